@@ -1,0 +1,28 @@
+// Point-cloud operations: voxel-grid filter, normal estimation, bounds.
+#pragma once
+
+#include "engine/core.hpp"
+
+namespace ts {
+
+/// Voxel-grid filter (Section 4.1.2): one point per occupied voxel of size `voxel`, the
+/// centroid of the points in it (normals averaged and renormalized when present). The output
+/// order is deterministic (sorted by voxel key), independent of the input order's threads.
+PointCloud voxel_filter(const PointCloud& cloud, double voxel);
+
+/// PCA normals from neighbours within `radius` (at least 3 needed; otherwise the normal is
+/// NaN-free but flagged by returning a zero vector). Normals are oriented toward `viewpoint_fn`
+/// when given, else away from the cloud centroid.
+struct NormalSettings {
+  double radius = 0.007;  ///< m, neighbourhood radius (paper: 7 mm)
+  int min_neighbours = 3;
+};
+std::vector<Vec3> estimate_normals(const std::vector<Vec3>& points, const NormalSettings& s);
+
+Eigen::AlignedBox3d bounds(const std::vector<Vec3>& points);
+Vec3 centroid(const std::vector<Vec3>& points);
+
+/// Apply a rigid transform to points (and normals).
+PointCloud transformed(const PointCloud& cloud, const Pose& T);
+
+}  // namespace ts

@@ -1,0 +1,115 @@
+// The object database as the engine sees it: per-object summary, features (loaded for every
+// object, to build the feature index) and geometry (fine cloud, k-d tree, distance field),
+// loaded lazily the first time a pruned feature or a hypothesis reaches the object.
+// Storage lives in io/ (HDF5); the engine only sees the ObjectSource interface.
+#pragma once
+
+#include "engine/core.hpp"
+#include "engine/distance_field.hpp"
+#include "engine/fpfh.hpp"
+#include "engine/scanner.hpp"
+#include "engine/search.hpp"
+
+#include <atomic>
+#include <memory>
+#include <mutex>
+
+namespace ts {
+
+/// Everything needed to build a database object from its mesh.
+struct DatabaseSettings {
+  double max_extent = 0.20;        ///< m, largest bounding-box extent after scaling
+  ScanSettings scan;
+  FpfhSettings fpfh;
+  DistanceFieldSettings field;
+};
+
+struct ObjectInfo {
+  std::string name;
+  std::string source;              ///< where the mesh came from (manifest source / path)
+  std::string mesh_sha256;         ///< checksum of the mesh file bytes
+  double scale = 1.0;              ///< object frame = scale * (mesh - bbox centre)
+  Vec3 extent = Vec3::Zero();      ///< bounding-box size in the object frame (m)
+  std::size_t fine_points = 0;
+  std::size_t coarse_points = 0;
+  bool closed = false;             ///< watertight mesh: inside/outside is meaningful
+  double coverage = 0.0;           ///< scanner coverage
+};
+
+struct ObjectFeatures {
+  PointCloud coarse;               ///< object frame, with normals
+  std::vector<Feature> features;   ///< one per coarse point
+};
+
+struct ObjectGeometry {
+  PointCloud fine;                 ///< object frame, with normals
+  KdTree3 tree;                    ///< over fine.points
+  DistanceField field;
+};
+
+/// A fully built object (what the builder produces and the store writes).
+struct BuiltObject {
+  ObjectInfo info;
+  ObjectFeatures features;
+  PointCloud fine;
+  DistanceField field;
+};
+
+/// Where objects come from. Implementations must be callable from several threads (the HDF5
+/// store serializes its reads behind one mutex).
+class ObjectSource {
+ public:
+  virtual ~ObjectSource() = default;
+  virtual std::size_t size() const = 0;
+  virtual const ObjectInfo& info(std::size_t i) const = 0;
+  virtual const DatabaseSettings& settings() const = 0;
+  virtual ObjectFeatures load_features(std::size_t i) const = 0;
+  virtual PointCloud load_fine(std::size_t i) const = 0;
+  virtual DistanceField load_field(std::size_t i) const = 0;
+};
+
+/// In-memory source over built objects (tests, `recognize` right after a build).
+class MemorySource final : public ObjectSource {
+ public:
+  MemorySource(std::vector<BuiltObject> objects, DatabaseSettings settings);
+  std::size_t size() const override;
+  const ObjectInfo& info(std::size_t i) const override;
+  const DatabaseSettings& settings() const override;
+  ObjectFeatures load_features(std::size_t i) const override;
+  PointCloud load_fine(std::size_t i) const override;
+  DistanceField load_field(std::size_t i) const override;
+
+ private:
+  std::vector<BuiltObject> objects_;
+  DatabaseSettings settings_;
+};
+
+/// Thread-safe lazy cache over a source. Each object's features and geometry are loaded at
+/// most once; counters let tests and reports check what a scene actually needed.
+class Database {
+ public:
+  explicit Database(std::shared_ptr<const ObjectSource> source);
+  ~Database();
+
+  std::size_t size() const;
+  const ObjectInfo& info(std::size_t i) const;
+  const DatabaseSettings& settings() const;
+  std::size_t find(const std::string& name) const;   ///< size() when absent
+
+  const ObjectFeatures& features(std::size_t i) const;
+  const ObjectGeometry& geometry(std::size_t i) const;
+  bool geometry_loaded(std::size_t i) const;
+  std::size_t geometry_loads() const;
+
+ private:
+  struct Slot;
+  std::shared_ptr<const ObjectSource> source_;
+  std::unique_ptr<Slot[]> slots_;
+};
+
+/// Build one object from a mesh already in its object frame (see io/mesh_import for the
+/// frame). Deterministic for a seed. Uses TBB inside; call from within the caller's arena.
+BuiltObject build_object(const Mesh& object_frame_mesh, ObjectInfo info,
+                         const DatabaseSettings& settings, std::uint64_t seed);
+
+}  // namespace ts

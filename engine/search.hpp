@@ -1,0 +1,72 @@
+// Search structures: exact 3-D nearest neighbours (nanoflann) and the database-wide feature
+// index (FLANN). Both are immutable after construction and safe to query from many threads.
+// Ties are broken by the smaller index, so results never depend on thread count.
+#pragma once
+
+#include "engine/core.hpp"
+
+#include <memory>
+
+namespace ts {
+
+struct Neighbour {
+  std::uint32_t index = 0;
+  double sq_distance = 0.0;
+};
+
+/// Exact k-d tree over 3-D points. Keeps its own copy of the points.
+class KdTree3 {
+ public:
+  KdTree3();
+  explicit KdTree3(std::vector<Vec3> points);
+  ~KdTree3();
+  KdTree3(KdTree3&&) noexcept;
+  KdTree3& operator=(KdTree3&&) noexcept;
+
+  std::size_t size() const;
+  const std::vector<Vec3>& points() const;
+  /// Nearest point; sq_distance = +inf when the tree is empty.
+  Neighbour nearest(const Vec3& q) const;
+  /// k nearest, sorted by distance then index.
+  std::vector<Neighbour> knn(const Vec3& q, std::size_t k) const;
+  /// All points within `radius`, sorted by distance then index.
+  std::vector<Neighbour> radius(const Vec3& q, double radius) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// One database feature: which object, which coarse point.
+struct FeatureRef {
+  std::uint32_t object = 0;
+  std::uint32_t point = 0;
+};
+
+struct FeatureIndexSettings {
+  bool exact = false;   ///< exact: single k-d tree, unlimited checks; approximate: randomized trees
+  int trees = 4;        ///< approximate mode: randomized k-d trees
+  int checks = 256;     ///< approximate mode: leaves visited per query
+};
+
+/// Index over all objects' features (the cumulative feature k-d tree KT_db,cum^feat).
+class FeatureIndex {
+ public:
+  FeatureIndex();
+  FeatureIndex(std::vector<Feature> features, std::vector<FeatureRef> refs,
+               const FeatureIndexSettings& settings);
+  ~FeatureIndex();
+  FeatureIndex(FeatureIndex&&) noexcept;
+  FeatureIndex& operator=(FeatureIndex&&) noexcept;
+
+  std::size_t size() const;
+  const FeatureRef& ref(std::size_t i) const;
+  /// The W nearest features to `query` (L2), sorted by distance then index.
+  std::vector<Neighbour> knn(const Feature& query, std::size_t w) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace ts

@@ -1,0 +1,28 @@
+// Outputs are written under a temporary name beside the target and renamed when complete, so
+// a failure or a kill never leaves a half-written file under the real name.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+namespace ts::io {
+
+class AtomicOutput {
+ public:
+  /// Reserve `target`; temp_path() is "<target>.tmp-<pid>" in the same directory.
+  explicit AtomicOutput(std::filesystem::path target);
+  ~AtomicOutput();  ///< removes the temporary file unless commit() succeeded
+  AtomicOutput(const AtomicOutput&) = delete;
+  AtomicOutput& operator=(const AtomicOutput&) = delete;
+
+  const std::filesystem::path& temp_path() const { return temp_; }
+  const std::filesystem::path& target() const { return target_; }
+  /// Rename the temporary file onto the target (atomic on one file system).
+  void commit();
+
+ private:
+  std::filesystem::path target_, temp_;
+  bool committed_ = false;
+};
+
+}  // namespace ts::io

@@ -1,0 +1,47 @@
+#include "datasets/manifest.hpp"
+#include "engine/core.hpp"
+
+#include <doctest/doctest.h>
+
+#include <filesystem>
+#include <fstream>
+
+namespace fs = std::filesystem;
+
+namespace {
+fs::path write_temp(const std::string& name, const std::string& text) {
+  const fs::path p = fs::temp_directory_path() / ("ts_test_" + name);
+  std::ofstream(p) << text;
+  return p;
+}
+}  // namespace
+
+TEST_CASE("manifest lines resolve archive members relative to the manifest") {
+  const auto p = write_temp("m1.tsv",
+                            "# comment\n"
+                            "pkg\tcache/a.tar.gz:data/meshes/x.off\tx\n"
+                            "\n"
+                            "local\t/abs/y.obj\ty\n");
+  const auto m = ts::datasets::read_manifest(p);
+  REQUIRE(m.size() == 2);
+  CHECK(m[0].name == "x");
+  CHECK(m[0].member == "data/meshes/x.off");
+  CHECK(m[0].path == p.parent_path() / "cache/a.tar.gz");
+  CHECK(m[0].line == 2);
+  CHECK(m[1].member.empty());
+  CHECK(m[1].path == fs::path("/abs/y.obj"));
+}
+
+TEST_CASE("manifest errors name the file and the line") {
+  const auto short_line = write_temp("m2.tsv", "pkg\tonly-two\n");
+  CHECK_THROWS_WITH_AS(ts::datasets::read_manifest(short_line),
+                       doctest::Contains("line 1"), ts::Error);
+  const auto dup = write_temp("m3.tsv", "a\tx.off\tsame\nb\ty.off\tsame\n");
+  CHECK_THROWS_WITH_AS(ts::datasets::read_manifest(dup), doctest::Contains("duplicate"), ts::Error);
+  CHECK_THROWS_AS(ts::datasets::read_manifest("/nonexistent/manifest.tsv"), ts::Error);
+}
+
+TEST_CASE("the shipped default manifest lists 45 distinct objects") {
+  const auto m = ts::datasets::read_manifest(fs::path(TS_SOURCE_DIR) / "datasets/dev45.tsv");
+  CHECK(m.size() == 45);
+}
