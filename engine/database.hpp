@@ -50,6 +50,7 @@ struct ObjectGeometry {
 /// A fully built object (what the builder produces and the store writes).
 struct BuiltObject {
   ObjectInfo info;
+  Mesh mesh;                       ///< object frame (stored so the simulator touches the truth)
   ObjectFeatures features;
   PointCloud fine;
   DistanceField field;
