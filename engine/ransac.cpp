@@ -1,0 +1,227 @@
+#include "engine/ransac.hpp"
+
+#include "engine/kabsch.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <optional>
+
+namespace ts {
+
+namespace {
+
+constexpr std::uint64_t kTagTriplet = 0x7121;
+constexpr std::uint64_t kTagRegistration = 0x7e61;
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+/// One pruned feature: which object, which coarse point.
+struct Pruned {
+  std::uint32_t object;
+  std::uint32_t point;
+};
+
+/// Pruned features of one triplet point, grouped by object (ascending), nearest first within.
+struct PrunedSet {
+  std::vector<Pruned> items;
+  std::vector<std::array<std::uint32_t, 3>> ranges;  ///< (object, begin, end)
+
+  std::pair<std::uint32_t, std::uint32_t> range_of(std::uint32_t object) const {
+    auto it = std::lower_bound(ranges.begin(), ranges.end(), object,
+                               [](const auto& r, std::uint32_t o) { return r[0] < o; });
+    if (it == ranges.end() || (*it)[0] != object) return {0, 0};
+    return {(*it)[1], (*it)[2]};
+  }
+};
+
+struct Triplet {
+  bool valid = false;
+  std::array<std::uint32_t, 3> point{};   ///< contact indices
+  std::array<Vec3, 3> p;                  ///< scene frame
+  double d12 = 0, d13 = 0, d23 = 0;
+  std::array<PrunedSet, 3> pruned;
+};
+
+PrunedSet prune(const FeatureIndex& index, const Feature& f, std::size_t w,
+                const std::vector<std::uint8_t>& allowed) {
+  PrunedSet set;
+  const std::vector<Neighbour> nn = index.knn(f, w);
+  set.items.reserve(nn.size());
+  for (const Neighbour& nb : nn) {
+    const FeatureRef& r = index.ref(nb.index);
+    if (r.object < allowed.size() && allowed[r.object]) set.items.push_back({r.object, r.point});
+  }
+  // Group by object, keeping the nearest-first order inside each group.
+  std::stable_sort(set.items.begin(), set.items.end(),
+                   [](const Pruned& a, const Pruned& b) { return a.object < b.object; });
+  for (std::uint32_t i = 0; i < set.items.size();) {
+    std::uint32_t j = i;
+    while (j < set.items.size() && set.items[j].object == set.items[i].object) ++j;
+    set.ranges.push_back({set.items[i].object, i, j});
+    i = j;
+  }
+  return set;
+}
+
+std::optional<Candidate> register_once(const Triplet& t, const Database& db,
+                                       const RansacSettings& s, Rng& rng,
+                                       std::vector<std::uint32_t>& buf2,
+                                       std::vector<std::uint32_t>& buf3) {
+  const PrunedSet& F1 = t.pruned[0];
+  const PrunedSet& F2 = t.pruned[1];
+  const PrunedSet& F3 = t.pruned[2];
+  if (F1.items.empty() || F2.items.empty() || F3.items.empty()) return std::nullopt;
+  const double tol = s.distance_tolerance;
+  for (int attempt = 0; attempt < s.registration_attempts; ++attempt) {
+    const Pruned& a = F1.items[rng.index(F1.items.size())];
+    const std::vector<Vec3>& pts = db.features(a.object).coarse.points;
+    const Vec3& q1 = pts[a.point];
+    // Second point: same object, distance to the first matching the input's.
+    const auto [b2, e2] = F2.range_of(a.object);
+    buf2.clear();
+    for (std::uint32_t j = b2; j < e2; ++j) {
+      const double d = (pts[F2.items[j].point] - q1).norm();
+      if (std::abs(d - t.d12) <= tol) buf2.push_back(F2.items[j].point);
+    }
+    if (buf2.empty()) continue;
+    const Vec3& q2 = pts[buf2[rng.index(buf2.size())]];
+    const auto [b3, e3] = F3.range_of(a.object);
+    buf3.clear();
+    for (std::uint32_t j = b3; j < e3; ++j) {
+      const Vec3& q = pts[F3.items[j].point];
+      if (std::abs((q - q1).norm() - t.d13) <= tol && std::abs((q - q2).norm() - t.d23) <= tol)
+        buf3.push_back(F3.items[j].point);
+    }
+    if (buf3.empty()) continue;
+    const Vec3& q3 = pts[buf3[rng.index(buf3.size())]];
+    if (!triangle_well_conditioned(q1, q2, q3, s.min_sv_ratio)) continue;
+    const std::array<Vec3, 3> src{q1, q2, q3};
+    const RigidFit fit = kabsch(src, t.p);
+    if (!fit.valid) continue;
+    Candidate c;
+    c.object = a.object;
+    c.T_scene_object = fit.T_target_source;
+    return c;
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> objects_spanning(const Scene& scene, const Database& db, double slack) {
+  std::vector<std::uint8_t> allowed(db.size(), 1);
+  for (std::size_t o = 0; o < db.size(); ++o)
+    allowed[o] = db.info(o).extent.norm() + slack >= scene.diameter ? 1 : 0;
+  return allowed;
+}
+
+FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings& settings) {
+  std::vector<Feature> features;
+  std::vector<FeatureRef> refs;
+  for (std::size_t o = 0; o < db.size(); ++o) {
+    const ObjectFeatures& f = db.features(o);
+    for (std::size_t i = 0; i < f.features.size(); ++i) {
+      features.push_back(f.features[i]);
+      refs.push_back({static_cast<std::uint32_t>(o), static_cast<std::uint32_t>(i)});
+    }
+  }
+  return FeatureIndex(std::move(features), std::move(refs), settings);
+}
+
+std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
+                                         const FeatureIndex& index,
+                                         const std::vector<std::uint8_t>& allowed,
+                                         const RansacSettings& s, std::uint64_t seed,
+                                         std::uint64_t step, RansacStats* stats) {
+  RansacStats st;
+  for (std::uint8_t a : allowed) st.objects_allowed += a;
+  std::vector<Candidate> out;
+  const int N = std::max(0, s.triplets), R = std::max(0, s.registrations);
+
+  // Sampling pool: interior points with a feature; boundary points only if there are too few.
+  std::vector<std::uint32_t> pool;
+  for (std::uint32_t i = 0; i < scene.contacts.size(); ++i)
+    if (scene.feature_valid[i] && scene.interior[i]) pool.push_back(i);
+  if (pool.size() < 3) {
+    pool.clear();
+    for (std::uint32_t i = 0; i < scene.contacts.size(); ++i)
+      if (scene.feature_valid[i]) pool.push_back(i);
+    st.boundary_fallback = true;
+  }
+  if (pool.size() < 3 || N == 0 || R == 0 || index.size() == 0 || st.objects_allowed == 0) {
+    if (stats) *stats = st;
+    return out;
+  }
+  const double spacing = std::min(s.min_spacing > 0.0 ? s.min_spacing : scene.feature_radius,
+                                  0.3 * scene.diameter);
+
+  // Triplet sampling and feature pruning, one slot per triplet.
+  auto t0 = Clock::now();
+  std::vector<Triplet> trip(static_cast<std::size_t>(N));
+  tbb::parallel_for(tbb::blocked_range<int>(0, N, 1), [&](const tbb::blocked_range<int>& r) {
+    for (int i = r.begin(); i != r.end(); ++i) {
+      Triplet& t = trip[static_cast<std::size_t>(i)];
+      Rng rng(seed, step, kTagTriplet, static_cast<std::uint64_t>(i));
+      for (int a = 0; a < s.triplet_attempts && !t.valid; ++a) {
+        std::array<std::uint32_t, 3> k{};
+        for (auto& x : k) x = pool[rng.index(pool.size())];
+        const Vec3 &p1 = scene.contacts.points[k[0]], &p2 = scene.contacts.points[k[1]],
+                   &p3 = scene.contacts.points[k[2]];
+        const double d12 = (p2 - p1).norm(), d13 = (p3 - p1).norm(), d23 = (p3 - p2).norm();
+        if (d12 < spacing || d13 < spacing || d23 < spacing) continue;
+        if (!triangle_well_conditioned(p1, p2, p3, s.min_sv_ratio)) continue;
+        t.valid = true;
+        t.point = k;
+        t.p = {p1, p2, p3};
+        t.d12 = d12;
+        t.d13 = d13;
+        t.d23 = d23;
+      }
+      if (!t.valid) continue;
+      for (int j = 0; j < 3; ++j)
+        t.pruned[j] = prune(index, scene.features[t.point[j]], s.prune_w, allowed);
+    }
+  });
+  st.time_prune_s = seconds_since(t0);
+  for (const Triplet& t : trip) {
+    st.triplets += t.valid;
+    if (t.valid)
+      for (const PrunedSet& ps : t.pruned) st.pruned += ps.items.size();
+  }
+
+  // Triplet registration, one slot per (triplet, registration).
+  t0 = Clock::now();
+  const std::size_t slots = static_cast<std::size_t>(N) * static_cast<std::size_t>(R);
+  std::vector<std::optional<Candidate>> cand(slots);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, slots, 16),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      std::vector<std::uint32_t> buf2, buf3;
+                      for (std::size_t k = r.begin(); k != r.end(); ++k) {
+                        const std::size_t i = k / static_cast<std::size_t>(R);
+                        if (!trip[i].valid) continue;
+                        Rng rng(seed, step, kTagRegistration, k);
+                        cand[k] = register_once(trip[i], db, s, rng, buf2, buf3);
+                        if (cand[k]) cand[k]->slot = static_cast<std::uint32_t>(k);
+                      }
+                    });
+  st.time_register_s = seconds_since(t0);
+  std::vector<std::uint8_t> reached(db.size(), 0);
+  for (auto& c : cand) {
+    if (!c) continue;
+    reached[c->object] = 1;
+    out.push_back(*c);
+  }
+  st.registrations = out.size();
+  for (std::uint8_t r : reached) st.objects_reached += r;
+  if (stats) *stats = st;
+  return out;
+}
+
+}  // namespace ts
