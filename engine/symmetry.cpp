@@ -48,7 +48,7 @@ class Checker {
       std::nth_element(nn.begin(), nn.begin() + nn.size() / 2, nn.end());
       spacing = nn[nn.size() / 2];
     }
-    tol_ = s.tolerance > 0.0 ? s.tolerance : std::max(s.tolerance_rel * diagonal_, 2.0 * spacing);
+    tol_ = s.tolerance > 0.0 ? s.tolerance : std::max(s.tolerance_rel * diagonal_, 2.5 * spacing);
   }
 
   const Vec3& centre() const { return centre_; }
@@ -269,6 +269,7 @@ SymmetryGroup find_symmetries(const std::vector<Vec3>& points, const KdTree3& tr
   const Checker ck(points, tree, s);
   g.centre = ck.centre();
   g.tolerance = ck.tolerance();
+  if (!(g.tolerance > 0.0)) return g;  // all points coincide
 
   Mat3 cov = Mat3::Zero();
   for (const Vec3& p : points) cov.noalias() += (p - g.centre) * (p - g.centre).transpose();

@@ -23,7 +23,7 @@ namespace ts {
 class Database;
 
 struct SymmetrySettings {
-  double tolerance = 0.0;          ///< m; 0: max(tolerance_rel * bbox diagonal, 2 * point spacing)
+  double tolerance = 0.0;          ///< m; 0: max(tolerance_rel * bbox diagonal, 2.5 * point spacing)
   double tolerance_rel = 0.01;     ///< of the bounding-box diagonal
   double inlier_fraction = 0.95;   ///< of sample points within tolerance for a symmetry
   std::size_t sample_points = 400; ///< points of the model used for the checks
