@@ -1,7 +1,9 @@
 // Pose refinement by ICP (Section 4.4, Algorithm 1 line 4; Section 5.4): the scene's contacts
 // are matched to the nearest points of the hypothesis' object (its fine cloud, k-d tree) and the
-// pose re-fitted by Kabsch until it stops moving. Point-to-point, with an optional correspondence
-// gate and trimming (Chetverikov et al. 2002) for robustness against outlying contacts.
+// pose re-fitted until it stops moving: point-to-point (Besl & McKay 1992, Kabsch fit) or
+// point-to-plane (Chen & Medioni 1992, Gauss-Newton on the object's normals, which converges in
+// far fewer iterations on the smooth and flat parts tactile data mostly covers). An optional
+// correspondence gate and trimming (Chetverikov et al. 2002) make it robust to outlying contacts.
 #pragma once
 
 #include "engine/database.hpp"
@@ -9,7 +11,10 @@
 
 namespace ts {
 
+enum class IcpMetric { point_to_point, point_to_plane };
+
 struct IcpSettings {
+  IcpMetric metric = IcpMetric::point_to_plane;  ///< point_to_point: the paper's ICP
   int max_iterations = 30;            ///< upper bound on iterations
   double min_translation = 1e-5;      ///< m; converged when an update moves less than this ...
   double min_rotation_deg = 1e-3;     ///< ... and turns less than this (degrees)

@@ -47,6 +47,7 @@ struct Triplet {
   std::array<Vec3, 3> p;                  ///< scene frame
   double d12 = 0, d13 = 0, d23 = 0;
   std::array<PrunedSet, 3> pruned;
+  bool from_boundary = false;   ///< drawn from all points, the interior gave no valid triplet
 };
 
 PrunedSet prune(const FeatureIndex& index, const Feature& f, std::size_t w,
@@ -122,10 +123,12 @@ std::vector<std::uint8_t> objects_spanning(const Scene& scene, const Database& d
   return allowed;
 }
 
-FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings& settings) {
+FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings& settings,
+                                 const std::vector<std::uint8_t>& objects) {
   std::vector<Feature> features;
   std::vector<FeatureRef> refs;
   for (std::size_t o = 0; o < db.size(); ++o) {
+    if (!objects.empty() && (o >= objects.size() || !objects[o])) continue;
     const ObjectFeatures& f = db.features(o);
     for (std::size_t i = 0; i < f.features.size(); ++i) {
       features.push_back(f.features[i]);
@@ -145,17 +148,15 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   std::vector<Candidate> out;
   const int N = std::max(0, s.triplets), R = std::max(0, s.registrations);
 
-  // Sampling pool: interior points with a feature; boundary points only if there are too few.
-  std::vector<std::uint32_t> pool;
-  for (std::uint32_t i = 0; i < scene.contacts.size(); ++i)
-    if (scene.feature_valid[i] && scene.interior[i]) pool.push_back(i);
-  if (pool.size() < 3) {
-    pool.clear();
-    for (std::uint32_t i = 0; i < scene.contacts.size(); ++i)
-      if (scene.feature_valid[i]) pool.push_back(i);
-    st.boundary_fallback = true;
+  // Sampling pools: interior points with a feature first; all points with a feature when no
+  // valid triplet can be drawn from the interior (small or narrow patches).
+  std::vector<std::uint32_t> interior, valid;
+  for (std::uint32_t i = 0; i < scene.contacts.size(); ++i) {
+    if (!scene.feature_valid[i]) continue;
+    valid.push_back(i);
+    if (scene.interior[i]) interior.push_back(i);
   }
-  if (pool.size() < 3 || N == 0 || R == 0 || index.size() == 0 || st.objects_allowed == 0) {
+  if (valid.size() < 3 || N == 0 || R == 0 || index.size() == 0 || st.objects_allowed == 0) {
     if (stats) *stats = st;
     return out;
   }
@@ -169,7 +170,11 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
     for (int i = r.begin(); i != r.end(); ++i) {
       Triplet& t = trip[static_cast<std::size_t>(i)];
       Rng rng(seed, step, kTagTriplet, static_cast<std::uint64_t>(i));
-      for (int a = 0; a < s.triplet_attempts && !t.valid; ++a) {
+      for (int a = 0; a < 2 * s.triplet_attempts && !t.valid; ++a) {
+        const bool inner = a < s.triplet_attempts && interior.size() >= 3;
+        if (!inner && a < s.triplet_attempts) continue;
+        const std::vector<std::uint32_t>& pool = inner ? interior : valid;
+        t.from_boundary = !inner;
         std::array<std::uint32_t, 3> k{};
         for (auto& x : k) x = pool[rng.index(pool.size())];
         const Vec3 &p1 = scene.contacts.points[k[0]], &p2 = scene.contacts.points[k[1]],
@@ -192,6 +197,7 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   st.time_prune_s = seconds_since(t0);
   for (const Triplet& t : trip) {
     st.triplets += t.valid;
+    if (t.valid && t.from_boundary) st.boundary_fallback = true;
     if (t.valid)
       for (const PrunedSet& ps : t.pruned) st.pruned += ps.items.size();
   }

@@ -45,8 +45,10 @@ struct RansacStats {
 /// Objects whose bounding-box diagonal can span the contacts (1 = allowed).
 std::vector<std::uint8_t> objects_spanning(const Scene& scene, const Database& db, double slack);
 
-/// Build the database-wide feature index (KT_db,cum^feat) over every object's coarse features.
-FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings& settings);
+/// Build the database-wide feature index (KT_db,cum^feat) over the coarse features of every
+/// object, or of the objects with objects[i] != 0 when `objects` is not empty.
+FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings& settings,
+                                 const std::vector<std::uint8_t>& objects = {});
 
 /// N x R registrations; the valid ones, in slot order (slot = triplet * R + registration).
 std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,

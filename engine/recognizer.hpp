@@ -42,6 +42,8 @@ struct RecognizerSettings {
   double icp_top = 0.0;             ///< ransac-icp(-fs): ICP only the best share of candidates
                                     ///< by pre-ICP score (0: all, as in the paper)
   std::uint64_t seed = 1;           ///< every random draw derives from (seed, step, task)
+  std::vector<std::uint8_t> objects;  ///< objects the recognizer may answer (1 = yes), by
+                                      ///< database index; empty: all
   SceneSettings scene;
   RansacSettings ransac;
   IcpSettings icp;
@@ -93,7 +95,8 @@ struct StepResult {
 
 class Recognizer {
  public:
-  /// `index` may be shared between recognizers over the same database (build_feature_index).
+  /// `index` may be shared between recognizers over the same database; build it with
+  /// build_feature_index(db, settings.index, settings.objects).
   Recognizer(const Database& db, std::shared_ptr<const FeatureIndex> index,
              RecognizerSettings settings);
   /// Builds the feature index itself.
