@@ -6,10 +6,10 @@
 #include <Eigen/Eigenvalues>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace ts {
 
@@ -24,8 +24,21 @@ struct VoxelGroups {
   std::vector<Key> key;              ///< one per group
 };
 
+inline std::uint64_t hash_key(const Key& k) {
+  std::uint64_t h = static_cast<std::uint64_t>(k[0]) * 0x9e3779b97f4a7c15ULL;
+  h ^= static_cast<std::uint64_t>(k[1]) * 0xc2b2ae3d27d4eb4fULL + (h >> 29);
+  h ^= static_cast<std::uint64_t>(k[2]) * 0x165667b19e3779f9ULL + (h >> 32);
+  return h ^ (h >> 31);
+}
+
+/// Group points by voxel in O(n): an open-addressing table gives each voxel an id in
+/// first-seen order, the (few) voxel keys are sorted, and a stable counting sort orders the
+/// points by voxel rank, keeping input order inside a voxel. Serial by design: the result is
+/// one well-defined order, whatever the thread count.
 VoxelGroups group_by_voxel(const std::vector<Vec3>& points, double voxel) {
   const std::size_t n = points.size();
+  if (n >= std::numeric_limits<std::uint32_t>::max())
+    throw Error("too many points for one cloud", "", "points");
   std::vector<Key> keys(n);
   std::vector<char> ok(n);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& r) {
@@ -36,58 +49,46 @@ VoxelGroups group_by_voxel(const std::vector<Vec3>& points, double voxel) {
         for (int k = 0; k < 3; ++k) keys[i][k] = static_cast<std::int64_t>(std::floor(s[k]));
     }
   });
-  Key lo{INT64_MAX, INT64_MAX, INT64_MAX}, hi{INT64_MIN, INT64_MIN, INT64_MIN};
-  std::size_t valid = 0;
+
+  std::size_t capacity = 64;
+  while (capacity < 2 * n) capacity *= 2;
+  std::vector<std::uint32_t> table(capacity, UINT32_MAX);
+  std::vector<Key> group_key;
+  std::vector<std::uint32_t> group_of(n, UINT32_MAX), group_size;
   for (std::size_t i = 0; i < n; ++i) {
     if (!ok[i]) continue;
-    ++valid;
-    for (int k = 0; k < 3; ++k) {
-      lo[k] = std::min(lo[k], keys[i][k]);
-      hi[k] = std::max(hi[k], keys[i][k]);
+    std::size_t slot = hash_key(keys[i]) & (capacity - 1);
+    while (table[slot] != UINT32_MAX && group_key[table[slot]] != keys[i]) slot = (slot + 1) & (capacity - 1);
+    if (table[slot] == UINT32_MAX) {
+      table[slot] = static_cast<std::uint32_t>(group_key.size());
+      group_key.push_back(keys[i]);
+      group_size.push_back(0);
     }
+    group_of[i] = table[slot];
+    ++group_size[table[slot]];
   }
+
+  const std::size_t groups = group_key.size();
+  std::vector<std::uint32_t> by_key(groups);
+  for (std::size_t g = 0; g < groups; ++g) by_key[g] = static_cast<std::uint32_t>(g);
+  std::sort(by_key.begin(), by_key.end(),
+            [&](std::uint32_t a, std::uint32_t b) { return group_key[a] < group_key[b]; });
+  std::vector<std::uint32_t> rank(groups);
   VoxelGroups g;
-  g.order.reserve(valid);
-  if (valid == 0) {
-    g.first.push_back(0);
-    return g;
+  g.key.resize(groups);
+  g.first.resize(groups + 1);
+  std::uint32_t offset = 0;
+  for (std::size_t r = 0; r < groups; ++r) {
+    rank[by_key[r]] = static_cast<std::uint32_t>(r);
+    g.key[r] = group_key[by_key[r]];
+    g.first[r] = offset;
+    offset += group_size[by_key[r]];
   }
-  constexpr std::int64_t kSpan = std::int64_t{1} << 21;
-  const bool packable = hi[0] - lo[0] < kSpan && hi[1] - lo[1] < kSpan && hi[2] - lo[2] < kSpan;
-  if (packable) {
-    // Lexicographic (i, j, k) order as one 63-bit integer, the index below it: every element
-    // is distinct, so the (unstable) parallel sort has exactly one possible result.
-    std::vector<std::pair<std::uint64_t, std::uint32_t>> items;
-    items.reserve(valid);
-    for (std::size_t i = 0; i < n; ++i) {
-      if (!ok[i]) continue;
-      const auto a = static_cast<std::uint64_t>(keys[i][0] - lo[0]);
-      const auto b = static_cast<std::uint64_t>(keys[i][1] - lo[1]);
-      const auto c = static_cast<std::uint64_t>(keys[i][2] - lo[2]);
-      items.emplace_back((a << 42) | (b << 21) | c, static_cast<std::uint32_t>(i));
-    }
-    tbb::parallel_sort(items.begin(), items.end());
-    for (std::size_t i = 0; i < items.size(); ++i) {
-      if (i == 0 || items[i].first != items[i - 1].first) {
-        g.first.push_back(static_cast<std::uint32_t>(i));
-        g.key.push_back(keys[items[i].second]);
-      }
-      g.order.push_back(items[i].second);
-    }
-  } else {
-    for (std::size_t i = 0; i < n; ++i)
-      if (ok[i]) g.order.push_back(static_cast<std::uint32_t>(i));
-    tbb::parallel_sort(g.order.begin(), g.order.end(), [&](std::uint32_t a, std::uint32_t b) {
-      return keys[a] != keys[b] ? keys[a] < keys[b] : a < b;
-    });
-    for (std::size_t i = 0; i < g.order.size(); ++i) {
-      if (i == 0 || keys[g.order[i]] != keys[g.order[i - 1]]) {
-        g.first.push_back(static_cast<std::uint32_t>(i));
-        g.key.push_back(keys[g.order[i]]);
-      }
-    }
-  }
-  g.first.push_back(static_cast<std::uint32_t>(g.order.size()));
+  g.first[groups] = offset;
+  g.order.resize(offset);
+  std::vector<std::uint32_t> fill(g.first.begin(), g.first.end() - 1);
+  for (std::size_t i = 0; i < n; ++i)
+    if (ok[i]) g.order[fill[rank[group_of[i]]]++] = static_cast<std::uint32_t>(i);
   return g;
 }
 
@@ -114,6 +115,38 @@ PointCloud voxel_filter(const PointCloud& cloud, double voxel) {
       }
       out.points[v] = corner + sum / static_cast<double>(g.first[v + 1] - g.first[v]);
       if (with_normals) out.normals[v] = nsum.normalized();  // zero stays zero
+    }
+  });
+  return out;
+}
+
+PointCloud voxel_representatives(const PointCloud& cloud, double voxel) {
+  if (!(voxel > 0.0) || !std::isfinite(voxel))
+    throw Error("voxel size must be positive and finite", "", "voxel");
+  const VoxelGroups g = group_by_voxel(cloud.points, voxel);
+  const std::size_t groups = g.key.size();
+  const bool with_normals = cloud.has_normals();
+  PointCloud out;
+  out.points.resize(groups);
+  if (with_normals) out.normals.resize(groups);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, groups, 1024), [&](const auto& r) {
+    for (std::size_t v = r.begin(); v != r.end(); ++v) {
+      const Vec3 corner(g.key[v][0] * voxel, g.key[v][1] * voxel, g.key[v][2] * voxel);
+      Vec3 sum = Vec3::Zero();
+      for (std::uint32_t i = g.first[v]; i < g.first[v + 1]; ++i) sum += cloud.points[g.order[i]] - corner;
+      const Vec3 mean = sum / static_cast<double>(g.first[v + 1] - g.first[v]);
+      // The member nearest to the centroid; ties go to the smaller input index (first in order).
+      std::uint32_t best = g.order[g.first[v]];
+      double best_d2 = std::numeric_limits<double>::infinity();
+      for (std::uint32_t i = g.first[v]; i < g.first[v + 1]; ++i) {
+        const double d2 = (cloud.points[g.order[i]] - corner - mean).squaredNorm();
+        if (d2 < best_d2) {
+          best_d2 = d2;
+          best = g.order[i];
+        }
+      }
+      out.points[v] = cloud.points[best];
+      if (with_normals) out.normals[v] = cloud.normals[best];
     }
   });
   return out;

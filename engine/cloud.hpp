@@ -13,6 +13,11 @@ namespace ts {
 /// when `voxel` is not positive.
 PointCloud voxel_filter(const PointCloud& cloud, double voxel);
 
+/// Voxel-grid filter that keeps input points: one point per occupied voxel, the member nearest
+/// to the voxel's centroid (ties: the earlier input point), with its own normal. Points stay on
+/// the sampled surface (the simulated scanner's fine cloud). Same grid and order as voxel_filter.
+PointCloud voxel_representatives(const PointCloud& cloud, double voxel);
+
 /// PCA normals from neighbours within `radius` (the point itself included; at least
 /// `min_neighbours` needed, otherwise the normal is NaN-free but flagged by returning a zero
 /// vector). Normals are oriented away from the cloud centroid; callers that know better (the

@@ -169,3 +169,32 @@ TEST_CASE("bounds, centroid and transformed") {
   CHECK((t.normals[0] - Vec3(0, 1, 0)).norm() < 1e-12);
   CHECK((t.normals[1] - Vec3(0, 0, 1)).norm() < 1e-12);
 }
+
+TEST_CASE("voxel_representatives keeps the input point nearest to each voxel's centroid") {
+  const double voxel = 0.004;
+  const PointCloud c = random_cloud(20000, Vec3(-0.03, 0.01, -0.02), 0.06, 12);
+  const PointCloud got = voxel_representatives(c, voxel);
+  const PointCloud centroids = voxel_filter(c, voxel);
+  REQUIRE(got.size() == centroids.size());
+  REQUIRE(got.has_normals());
+  // Oracle: per voxel, scan all of its members.
+  std::map<std::array<long long, 3>, std::vector<std::size_t>> members;
+  for (std::size_t i = 0; i < c.size(); ++i) {
+    std::array<long long, 3> key{};
+    for (int k = 0; k < 3; ++k) key[k] = static_cast<long long>(std::floor(c.points[i][k] / voxel));
+    members[key].push_back(i);
+  }
+  std::size_t v = 0;
+  for (const auto& [key, idx] : members) {
+    // got is a member, at the smallest distance to the centroid (two members of a voxel of
+    // two are equally far: rounding decides, so compare distances with a tolerance).
+    double best = 1e30;
+    for (std::size_t i : idx) best = std::min(best, (c.points[i] - centroids.points[v]).norm());
+    bool member = false;
+    for (std::size_t i : idx)
+      if (got.points[v] == c.points[i] && got.normals[v] == c.normals[i]) member = true;
+    CHECK(member);
+    CHECK((got.points[v] - centroids.points[v]).norm() <= best + 1e-12);
+    ++v;
+  }
+}
