@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <functional>
 #include <set>
 
 namespace ts {
@@ -14,7 +15,7 @@ namespace {
 
 /// Half extent of the object's box around its origin, slightly grown (free-space culling).
 Vec3 half_extent_of(const ObjectInfo& info) {
-  return 0.51 * info.extent.array() + 0.002;
+  return 0.5 * info.extent.array() + 0.01 * info.extent.norm();
 }
 
 }  // namespace
@@ -94,38 +95,36 @@ std::vector<ScoredCandidate> select_top(const Scene& scene, const Database& db,
   std::vector<Evaluation> ev(n);
   parallel_each(n, [&](std::size_t i) { ev[i] = eval(i, kInf); });
 
-  // Phase 2a: complete the k best by bound; the worst of their exact weights is a threshold
-  // that the k-th best weight overall reaches.
+  // Phase 2: best-first by bound, in fixed chunks. After each chunk the threshold tau is the
+  // k-th best exact weight found so far, which the k-th best overall reaches; a candidate
+  // whose bound is below tau cannot enter the top k. The chunks and thresholds do not depend
+  // on the thread count, so neither does anything else.
   std::vector<std::uint32_t> idx(n);
   std::iota(idx.begin(), idx.end(), 0u);
   std::sort(idx.begin(), idx.end(), [&](std::uint32_t a, std::uint32_t b) {
     if (ev[a].log_weight != ev[b].log_weight) return ev[a].log_weight > ev[b].log_weight;
     return a < b;
   });
-  const std::size_t head = std::min(k, n);
-  parallel_each(head, [&](std::size_t j) {
-    const std::uint32_t i = idx[j];
-    if (!ev[i].complete) ev[i] = eval(i, -kInf);
-  });
+  const std::size_t chunk = std::max<std::size_t>(k, 64);
   double tau = -kInf;
-  if (head == k) {
-    tau = kInf;
-    for (std::size_t j = 0; j < head; ++j) tau = std::min(tau, ev[idx[j]].log_weight);
+  std::vector<double> best;  // exact weights found so far (for tau)
+  for (std::size_t pos = 0; pos < n; pos += chunk) {
+    if (ev[idx[pos]].log_weight < tau) break;  // sorted by bound: nobody further can enter
+    const std::size_t end = std::min(n, pos + chunk);
+    parallel_each(end - pos, [&](std::size_t j) {
+      const std::uint32_t i = idx[pos + j];
+      if (!ev[i].complete && ev[i].log_weight >= tau) ev[i] = eval(i, tau);
+    });
+    for (std::size_t j = pos; j < end; ++j)
+      if (ev[idx[j]].complete) best.push_back(ev[idx[j]].log_weight);
+    if (best.size() >= k) {
+      std::nth_element(best.begin(), best.begin() + static_cast<std::ptrdiff_t>(k - 1), best.end(),
+                       std::greater<double>());
+      tau = std::max(tau, best[k - 1]);
+      best.resize(k);
+    }
   }
   st.threshold = tau;
-
-  // Phase 2b: the rest, rejected as soon as their bound drops below the threshold.
-  std::vector<std::uint32_t> rest;
-  for (std::size_t j = head; j < n; ++j) {
-    const std::uint32_t i = idx[j];
-    if (ev[i].complete) continue;
-    if (ev[i].log_weight < tau) {
-      ++st.rejected_prefix;
-      continue;
-    }
-    rest.push_back(i);
-  }
-  parallel_each(rest.size(), [&](std::size_t j) { ev[rest[j]] = eval(rest[j], tau); });
 
   for (std::size_t i = 0; i < n; ++i) {
     if (ev[i].complete) {
@@ -133,7 +132,12 @@ std::vector<ScoredCandidate> select_top(const Scene& scene, const Database& db,
       out.push_back({static_cast<std::uint32_t>(i), ev[i]});
     }
   }
-  st.rejected_later = n - st.full - st.rejected_prefix;
+  for (std::size_t i = 0; i < n; ++i)
+    if (!ev[i].complete) {
+      if (ev[i].contacts <= std::max<std::size_t>(1, s.prefix) && ev[i].contacts < scene.contacts.size())
+        ++st.rejected_prefix;
+      else ++st.rejected_later;
+    }
   std::sort(out.begin(), out.end(), [](const ScoredCandidate& a, const ScoredCandidate& b) {
     if (a.eval.log_weight != b.eval.log_weight) return a.eval.log_weight > b.eval.log_weight;
     return a.index < b.index;

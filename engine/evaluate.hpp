@@ -32,6 +32,7 @@ struct EvaluateSettings {
                                       ///< (signed field < 0) costs e = 1 however deep
   bool use_distance_field = true;     ///< false: nearest fine-cloud point (paper's k-d tree)
   std::size_t prefix = 32;            ///< contacts in the first rejection test (and per chunk)
+  std::size_t free_prefix = 128;      ///< free-space points in the first rejection test
 };
 
 struct Evaluation {
@@ -125,26 +126,39 @@ Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const 
   const double invC = 1.0 / static_cast<double>(C);
   constexpr std::size_t kMax = 64;
   const std::size_t chunk = std::clamp<std::size_t>(s.prefix, 1, kMax);
+  // reject_below = +inf asks for the bound from the prefixes only (select_top's first phase).
+  const bool bound_only = reject_below == std::numeric_limits<double>::infinity();
   double buf[kMax];
+
+  // Contact term (Eq. 4, 5/7), in the scene's fixed pseudo-random order.
   double sum = 0.0;
-  for (std::size_t i = 0; i < C; i += chunk) {
-    const std::size_t m = std::min(chunk, C - i);
-    distances(scene.ordered.data() + i, m, T_object_scene, buf);
+  std::size_t nc = 0;
+  const std::size_t c_limit = bound_only ? std::min(C, chunk) : C;
+  while (nc < c_limit) {
+    const std::size_t m = std::min(chunk, c_limit - nc);
+    distances(scene.ordered.data() + nc, m, T_object_scene, buf);
     for (std::size_t j = 0; j < m; ++j) sum += detail::contact_error(buf[j], s.d_outlier);
-    if (i + m < C && -sum * invC < reject_below) {
-      ev.contacts = static_cast<std::uint32_t>(i + m);
-      ev.contact_error = sum / static_cast<double>(i + m);
+    nc += m;
+    if (!bound_only && nc < C && -sum * invC < reject_below) {
+      ev.contacts = static_cast<std::uint32_t>(nc);
+      ev.contact_error = sum / static_cast<double>(nc);
       ev.log_weight = -sum * invC;
       return ev;
     }
   }
-  ev.contacts = static_cast<std::uint32_t>(C);
-  ev.contact_error = sum * invC;
+  ev.contacts = static_cast<std::uint32_t>(nc);
+  ev.contact_error = sum / static_cast<double>(nc);
   ev.log_weight = -sum * invC;
+  bool partial = nc < C;
+
+  // Free-space term (Eq. 8, 9): points farther than d_thresh from the object's box cost 0 and
+  // need no distance.
   if (s.free_space && scene.has_free_space() && s.lambda > 0.0) {
     const double d_thresh = 0.5 * s.res_free;
     const Eigen::Array3d lim = half_extent.array() + d_thresh;
     const Pose I = Pose::Identity();
+    const std::size_t Q = scene.free_space.size();
+    const std::size_t q_limit = bound_only ? std::min(Q, s.free_prefix) : Q;
     Vec3 near[kMax];
     double fsum = 0.0;
     std::uint32_t count = 0;
@@ -156,13 +170,13 @@ Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const 
       count += static_cast<std::uint32_t>(k);
       k = 0;
     };
-    for (const Vec3& q : scene.free_space) {
-      const Vec3 y = T_object_scene * q;
-      if ((y.array().abs() > lim).any()) continue;  // farther than d_thresh: e = 0 (Eq. 8)
+    for (std::size_t q = 0; q < q_limit; ++q) {
+      const Vec3 y = T_object_scene * scene.free_space[q];
+      if ((y.array().abs() > lim).any()) continue;
       near[k++] = y;
       if (k == chunk) {
         flush();
-        if (ev.log_weight - s.lambda * fsum < reject_below) {
+        if (!bound_only && ev.log_weight - s.lambda * fsum < reject_below) {
           ev.free_points = count;
           ev.free_error = fsum;
           ev.log_weight -= s.lambda * fsum;
@@ -174,8 +188,9 @@ Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const 
     ev.free_points = count;
     ev.free_error = fsum;
     ev.log_weight -= s.lambda * fsum;
+    partial = partial || q_limit < Q;
   }
-  ev.complete = true;
+  ev.complete = !partial;
   return ev;
 }
 

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numbers>
 #include <optional>
 
 namespace ts {
@@ -41,10 +42,25 @@ struct PrunedSet {
   }
 };
 
+/// Sign-free angles of a point pair with normals: |n_a . n_b|, |n_a . u|, |n_b . u| (u the unit
+/// chord), as cosines. Invariant to rigid motions and to flipped normals.
+struct PairSignature {
+  double nn = 0, na = 0, nb = 0;
+};
+inline PairSignature signature(const Vec3& pa, const Vec3& na, const Vec3& pb, const Vec3& nb) {
+  const Vec3 u = (pb - pa).normalized();
+  return {std::abs(na.dot(nb)), std::abs(na.dot(u)), std::abs(nb.dot(u))};
+}
+inline bool similar(const PairSignature& a, const PairSignature& b, double tol) {
+  return std::abs(a.nn - b.nn) <= tol && std::abs(a.na - b.na) <= tol && std::abs(a.nb - b.nb) <= tol;
+}
+
 struct Triplet {
   bool valid = false;
   std::array<std::uint32_t, 3> point{};   ///< contact indices
   std::array<Vec3, 3> p;                  ///< scene frame
+  std::array<Vec3, 3> n;                  ///< scene normals
+  PairSignature s12, s13, s23;
   double d12 = 0, d13 = 0, d23 = 0;
   std::array<PrunedSet, 3> pruned;
   bool from_boundary = false;   ///< drawn from all points, the interior gave no valid triplet
@@ -80,25 +96,40 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
   const PrunedSet& F3 = t.pruned[2];
   if (F1.items.empty() || F2.items.empty() || F3.items.empty()) return std::nullopt;
   const double tol = s.distance_tolerance;
+  const bool use_normals = s.normal_tolerance_deg > 0.0;
+  const double ntol = std::sin(std::min(90.0, s.normal_tolerance_deg) * std::numbers::pi / 180.0);
   for (int attempt = 0; attempt < s.registration_attempts; ++attempt) {
     const Pruned& a = F1.items[rng.index(F1.items.size())];
-    const std::vector<Vec3>& pts = db.features(a.object).coarse.points;
+    const PointCloud& coarse = db.features(a.object).coarse;
+    const std::vector<Vec3>& pts = coarse.points;
+    const bool normals = use_normals && coarse.has_normals();
     const Vec3& q1 = pts[a.point];
-    // Second point: same object, distance to the first matching the input's.
+    // Second point: same object, distance to the first matching the input's (and, as an
+    // extension, the same angles between normals and chord).
     const auto [b2, e2] = F2.range_of(a.object);
     buf2.clear();
     for (std::uint32_t j = b2; j < e2; ++j) {
-      const double d = (pts[F2.items[j].point] - q1).norm();
-      if (std::abs(d - t.d12) <= tol) buf2.push_back(F2.items[j].point);
+      const std::uint32_t k = F2.items[j].point;
+      const double d = (pts[k] - q1).norm();
+      if (std::abs(d - t.d12) > tol) continue;
+      if (normals && !similar(signature(q1, coarse.normals[a.point], pts[k], coarse.normals[k]), t.s12, ntol))
+        continue;
+      buf2.push_back(k);
     }
     if (buf2.empty()) continue;
-    const Vec3& q2 = pts[buf2[rng.index(buf2.size())]];
+    const std::uint32_t k2 = buf2[rng.index(buf2.size())];
+    const Vec3& q2 = pts[k2];
     const auto [b3, e3] = F3.range_of(a.object);
     buf3.clear();
     for (std::uint32_t j = b3; j < e3; ++j) {
-      const Vec3& q = pts[F3.items[j].point];
-      if (std::abs((q - q1).norm() - t.d13) <= tol && std::abs((q - q2).norm() - t.d23) <= tol)
-        buf3.push_back(F3.items[j].point);
+      const std::uint32_t k = F3.items[j].point;
+      const Vec3& q = pts[k];
+      if (std::abs((q - q1).norm() - t.d13) > tol || std::abs((q - q2).norm() - t.d23) > tol) continue;
+      if (normals &&
+          (!similar(signature(q1, coarse.normals[a.point], q, coarse.normals[k]), t.s13, ntol) ||
+           !similar(signature(q2, coarse.normals[k2], q, coarse.normals[k]), t.s23, ntol)))
+        continue;
+      buf3.push_back(k);
     }
     if (buf3.empty()) continue;
     const Vec3& q3 = pts[buf3[rng.index(buf3.size())]];
@@ -185,6 +216,10 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
         t.valid = true;
         t.point = k;
         t.p = {p1, p2, p3};
+        t.n = {scene.contacts.normals[k[0]], scene.contacts.normals[k[1]], scene.contacts.normals[k[2]]};
+        t.s12 = signature(p1, t.n[0], p2, t.n[1]);
+        t.s13 = signature(p1, t.n[0], p3, t.n[2]);
+        t.s23 = signature(p2, t.n[1], p3, t.n[2]);
         t.d12 = d12;
         t.d13 = d13;
         t.d23 = d23;

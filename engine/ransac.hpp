@@ -23,6 +23,9 @@ struct RansacSettings {
   double min_spacing = 0.0;           ///< m between triplet points; 0: the FPFH feature radius.
                                       ///< Capped at 0.3 x the contact cloud's diameter
   double distance_tolerance = 0.006;  ///< m, allowed |d_db - d_input| of each point pair
+  double normal_tolerance_deg = 0.0; ///< extension: registered pairs must also agree in the
+                                      ///< angles between their normals and chord, within this
+                                      ///< (0: off, the paper's distance test only)
   double min_sv_ratio = 0.15;         ///< triangles (input and database) with sigma2/sigma1
                                       ///< below this are degenerate (near-collinear)
   int triplet_attempts = 500;         ///< draws before a triplet slot is given up

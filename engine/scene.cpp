@@ -13,6 +13,7 @@ namespace ts {
 namespace {
 
 constexpr std::uint64_t kTagOrder = 0x0de7;
+constexpr std::uint64_t kTagFreeOrder = 0xf7ee;
 
 /// Largest pairwise distance: exact up to a few thousand points, else a lower bound from the
 /// extreme points along 13 directions (enough for the size filter, which needs a lower bound).
@@ -119,6 +120,12 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
   for (Vec3& p : in.points) p -= sc.origin;
   for (const Vec3& q : free_world)
     if (finite(q)) sc.free_space.push_back(q - sc.origin);
+  {
+    // A fixed pseudo-random order, so that every prefix is a representative subset.
+    Rng rng(seed, step, kTagFreeOrder);
+    for (std::size_t i = sc.free_space.size(); i > 1; --i)
+      std::swap(sc.free_space[i - 1], sc.free_space[rng.index(i)]);
+  }
   if (s.query_voxel > 0.0 && !in.empty()) in = voxel_filter(in, s.query_voxel);
 
   const std::size_t n = in.size();

@@ -29,7 +29,7 @@ struct Scene {
   std::vector<std::uint8_t> feature_valid;  ///< FPFH defined (normal and neighbours present)
   std::vector<std::uint8_t> interior;  ///< not on a patch boundary (triplet sampling)
   KdTree3 tree;                        ///< over contacts.points
-  std::vector<Vec3> free_space;        ///< local frame
+  std::vector<Vec3> free_space;        ///< local frame, in a fixed pseudo-random order
   std::vector<std::uint32_t> order;    ///< fixed pseudo-random permutation of the contacts:
                                        ///< every prefix is a representative subset
   std::vector<Vec3> ordered;           ///< contacts.points permuted by `order` (evaluation)
