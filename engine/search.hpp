@@ -14,7 +14,8 @@ struct Neighbour {
   double sq_distance = 0.0;
 };
 
-/// Exact k-d tree over 3-D points. Keeps its own copy of the points.
+/// Exact k-d tree over 3-D points. Keeps its own copy of the points. sq_distance is
+/// (q0-p0)^2 + (q1-p1)^2 + (q2-p2)^2 summed in that order; radius() is inclusive (<= r).
 class KdTree3 {
  public:
   KdTree3();
@@ -46,10 +47,15 @@ struct FeatureRef {
 struct FeatureIndexSettings {
   bool exact = false;   ///< exact: single k-d tree, unlimited checks; approximate: randomized trees
   int trees = 4;        ///< approximate mode: randomized k-d trees
-  int checks = 256;     ///< approximate mode: leaves visited per query
+  int checks = 256;     ///< approximate mode: leaves visited per query (at least W are visited)
+  std::uint64_t seed = 1;  ///< approximate mode: seed of the randomized trees' split choices
 };
 
 /// Index over all objects' features (the cumulative feature k-d tree KT_db,cum^feat).
+/// Exact mode: FLANN's single k-d tree with unlimited checks. Approximate mode: a randomized
+/// k-d forest searched best-bin-first (FLANN's KDTreeIndex algorithm) whose split choices come
+/// from ts::Rng(seed): the same features and settings give the same results on every run.
+/// sq_distance = sum over bins i = 0..32, in that order, of (double(a_i) - double(b_i))^2.
 class FeatureIndex {
  public:
   FeatureIndex();

@@ -1,0 +1,225 @@
+#include "engine/core.hpp"
+#include "io/atomic_file.hpp"
+#include "io/h5.hpp"
+#include "temp_dir.hpp"
+
+#include <doctest/doctest.h>
+
+#include <chrono>
+#include <filesystem>
+#include <thread>
+
+namespace fs = std::filesystem;
+namespace h5 = ts::io::h5;
+using ts::test::TempDir;
+
+namespace {
+
+std::string numbered(const char* stem, int k) {
+  std::string s = stem;
+  s += std::to_string(k);  // (not "x" + to_string: GCC 12 warns falsely on that, -Wrestrict)
+  return s;
+}
+
+// A small file exercising every kind of content the wrapper writes.
+void write_sample(const fs::path& path) {
+  auto f = h5::File::create(path);
+  auto root = f.root();
+  root.set_attribute("schema_version", std::int64_t{3});
+  root.set_attribute("title", "sample");
+  root.set_attribute("weights", std::vector<double>{0.5, 1.5, -2.0});
+  auto obj = root.create_group("objects/cube");
+  obj.set_attribute("scale", 0.125);
+  std::vector<double> pts{0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11};
+  obj.write("fine/points", pts.data(), {4, 3});
+  std::vector<float> feat(2 * 33);
+  for (std::size_t i = 0; i < feat.size(); ++i) feat[i] = static_cast<float>(i) * 0.25f;
+  obj.write("features", feat.data(), {2, 33}, h5::Storage{.deflate = 4});
+  std::vector<std::int32_t> ijk{-1, 0, 1, 2, 3, 4};
+  obj.write("field/ijk", ijk.data(), {2, 3});
+  obj.write("ids", std::vector<std::int64_t>{7, -8, 9});
+  obj.write("flags", std::vector<std::uint8_t>{1, 0, 1, 1});
+  root.write_strings("order", {"cube", "sphere", ""});
+  root.create_extendible<double>("log/contacts", {3});
+  std::vector<double> rows{1, 2, 3, 4, 5, 6};
+  root.open_group("log").append("contacts", rows.data(), 2);
+  f.close();
+}
+
+}  // namespace
+
+TEST_CASE("h5: every type, attribute and group round-trips") {
+  TempDir dir("h5");
+  const auto p = dir / "a.h5";
+  write_sample(p);
+
+  auto f = h5::File::open(p);
+  auto root = f.root();
+  CHECK(root.int_attribute("schema_version") == 3);
+  CHECK(root.string_attribute("title") == "sample");
+  CHECK(root.doubles_attribute("weights", 3) == std::vector<double>{0.5, 1.5, -2.0});
+  CHECK(root.children() == std::vector<std::string>{"log", "objects", "order"});
+  CHECK(root.attributes() == std::vector<std::string>{"schema_version", "title", "weights"});
+  CHECK(root.has("objects/cube/fine/points"));
+  CHECK_FALSE(root.has("objects/sphere/fine/points"));
+  CHECK(root.has_group("objects/cube"));
+  CHECK_FALSE(root.has_group("objects/cube/features"));
+  CHECK(root.has_dataset("objects/cube/features"));
+
+  auto obj = root.open_group("objects/cube");
+  CHECK(obj.path() == "/objects/cube");
+  CHECK(obj.double_attribute("scale") == 0.125);
+  h5::Shape shape;
+  const auto pts = obj.read<double>("fine/points", {h5::kAny, 3}, &shape);
+  CHECK(shape == h5::Shape{4, 3});
+  REQUIRE(pts.size() == 12);
+  for (int i = 0; i < 12; ++i) CHECK(pts[i] == i);
+  const auto feat = obj.read<float>("features", {h5::kAny, 33});
+  REQUIRE(feat.size() == 66);
+  CHECK(feat[65] == 65 * 0.25f);
+  CHECK(obj.read<std::int32_t>("field/ijk", {h5::kAny, 3}) == std::vector<std::int32_t>{-1, 0, 1, 2, 3, 4});
+  CHECK(obj.read<std::int64_t>("ids", {3}) == std::vector<std::int64_t>{7, -8, 9});
+  CHECK(obj.read<std::uint8_t>("flags", {h5::kAny}) == std::vector<std::uint8_t>{1, 0, 1, 1});
+  CHECK(root.read_strings("order") == std::vector<std::string>{"cube", "sphere", ""});
+  CHECK(root.read<double>("log/contacts", {h5::kAny, 3}) == std::vector<double>{1, 2, 3, 4, 5, 6});
+  CHECK(obj.read_rows<double>("fine/points", 1, 2, {h5::kAny, 3}) ==
+        std::vector<double>{3, 4, 5, 6, 7, 8});
+}
+
+TEST_CASE("h5: extendible datasets grow across reopenings") {
+  TempDir dir("h5");
+  const auto p = dir / "log.h5";
+  {
+    auto f = h5::File::create(p);
+    f.root().create_extendible<float>("taxels", {2, 2}, h5::Storage{.deflate = 1, .chunk_rows = 2});
+    f.close();
+  }
+  for (int k = 0; k < 3; ++k) {
+    auto f = h5::File::open(p, h5::File::Access::read_write);
+    std::vector<float> rows(4 * (k + 1));
+    for (std::size_t i = 0; i < rows.size(); ++i) rows[i] = static_cast<float>(10 * k + i);
+    f.root().append("taxels", rows.data(), static_cast<std::uint64_t>(k + 1));
+    f.close();
+  }
+  auto f = h5::File::open(p);
+  h5::Shape s;
+  const auto all = f.root().read<float>("taxels", {h5::kAny, 2, 2}, &s);
+  CHECK(s == h5::Shape{6, 2, 2});
+  CHECK(all[0] == 0.0f);
+  CHECK(all[4] == 10.0f);
+  CHECK(all[12] == 20.0f);
+  CHECK(all[23] == 31.0f);
+}
+
+TEST_CASE("h5: shape, type and missing-field errors name the file and the path") {
+  TempDir dir("h5");
+  const auto p = dir / "db.h5";
+  write_sample(p);
+  auto f = h5::File::open(p, h5::File::Access::read, "db.h5");
+  auto obj = f.group("objects/cube");
+  CHECK_THROWS_WITH_AS(obj.read<double>("fine/points", {h5::kAny, 2}),
+                       "dataset has shape [4,3], expected [n,2] (db.h5, /objects/cube/fine/points)",
+                       ts::Error);
+  CHECK_THROWS_WITH_AS(obj.read<double>("fine/points", {h5::kAny}),
+                       doctest::Contains("expected [n]"), ts::Error);
+  CHECK_THROWS_WITH_AS(obj.read<double>("features", {h5::kAny, 33}),
+                       "dataset holds float32 values, expected float64 (db.h5, /objects/cube/features)",
+                       ts::Error);
+  CHECK_THROWS_WITH_AS(obj.read<std::uint32_t>("field/ijk", {h5::kAny, 3}),
+                       doctest::Contains("holds int32 values, expected uint32"), ts::Error);
+  CHECK_THROWS_WITH_AS(obj.read<double>("coarse/points", {h5::kAny, 3}),
+                       "dataset is missing (db.h5, /objects/cube/coarse/points)", ts::Error);
+  CHECK_THROWS_WITH_AS(f.group("objects/sphere"), "group is missing (db.h5, /objects/sphere)",
+                       ts::Error);
+  CHECK_THROWS_WITH_AS(obj.int_attribute("scale"),
+                       doctest::Contains("expected an integer (db.h5, /objects/cube@scale)"), ts::Error);
+  CHECK_THROWS_WITH_AS(obj.string_attribute("nope"), doctest::Contains("attribute is missing"),
+                       ts::Error);
+  CHECK_THROWS_WITH_AS(f.root().doubles_attribute("weights", 4),
+                       doctest::Contains("holds 3 values, expected 4"), ts::Error);
+  CHECK_THROWS_WITH_AS(obj.read_rows<double>("fine/points", 3, 2, {h5::kAny, 3}),
+                       doctest::Contains("out of range"), ts::Error);
+}
+
+TEST_CASE("h5: writing over existing objects is refused") {
+  TempDir dir("h5");
+  auto f = h5::File::create(dir / "w.h5", "w.h5");
+  auto root = f.root();
+  root.write("x", std::vector<double>{1.0});
+  CHECK_THROWS_WITH_AS(root.write("x", std::vector<double>{2.0}),
+                       "dataset already exists (w.h5, /x)", ts::Error);
+  root.create_group("g");
+  CHECK_THROWS_WITH_AS(root.create_group("g"), "group already exists (w.h5, /g)", ts::Error);
+  // Attributes are replaced, not duplicated.
+  root.set_attribute("a", std::int64_t{1});
+  root.set_attribute("a", std::int64_t{2});
+  CHECK(root.int_attribute("a") == 2);
+}
+
+TEST_CASE("h5: missing, foreign and truncated files give one clear error") {
+  TempDir dir("h5");
+  CHECK_THROWS_WITH_AS(h5::File::open(dir / "none.h5"), doctest::Contains("file does not exist"),
+                       ts::Error);
+
+  const auto text = dir / "foreign.h5";
+  ts::test::write_text(text, "this is not HDF5, just text pretending to be a database\n");
+  CHECK_THROWS_WITH_AS(h5::File::open(text), doctest::Contains("not an HDF5 file"), ts::Error);
+
+  const auto empty = dir / "empty.h5";
+  ts::test::write_text(empty, "");
+  CHECK_THROWS_AS(h5::File::open(empty), ts::Error);
+
+  const auto full = dir / "full.h5";
+  write_sample(full);
+  const auto bytes = ts::test::read_bytes(full);
+  const auto cut = dir / "cut.h5";
+  ts::test::write_text(cut, bytes.substr(0, bytes.size() / 2));
+  CHECK_THROWS_WITH_AS(h5::File::open(cut), doctest::Contains("truncated"), ts::Error);
+  CHECK_THROWS_WITH_AS(h5::File::open(cut), doctest::Contains(cut.string().c_str()), ts::Error);
+}
+
+TEST_CASE("h5: the same content gives identical bytes (no timestamps)") {
+  TempDir dir("h5");
+  write_sample(dir / "one.h5");
+  // HDF5 timestamps have a resolution of one second: wait past it so that a timestamp would show.
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  {
+    // Through the atomic output, as every store writes.
+    ts::io::AtomicOutput out(dir / "two.h5");
+    write_sample(out.temp_path());
+    out.commit();
+  }
+  const auto a = ts::test::read_bytes(dir / "one.h5");
+  const auto b = ts::test::read_bytes(dir / "two.h5");
+  CHECK(a.size() > 1000);
+  CHECK(a == b);
+}
+
+TEST_CASE("h5: concurrent readers are serialised and read the right data") {
+  TempDir dir("h5");
+  const auto p = dir / "c.h5";
+  {
+    auto f = h5::File::create(p);
+    for (int k = 0; k < 8; ++k) {
+      std::vector<double> v(3000);
+      for (std::size_t i = 0; i < v.size(); ++i) v[i] = k * 10000.0 + static_cast<double>(i);
+      f.root().write(numbered("d", k), v.data(), {1000, 3});
+    }
+    f.close();
+  }
+  auto f = h5::File::open(p);
+  const auto root = f.root();
+  std::vector<int> ok(8, 0);
+  std::vector<std::thread> threads;
+  for (int k = 0; k < 8; ++k)
+    threads.emplace_back([&, k] {
+      bool good = true;
+      for (int rep = 0; rep < 20; ++rep) {
+        const auto v = root.read<double>(numbered("d", k), {h5::kAny, 3});
+        good = good && v.size() == 3000 && v[2999] == k * 10000.0 + 2999.0;
+      }
+      ok[k] = good;
+    });
+  for (auto& t : threads) t.join();
+  CHECK(ok == std::vector<int>(8, 1));
+}
