@@ -20,64 +20,74 @@ bool rigid_pose(const Pose& T) {
 }
 }  // namespace
 
-void validate(const TactileLog& log, const std::string& file) {
+void validate_grasp(const TactileLog& log, const GraspRecord& r, std::size_t k, const std::string& file) {
   const Gripper& g = log.gripper;
   const std::size_t n = log.sensels();
   const double full_scale = g.sensor().signal_full_scale;
-  require(!log.pads.empty(), "log records no tactile pad", file, "sensors/pad_index");
+  const std::size_t image = log.pads.size() * n;
+  std::string at = "[";
+  at += std::to_string(k);
+  at += ']';
+  require(std::isfinite(r.time), "timestamp is not finite", file, "/grasps/time" + at);
+  require(rigid_pose(r.arm_pose), "arm pose is not a finite rigid transform", file, "/grasps/arm_pose" + at);
+  require(r.joints.size() == static_cast<std::size_t>(g.joint_count()),
+          "expected " + std::to_string(g.joint_count()) + " joint angles, got " +
+              std::to_string(r.joints.size()),
+          file, "/grasps/joints" + at);
+  for (double q : r.joints) require(std::isfinite(q), "joint angle is not finite", file, "/grasps/joints" + at);
+  require(r.tactile.size() == image,
+          "tactile image size " + std::to_string(r.tactile.size()) + " does not match " +
+              std::to_string(log.pads.size()) + " pads x " + std::to_string(n) + " sensels",
+          file, "/grasps/tactile" + at);
+  for (std::size_t i = 0; i < r.tactile.size(); ++i) {
+    const float e = r.tactile[i];
+    if (std::isfinite(e) && e >= 0.0f && e <= full_scale) continue;
+    const std::string where = "/grasps/tactile" + at + "[" + std::to_string(i / n) + "][" + std::to_string(i % n) + "]";
+    require(std::isfinite(e), "tactile signal is not finite", file, where);
+    require(e >= 0.0f, "tactile signal " + std::to_string(e) + " is negative", file, where);
+    require(false, "tactile signal " + std::to_string(e) + " exceeds the full scale " + std::to_string(full_scale),
+            file, where);
+  }
+  require(r.past_peak.empty() || r.past_peak.size() == image,
+          "past-peak flags do not match the tactile image size", file, "/grasps/past_peak" + at);
+  for (auto h : r.past_peak)
+    require(h <= 2, "past-peak flag must be 0, 1 or 2", file, "/grasps/past_peak" + at);
+}
+
+void validate(const TactileLog& log, const std::string& file) {
+  const Gripper& g = log.gripper;
+  const std::size_t n = log.sensels();
+  require(!log.pads.empty(), "log records no tactile pad", file, "/sensors/pad_index");
   std::set<int> seen;
   for (std::size_t i = 0; i < log.pads.size(); ++i) {
     const int p = log.pads[i];
     require(p >= 0 && p < static_cast<int>(g.pads().size()),
             "pad index " + std::to_string(p) + " is not a pad of the gripper", file,
-            "sensors/pad_index[" + std::to_string(i) + "]");
+            "/sensors/pad_index[" + std::to_string(i) + "]");
     require(seen.insert(p).second, "pad index " + std::to_string(p) + " listed twice", file,
-            "sensors/pad_index[" + std::to_string(i) + "]");
+            "/sensors/pad_index[" + std::to_string(i) + "]");
   }
   require(log.gains.size() == log.pads.size() * n,
           "calibration gains: expected " + std::to_string(log.pads.size() * n) + " values, got " +
               std::to_string(log.gains.size()),
-          file, "sensors/gain");
+          file, "/sensors/gain");
   for (std::size_t i = 0; i < log.gains.size(); ++i)
     require(std::isfinite(log.gains[i]) && log.gains[i] > 0.0f,
             "calibration gain must be positive and finite", file,
-            "sensors/gain[" + std::to_string(i / n) + "][" + std::to_string(i % n) + "]");
-  const std::size_t image = log.pads.size() * n;
-  for (std::size_t k = 0; k < log.grasps.size(); ++k) {
-    const GraspRecord& r = log.grasps[k];
-    const std::string at = "grasps[" + std::to_string(k) + "]";
-    require(std::isfinite(r.time), "timestamp is not finite", file, at + ".time");
-    require(rigid_pose(r.arm_pose), "arm pose is not a finite rigid transform", file, at + ".arm_pose");
-    require(r.joints.size() == static_cast<std::size_t>(g.joint_count()),
-            "expected " + std::to_string(g.joint_count()) + " joint angles, got " +
-                std::to_string(r.joints.size()),
-            file, at + ".joints");
-    for (double q : r.joints) require(std::isfinite(q), "joint angle is not finite", file, at + ".joints");
-    require(r.tactile.size() == image,
-            "tactile image size " + std::to_string(r.tactile.size()) + " does not match " +
-                std::to_string(log.pads.size()) + " pads x " + std::to_string(n) + " sensels",
-            file, at + ".tactile");
-    for (std::size_t i = 0; i < r.tactile.size(); ++i) {
-      const float e = r.tactile[i];
-      const std::string where = at + ".tactile[" + std::to_string(i / n) + "][" + std::to_string(i % n) + "]";
-      require(std::isfinite(e), "tactile signal is not finite", file, where);
-      require(e >= 0.0f, "tactile signal is negative", file, where);
-      require(e <= full_scale, "tactile signal exceeds the full scale " + std::to_string(full_scale),
-              file, where);
-    }
-    require(r.past_peak.empty() || r.past_peak.size() == image,
-            "past-peak flags do not match the tactile image size", file, at + ".past_peak");
-    for (auto h : r.past_peak) require(h <= 2, "past-peak flag must be 0, 1 or 2", file, at + ".past_peak");
-  }
+            "/sensors/gain[" + std::to_string(i / n) + "][" + std::to_string(i % n) + "]");
+  for (std::size_t k = 0; k < log.grasps.size(); ++k) validate_grasp(log, log.grasps[k], k, file);
   if (log.truth) {
     require(log.truth->arm_poses.size() == log.grasps.size(),
             "ground truth has " + std::to_string(log.truth->arm_poses.size()) + " arm poses for " +
                 std::to_string(log.grasps.size()) + " grasps",
-            file, "ground_truth/arm_pose");
-    require(rigid_pose(log.truth->object_pose), "ground-truth object pose is not rigid", file,
-            "ground_truth/object_pose");
-    for (const auto& T : log.truth->arm_poses)
-      require(rigid_pose(T), "ground-truth arm pose is not rigid", file, "ground_truth/arm_pose");
+            file, "/ground_truth/arm_pose");
+    require(log.truth->joints.empty() || log.truth->joints.size() == log.grasps.size(),
+            "ground truth joint rows do not match the grasps", file, "/ground_truth/joints");
+    require(rigid_pose(log.truth->object_pose), "ground-truth object pose is not a finite rigid transform",
+            file, "/ground_truth/object_pose");
+    for (std::size_t k = 0; k < log.truth->arm_poses.size(); ++k)
+      require(rigid_pose(log.truth->arm_poses[k]), "ground-truth arm pose is not a finite rigid transform",
+              file, "/ground_truth/arm_pose[" + std::to_string(k) + "]");
   }
 }
 

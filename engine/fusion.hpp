@@ -60,8 +60,12 @@ struct TactileLog {
 };
 
 /// Checks a log held in memory (sizes, finiteness, signal range, rigid poses, pads). Throws
-/// ts::Error naming `file` and the offending field ("grasps[3].tactile", ...).
+/// ts::Error naming `file` and the offending field as its HDF5 path and indices
+/// ("/grasps/tactile[3][0][17]": grasp 3, logged pad 0, sensel 17).
 void validate(const TactileLog& log, const std::string& file = {});
+/// The per-grasp part of validate() for grasp number `index` (used before appending).
+void validate_grasp(const TactileLog& log, const GraspRecord& grasp, std::size_t index,
+                    const std::string& file = {});
 
 struct ContactSettings {
   bool keep_ambiguous = true;  ///< keep sensels whose side of the fold is unknown (rising value)
