@@ -23,7 +23,7 @@ TactileLog hand_log(const Vec3& origin, std::size_t grasps) {
     r.arm_pose.translation() = origin + Vec3(0.01 * g, 0, 0);
     r.joints = std::vector<double>(6, 0.2);
     for (int j = 0; j < s.sensels(); ++j) {
-      const double c = (g == 1) ? 0.0 : (j < 24 ? 0.001 + 0.0001 * j : 0.0);  // grasp 1: no contact
+      const double c = (g == 1) ? 0.0 : (j < 24 ? 0.001 + 0.00008 * j : 0.0);  // up to 2.84 mm  // grasp 1: no contact
       r.tactile.push_back(static_cast<float>(sensel_signal(s, log.gain(0, j), c)));
       r.past_peak.push_back(static_cast<std::uint8_t>(FoldHint::rising));
     }
@@ -43,7 +43,7 @@ TEST_CASE("contacts follow Eq. 1 and Eq. 2 exactly") {
     const Pose T = log.grasps[0].arm_pose * log.gripper.pad_pose(log.grasps[0].joints, 1);
     for (int j = 0; j < 24; ++j) {
       Vec3 PL = s.sensel_position(j);
-      PL.z() = s.foam_thickness - (0.001 + 0.0001 * j);  // z_j = z_max - compression
+      PL.z() = s.foam_thickness - (0.001 + 0.00008 * j);  // z_j = z_max - compression
       // float32 signals: well below a micrometre even 100 km from the origin
       CHECK((c.points[j] - T * PL).norm() < 1e-6);
     }
@@ -54,7 +54,7 @@ TEST_CASE("contacts follow Eq. 1 and Eq. 2 exactly") {
 TEST_CASE("unknown fold side: ambiguous sensels are counted and optionally dropped") {
   TactileLog log = hand_log(Vec3::Zero(), 1);
   const auto& s = log.gripper.sensor();
-  log.grasps[0].past_peak.clear();  // a log without past-peak flags
+  log.grasps[0].past_peak[30] = static_cast<std::uint8_t>(FoldHint::unknown);  // no flag for sensel 30
   log.grasps[0].tactile[30] = static_cast<float>(sensel_signal(s, log.gain(0, 30), 0.0036));  // beyond the peak
   const auto kept = grasp_contacts(log, 0);
   CHECK(kept.ambiguous == 1);
