@@ -165,6 +165,22 @@ View cast_view(const Mesh& mesh, const Vec3& d, const Vec3& centre, double radiu
   return view;
 }
 
+/// Append the view's first hits in pixel order, with face normals turned toward the scanner.
+void append_hits(const Mesh& mesh, const View& view, PointCloud& hits) {
+  for (int j = 0; j < view.nv; ++j)
+    for (int i = 0; i < view.nu; ++i) {
+      const int f = view.face[std::size_t(j) * view.nu + i];
+      if (f < 0) continue;
+      const auto& fc = mesh.faces[f];
+      Vec3 normal = (mesh.vertices[fc[1]] - mesh.vertices[fc[0]])
+                        .cross(mesh.vertices[fc[2]] - mesh.vertices[fc[0]])
+                        .normalized();
+      if (normal.dot(view.d) > 0.0) normal = -normal;
+      hits.points.push_back(view.hit(i, j));
+      hits.normals.push_back(normal);
+    }
+}
+
 /// Is p within `radius` of a hit of the view? Looks only at the pixels around p's projection.
 bool covered_by(const View& view, const Vec3& p, double radius) {
   const Vec3 rel = p - view.origin;
@@ -277,6 +293,18 @@ class ViewPlanner {
 
 }  // namespace
 
+PointCloud scan_view(const MeshIndex& index, const Vec3& direction, double pitch) {
+  PointCloud hits;
+  const Mesh& mesh = index.mesh();
+  if (mesh.vertices.empty() || !(direction.norm() > 0.0) || !finite(direction)) return hits;
+  if (!(pitch > 0.0)) throw Error("ray pitch must be positive", "", "pitch");
+  const Vec3 centre = mesh_bounds(mesh).center();
+  double radius = 0.0;
+  for (const auto& p : mesh.vertices) radius = std::max(radius, (p - centre).norm());
+  append_hits(mesh, cast_view(mesh, direction.normalized(), centre, radius, pitch), hits);
+  return hits;
+}
+
 double surface_coverage(const MeshIndex& mesh, const std::vector<Vec3>& points, double radius,
                         std::uint64_t seed, int samples) {
   Rng rng(seed, kCoverageStream);
@@ -384,19 +412,7 @@ ScanResult scan_mesh(const MeshIndex& index, const ScanSettings& settings, std::
     const double gain = static_cast<double>(uncovered.size() - still.size()) / n;
     uncovered.swap(still);
 
-    // Keep the first hits, normals turned toward the scanner, in pixel order.
-    for (int j = 0; j < view.nv; ++j)
-      for (int i = 0; i < view.nu; ++i) {
-        const int f = view.face[std::size_t(j) * view.nu + i];
-        if (f < 0) continue;
-        const auto& fc = mesh.faces[f];
-        Vec3 normal = (mesh.vertices[fc[1]] - mesh.vertices[fc[0]])
-                          .cross(mesh.vertices[fc[2]] - mesh.vertices[fc[0]])
-                          .normalized();
-        if (normal.dot(d) > 0.0) normal = -normal;
-        hits.points.push_back(view.hit(i, j));
-        hits.normals.push_back(normal);
-      }
+    append_hits(mesh, view, hits);
 
     stalled = gain < settings.min_gain ? stalled + 1 : 0;
     if (stalled >= std::max(1, settings.stall_views) && !next_phase()) break;
