@@ -24,6 +24,7 @@ constexpr std::uint64_t kTrackingStream = 0x5ca1;   // surface samples that trac
 constexpr std::uint64_t kRandomViewStream = 0x7a2d; // random view directions (per view index)
 constexpr std::uint64_t kCoverageStream = 0xc0fe;   // surface samples of surface_coverage
 
+constexpr double kMaxPixels = 1 << 26;  // rays per view: beyond, settings are a mistake
 constexpr double kFailDecay = 0.5;  // weight kept by a sample a chosen view should have covered
 
 struct SurfaceSamples {
@@ -301,6 +302,8 @@ PointCloud scan_view(const MeshIndex& index, const Vec3& direction, double pitch
   const Vec3 centre = mesh_bounds(mesh).center();
   double radius = 0.0;
   for (const auto& p : mesh.vertices) radius = std::max(radius, (p - centre).norm());
+  if (std::pow(2.0 * radius / pitch + 2.0, 2.0) > kMaxPixels)
+    throw Error("ray raster too fine for the object's size", "", "pitch");
   append_hits(mesh, cast_view(mesh, direction.normalized(), centre, radius, pitch), hits);
   return hits;
 }
@@ -328,6 +331,8 @@ ScanResult scan_mesh(const MeshIndex& index, const ScanSettings& settings, std::
   if (!(settings.ray_pitch > 0.0)) throw Error("ray pitch must be positive", "", "scan.ray_pitch");
   if (!(settings.coverage_radius > 0.0))
     throw Error("coverage radius must be positive", "", "scan.coverage_radius");
+  if (settings.coverage_samples < 1) throw Error("at least one coverage sample is needed", "", "scan.coverage_samples");
+  if (settings.candidate_views < 1) throw Error("at least one candidate view is needed", "", "scan.candidate_views");
 
   ScanResult result;
   const Mesh& mesh = index.mesh();
@@ -340,6 +345,9 @@ ScanResult scan_mesh(const MeshIndex& index, const ScanSettings& settings, std::
   double radius = 0.0;
   for (const auto& p : mesh.vertices) radius = std::max(radius, (p - centre).norm());
   const double h = settings.ray_pitch * settings.fine_spacing;
+  if (std::pow(2.0 * radius / h + 2.0, 2.0) > kMaxPixels)
+    throw Error("ray raster too fine for the object's size (over " + std::to_string(kMaxPixels) +
+                    " rays per view)", "", "scan.ray_pitch/scan.fine_spacing");
   const bool two_sided = !mesh_topology(mesh).closed();  // open sheets are seen from both sides
 
   const std::size_t n = samples.points.size();

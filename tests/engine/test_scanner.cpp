@@ -182,6 +182,15 @@ TEST_CASE("scanner: bad settings are reported, empty meshes give an empty scan")
   s = ScanSettings{};
   s.ray_pitch = -1.0;
   CHECK_THROWS_AS(scan_mesh(index, s, 1), Error);
+  s = ScanSettings{};
+  s.fine_spacing = 1e-7;  // 4e12 rays per view
+  CHECK_THROWS_AS(scan_mesh(index, s, 1), Error);
+  s = ScanSettings{};
+  s.coverage_samples = 0;
+  CHECK_THROWS_AS(scan_mesh(index, s, 1), Error);
+  s = ScanSettings{};
+  s.max_views = 0;
+  CHECK(scan_mesh(index, s, 1).fine.empty());
   const ScanResult r = scan_mesh(MeshIndex(Mesh{}), ScanSettings{}, 1);
   CHECK(r.fine.empty());
   CHECK(r.coverage == 0.0);
