@@ -1,0 +1,126 @@
+// Experiment configuration: objects x runs x steps x method x noise x sensors, the method's
+// cost knobs, and an optional sweep (a grid of variants). Read from a TOML/INI file (CLI11's
+// config parser) and/or command-line flags; every key goes through one setter, so a file key
+// and a flag are validated alike and an error names the key (and the file).
+//
+// Keys (file sections become dotted prefixes: `[ransac]` + `triplets = 15` is ransac.triplets):
+//   name, description                      free text
+//   objects            "all" | [names]     objects explored (default: all of the database)
+//   database           "all" | [names]     objects the recognizer may answer (default: all)
+//   database_size      int >= 1            first the explored objects, then database order
+//   runs               int >= 1            exploration runs per object (paper: 20 or 50)
+//   steps              int >= 1            exploration steps (grasps) per run (paper: 40)
+//   pool               int >= steps        simulated grasps per object (Section 5.1: >= 50)
+//   method             bricpsf | batch-ransac | ransac-icp | ransac-icp-fs
+//   noise              ideal | underwater | deepsea
+//   noise.arm_position_sigma_m, noise.arm_rotation_sigma_deg, noise.sensel_noise,
+//   noise.force_noise, noise.contact_sigma_m     overrides of the profile (>= 0)
+//   sensors            1 | 6
+//   seed               unsigned integer
+//   ransac.triplets (N), ransac.registrations (R), ransac.samples ("NxR"), ransac.prune (W),
+//   ransac.d_outlier_m, bricpsf.hypotheses (n_p), bricpsf.psi, bricpsf.lambda,
+//   icp.iterations     method parameters; unset means the recognizer's default
+//   schedule           runs | steps        parallel over runs (throughput) or inside each step
+//                                          (latency); never changes results
+//   sweep.<key> = [v1, v2, ...]            one variant per combination (cartesian product, the
+//                                          first listed key varies slowest)
+#pragma once
+
+#include "engine/core.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace ts::experiments {
+
+/// Overrides of the simulator's noise profile (unset: the profile's value).
+struct NoiseOverrides {
+  std::optional<double> arm_position_sigma_m;    ///< m per axis, per grasp
+  std::optional<double> arm_rotation_sigma_deg;  ///< deg, per grasp
+  std::optional<double> sensel_noise;            ///< fraction of the signal (0.05 = 5 %)
+  std::optional<double> force_noise;             ///< fraction of the force (deep sea: 0.5)
+  std::optional<double> contact_sigma_m;         ///< m, contact position noise (Q = diag)
+};
+
+/// Method parameters (unset: the recognizer's default, which follows the paper).
+struct MethodParams {
+  std::optional<int> triplets;          ///< N, input triplets per Batch RANSAC
+  std::optional<int> registrations;     ///< R, registrations per triplet
+  std::optional<int> prune;             ///< W, nearest database features per triplet point
+  std::optional<double> d_outlier_m;    ///< m, Eq. 4
+  std::optional<int> hypotheses;        ///< n_p, BRICPSF hypotheses
+  std::optional<double> psi;            ///< Ψ, share of evolved hypotheses kept
+  std::optional<double> lambda;         ///< λ, free-space weight (Eq. 9)
+  std::optional<int> icp_iterations;    ///< ICP iteration cap
+};
+
+struct SweepAxis {
+  std::string key;                              ///< a scalar key, e.g. "ransac.samples"
+  std::vector<std::vector<std::string>> values; ///< one entry per variant value (a key's inputs)
+};
+
+struct ExperimentConfig {
+  std::string name = "experiment";
+  std::string description;
+  std::vector<std::string> objects;     ///< explored objects; empty = all of the database
+  std::vector<std::string> database;    ///< objects the recognizer knows; empty = all
+  std::optional<int> database_size;     ///< truncate the database (explored objects first)
+  int runs = 20;
+  int steps = 40;
+  int pool = 50;
+  std::string method = "bricpsf";
+  std::string noise = "underwater";
+  NoiseOverrides noise_params;
+  int sensors = 1;
+  std::uint64_t seed = 1;
+  MethodParams params;
+  std::string schedule = "runs";
+  std::vector<SweepAxis> sweep;
+};
+
+/// Every key the configuration accepts (without the sweep. prefix), in documentation order.
+const std::vector<std::string>& config_keys();
+
+/// Set one key from its textual inputs (a config item's or a flag's). Throws ts::Error naming
+/// `key` (and `file` when given) on an unknown key or an impossible value.
+void set_key(ExperimentConfig& config, const std::string& key,
+             const std::vector<std::string>& inputs, const std::string& file = {});
+
+/// Read a TOML or INI file (CLI11's parser) on top of `config`. Unknown keys, impossible values
+/// and unreadable files throw ts::Error naming the file and the key.
+void load_config_file(ExperimentConfig& config, const std::filesystem::path& file);
+
+/// Checks that need all keys together (pool >= steps, sweep values valid...). Throws ts::Error
+/// naming the key.
+void validate(const ExperimentConfig& config, const std::string& file = {});
+
+/// Resolve explored and database objects against the database's names: "all" expands, unknown
+/// names throw ts::Error naming the key ("objects" or "database") and the name.
+struct ResolvedObjects {
+  std::vector<std::string> explored;   ///< in the configuration's order
+  std::vector<std::string> database;   ///< what the recognizer knows, explored objects first
+};
+ResolvedObjects resolve_objects(const ExperimentConfig& config,
+                                const std::vector<std::string>& database_names);
+
+/// One combination of the sweep (or the configuration itself when there is no sweep).
+struct Variant {
+  std::string label;                   ///< "ransac.samples=15x200, method=bricpsf"; "" if none
+  ExperimentConfig config;             ///< with the sweep applied and cleared
+};
+std::vector<Variant> expand_variants(const ExperimentConfig& config);
+
+/// Canonical JSON of everything that determines results (all keys, unset ones as null; the
+/// schedule is informative and kept apart under "schedule").
+nlohmann::ordered_json to_json(const ExperimentConfig& config);
+
+/// Compare two canonical configurations; returns the first key whose value differs ("" when
+/// they determine the same results; "schedule" is ignored).
+std::string first_difference(const nlohmann::ordered_json& a, const nlohmann::ordered_json& b);
+
+}  // namespace ts::experiments

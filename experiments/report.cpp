@@ -1,0 +1,416 @@
+#include "experiments/report.hpp"
+
+#include "engine/core.hpp"
+#include "io/atomic_file.hpp"
+
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iomanip>
+#include <map>
+#include <numbers>
+#include <ostream>
+#include <sstream>
+
+#ifndef TS_SOURCE_DIR
+#define TS_SOURCE_DIR ""
+#endif
+
+namespace ts::experiments {
+
+namespace {
+
+using J = nlohmann::ordered_json;
+constexpr double kDeg = 180.0 / std::numbers::pi;
+
+J opt(const std::optional<double>& v, double scale = 1.0) {
+  return v ? J(*v * scale) : J(nullptr);
+}
+J interval(const std::optional<Interval>& v, double scale = 1.0) {
+  return v ? J::array({v->lo * scale, v->hi * scale}) : J(nullptr);
+}
+
+/// The four keys of one error: _median, _p95, _mean_bounded, _mean_bounded_ci95.
+void put_error(J& j, const std::string& prefix, const ErrorSummary& e, double scale) {
+  j[prefix + "_median"] = opt(e.median, scale);
+  j[prefix + "_p95"] = opt(e.p95, scale);
+  j[prefix + "_mean_bounded"] = e.bounded_mean * scale;
+  j[prefix + "_mean_bounded_ci95"] = interval(e.bounded_mean_ci95, scale);
+}
+
+/// Per-step JSON rows for a set of runs (all of the same step count).
+J per_step_json(const std::vector<const io::RunRecord*>& runs, int steps,
+                const std::vector<std::string>& stages, const ErrorBounds& bounds) {
+  J rows = J::array();
+  for (int k = 0; k < steps; ++k) {
+    std::vector<StepSample> samples;
+    std::vector<std::vector<double>> stage_times(stages.size());
+    std::vector<double> posterior, hyps, contacts;
+    for (const io::RunRecord* r : runs) {
+      const io::RunStepRecord& s = r->steps[static_cast<std::size_t>(k)];
+      samples.push_back({s.correct, s.position_error_m, s.orientation_error_rad,
+                         s.symmetric_orientation_error_rad, s.mssd_m, s.time_s});
+      for (std::size_t i = 0; i < stages.size() && i < s.stage_times_s.size(); ++i)
+        stage_times[i].push_back(s.stage_times_s[i]);
+      posterior.push_back(s.posterior_true);
+      contacts.push_back(s.contacts);
+    }
+    const StepSummary m = summarize_step(k + 1, samples, bounds);
+    J row;
+    row["step"] = k + 1;
+    row["runs"] = m.runs;
+    row["correct"] = m.correct;
+    row["recognition_rate"] = m.recognition_rate;
+    row["recognition_rate_ci95"] = J::array({m.recognition_rate_ci95.lo, m.recognition_rate_ci95.hi});
+    // The interface's keys first, then the rest.
+    row["position_error_m_median"] = opt(m.position_m.median);
+    row["orientation_error_deg_median"] = opt(m.orientation_rad.median, kDeg);
+    row["symmetric_orientation_error_deg_median"] = opt(m.symmetric_orientation_rad.median, kDeg);
+    row["time_s_median"] = opt(m.time_s_median);
+    row["time_s_p95"] = opt(m.time_s_p95);
+    row["time_s_mean"] = opt(m.time_s_mean);
+    put_error(row, "position_error_m", m.position_m, 1.0);
+    put_error(row, "orientation_error_deg", m.orientation_rad, kDeg);
+    put_error(row, "symmetric_orientation_error_deg", m.symmetric_orientation_rad, kDeg);
+    put_error(row, "mssd_m", m.mssd_m, 1.0);
+    row["posterior_true_median"] = opt(median(posterior));
+    row["contacts_median"] = opt(median(contacts));
+    J st = J::object();
+    for (std::size_t i = 0; i < stages.size(); ++i) st[stages[i]] = opt(median(stage_times[i]));
+    row["stage_times_s_median"] = st;
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+/// First step from which the recognition rate stays >= level to the end; null if never.
+J steps_to_rate(const J& per_step, double level) {
+  J first = nullptr;
+  for (const auto& row : per_step) {
+    if (row["recognition_rate"].get<double>() >= level) {
+      if (first.is_null()) first = row["step"];
+    } else {
+      first = nullptr;
+    }
+  }
+  return first;
+}
+
+J summary_json(const J& per_step, const std::vector<const io::RunRecord*>& runs) {
+  J s;
+  const J& last = per_step.back();
+  s["runs"] = runs.size();
+  s["final_step"] = last["step"];
+  s["recognition_rate_final"] = last["recognition_rate"];
+  s["recognition_rate_final_ci95"] = last["recognition_rate_ci95"];
+  // Step 20 is where the paper quotes its figures (Sections 5.5, 5.7.2).
+  const std::size_t k20 = std::min<std::size_t>(20, per_step.size()) - 1;
+  s["recognition_rate_step20"] = per_step[k20]["recognition_rate"];
+  s["position_error_m_median_final"] = last["position_error_m_median"];
+  s["orientation_error_deg_median_final"] = last["orientation_error_deg_median"];
+  s["symmetric_orientation_error_deg_median_final"] = last["symmetric_orientation_error_deg_median"];
+  s["steps_to_90_percent"] = steps_to_rate(per_step, 0.9);
+  std::vector<double> times;
+  for (const io::RunRecord* r : runs)
+    for (const auto& st : r->steps) times.push_back(st.time_s);
+  s["time_s_per_step_mean"] = times.empty() ? J(nullptr) : J(mean_t_interval(times).mean);
+  s["time_s_per_step_median"] = opt(median(times));
+  s["time_s_per_step_p95"] = opt(quantile(times, 0.95));
+  return s;
+}
+
+struct VariantJson {
+  J per_step, per_object, summary;
+};
+
+VariantJson variant_json(const io::RunStoreContents& store, int variant, const ErrorBounds& bounds) {
+  const auto& h = store.header;
+  std::vector<const io::RunRecord*> all;
+  std::vector<std::vector<const io::RunRecord*>> by_object(h.objects.size());
+  for (const auto& r : store.runs)
+    if (r.variant == variant) {
+      all.push_back(&r);
+      by_object[static_cast<std::size_t>(r.object)].push_back(&r);
+    }
+  VariantJson v;
+  v.per_step = per_step_json(all, h.steps, h.stages, bounds);
+  v.summary = summary_json(v.per_step, all);
+  v.per_object = J::array();
+  for (std::size_t o = 0; o < h.objects.size(); ++o) {
+    if (by_object[o].empty()) continue;
+    J obj;
+    obj["object"] = h.objects[o];
+    obj["runs"] = by_object[o].size();
+    obj["per_step"] = per_step_json(by_object[o], h.steps, h.stages, bounds);
+    obj["summary"] = summary_json(obj["per_step"], by_object[o]);
+    v.per_object.push_back(obj);
+  }
+  return v;
+}
+
+J parse_or_text(const std::string& text) {
+  try {
+    return J::parse(text);
+  } catch (const std::exception&) {
+    return J(text);
+  }
+}
+
+}  // namespace
+
+nlohmann::ordered_json report_json(const io::RunStoreContents& store, const ReportSettings& settings,
+                                   const std::string& store_path) {
+  const auto& h = store.header;
+  J config = parse_or_text(h.config_json);
+  J versions = parse_or_text(h.versions_json);
+  const std::size_t variants = h.variant_labels.size();
+  int runs_per = 0;
+  if (config.is_object() && config.contains("runs") && config["runs"].is_number_integer())
+    runs_per = config["runs"].get<int>();
+
+  J out;
+  out["config"] = config;
+  J st;
+  st["path"] = store_path;
+  st["complete"] = store.complete;
+  st["runs_done"] = store.runs.size();
+  st["runs_planned"] = variants * h.objects.size() * static_cast<std::size_t>(runs_per);
+  st["objects"] = h.objects;
+  st["stages"] = h.stages;
+  st["database"] = parse_or_text(h.database_json);
+  st["versions"] = versions;
+  out["store"] = st;
+
+  std::vector<VariantJson> vj;
+  for (std::size_t v = 0; v < variants; ++v) {
+    bool any = false;
+    for (const auto& r : store.runs) any = any || r.variant == static_cast<int>(v);
+    if (!any) {
+      vj.push_back({J::array(), J::array(), nullptr});
+      continue;
+    }
+    vj.push_back(variant_json(store, static_cast<int>(v), settings.bounds));
+  }
+  out["per_step"] = vj.empty() ? J::array() : vj[0].per_step;
+  out["per_object"] = vj.empty() ? J::array() : vj[0].per_object;
+  out["summary"] = vj.empty() ? J(nullptr) : vj[0].summary;
+
+  if (variants > 1) {
+    J list = J::array();
+    std::vector<double> cost, rate, neg_error;
+    std::vector<std::size_t> index;
+    for (std::size_t v = 0; v < variants; ++v) {
+      J item;
+      item["label"] = h.variant_labels[v];
+      item["config"] = parse_or_text(h.variant_configs[v]);
+      item["summary"] = vj[v].summary;
+      item["per_step"] = vj[v].per_step;
+      item["per_object"] = vj[v].per_object;
+      list.push_back(item);
+      const J& s = vj[v].summary;
+      if (s.is_null() || s["time_s_per_step_mean"].is_null()) continue;
+      index.push_back(v);
+      cost.push_back(s["time_s_per_step_mean"].get<double>());
+      rate.push_back(s["recognition_rate_final"].get<double>());
+      // A variant that never recognizes gets the bound as its error.
+      const J& e = s["position_error_m_median_final"];
+      neg_error.push_back(-(e.is_null() ? settings.bounds.position_m : e.get<double>()));
+    }
+    out["variants"] = list;
+    J pareto;
+    J by_rate = J::array(), by_error = J::array();
+    for (std::size_t i : pareto_front(cost, rate)) by_rate.push_back(h.variant_labels[index[i]]);
+    for (std::size_t i : pareto_front(cost, neg_error)) by_error.push_back(h.variant_labels[index[i]]);
+    pareto["cost"] = "time_s_per_step_mean";
+    pareto["recognition_rate_final"] = by_rate;
+    pareto["position_error_m_median_final"] = by_error;
+    out["pareto"] = pareto;
+  }
+  out["threads"] = settings.threads > 0 ? J(settings.threads)
+                   : versions.is_object() && versions.contains("threads") ? versions["threads"]
+                                                                          : J(nullptr);
+  out["machine"] = settings.machine.empty() ? J(h.machine) : J(settings.machine);
+  return out;
+}
+
+namespace {
+
+std::string fmt(const J& v, double scale, int precision, const char* missing = "-") {
+  if (v.is_null()) return missing;
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(precision) << v.get<double>() * scale;
+  return s.str();
+}
+
+std::string pct(const J& v) { return fmt(v, 100.0, 0); }
+
+void print_steps(const J& per_step, std::ostream& out) {
+  out << "  step   rate  95% CI       pos med  pos p95  ori med  sym-ori  time med  time p95\n"
+         "         (%)   (%)          (mm)     (mm)     (deg)    med(deg) (s)       (s)\n";
+  for (const auto& r : per_step) {
+    std::ostringstream ci;
+    ci << pct(r["recognition_rate_ci95"][0]) << "-" << pct(r["recognition_rate_ci95"][1]);
+    out << "  " << std::setw(4) << r["step"].get<int>() << "  " << std::setw(5)
+        << pct(r["recognition_rate"]) << "  " << std::left << std::setw(11) << ci.str()
+        << std::right << "  " << std::setw(7) << fmt(r["position_error_m_median"], 1000, 1)
+        << "  " << std::setw(7) << fmt(r["position_error_m_p95"], 1000, 1) << "  "
+        << std::setw(7) << fmt(r["orientation_error_deg_median"], 1, 1) << "  " << std::setw(7)
+        << fmt(r["symmetric_orientation_error_deg_median"], 1, 1) << "  " << std::setw(8)
+        << fmt(r["time_s_median"], 1, 3) << "  " << std::setw(8) << fmt(r["time_s_p95"], 1, 3)
+        << "\n";
+  }
+}
+
+void print_objects(const J& per_object, std::ostream& out) {
+  if (per_object.empty()) return;
+  const std::size_t steps = per_object[0]["per_step"].size();
+  std::vector<std::size_t> cols;
+  for (std::size_t s : {1, 5, 10, 20, 40})
+    if (s <= steps) cols.push_back(s);
+  if (cols.empty() || cols.back() != steps) cols.push_back(steps);
+  std::size_t width = 6;
+  for (const auto& o : per_object) width = std::max(width, o["object"].get<std::string>().size());
+  out << "  " << std::left << std::setw(static_cast<int>(width)) << "object" << std::right
+      << "  runs";
+  for (std::size_t c : cols) {
+    std::string head(1, '@');  // not "@" + ...: GCC 12 -Wrestrict false positive
+    head += std::to_string(c);
+    out << std::setw(8) << head;
+  }
+  out << "  pos med  sym-ori  (rate % at step; errors at the last step, mm / deg)\n";
+  for (const auto& o : per_object) {
+    out << "  " << std::left << std::setw(static_cast<int>(width)) << o["object"].get<std::string>()
+        << std::right << std::setw(6) << o["runs"].get<int>();
+    for (std::size_t c : cols) out << std::setw(8) << pct(o["per_step"][c - 1]["recognition_rate"]);
+    const J& last = o["per_step"][steps - 1];
+    out << "  " << std::setw(7) << fmt(last["position_error_m_median"], 1000, 1) << "  "
+        << std::setw(7) << fmt(last["symmetric_orientation_error_deg_median"], 1, 1) << "\n";
+  }
+}
+
+}  // namespace
+
+void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
+  const J& cfg = report["config"];
+  const J& st = report["store"];
+  out << "Experiment";
+  if (cfg.is_object() && cfg.contains("name")) out << " '" << cfg["name"].get<std::string>() << "'";
+  out << ": " << st["runs_done"].get<std::size_t>() << " of " << st["runs_planned"].get<std::size_t>()
+      << " runs" << (st["complete"].get<bool>() ? "" : " (incomplete)");
+  if (cfg.is_object())
+    out << ", method " << cfg.value("method", std::string("?")) << ", noise "
+        << cfg.value("noise", std::string("?")) << ", sensors " << cfg.value("sensors", 0) << ", "
+        << st["objects"].size() << " objects";
+  out << "\n";
+  if (!report["threads"].is_null())
+    out << "Machine: " << report["machine"].get<std::string>() << ", " << report["threads"] << " threads\n";
+  const bool sweep = report.contains("variants");
+  if (!sweep) {
+    if (report["per_step"].empty()) {
+      out << "No completed runs yet.\n";
+      return;
+    }
+    out << "\nAll objects, per step (errors over runs that recognized the object):\n";
+    print_steps(report["per_step"], out);
+    out << "\nPer object:\n";
+    print_objects(report["per_object"], out);
+    return;
+  }
+  out << "\nSweep variants (rates at the last step; time per step over all steps):\n";
+  std::size_t width = 7;
+  for (const auto& v : report["variants"]) width = std::max(width, v["label"].get<std::string>().size());
+  out << "  " << std::left << std::setw(static_cast<int>(width)) << "variant" << std::right
+      << "  runs   rate  @20   pos med  sym-ori  time/step  p95     pareto\n";
+  auto on_front = [&](const std::string& label, const char* key) {
+    for (const auto& l : report["pareto"][key])
+      if (l == label) return true;
+    return false;
+  };
+  for (const auto& v : report["variants"]) {
+    const std::string label = v["label"].get<std::string>();
+    const J& s = v["summary"];
+    out << "  " << std::left << std::setw(static_cast<int>(width)) << label << std::right;
+    if (s.is_null()) {
+      out << "     0  (no runs yet)\n";
+      continue;
+    }
+    std::string front;
+    if (on_front(label, "recognition_rate_final")) front += "R";
+    if (on_front(label, "position_error_m_median_final")) front += "E";
+    out << std::setw(6) << s["runs"].get<int>() << "  " << std::setw(5)
+        << pct(s["recognition_rate_final"]) << "  " << std::setw(3) << pct(s["recognition_rate_step20"])
+        << "  " << std::setw(7) << fmt(s["position_error_m_median_final"], 1000, 1) << "  "
+        << std::setw(7) << fmt(s["symmetric_orientation_error_deg_median_final"], 1, 1) << "  "
+        << std::setw(9) << fmt(s["time_s_per_step_mean"], 1, 3) << "  " << std::setw(6)
+        << fmt(s["time_s_per_step_p95"], 1, 3) << "  " << front << "\n";
+  }
+  out << "  pareto: R = on the front of recognition rate vs time per step, E = of position error "
+         "vs time per step\n";
+}
+
+std::filesystem::path plot_script() {
+  namespace fs = std::filesystem;
+  if (const char* env = std::getenv("TOUCHSTONE_PLOT_SCRIPT"); env && *env) return env;
+  const fs::path rel = fs::path("scripts") / "plots" / "touchstone_plots.py";
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec)
+    for (fs::path dir = exe.parent_path(); !dir.empty() && dir != dir.root_path(); dir = dir.parent_path())
+      if (fs::is_regular_file(dir / rel, ec)) return dir / rel;
+  const fs::path src = fs::path(TS_SOURCE_DIR) / rel;
+  if (!std::string(TS_SOURCE_DIR).empty() && fs::is_regular_file(src, ec)) return src;
+  throw Error("cannot find the plot script scripts/plots/touchstone_plots.py (set "
+              "TOUCHSTONE_PLOT_SCRIPT)", rel.string());
+}
+
+std::vector<std::filesystem::path> write_plots(const nlohmann::ordered_json& report,
+                                               const std::filesystem::path& dir) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) throw Error("cannot create the plot folder: " + ec.message(), dir.string());
+  const fs::path json_path = dir / "report.json";
+  {
+    io::AtomicOutput out(json_path);
+    std::ofstream f(out.temp_path());
+    f << report.dump(1) << "\n";
+    f.close();
+    if (!f) throw Error("cannot write the report", json_path.string());
+    out.commit();
+  }
+  const fs::path script = plot_script();
+  const char* env_python = std::getenv("TOUCHSTONE_PYTHON");
+  const std::string python = env_python && *env_python ? env_python : "/usr/bin/python3";
+  const std::string list_path = (dir / ".plots-written").string();
+  // Arguments prepared before spawning (nothing but the exec happens in the child).
+  std::vector<std::string> args{python, script.string(), json_path.string(), "--out", dir.string(),
+                                "--list", list_path};
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  if (posix_spawn(&pid, python.c_str(), nullptr, nullptr, argv.data(), environ) != 0)
+    throw Error("cannot run " + python + " for the plot script", script.string());
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0)
+    if (errno != EINTR) throw Error("lost the plot script process", script.string());
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+    throw Error("the plot script failed (exit " +
+                    std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + "; it needs " +
+                    python + " with matplotlib and numpy)", script.string());
+  std::vector<fs::path> files;
+  std::ifstream list(list_path);
+  for (std::string line; std::getline(list, line);)
+    if (!line.empty()) files.emplace_back(line);
+  fs::remove(list_path, ec);
+  return files;
+}
+
+}  // namespace ts::experiments

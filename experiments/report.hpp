@@ -1,0 +1,46 @@
+// Reports of an experiment: metrics per step (all objects and per object), per sweep variant,
+// and the Pareto front of recognition / pose error against time per step. Produces the JSON of
+// the interface contract (shared by `experiment --json` and `report --json`), terminal tables,
+// and runs the plot script.
+#pragma once
+
+#include "experiments/metrics.hpp"
+#include "io/run_store.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <iosfwd>
+#include <string>
+
+namespace ts::experiments {
+
+struct ReportSettings {
+  ErrorBounds bounds;          ///< the paper's 4 cm / 1 rad
+  int threads = 0;             ///< reported "threads" (the experiment's); 0: from the store
+  std::string machine;         ///< reported "machine"; empty: from the store
+};
+
+/// The report JSON: {"config", "store", "per_step", "per_object", "variants", "pareto",
+/// "threads", "machine"}. per_step / per_object describe the first variant (the only one
+/// without a sweep); "variants" repeats them for every variant of a sweep.
+/// Orientation errors are in degrees, positions in metres; undefined values are null.
+nlohmann::ordered_json report_json(const io::RunStoreContents& store, const ReportSettings& settings,
+                                   const std::string& store_path = {});
+
+/// Human tables (recognition and errors per step, per object at a few steps, sweep variants and
+/// the Pareto front) written to `out`.
+void print_report(const nlohmann::ordered_json& report, std::ostream& out);
+
+/// Write `report` to DIR/report.json and run the plot script (/usr/bin/python3, or
+/// $TOUCHSTONE_PYTHON) on it, which writes DIR/*.png. Throws ts::Error when the script cannot be
+/// found or fails. Returns the PNG files written.
+std::vector<std::filesystem::path> write_plots(const nlohmann::ordered_json& report,
+                                               const std::filesystem::path& dir);
+
+/// Where the plot script is: $TOUCHSTONE_PLOT_SCRIPT, else scripts/plots/touchstone_plots.py
+/// beside the executable's source tree (../scripts from the build folder, or the source
+/// folder this binary was built from).
+std::filesystem::path plot_script();
+
+}  // namespace ts::experiments

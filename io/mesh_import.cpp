@@ -1,0 +1,213 @@
+#include "io/mesh_import.hpp"
+
+#include "io/sha256.hpp"
+
+#include <assimp/Importer.hpp>
+#include <assimp/config.h>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <unordered_map>
+
+namespace ts::io {
+
+namespace {
+
+// ValidateDataStructure first: a malformed scene (a truncated file) is then an import error
+// instead of reaching an assertion in a later step (Debian's Assimp aborts on those).
+constexpr unsigned kFlags = aiProcess_ValidateDataStructure | aiProcess_Triangulate |
+                            aiProcess_JoinIdenticalVertices | aiProcess_SortByPType;
+
+void configure(Assimp::Importer& importer) {
+  // Drop point and line primitives: only triangles describe a surface.
+  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
+}
+
+void append_node(const aiScene& scene, const aiNode& node, const aiMatrix4x4& parent, Mesh& out) {
+  const aiMatrix4x4 T = parent * node.mTransformation;
+  for (unsigned m = 0; m < node.mNumMeshes; ++m) {
+    const aiMesh& mesh = *scene.mMeshes[node.mMeshes[m]];
+    const int base = static_cast<int>(out.vertices.size());
+    for (unsigned v = 0; v < mesh.mNumVertices; ++v) {
+      const aiVector3D p = T * mesh.mVertices[v];
+      out.vertices.emplace_back(p.x, p.y, p.z);
+    }
+    for (unsigned f = 0; f < mesh.mNumFaces; ++f) {
+      const aiFace& face = mesh.mFaces[f];
+      if (face.mNumIndices != 3) continue;
+      out.faces.emplace_back(base + static_cast<int>(face.mIndices[0]), base + static_cast<int>(face.mIndices[1]),
+                             base + static_cast<int>(face.mIndices[2]));
+    }
+  }
+  for (unsigned c = 0; c < node.mNumChildren; ++c) append_node(scene, *node.mChildren[c], T, out);
+}
+
+Mesh scene_mesh(const aiScene* scene, const Assimp::Importer& importer, const std::string& name) {
+  if (!scene) {
+    const char* e = importer.GetErrorString();
+    throw Error(std::string("cannot read the mesh") + (e && *e ? std::string(": ") + e : ""), name);
+  }
+  Mesh mesh;
+  if (scene->mRootNode) append_node(*scene, *scene->mRootNode, aiMatrix4x4(), mesh);
+  return mesh;
+}
+
+std::string read_bytes(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw Error("mesh file does not exist", path.string());
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error("cannot read the mesh file", path.string());
+  std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) throw Error("cannot read the mesh file", path.string());
+  return data;
+}
+
+struct PositionHash {
+  std::size_t operator()(const std::array<std::uint64_t, 3>& k) const {
+    std::uint64_t h = 0x9e3779b97f4a7c15ULL;
+    for (auto v : k) h = (h ^ v) * 0xbf58476d1ce4e5b9ULL + (h >> 29);
+    return static_cast<std::size_t>(h);
+  }
+};
+
+std::array<std::uint64_t, 3> position_key(const Vec3& v) {
+  std::array<std::uint64_t, 3> k;
+  for (int i = 0; i < 3; ++i) {
+    const double x = v[i] + 0.0;  // -0.0 and +0.0 weld together
+    std::memcpy(&k[static_cast<std::size_t>(i)], &x, sizeof x);
+  }
+  return k;
+}
+
+}  // namespace
+
+ImportedMesh normalize_mesh(Mesh input, const std::string& name, const MeshImportSettings& settings) {
+  if (!(settings.max_extent > 0.0) || !std::isfinite(settings.max_extent))
+    throw Error("max extent must be a positive number of metres", name);
+  const int nv = static_cast<int>(input.vertices.size());
+  for (std::size_t i = 0; i < input.vertices.size(); ++i)
+    if (!finite(input.vertices[i]))
+      throw Error("mesh has a non-finite vertex coordinate", name, "vertex " + std::to_string(i));
+
+  if (input.faces.empty()) throw Error("mesh has no faces", name);
+  {
+    Eigen::AlignedBox3d referenced;
+    for (std::size_t fi = 0; fi < input.faces.size(); ++fi)
+      for (int k = 0; k < 3; ++k) {
+        const int v = input.faces[fi][k];
+        if (v < 0 || v >= nv) throw Error("face refers to a missing vertex", name, "face " + std::to_string(fi));
+        referenced.extend(input.vertices[static_cast<std::size_t>(v)]);
+      }
+    const double largest = referenced.sizes().maxCoeff();
+    if (!std::isfinite(largest)) throw Error("mesh extent is not a finite number", name);
+    if (largest <= 0.0) throw Error("mesh has zero extent (every vertex at one point)", name);
+  }
+
+  // Weld on exact position (first-use order: deterministic, drops unreferenced vertices) and
+  // drop degenerate faces.
+  ImportedMesh out;
+  std::unordered_map<std::array<std::uint64_t, 3>, int, PositionHash> index_of;
+  std::vector<int> remap(input.vertices.size(), -1);
+  Mesh& mesh = out.mesh;
+  auto vertex = [&](int i) {
+    if (remap[static_cast<std::size_t>(i)] >= 0) return remap[static_cast<std::size_t>(i)];
+    const auto [it, added] = index_of.emplace(position_key(input.vertices[static_cast<std::size_t>(i)]),
+                                              static_cast<int>(mesh.vertices.size()));
+    if (added) mesh.vertices.push_back(input.vertices[static_cast<std::size_t>(i)]);
+    return remap[static_cast<std::size_t>(i)] = it->second;
+  };
+  for (std::size_t fi = 0; fi < input.faces.size(); ++fi) {
+    const auto& f = input.faces[fi];
+    const Eigen::Vector3i g(vertex(f[0]), vertex(f[1]), vertex(f[2]));
+    const bool repeated = g[0] == g[1] || g[1] == g[2] || g[0] == g[2];
+    if (repeated || (mesh.vertices[static_cast<std::size_t>(g[1])] - mesh.vertices[static_cast<std::size_t>(g[0])])
+                            .cross(mesh.vertices[static_cast<std::size_t>(g[2])] - mesh.vertices[static_cast<std::size_t>(g[0])])
+                            .squaredNorm() == 0.0) {
+      ++out.dropped_faces;
+      continue;
+    }
+    mesh.faces.push_back(g);
+  }
+  if (mesh.faces.empty())
+    throw Error(out.dropped_faces ? "mesh has no faces (all " + std::to_string(out.dropped_faces) + " are degenerate)"
+                                  : std::string("mesh has no faces"),
+                name);
+  // Vertices only used by dropped faces: compact again so the bounding box is the surface's.
+  {
+    std::vector<int> used(mesh.vertices.size(), -1);
+    std::vector<Vec3> kept;
+    for (auto& f : mesh.faces)
+      for (int k = 0; k < 3; ++k) {
+        int& u = used[static_cast<std::size_t>(f[k])];
+        if (u < 0) {
+          u = static_cast<int>(kept.size());
+          kept.push_back(mesh.vertices[static_cast<std::size_t>(f[k])]);
+        }
+        f[k] = u;
+      }
+    mesh.vertices = std::move(kept);
+  }
+
+  // Object frame: bounding-box centre at the origin, largest side = max_extent.
+  const Eigen::AlignedBox3d box = mesh_bounds(mesh);
+  const Vec3 size = box.sizes();
+  const double largest = size.maxCoeff();
+  if (!(largest > 0.0) || !std::isfinite(largest)) throw Error("mesh has zero extent", name);  // guarded above
+  out.centre = box.center();
+  out.scale = settings.max_extent / largest;
+  for (auto& v : mesh.vertices) v = out.scale * (v - out.centre);
+  out.extent = mesh_bounds(mesh).sizes();
+
+  // Outward winding: flip when the faces enclose a negative volume.
+  if (mesh_signed_volume(mesh) < 0.0) {
+    for (auto& f : mesh.faces) std::swap(f[1], f[2]);
+    out.flipped = true;
+  }
+  out.topology = mesh_topology(mesh);
+  out.closed = out.topology.closed();
+  if (out.topology.boundary_edges > 0)
+    out.warnings.push_back("mesh is open (" + std::to_string(out.topology.boundary_edges) +
+                           " boundary edges): it is used, but its distance field is unsigned");
+  if (out.topology.nonmanifold_edges > 0)
+    out.warnings.push_back("mesh is non-manifold (" + std::to_string(out.topology.nonmanifold_edges) +
+                           " edges shared by more than two faces): it is used as it is");
+  return out;
+}
+
+bool is_mesh_extension(const std::string& extension) {
+  if (extension.empty() || extension == ".") return false;
+  std::string ext = extension[0] == '.' ? extension : "." + extension;
+  Assimp::Importer importer;
+  return importer.IsExtensionSupported(ext);
+}
+
+ImportedMesh import_mesh(const std::filesystem::path& file, const MeshImportSettings& settings) {
+  const std::string name = file.string();
+  const std::string bytes = read_bytes(file);
+  Assimp::Importer importer;
+  configure(importer);
+  // From the file (not memory) so formats with companion files (OBJ + MTL, glTF + BIN) work.
+  const aiScene* scene = importer.ReadFile(name, kFlags);
+  ImportedMesh out = normalize_mesh(scene_mesh(scene, importer, name), name, settings);
+  out.sha256 = sha256_hex(bytes);
+  return out;
+}
+
+ImportedMesh import_mesh_from_memory(const std::string& bytes, const std::string& name,
+                                     const MeshImportSettings& settings) {
+  std::string hint = std::filesystem::path(name).extension().string();
+  if (!hint.empty() && hint[0] == '.') hint.erase(0, 1);
+  if (bytes.empty()) throw Error("mesh file is empty", name);
+  Assimp::Importer importer;
+  configure(importer);
+  const aiScene* scene = importer.ReadFileFromMemory(bytes.data(), bytes.size(), kFlags, hint.c_str());
+  ImportedMesh out = normalize_mesh(scene_mesh(scene, importer, name), name, settings);
+  out.sha256 = sha256_hex(bytes);
+  return out;
+}
+
+}  // namespace ts::io

@@ -1,0 +1,60 @@
+// Mesh import (Assimp: OFF, OBJ, PLY, STL, 3DS, glTF, ...) into the OBJECT FRAME.
+//
+// The object frame (what every database object, simulated dive and ground-truth pose refers to):
+//   p_object = scale * (p_file - centre)
+// where `centre` is the centre of the mesh's axis-aligned bounding box in file units and
+// `scale` = max_extent / (largest bounding-box side), so the object's largest extent is
+// max_extent metres (default 0.20 m) and its bounding box is centred on the origin. Axes are
+// the file's axes (no rotation). See io/FORMAT_DB.md.
+//
+// Steps: Assimp with aiProcess_Triangulate | aiProcess_JoinIdenticalVertices (points and lines
+// dropped); every mesh of the scene merged, with its node transforms applied; vertices welded on
+// exact position across meshes; unreferenced vertices and degenerate faces (a repeated vertex
+// or zero area) dropped; faces flipped when the signed volume is negative (wound inward); the
+// topology checked (open / non-manifold meshes are kept, with a warning).
+// Rejected with ts::Error (naming the file): a mesh Assimp cannot read, no faces, a non-finite
+// coordinate, zero extent.
+#pragma once
+
+#include "engine/core.hpp"
+#include "engine/mesh.hpp"
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace ts::io {
+
+struct MeshImportSettings {
+  double max_extent = 0.20;   ///< m, largest bounding-box side in the object frame
+};
+
+struct ImportedMesh {
+  Mesh mesh;                  ///< object frame, faces wound outward (when closed)
+  double scale = 1.0;         ///< p_object = scale * (p_file - centre)
+  Vec3 centre = Vec3::Zero(); ///< bounding-box centre, file units
+  Vec3 extent = Vec3::Zero(); ///< bounding-box size in the object frame (m)
+  std::string sha256;         ///< of the file bytes (hex)
+  MeshTopology topology;
+  bool closed = false;        ///< no boundary and no non-manifold edges
+  bool flipped = false;       ///< faces were wound inward and have been flipped
+  std::size_t dropped_faces = 0;        ///< degenerate faces removed
+  std::vector<std::string> warnings;    ///< open / non-manifold (the mesh is still used)
+};
+
+/// Import a mesh file. `name` (default: the path) is used in errors.
+ImportedMesh import_mesh(const std::filesystem::path& file, const MeshImportSettings& settings = {});
+
+/// Import from bytes already in memory (an archive member). `name` names the source in errors
+/// and its extension tells Assimp the format ("data.tar.gz:data/meshes/cube.off").
+ImportedMesh import_mesh_from_memory(const std::string& bytes, const std::string& name,
+                                     const MeshImportSettings& settings = {});
+
+/// True when Assimp reads files with this extension (".off", "OBJ", ...).
+bool is_mesh_extension(const std::string& extension);
+
+/// Bring a mesh (vertices in any units) into the object frame as described above. Used by both
+/// importers; exposed for callers that build meshes themselves. `name` names it in errors.
+ImportedMesh normalize_mesh(Mesh mesh, const std::string& name, const MeshImportSettings& settings = {});
+
+}  // namespace ts::io

@@ -1,0 +1,374 @@
+#include "io/run_store.hpp"
+
+#include "io/atomic_file.hpp"
+#include "io/h5.hpp"
+
+#include <algorithm>
+#include <array>
+#include <map>
+#include <tuple>
+
+namespace ts::io {
+
+namespace {
+
+constexpr const char* kFormat = "touchstone-run";
+constexpr std::int64_t kFormatVersion = 1;
+
+const char* kStepDoubles[] = {"weight",           "posterior_true",        "posterior_best",
+                              "posterior_entropy", "position_error_m",      "orientation_error_rad",
+                              "symmetric_orientation_error_rad",            "mssd_m",
+                              "time_s"};
+const char* kStepInts[] = {"best_object", "true_rank", "hypotheses", "contacts", "free_points"};
+
+std::array<double, 7> pose_row(const Pose& p) {
+  const Eigen::Quaterniond q(p.linear());
+  const Vec3 t = p.translation();
+  return {t.x(), t.y(), t.z(), q.w(), q.x(), q.y(), q.z()};
+}
+
+Pose pose_from(const double* r) {
+  Pose p = Pose::Identity();
+  p.translation() = Vec3(r[0], r[1], r[2]);
+  p.linear() = Eigen::Quaterniond(r[3], r[4], r[5], r[6]).normalized().toRotationMatrix();
+  return p;
+}
+
+double step_double(const RunStepRecord& s, int k) {
+  switch (k) {
+    case 0: return s.weight;
+    case 1: return s.posterior_true;
+    case 2: return s.posterior_best;
+    case 3: return s.posterior_entropy;
+    case 4: return s.position_error_m;
+    case 5: return s.orientation_error_rad;
+    case 6: return s.symmetric_orientation_error_rad;
+    case 7: return s.mssd_m;
+    default: return s.time_s;
+  }
+}
+
+void set_step_double(RunStepRecord& s, int k, double v) {
+  switch (k) {
+    case 0: s.weight = v; break;
+    case 1: s.posterior_true = v; break;
+    case 2: s.posterior_best = v; break;
+    case 3: s.posterior_entropy = v; break;
+    case 4: s.position_error_m = v; break;
+    case 5: s.orientation_error_rad = v; break;
+    case 6: s.symmetric_orientation_error_rad = v; break;
+    case 7: s.mssd_m = v; break;
+    default: s.time_s = v; break;
+  }
+}
+
+std::int32_t& step_int(RunStepRecord& s, int k) {
+  switch (k) {
+    case 0: return s.best_object;
+    case 1: return s.true_rank;
+    case 2: return s.hypotheses;
+    case 3: return s.contacts;
+    default: return s.free_points;
+  }
+}
+
+void write_header(h5::Group root, const RunStoreHeader& h) {
+  root.set_attribute("format", kFormat);
+  root.set_attribute("format_version", kFormatVersion);
+  root.set_attribute("steps", static_cast<std::int64_t>(h.steps));
+  root.set_attribute("machine", h.machine);
+  root.set_attribute("complete", std::int64_t{0});
+  h5::Group hg = root.create_group("header");
+  hg.write_strings("config", {h.config_json});
+  hg.write_strings("database", {h.database_json});
+  hg.write_strings("versions", {h.versions_json});
+  hg.write_strings("variant_labels", h.variant_labels);
+  hg.write_strings("variant_configs", h.variant_configs);
+  hg.write_strings("objects", h.objects);
+  hg.write_strings("database_objects", h.database_objects);
+  hg.write_strings("stages", h.stages);
+
+  const std::uint64_t steps = static_cast<std::uint64_t>(h.steps);
+  h5::Group runs = root.create_group("runs");
+  runs.create_extendible<std::int32_t>("variant", {});
+  runs.create_extendible<std::int32_t>("object", {});
+  runs.create_extendible<std::int32_t>("run", {});
+  runs.create_extendible<std::int64_t>("first_step_row", {});
+  runs.create_extendible<std::int32_t>("grasps", {steps});
+  runs.create_extendible<double>("truth", {7});
+  runs.create_extendible<double>("wall_time_s", {});
+  h5::Group st = root.create_group("steps");
+  st.create_extendible<std::int32_t>("step", {});
+  st.create_extendible<std::uint8_t>("correct", {});
+  for (const char* n : kStepInts) st.create_extendible<std::int32_t>(n, {});
+  for (const char* n : kStepDoubles) st.create_extendible<double>(n, {});
+  st.create_extendible<double>("pose", {7});
+  if (!h.stages.empty()) st.create_extendible<double>("stage_times_s", {h.stages.size()});
+}
+
+RunStoreHeader parse_header(const h5::File& file) {
+  h5::Group root = file.root();
+  if (!root.has_attribute("format") || root.string_attribute("format") != kFormat)
+    throw Error("not a Touchstone run store (no format = \"touchstone-run\")", file.name(), "/@format");
+  const std::int64_t version = root.int_attribute("format_version");
+  if (version != kFormatVersion)
+    throw Error("run store format version " + std::to_string(version) + " is not supported (this "
+                "build reads version " + std::to_string(kFormatVersion) + ")", file.name(),
+                "/@format_version");
+  RunStoreHeader h;
+  h.steps = static_cast<std::int32_t>(root.int_attribute("steps"));
+  if (h.steps < 1) throw Error("steps must be at least 1", file.name(), "/@steps");
+  h.machine = root.string_attribute("machine");
+  h5::Group hg = root.open_group("header");
+  auto one = [&](const char* name) {
+    auto v = hg.read_strings(name);
+    if (v.size() != 1) throw Error("expected one string", file.name(), hg.child_path(name));
+    return v.front();
+  };
+  h.config_json = one("config");
+  h.database_json = one("database");
+  h.versions_json = one("versions");
+  h.variant_labels = hg.read_strings("variant_labels");
+  h.variant_configs = hg.read_strings("variant_configs");
+  h.objects = hg.read_strings("objects");
+  h.database_objects = hg.read_strings("database_objects");
+  h.stages = hg.read_strings("stages");
+  if (h.variant_labels.empty() || h.variant_labels.size() != h.variant_configs.size())
+    throw Error("variant labels and configurations differ in number", file.name(), "/header/variant_configs");
+  return h;
+}
+
+void append_runs(h5::Group root, const RunStoreHeader& h, const std::vector<RunRecord>& runs) {
+  const std::size_t S = h.stages.size();
+  const std::size_t steps = static_cast<std::size_t>(h.steps);
+  h5::Group st = root.open_group("steps");
+  h5::Group rg = root.open_group("runs");
+  std::uint64_t first_row = st.shape("step").at(0);
+  // Orphan rows of an interrupted append may make the columns uneven: start after the longest.
+  for (const char* n : kStepDoubles) first_row = std::max(first_row, st.shape(n).at(0));
+  for (const char* n : kStepInts) first_row = std::max(first_row, st.shape(n).at(0));
+  for (const char* n : {"correct", "pose"}) first_row = std::max(first_row, st.shape(n).at(0));
+  if (S) first_row = std::max(first_row, st.shape("stage_times_s").at(0));
+  auto pad_to = [&](const char* name, auto zero) {
+    using T = decltype(zero);
+    const h5::Shape s = st.shape(name);
+    if (s.at(0) >= first_row) return;
+    std::uint64_t row = 1;
+    for (std::size_t i = 1; i < s.size(); ++i) row *= s[i];
+    std::vector<T> pad((first_row - s[0]) * row, zero);
+    st.append<T>(name, pad.data(), first_row - s[0]);
+  };
+  pad_to("step", std::int32_t{0});
+  pad_to("correct", std::uint8_t{0});
+  for (const char* n : kStepInts) pad_to(n, std::int32_t{0});
+  for (const char* n : kStepDoubles) pad_to(n, 0.0);
+  pad_to("pose", 0.0);
+  if (S) pad_to("stage_times_s", 0.0);
+
+  const std::size_t m = runs.size() * steps;
+  std::vector<std::int32_t> step_col(m);
+  std::vector<std::uint8_t> correct(m);
+  std::vector<std::vector<std::int32_t>> ints(std::size(kStepInts), std::vector<std::int32_t>(m));
+  std::vector<std::vector<double>> dbls(std::size(kStepDoubles), std::vector<double>(m));
+  std::vector<double> pose(7 * m), stages(S * m);
+  std::size_t row = 0;
+  for (const RunRecord& r : runs) {
+    if (r.steps.size() != steps || r.grasps.size() != steps)
+      throw Error("a run must have exactly " + std::to_string(steps) + " steps", root.file(), "/steps");
+    for (std::size_t k = 0; k < steps; ++k, ++row) {
+      RunStepRecord s = r.steps[k];
+      if (s.stage_times_s.size() != S)
+        throw Error("a step must have one timing per stage", root.file(), "/steps/stage_times_s");
+      step_col[row] = static_cast<std::int32_t>(k + 1);
+      correct[row] = s.correct ? 1 : 0;
+      for (std::size_t c = 0; c < std::size(kStepInts); ++c) ints[c][row] = step_int(s, static_cast<int>(c));
+      for (std::size_t c = 0; c < std::size(kStepDoubles); ++c)
+        dbls[c][row] = step_double(s, static_cast<int>(c));
+      const auto p = pose_row(s.pose);
+      std::copy(p.begin(), p.end(), pose.begin() + static_cast<std::ptrdiff_t>(7 * row));
+      std::copy(s.stage_times_s.begin(), s.stage_times_s.end(),
+                stages.begin() + static_cast<std::ptrdiff_t>(S * row));
+    }
+  }
+  st.append("step", step_col.data(), m);
+  st.append("correct", correct.data(), m);
+  for (std::size_t c = 0; c < std::size(kStepInts); ++c) st.append(kStepInts[c], ints[c].data(), m);
+  for (std::size_t c = 0; c < std::size(kStepDoubles); ++c) st.append(kStepDoubles[c], dbls[c].data(), m);
+  st.append("pose", pose.data(), m);
+  if (S) st.append("stage_times_s", stages.data(), m);
+
+  // Run rows last: they commit the step rows above. The shortest /runs column decides how
+  // many runs are committed, so write the key columns last. Columns left uneven by an
+  // interrupted append are padded first; a padded row has variant -1 and is never read.
+  std::uint64_t run_rows = 0;
+  for (const char* c : {"variant", "object", "run", "first_step_row", "grasps", "truth", "wall_time_s"})
+    run_rows = std::max(run_rows, rg.shape(c).at(0));
+  auto pad_run = [&](const char* name, auto value) {
+    using T = decltype(value);
+    const h5::Shape s = rg.shape(name);
+    if (s.at(0) >= run_rows) return;
+    std::uint64_t row = 1;
+    for (std::size_t i = 1; i < s.size(); ++i) row *= s[i];
+    std::vector<T> pad((run_rows - s[0]) * row, value);
+    rg.append<T>(name, pad.data(), run_rows - s[0]);
+  };
+  pad_run("first_step_row", std::int64_t{0});
+  pad_run("grasps", std::int32_t{0});
+  pad_run("truth", 0.0);
+  pad_run("wall_time_s", 0.0);
+  pad_run("run", std::int32_t{0});
+  pad_run("object", std::int32_t{0});
+  pad_run("variant", std::int32_t{-1});
+  const std::size_t n = runs.size();
+  std::vector<std::int64_t> first(n);
+  std::vector<std::int32_t> grasps(n * steps), variant(n), object(n), run(n);
+  std::vector<double> truth(7 * n), wall(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    first[i] = static_cast<std::int64_t>(first_row + i * steps);
+    std::copy(runs[i].grasps.begin(), runs[i].grasps.end(), grasps.begin() + static_cast<std::ptrdiff_t>(i * steps));
+    const auto t = pose_row(runs[i].truth);
+    std::copy(t.begin(), t.end(), truth.begin() + static_cast<std::ptrdiff_t>(7 * i));
+    wall[i] = runs[i].wall_time_s;
+    variant[i] = runs[i].variant;
+    object[i] = runs[i].object;
+    run[i] = runs[i].run;
+  }
+  rg.append("first_step_row", first.data(), n);
+  rg.append("grasps", grasps.data(), n);
+  rg.append("truth", truth.data(), n);
+  rg.append("wall_time_s", wall.data(), n);
+  rg.append("run", run.data(), n);
+  rg.append("object", object.data(), n);
+  rg.append("variant", variant.data(), n);
+}
+
+std::vector<RunRecord> read_runs(const h5::File& file, const RunStoreHeader& h) {
+  h5::Group root = file.root();
+  h5::Group rg = root.open_group("runs");
+  h5::Group st = root.open_group("steps");
+  const std::int64_t steps = h.steps;
+  const std::size_t S = h.stages.size();
+  auto variant = rg.read<std::int32_t>("variant", {h5::kAny});
+  auto object = rg.read<std::int32_t>("object", {h5::kAny});
+  auto run = rg.read<std::int32_t>("run", {h5::kAny});
+  auto first = rg.read<std::int64_t>("first_step_row", {h5::kAny});
+  auto grasps = rg.read<std::int32_t>("grasps", {h5::kAny, steps});
+  auto truth = rg.read<double>("truth", {h5::kAny, 7});
+  auto wall = rg.read<double>("wall_time_s", {h5::kAny});
+  std::size_t n = std::min({variant.size(), object.size(), run.size(), first.size(),
+                            grasps.size() / static_cast<std::size_t>(steps), truth.size() / 7, wall.size()});
+
+  auto step_col = st.read<std::int32_t>("step", {h5::kAny});
+  auto correct = st.read<std::uint8_t>("correct", {h5::kAny});
+  std::vector<std::vector<std::int32_t>> ints;
+  for (const char* c : kStepInts) ints.push_back(st.read<std::int32_t>(c, {h5::kAny}));
+  std::vector<std::vector<double>> dbls;
+  for (const char* c : kStepDoubles) dbls.push_back(st.read<double>(c, {h5::kAny}));
+  auto pose = st.read<double>("pose", {h5::kAny, 7});
+  std::vector<double> stage;
+  if (S) stage = st.read<double>("stage_times_s", {h5::kAny, static_cast<std::int64_t>(S)});
+  std::size_t m = std::min({step_col.size(), correct.size(), pose.size() / 7});
+  for (const auto& c : ints) m = std::min(m, c.size());
+  for (const auto& c : dbls) m = std::min(m, c.size());
+  if (S) m = std::min(m, stage.size() / S);
+
+  std::vector<RunRecord> out;
+  out.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    RunRecord r;
+    r.variant = variant[i];
+    r.object = object[i];
+    r.run = run[i];
+    const std::string where = "/runs row " + std::to_string(i);
+    if (r.variant == -1) continue;  // padding left by an interrupted append
+    if (r.variant < 0 || static_cast<std::size_t>(r.variant) >= h.variant_labels.size() ||
+        r.object < 0 || static_cast<std::size_t>(r.object) >= h.objects.size() || r.run < 0)
+      throw Error("run key out of range", file.name(), where);
+    if (first[i] < 0 || static_cast<std::size_t>(first[i]) + static_cast<std::size_t>(steps) > m)
+      throw Error("run refers to missing step rows", file.name(), where);
+    r.grasps.assign(grasps.begin() + static_cast<std::ptrdiff_t>(i * steps),
+                    grasps.begin() + static_cast<std::ptrdiff_t>((i + 1) * steps));
+    r.truth = pose_from(&truth[7 * i]);
+    r.wall_time_s = wall[i];
+    for (std::int64_t k = 0; k < steps; ++k) {
+      const std::size_t row = static_cast<std::size_t>(first[i] + k);
+      if (step_col[row] != k + 1) throw Error("step rows out of order", file.name(), where);
+      RunStepRecord s;
+      s.correct = correct[row] != 0;
+      for (std::size_t c = 0; c < std::size(kStepInts); ++c) step_int(s, static_cast<int>(c)) = ints[c][row];
+      for (std::size_t c = 0; c < std::size(kStepDoubles); ++c)
+        set_step_double(s, static_cast<int>(c), dbls[c][row]);
+      s.pose = pose_from(&pose[7 * row]);
+      s.stage_times_s.assign(stage.begin() + static_cast<std::ptrdiff_t>(S * row),
+                             stage.begin() + static_cast<std::ptrdiff_t>(S * (row + 1)));
+      r.steps.push_back(std::move(s));
+    }
+    out.push_back(std::move(r));
+  }
+  // Sort by key; keep the first copy of a key (duplicates cannot arise from our writer, but a
+  // reader should not double-count if they ever do).
+  std::stable_sort(out.begin(), out.end(), [](const RunRecord& a, const RunRecord& b) {
+    return std::tie(a.variant, a.object, a.run) < std::tie(b.variant, b.object, b.run);
+  });
+  out.erase(std::unique(out.begin(), out.end(),
+                        [](const RunRecord& a, const RunRecord& b) { return a.same_key(b); }),
+            out.end());
+  return out;
+}
+
+}  // namespace
+
+void RunStore::create(const std::filesystem::path& path, const RunStoreHeader& header) {
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec))
+    throw Error("the run store already exists (continue it with --resume, or remove it)", path.string());
+  if (header.steps < 1) throw Error("steps must be at least 1", path.string(), "steps");
+  AtomicOutput out(path);
+  {
+    h5::File f = h5::File::create(out);
+    write_header(f.root(), header);
+    f.close();
+  }
+  out.commit();
+}
+
+RunStoreHeader RunStore::read_header(const std::filesystem::path& path) {
+  h5::File f = h5::File::open(path, h5::File::Access::read);
+  return parse_header(f);
+}
+
+RunStoreContents RunStore::read(const std::filesystem::path& path) {
+  h5::File f = h5::File::open(path, h5::File::Access::read);
+  RunStoreContents c;
+  c.header = parse_header(f);
+  c.runs = read_runs(f, c.header);
+  c.complete = f.root().int_attribute("complete") != 0;
+  return c;
+}
+
+void RunStore::append(const std::filesystem::path& path, const std::vector<RunRecord>& runs) {
+  if (runs.empty()) return;
+  h5::File f = h5::File::open(path, h5::File::Access::read_write);
+  const RunStoreHeader h = parse_header(f);
+  for (const RunRecord& r : runs)
+    if (r.variant < 0 || static_cast<std::size_t>(r.variant) >= h.variant_labels.size() ||
+        r.object < 0 || static_cast<std::size_t>(r.object) >= h.objects.size() || r.run < 0)
+      throw Error("run key out of range", path.string(), "/runs");
+  append_runs(f.root(), h, runs);
+  f.close();
+}
+
+void RunStore::compact(const std::filesystem::path& path, bool complete) {
+  const RunStoreContents c = read(path);
+  AtomicOutput out(path);
+  {
+    h5::File f = h5::File::create(out);
+    write_header(f.root(), c.header);
+    append_runs(f.root(), c.header, c.runs);
+    f.root().set_attribute("complete", std::int64_t{complete ? 1 : 0});
+    f.close();
+  }
+  out.commit();
+}
+
+}  // namespace ts::io

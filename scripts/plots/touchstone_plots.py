@@ -1,0 +1,301 @@
+#!/usr/bin/python3
+"""Figures of a Touchstone experiment report (the JSON of `touchstone report --json`).
+
+    /usr/bin/python3 scripts/plots/touchstone_plots.py REPORT.json --out DIR
+
+Writes into DIR:
+  recognition_rate.png        recognition rate against step, Wilson 95 % band (per variant)
+  pose_errors.png             position and orientation error against step: mean bounded by the
+                              paper's 4 cm / 1 rad with Student-t 95 % band, and the median
+  time_per_step.png           time per step (median, 95th percentile) and per-stage medians
+  error_vs_time.png           error against time per step: per step, or the Pareto front of a sweep
+  recognition_per_object.png  recognition rate per object and step (several objects only)
+
+Uses only matplotlib and numpy (Debian's python3-matplotlib for /usr/bin/python3).
+"""
+import argparse
+import json
+import os
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+plt.rcParams.update({
+    "font.size": 9,
+    "axes.titlesize": 9,
+    "axes.labelsize": 9,
+    "legend.fontsize": 7.5,
+    "xtick.labelsize": 8,
+    "ytick.labelsize": 8,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "grid.linewidth": 0.5,
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "savefig.dpi": 200,
+    "savefig.bbox": "tight",
+    "lines.linewidth": 1.4,
+})
+COLORS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+WIDTH = 6.8  # inches: a two-column paper's full width
+
+
+def column(rows, key, scale=1.0):
+    """Values of `key` in per-step rows as floats (nan where null)."""
+    out = []
+    for r in rows:
+        v = r.get(key)
+        out.append(np.nan if v is None else float(v) * scale)
+    return np.array(out, dtype=float)
+
+
+def band(rows, key, scale=1.0):
+    lo, hi = [], []
+    for r in rows:
+        v = r.get(key)
+        if v is None:
+            lo.append(np.nan)
+            hi.append(np.nan)
+        else:
+            lo.append(float(v[0]) * scale)
+            hi.append(float(v[1]) * scale)
+    return np.array(lo), np.array(hi)
+
+
+def series(report):
+    """(label, per_step rows) for each variant, or the single experiment."""
+    if "variants" in report:
+        return [(v["label"], v["per_step"]) for v in report["variants"] if v["per_step"]]
+    return [(report["config"].get("name", "experiment"), report["per_step"])]
+
+
+def subtitle(report):
+    c = report["config"]
+    st = report["store"]
+    objects = len(st.get("objects", []))
+    text = (f"{c.get('method', '?')}, {c.get('noise', '?')} noise, {c.get('sensors', '?')} pad(s), "
+            f"{objects} object{'s' if objects != 1 else ''}, {st.get('runs_done', 0)} runs")
+    if not st.get("complete", True):
+        text += f" (of {st.get('runs_planned', '?')})"
+    return text
+
+
+def steps_of(rows):
+    return np.array([r["step"] for r in rows], dtype=float)
+
+
+def finish(fig, path, written):
+    fig.savefig(path)
+    plt.close(fig)
+    written.append(path)
+
+
+def plot_recognition(report, out, written):
+    fig, ax = plt.subplots(figsize=(WIDTH / 2, 2.6))
+    for i, (label, rows) in enumerate(series(report)):
+        x = steps_of(rows)
+        y = column(rows, "recognition_rate", 100)
+        lo, hi = band(rows, "recognition_rate_ci95", 100)
+        c = COLORS[i % len(COLORS)]
+        ax.fill_between(x, lo, hi, color=c, alpha=0.18, linewidth=0)
+        ax.plot(x, y, color=c, marker="o", markersize=2.5, label=label)
+    ax.set_xlabel("exploration step (grasps)")
+    ax.set_ylabel("recognition rate (%)")
+    ax.set_ylim(-2, 102)
+    ax.set_xlim(left=0.5)
+    ax.set_title(subtitle(report))
+    ax.legend(loc="lower right", frameon=False, title="shaded: Wilson 95 % CI", title_fontsize=7)
+    finish(fig, os.path.join(out, "recognition_rate.png"), written)
+
+
+def plot_errors(report, out, written):
+    fig, axes = plt.subplots(1, 2, figsize=(WIDTH, 2.6))
+    specs = [
+        (axes[0], "position_error_m", 1000, "position error (mm)", 40),
+        (axes[1], "symmetric_orientation_error_deg", 1, "orientation error (deg)", 57.3),
+    ]
+    many = len(series(report)) > 1
+    for ax, key, scale, ylabel, bound in specs:
+        for i, (label, rows) in enumerate(series(report)):
+            x = steps_of(rows)
+            c = COLORS[i % len(COLORS)]
+            mean = column(rows, key + "_mean_bounded", scale)
+            lo, hi = band(rows, key + "_mean_bounded_ci95", scale)
+            med = column(rows, key + "_median", scale)
+            ax.fill_between(x, lo, hi, color=c, alpha=0.18, linewidth=0)
+            ax.plot(x, mean, color=c, label=(label if many else "bounded mean, 95 % CI"))
+            ax.plot(x, med, color=c, linestyle="--", linewidth=1.0,
+                    label=(None if many else "median"))
+            if key == "symmetric_orientation_error_deg" and not many:
+                raw = column(rows, "orientation_error_deg_median", scale)
+                ax.plot(x, raw, color="0.5", linestyle=":", linewidth=1.0,
+                        label="median, ignoring symmetry")
+        ax.axhline(bound, color="0.4", linewidth=0.6, linestyle="-.")
+        ax.text(0.01, bound, " bound used for averaging (paper)", transform=ax.get_yaxis_transform(),
+                ha="left", va="bottom", fontsize=6.5, color="0.4")
+        ax.set_xlabel("exploration step (grasps)")
+        ax.set_ylabel(ylabel)
+        top = max(bound, np.nanmax([ax.get_ylim()[1], bound]))
+        ax.set_ylim(0, top * 1.45)
+        ax.set_xlim(left=0.5)
+    axes[0].set_title("position (runs with the right object)")
+    axes[1].set_title("orientation, symmetry-aware")
+    axes[0].legend(frameon=False, loc="upper right", fontsize=6.5)
+    if not many:
+        axes[1].legend(frameon=False, loc="upper right", fontsize=6.5)
+    fig.tight_layout()
+    fig.suptitle(subtitle(report), fontsize=8, y=1.04)
+    finish(fig, os.path.join(out, "pose_errors.png"), written)
+
+
+def plot_time(report, out, written):
+    fig, axes = plt.subplots(1, 2, figsize=(WIDTH, 2.6))
+    ax = axes[0]
+    for i, (label, rows) in enumerate(series(report)):
+        x = steps_of(rows)
+        c = COLORS[i % len(COLORS)]
+        ax.plot(x, column(rows, "time_s_median"), color=c, label=label)
+        ax.plot(x, column(rows, "time_s_p95"), color=c, linestyle="--", linewidth=1.0)
+    ax.set_xlabel("exploration step (grasps)")
+    ax.set_ylabel("time per step (s)")
+    ax.set_ylim(bottom=0)
+    ax.set_title("median (solid), 95th percentile (dashed)")
+    if len(series(report)) > 1:
+        ax.legend(frameon=False, fontsize=6.5)
+    # Per-stage medians of the first series, stacked.
+    ax = axes[1]
+    rows = series(report)[0][1]
+    stages = list(rows[0].get("stage_times_s_median", {}).keys()) if rows else []
+    if stages:
+        x = steps_of(rows)
+        ys = [np.nan_to_num(np.array([np.nan if r["stage_times_s_median"].get(s) is None
+                                      else r["stage_times_s_median"][s] for r in rows], dtype=float))
+              for s in stages]
+        ax.stackplot(x, ys, labels=stages, colors=COLORS[:len(stages)], alpha=0.85)
+        ax.legend(frameon=False, loc="upper left", fontsize=6.5)
+        ax.set_title("per-stage medians" + (f" ({series(report)[0][0]})" if len(series(report)) > 1 else ""))
+    else:
+        ax.text(0.5, 0.5, "no per-stage timings", ha="center", va="center", transform=ax.transAxes)
+    ax.set_xlabel("exploration step (grasps)")
+    ax.set_ylabel("time (s)")
+    ax.set_ylim(bottom=0)
+    fig.tight_layout()
+    fig.suptitle(subtitle(report) + f"; {report.get('threads')} threads, {report.get('machine')}",
+                 fontsize=7.5, y=1.04)
+    finish(fig, os.path.join(out, "time_per_step.png"), written)
+
+
+def short_labels(labels):
+    """("key1, key2", ["v1, v2", ...]) when every label sets the same keys; else the labels."""
+    parsed = [[part.split("=", 1) for part in label.split(", ")] if label else [] for label in labels]
+    keys = [tuple(kv[0] for kv in p) for p in parsed]
+    if labels and all(len(kv) == 2 for p in parsed for kv in p) and len(set(keys)) == 1 and keys[0]:
+        return ", ".join(keys[0]), [", ".join(kv[1] for kv in p) for p in parsed]
+    return "", list(labels)
+
+
+def plot_error_vs_time(report, out, written):
+    fig, axes = plt.subplots(1, 2, figsize=(WIDTH, 2.9))
+    if "variants" in report:
+        variants = [v for v in report["variants"] if v.get("summary")]
+        title, names = short_labels([v["label"] for v in variants])
+        pareto = report.get("pareto", {})
+        specs = [
+            (axes[0], "recognition_rate_final", 100, "recognition rate at the last step (%)",
+             pareto.get("recognition_rate_final", [])),
+            (axes[1], "position_error_m_median_final", 1000, "median position error, last step (mm)",
+             pareto.get("position_error_m_median_final", [])),
+        ]
+        for ax, key, scale, ylabel, front in specs:
+            xs = np.array([v["summary"]["time_s_per_step_mean"] for v in variants], dtype=float)
+            ys = np.array([np.nan if v["summary"][key] is None else v["summary"][key] * scale
+                           for v in variants], dtype=float)
+            on = np.array([v["label"] in front for v in variants])
+            ax.scatter(xs[~on], ys[~on], s=14, color="0.6", label="dominated", zorder=2)
+            ax.scatter(xs[on], ys[on], s=20, color=COLORS[3], label="Pareto front", zorder=3)
+            if on.any():
+                order = np.argsort(xs[on])
+                ax.step(xs[on][order], ys[on][order], where="post", color=COLORS[3], linewidth=1.0)
+            for i, (name, x, y) in enumerate(zip(names, xs, ys)):
+                if np.isfinite(y):
+                    ax.annotate(name.replace(", ", "\n"), (x, y), fontsize=6,
+                                xytext=(4, 4 if i % 2 == 0 else -9), textcoords="offset points")
+            ax.set_xscale("log")
+            ax.margins(x=0.25, y=0.15)
+            ax.set_xlabel("mean time per step (s, log scale)")
+            ax.set_ylabel(ylabel)
+        axes[0].set_ylim(top=min(105, axes[0].get_ylim()[1]))
+        axes[1].set_ylim(bottom=0)
+        axes[0].legend(frameon=False, loc="best", title=title or None, title_fontsize=6.5)
+        fig.tight_layout(w_pad=2.0)
+        fig.suptitle("error against run time: " + subtitle(report), fontsize=8, y=1.04)
+    else:
+        rows = report["per_step"]
+        t = column(rows, "time_s_median")
+        steps = steps_of(rows)
+        for ax, key, scale, ylabel in [
+            (axes[0], "position_error_m_median", 1000, "median position error (mm)"),
+            (axes[1], "symmetric_orientation_error_deg_median", 1, "median orientation error (deg)"),
+        ]:
+            y = column(rows, key, scale)
+            sc = ax.scatter(t, y, c=steps, cmap="viridis", s=16, zorder=3)
+            ax.plot(t, y, color="0.7", linewidth=0.8, zorder=2)
+            ax.set_xlabel("median time of the step (s)")
+            ax.set_ylabel(ylabel)
+            ax.set_ylim(bottom=0)
+        cb = fig.colorbar(sc, ax=axes, fraction=0.03, pad=0.02)
+        cb.set_label("step")
+        fig.suptitle("error against time per step: " + subtitle(report), fontsize=8, y=1.02)
+    finish(fig, os.path.join(out, "error_vs_time.png"), written)
+
+
+def plot_per_object(report, out, written):
+    objs = report.get("per_object", [])
+    if len(objs) < 2:
+        return
+    names = [o["object"] for o in objs]
+    grid = np.array([column(o["per_step"], "recognition_rate", 100) for o in objs])
+    steps = grid.shape[1]
+    fig, ax = plt.subplots(figsize=(WIDTH, 0.6 + 0.16 * len(names)))
+    im = ax.imshow(grid, aspect="auto", cmap="viridis", vmin=0, vmax=100, interpolation="nearest",
+                   extent=(0.5, steps + 0.5, len(names) - 0.5, -0.5))
+    ax.set_yticks(range(len(names)))
+    ax.set_yticklabels(names, fontsize=6.5)
+    ax.set_xlabel("exploration step (grasps)")
+    ax.grid(False)
+    cb = fig.colorbar(im, ax=ax, fraction=0.025, pad=0.01)
+    cb.set_label("recognition rate (%)")
+    ax.set_title("per object: " + subtitle(report))
+    finish(fig, os.path.join(out, "recognition_per_object.png"), written)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("report", help="report JSON (touchstone report RUN.h5 --json)")
+    parser.add_argument("--out", required=True, help="folder for the PNG files")
+    parser.add_argument("--list", help="write the paths of the files written here, one a line")
+    args = parser.parse_args()
+    with open(args.report) as f:
+        report = json.load(f)
+    os.makedirs(args.out, exist_ok=True)
+    if not report.get("per_step") and "variants" not in report:
+        print("touchstone_plots: the report has no completed runs", file=sys.stderr)
+        return 1
+    written = []
+    plot_recognition(report, args.out, written)
+    plot_errors(report, args.out, written)
+    plot_time(report, args.out, written)
+    plot_error_vs_time(report, args.out, written)
+    plot_per_object(report, args.out, written)
+    if args.list:
+        with open(args.list, "w") as f:
+            f.write("\n".join(written) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,216 @@
+// Experiment configuration: files, flags, sweeps and clear errors that name the key.
+#include "experiments/config.hpp"
+
+#include <doctest/doctest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <unistd.h>
+
+using namespace ts;
+using namespace ts::experiments;
+namespace fs = std::filesystem;
+
+namespace {
+struct TempFile {
+  fs::path path;
+  explicit TempFile(const std::string& text, const std::string& ext = ".toml") {
+    static int counter = 0;
+    path = fs::temp_directory_path() /
+           ("ts_config_" + std::to_string(::getpid()) + "_" + std::to_string(counter++) + ext);
+    std::ofstream(path) << text;
+  }
+  ~TempFile() { fs::remove(path); }
+};
+
+/// The error of loading `text`, as (message, field).
+std::pair<std::string, std::string> load_error(const std::string& text) {
+  TempFile f(text);
+  ExperimentConfig c;
+  try {
+    load_config_file(c, f.path);
+  } catch (const Error& e) {
+    CHECK(e.file() == f.path.string());
+    return {e.message(), e.field()};
+  }
+  FAIL("no error for: " << text);
+  return {};
+}
+}  // namespace
+
+TEST_CASE("A TOML study file with sections, dotted keys and a sweep") {
+  TempFile f(R"(# study 1
+name = "batch-ransac-samples"
+description = "Figure 12: Batch RANSAC alone, pitcher-like object"
+objects = ["bunny", "cube"]
+runs = 50
+steps = 40
+pool = 60
+method = "batch-ransac"
+noise = "underwater"
+sensors = 6
+seed = 7
+noise.sensel_noise = 0.1
+
+[ransac]
+prune = 3000
+d_outlier_m = 0.2
+
+[bricpsf]
+hypotheses = 100
+psi = 0.8
+
+[sweep]
+ransac.samples = ["15x200", "50x200", "50x500", "100x1000"]
+)");
+  ExperimentConfig c;
+  load_config_file(c, f.path);
+  CHECK(c.name == "batch-ransac-samples");
+  CHECK(c.description == "Figure 12: Batch RANSAC alone, pitcher-like object");
+  REQUIRE(c.objects.size() == 2);
+  CHECK(c.objects[1] == "cube");
+  CHECK(c.runs == 50);
+  CHECK(c.steps == 40);
+  CHECK(c.pool == 60);
+  CHECK(c.method == "batch-ransac");
+  CHECK(c.sensors == 6);
+  CHECK(c.seed == 7);
+  CHECK(*c.noise_params.sensel_noise == 0.1);
+  CHECK_FALSE(c.noise_params.force_noise.has_value());
+  CHECK(*c.params.prune == 3000);
+  CHECK(*c.params.d_outlier_m == 0.2);
+  CHECK(*c.params.hypotheses == 100);
+  CHECK(*c.params.psi == 0.8);
+  REQUIRE(c.sweep.size() == 1);
+  CHECK(c.sweep[0].key == "ransac.samples");
+
+  const auto variants = expand_variants(c);
+  REQUIRE(variants.size() == 4);
+  CHECK(variants[0].label == "ransac.samples=15x200");
+  CHECK(*variants[0].config.params.triplets == 15);
+  CHECK(*variants[0].config.params.registrations == 200);
+  CHECK(*variants[3].config.params.triplets == 100);
+  CHECK(*variants[3].config.params.registrations == 1000);
+  CHECK(variants[3].config.sweep.empty());
+  CHECK(variants[3].config.runs == 50);
+}
+
+TEST_CASE("INI files and a two-axis sweep (first key slowest)") {
+  TempFile f(
+      "runs=3\nsteps=5\npool=5\n[sweep]\nnoise.arm_position_sigma_m = 0, 0.003, 0.006\n"
+      "noise.sensel_noise = 0.0, 0.05\n",
+      ".ini");
+  ExperimentConfig c;
+  load_config_file(c, f.path);
+  const auto v = expand_variants(c);
+  REQUIRE(v.size() == 6);
+  CHECK(v[0].label == "noise.arm_position_sigma_m=0, noise.sensel_noise=0.0");
+  CHECK(v[1].label == "noise.arm_position_sigma_m=0, noise.sensel_noise=0.05");
+  CHECK(*v[5].config.noise_params.arm_position_sigma_m == 0.006);
+  CHECK(*v[5].config.noise_params.sensel_noise == 0.05);
+}
+
+TEST_CASE("Impossible values and unknown keys name the key") {
+  auto e = load_error("runs = -5\n");
+  CHECK(e.second == "runs");
+  CHECK(e.first.find("at least 1") != std::string::npos);
+  CHECK(e.first.find("-5") != std::string::npos);
+
+  CHECK(load_error("steps = 0\n").second == "steps");
+  CHECK(load_error("runs = 2.5\n").second == "runs");
+  CHECK(load_error("runs = many\n").second == "runs");
+  CHECK(load_error("method = magic\n").second == "method");
+  CHECK(load_error("noise = shallow\n").second == "noise");
+  CHECK(load_error("sensors = 3\n").second == "sensors");
+  CHECK(load_error("seed = -1\n").second == "seed");
+  CHECK(load_error("[bricpsf]\npsi = 1.5\n").second == "bricpsf.psi");
+  CHECK(load_error("noise.sensel_noise = -0.1\n").second == "noise.sensel_noise");
+  CHECK(load_error("objects = [\"a\", \"a\"]\n").second == "objects");
+  CHECK(load_error("runs = 3\nruns = 4\n").second == "runs");
+  CHECK(load_error("steps = 60\n").second == "pool");  // default pool 50 < 60 steps
+
+  auto u = load_error("[ransac]\ntriplet = 15\n");
+  CHECK(u.second == "ransac.triplet");
+  CHECK(u.first.find("unknown key") != std::string::npos);
+  CHECK(u.first.find("did you mean 'ransac.triplets'") != std::string::npos);
+  CHECK(load_error("colour = 3\n").second == "colour");
+
+  auto s = load_error("[sweep]\nruns = [1, 2]\n");
+  CHECK(s.second == "sweep.runs");
+  CHECK(load_error("[sweep]\nmethod = [\"bricpsf\", \"nope\"]\n").second == "sweep.method");
+  CHECK(load_error("[sweep]\nransac.samples = [\"15x0\"]\n").second == "sweep.ransac.samples");
+  CHECK(load_error("[sweep]\nbogus = [1]\n").second == "sweep.bogus");
+
+  ExperimentConfig c;
+  CHECK_THROWS_AS(load_config_file(c, "/nonexistent/exp.toml"), Error);
+}
+
+TEST_CASE("Flags use the same setter as files") {
+  ExperimentConfig c;
+  set_key(c, "objects", {"sphere,cube , bunny"});
+  REQUIRE(c.objects.size() == 3);
+  CHECK(c.objects[1] == "cube");
+  set_key(c, "objects", {"all"});
+  CHECK(c.objects.empty());
+  set_key(c, "ransac.samples", {"50x500"});
+  CHECK(*c.params.triplets == 50);
+  CHECK(*c.params.registrations == 500);
+  try {
+    set_key(c, "runs", {"-1"});
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.field() == "runs");
+    CHECK(e.file().empty());
+  }
+  CHECK_THROWS_AS(set_key(c, "ransac.samples", {"50"}), Error);
+  CHECK_THROWS_AS(set_key(c, "objects", {"all,cube"}), Error);
+}
+
+TEST_CASE("Objects resolve against the database; unknown names are errors") {
+  const std::vector<std::string> db{"a", "b", "c", "d", "e"};
+  ExperimentConfig c;
+  auto all = resolve_objects(c, db);
+  CHECK(all.explored == db);
+  CHECK(all.database == db);
+
+  set_key(c, "objects", {"d,b"});
+  set_key(c, "database_size", {"3"});
+  auto r = resolve_objects(c, db);
+  CHECK(r.explored == std::vector<std::string>{"d", "b"});
+  CHECK(r.database == std::vector<std::string>{"d", "b", "a"});
+
+  set_key(c, "objects", {"d,zz"});
+  try {
+    resolve_objects(c, db);
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.field() == "objects");
+    CHECK(e.message().find("zz") != std::string::npos);
+  }
+  ExperimentConfig big;
+  set_key(big, "database_size", {"6"});
+  CHECK_THROWS_AS(resolve_objects(big, db), Error);
+  ExperimentConfig sub;
+  set_key(sub, "objects", {"a"});
+  set_key(sub, "database", {"b,c"});
+  CHECK_THROWS_AS(resolve_objects(sub, db), Error);
+}
+
+TEST_CASE("Canonical JSON and the first result-determining difference") {
+  ExperimentConfig a;
+  ExperimentConfig b = a;
+  b.name = "renamed";
+  b.schedule = "steps";
+  CHECK(first_difference(to_json(a), to_json(b)).empty());
+  b.params.prune = 1000;
+  CHECK(first_difference(to_json(a), to_json(b)) == "ransac.prune");
+  ExperimentConfig c = a;
+  set_key(c, "sweep.method", {"bricpsf", "ransac-icp"});
+  CHECK(first_difference(to_json(a), to_json(c)) == "sweep");
+  const auto j = to_json(a);
+  CHECK(j.at("objects") == "all");
+  CHECK(j.at("runs") == 20);
+  CHECK(j.at("ransac.triplets").is_null());
+  CHECK_FALSE(j.contains("ransac.samples"));  // derived key, not stored twice
+}

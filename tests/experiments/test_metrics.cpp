@@ -1,0 +1,208 @@
+// Metrics against hand-computed and published values.
+#include "experiments/metrics.hpp"
+
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+using namespace ts;
+using namespace ts::experiments;
+
+namespace {
+Mat3 rot(double angle, const Vec3& axis) {
+  return Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();
+}
+Pose pose(const Mat3& r, const Vec3& t) {
+  Pose p = Pose::Identity();
+  p.linear() = r;
+  p.translation() = t;
+  return p;
+}
+}  // namespace
+
+TEST_CASE("Wilson interval matches Newcombe (1998) Table I") {
+  // Newcombe, Statistics in Medicine 17:857-872, method 3 (score, no continuity correction).
+  Interval a = wilson_interval(81, 263);
+  CHECK(a.lo == doctest::Approx(0.2553).epsilon(2e-4));
+  CHECK(a.hi == doctest::Approx(0.3662).epsilon(2e-4));
+  Interval b = wilson_interval(15, 148);
+  CHECK(b.lo == doctest::Approx(0.0624).epsilon(1e-3));
+  CHECK(b.hi == doctest::Approx(0.1605).epsilon(1e-3));
+  Interval c = wilson_interval(0, 20);
+  CHECK(c.lo == 0.0);
+  CHECK(c.hi == doctest::Approx(0.1611).epsilon(1e-3));
+  Interval d = wilson_interval(1, 29);
+  CHECK(d.lo == doctest::Approx(0.0061).epsilon(1e-2));
+  CHECK(d.hi == doctest::Approx(0.1718).epsilon(1e-3));
+}
+
+TEST_CASE("Wilson interval at hand-computed points and edges") {
+  // 8/10: centre (0.8 + 1.92/10) / 1.384 etc., computed by hand from the score formula.
+  Interval a = wilson_interval(8, 10);
+  CHECK(a.lo == doctest::Approx(0.490162).epsilon(1e-5));
+  CHECK(a.hi == doctest::Approx(0.943318).epsilon(1e-5));
+  Interval h = wilson_interval(5, 10);  // symmetric about 1/2
+  CHECK(h.lo + h.hi == doctest::Approx(1.0));
+  CHECK(h.lo == doctest::Approx(0.236593).epsilon(1e-5));
+  Interval all = wilson_interval(10, 10);
+  CHECK(all.hi == 1.0);
+  CHECK(all.lo == doctest::Approx(0.722467).epsilon(1e-5));
+  Interval none = wilson_interval(0, 0);
+  CHECK(none.lo == 0.0);
+  CHECK(none.hi == 1.0);
+  CHECK_THROWS_AS(wilson_interval(3, 2), Error);
+  // Wider at 90 % than... narrower at lower confidence.
+  Interval z90 = wilson_interval(8, 10, 1.6448536269514722);
+  CHECK(z90.lo > a.lo);
+  CHECK(z90.hi < a.hi);
+}
+
+TEST_CASE("Quantiles are type 7 (linear interpolation)") {
+  const std::vector<double> v{4, 1, 3, 2};
+  CHECK(*median(v) == doctest::Approx(2.5));
+  CHECK(*quantile(v, 0.95) == doctest::Approx(3.85));
+  CHECK(*quantile(v, 0.0) == 1.0);
+  CHECK(*quantile(v, 1.0) == 4.0);
+  const std::vector<double> odd{3, 1, 2};
+  CHECK(*median(odd) == 2.0);
+  const std::vector<double> one{7};
+  CHECK(*quantile(one, 0.95) == 7.0);
+  CHECK_FALSE(median(std::vector<double>{}).has_value());
+  CHECK_THROWS_AS(quantile(v, 1.5), Error);
+  const std::vector<double> bad{1, std::nan("")};
+  CHECK_THROWS_AS(median(bad), Error);
+}
+
+TEST_CASE("Student t quantiles match tables") {
+  CHECK(student_t_quantile(0.975, 1) == doctest::Approx(12.706204736).epsilon(1e-8));
+  CHECK(student_t_quantile(0.975, 2) == doctest::Approx(4.302652730).epsilon(1e-8));
+  CHECK(student_t_quantile(0.975, 4) == doctest::Approx(2.776445105).epsilon(1e-8));
+  CHECK(student_t_quantile(0.975, 19) == doctest::Approx(2.093024054).epsilon(1e-8));
+  CHECK(student_t_quantile(0.975, 30) == doctest::Approx(2.042272456).epsilon(1e-8));
+  CHECK(student_t_quantile(0.975, 1e6) == doctest::Approx(kZ95).epsilon(1e-5));
+  CHECK(student_t_quantile(0.025, 4) == doctest::Approx(-2.776445105).epsilon(1e-8));
+  CHECK(student_t_cdf(-1.5, 3) == doctest::Approx(0.115291932622).epsilon(1e-9));
+  CHECK(incomplete_beta(0.3, 2.5, 1.5) == doctest::Approx(0.088943723171).epsilon(1e-9));
+}
+
+TEST_CASE("Mean with a Student-t interval") {
+  const std::vector<double> v{1, 2, 3, 4, 5};
+  const MeanInterval m = mean_t_interval(v);
+  CHECK(m.n == 5);
+  CHECK(m.mean == doctest::Approx(3.0));
+  REQUIRE(m.ci.has_value());
+  // s = sqrt(2.5); half width = t(0.975, 4) * s / sqrt(5) = 2.776445 * 0.707107
+  CHECK(m.ci->hi - m.mean == doctest::Approx(2.776445105 * std::sqrt(0.5)).epsilon(1e-8));
+  CHECK(m.mean - m.ci->lo == doctest::Approx(2.776445105 * std::sqrt(0.5)).epsilon(1e-8));
+  const MeanInterval one = mean_t_interval(std::vector<double>{2.0});
+  CHECK(one.mean == 2.0);
+  CHECK_FALSE(one.ci.has_value());
+}
+
+TEST_CASE("Orientation error is Eq. 10, exact near 0 and pi") {
+  const Mat3 r0 = rot(0.7, {1, 2, 3});
+  CHECK(orientation_error(r0, r0) == doctest::Approx(0.0));
+  CHECK(orientation_error(r0 * rot(std::numbers::pi / 6, {0, 0, 1}), r0) ==
+        doctest::Approx(std::numbers::pi / 6));
+  // Symmetric in its arguments.
+  const Mat3 r1 = rot(2.0, {-1, 0.5, 0.2});
+  CHECK(orientation_error(r0, r1) == doctest::Approx(orientation_error(r1, r0)));
+  // Tiny angles keep their digits (arccos would give ~1e-8 noise here).
+  CHECK(orientation_error(rot(1e-9, {0, 1, 0}), Mat3::Identity()) ==
+        doctest::Approx(1e-9).epsilon(1e-6));
+  CHECK(orientation_error(rot(std::numbers::pi - 1e-7, {0, 1, 1}), Mat3::Identity()) ==
+        doctest::Approx(std::numbers::pi - 1e-7).epsilon(1e-12));
+  // Agrees with arccos((tr R - 1) / 2) at a generic angle.
+  const Mat3 rel = r0.transpose() * r1;
+  CHECK(orientation_error(r0, r1) == doctest::Approx(std::acos((rel.trace() - 1) / 2)));
+}
+
+TEST_CASE("Symmetry-aware orientation error and MSSD") {
+  const Pose truth = pose(rot(0.4, {1, 1, 0}), {1.0, -2.0, 0.5});
+  // A cube's 90-degree symmetry about z.
+  const std::vector<Pose> cube{pose(rot(std::numbers::pi / 2, {0, 0, 1}), Vec3::Zero())};
+  const double one_deg = std::numbers::pi / 180;
+  const Pose est = pose(truth.linear() * rot(std::numbers::pi / 2 + one_deg, {0, 0, 1}),
+                        truth.translation());
+  CHECK(orientation_error(est.linear(), truth.linear()) ==
+        doctest::Approx(std::numbers::pi / 2 + one_deg));
+  CHECK(symmetric_orientation_error(est.linear(), truth.linear(), cube) ==
+        doctest::Approx(one_deg));
+  CHECK(symmetric_orientation_error(est.linear(), truth.linear(), {}) ==
+        doctest::Approx(std::numbers::pi / 2 + one_deg));
+
+  // MSSD: two points on the x axis, symmetric under a half turn about z.
+  const std::vector<Vec3> pts{{0.05, 0, 0}, {-0.05, 0, 0}};
+  const std::vector<Pose> half{pose(rot(std::numbers::pi, {0, 0, 1}), Vec3::Zero())};
+  const Pose flipped = truth * half[0];
+  CHECK(mssd(flipped, truth, {}, pts) == doctest::Approx(0.10));
+  CHECK(mssd(flipped, truth, half, pts) == doctest::Approx(0.0));
+  // A pure 1 cm shift moves every point by 1 cm.
+  Pose shifted = truth;
+  shifted.translation() += Vec3(0.0, 0.01, 0.0);
+  CHECK(mssd(shifted, truth, half, pts) == doctest::Approx(0.01));
+  CHECK(position_error(shifted, truth) == doctest::Approx(0.01));
+  // Symmetries with a translation part (origin off the symmetry axis) are honoured.
+  const std::vector<Vec3> off{{0.06, 0, 0}, {0.04, 0, 0}};
+  const Pose about_x005 = pose(rot(std::numbers::pi, {0, 0, 1}), {0.10, 0, 0});
+  const std::vector<Pose> sym_off{about_x005};
+  CHECK(mssd(truth * about_x005, truth, sym_off, off) == doctest::Approx(0.0));
+  CHECK(mssd(truth, truth, {}, {}) == 0.0);
+}
+
+TEST_CASE("Step summary follows the paper's bounded averaging") {
+  std::vector<StepSample> s(4);
+  s[0] = {true, 0.01, 0.1, 0.05, 0.012, 1.0};
+  s[1] = {true, 0.02, 2.0, 0.10, 0.030, 2.0};
+  s[2] = {true, 0.10, 0.3, 0.20, 0.200, 3.0};
+  s[3] = {false, 0.50, 3.0, 3.00, 0.900, 4.0};
+  const StepSummary m = summarize_step(7, s);
+  CHECK(m.step == 7);
+  CHECK(m.runs == 4);
+  CHECK(m.correct == 3);
+  CHECK(m.recognition_rate == doctest::Approx(0.75));
+  CHECK(m.recognition_rate_ci95.lo == doctest::Approx(0.300642).epsilon(1e-5));
+  CHECK(m.recognition_rate_ci95.hi == doctest::Approx(0.954413).epsilon(1e-5));
+  // Errors only over the 3 correct runs; the mean caps each at 4 cm / 1 rad.
+  CHECK(m.position_m.n == 3);
+  CHECK(*m.position_m.median == doctest::Approx(0.02));
+  CHECK(*m.position_m.p95 == doctest::Approx(0.02 + 0.9 * 0.08));
+  CHECK(m.position_m.bounded_mean == doctest::Approx((0.01 + 0.02 + 0.04) / 3));
+  CHECK(m.orientation_rad.bounded_mean == doctest::Approx((0.1 + 1.0 + 0.3) / 3));
+  REQUIRE(m.position_m.bounded_mean_ci95.has_value());
+  // s of {0.01, 0.02, 0.04} = 0.0152753; t(0.975, 2) = 4.302653
+  const double half = 4.302652730 * 0.015275252316519 / std::sqrt(3.0);
+  CHECK(m.position_m.bounded_mean_ci95->hi == doctest::Approx(0.0233333 + half).epsilon(1e-5));
+  CHECK(*m.time_s_median == doctest::Approx(2.5));
+  CHECK(*m.time_s_p95 == doctest::Approx(3.85));
+
+  // No correct run: the bound itself, no median.
+  std::vector<StepSample> wrong{s[3], s[3]};
+  const StepSummary w = summarize_step(1, wrong);
+  CHECK(w.recognition_rate == 0.0);
+  CHECK(w.position_m.bounded_mean == 0.04);
+  CHECK(w.orientation_rad.bounded_mean == 1.0);
+  CHECK_FALSE(w.position_m.median.has_value());
+  CHECK_FALSE(w.position_m.bounded_mean_ci95.has_value());
+}
+
+TEST_CASE("Pareto front: cheaper or better, never dominated") {
+  //                      0    1    2    3    4    5
+  const std::vector<double> cost{1.0, 2.0, 3.0, 2.0, 5.0, 3.0};
+  const std::vector<double> gain{0.5, 0.7, 0.6, 0.4, 0.9, 0.7};
+  const auto f = pareto_front(cost, gain);
+  REQUIRE(f.size() == 3);
+  CHECK(f[0] == 0);
+  CHECK(f[1] == 1);
+  CHECK(f[2] == 4);
+  // Brute force: each front member is not dominated; each other point is.
+  for (std::size_t i = 0; i < cost.size(); ++i) {
+    bool dominated = false;
+    for (std::size_t j = 0; j < cost.size(); ++j)
+      if (cost[j] <= cost[i] && gain[j] >= gain[i] && (cost[j] < cost[i] || gain[j] > gain[i]))
+        dominated = true;
+    CHECK(dominated == (std::find(f.begin(), f.end(), i) == f.end()));
+  }
+}

@@ -1,0 +1,129 @@
+// Report JSON: the interface's keys, values against hand-counted outcomes, plots.
+#include "experiments/report.hpp"
+#include "temp_dir.hpp"
+
+#include <doctest/doctest.h>
+
+#include <numbers>
+#include <sstream>
+
+using namespace ts;
+using namespace ts::experiments;
+
+namespace {
+
+/// 2 objects x 4 runs x 3 steps. Run r of object o is correct at step k when k > r (so step 1:
+/// 1 of 4 correct, step 2: 2 of 4, step 3: 3 of 4); position error 1 cm * (r + 1), orientation
+/// 0.1 rad * (r + 1), symmetric half of it; time 0.1 * step.
+io::RunStoreContents synthetic(int variants = 1) {
+  io::RunStoreContents c;
+  auto& h = c.header;
+  h.config_json = R"({"name":"synthetic","runs":4,"steps":3,"method":"bricpsf","noise":"ideal","sensors":1})";
+  h.database_json = "{}";
+  h.versions_json = R"({"touchstone":"test","threads":2})";
+  h.machine = "test machine";
+  h.steps = 3;
+  for (int v = 0; v < variants; ++v) {
+    h.variant_labels.push_back(variants == 1 ? "" : "icp.iterations=" + std::to_string(v));
+    h.variant_configs.push_back("{}");
+  }
+  h.objects = {"cube", "sphere"};
+  h.database_objects = {"cube", "sphere", "bunny"};
+  h.stages = {"ransac", "icp"};
+  for (int v = 0; v < variants; ++v)
+    for (int o = 0; o < 2; ++o)
+      for (int r = 0; r < 4; ++r) {
+        io::RunRecord rec;
+        rec.variant = v;
+        rec.object = o;
+        rec.run = r;
+        rec.grasps = {0, 1, 2};
+        for (int k = 1; k <= 3; ++k) {
+          io::RunStepRecord s;
+          s.correct = k > r;
+          s.best_object = s.correct ? o : 2;
+          s.position_error_m = 0.01 * (r + 1);
+          s.orientation_error_rad = 0.1 * (r + 1);
+          s.symmetric_orientation_error_rad = 0.05 * (r + 1);
+          s.time_s = 0.1 * k * (v + 1);
+          s.stage_times_s = {0.06 * k, 0.04 * k};
+          rec.steps.push_back(s);
+        }
+        c.runs.push_back(rec);
+      }
+  c.complete = true;
+  return c;
+}
+
+}  // namespace
+
+TEST_CASE("Report JSON has the interface's keys with the right values") {
+  const auto j = report_json(synthetic(), {}, "run.h5");
+  for (const char* k : {"config", "per_step", "per_object", "threads", "machine"})
+    CHECK(j.contains(k));
+  CHECK(j["threads"] == 2);
+  CHECK(j["machine"] == "test machine");
+  CHECK(j["config"]["name"] == "synthetic");
+  CHECK(j["store"]["runs_done"] == 8);
+  CHECK(j["store"]["runs_planned"] == 8);
+  REQUIRE(j["per_step"].size() == 3);
+  for (const auto& row : j["per_step"])
+    for (const char* k : {"step", "recognition_rate", "recognition_rate_ci95", "position_error_m_median",
+                          "orientation_error_deg_median", "symmetric_orientation_error_deg_median",
+                          "time_s_median", "time_s_p95"})
+      CHECK(row.contains(k));
+  const auto& s1 = j["per_step"][0];
+  CHECK(s1["step"] == 1);
+  CHECK(s1["recognition_rate"].get<double>() == doctest::Approx(0.25));  // runs 0 of each object
+  CHECK(s1["recognition_rate_ci95"][0].get<double>() == doctest::Approx(wilson_interval(2, 8).lo));
+  CHECK(s1["position_error_m_median"].get<double>() == doctest::Approx(0.01));
+  const auto& s3 = j["per_step"][2];
+  CHECK(s3["recognition_rate"].get<double>() == doctest::Approx(0.75));
+  // correct at step 3: runs 0, 1, 2 -> errors 1, 2, 3 cm; median 2 cm; bounded mean same (< 4 cm)
+  CHECK(s3["position_error_m_median"].get<double>() == doctest::Approx(0.02));
+  CHECK(s3["position_error_m_mean_bounded"].get<double>() == doctest::Approx(0.02));
+  CHECK(s3["orientation_error_deg_median"].get<double>() == doctest::Approx(0.2 * 180 / std::numbers::pi));
+  CHECK(s3["symmetric_orientation_error_deg_median"].get<double>() ==
+        doctest::Approx(0.1 * 180 / std::numbers::pi));
+  // orientation bounded mean: 0.1, 0.2, 0.3 rad, all under 1 rad.
+  CHECK(s3["orientation_error_deg_mean_bounded"].get<double>() ==
+        doctest::Approx(0.2 * 180 / std::numbers::pi));
+  CHECK(s3["time_s_median"].get<double>() == doctest::Approx(0.3));
+  CHECK(s3["stage_times_s_median"]["ransac"].get<double>() == doctest::Approx(0.18));
+  REQUIRE(j["per_object"].size() == 2);
+  CHECK(j["per_object"][1]["object"] == "sphere");
+  CHECK(j["per_object"][1]["per_step"][2]["recognition_rate"].get<double>() == doctest::Approx(0.75));
+  CHECK_FALSE(j.contains("variants"));
+  std::ostringstream text;
+  print_report(j, text);
+  CHECK(text.str().find("sphere") != std::string::npos);
+  CHECK(text.str().find("75") != std::string::npos);
+}
+
+TEST_CASE("A sweep reports every variant and the Pareto front") {
+  const auto j = report_json(synthetic(3), {}, "run.h5");
+  REQUIRE(j.contains("variants"));
+  CHECK(j["variants"].size() == 3);
+  // Same recognition, variant 0 is fastest: it alone is on both fronts.
+  CHECK(j["pareto"]["recognition_rate_final"] == nlohmann::ordered_json::array({"icp.iterations=0"}));
+  CHECK(j["pareto"]["position_error_m_median_final"] ==
+        nlohmann::ordered_json::array({"icp.iterations=0"}));
+  CHECK(j["variants"][2]["summary"]["time_s_per_step_mean"].get<double>() == doctest::Approx(0.6));
+  std::ostringstream text;
+  print_report(j, text);
+  CHECK(text.str().find("icp.iterations=2") != std::string::npos);
+}
+
+TEST_CASE("Plots are written by the plot script") {
+  test::TempDir dir("plots");
+  const auto j = report_json(synthetic(), {}, "run.h5");
+  const auto files = write_plots(j, dir.path());
+  CHECK(files.size() == 5);
+  for (const auto& f : files) {
+    CHECK(std::filesystem::file_size(f) > 10000);
+    CHECK(test::read_bytes(f).substr(1, 3) == "PNG");
+  }
+  CHECK(std::filesystem::exists(dir / "report.json"));
+  const auto sweep = write_plots(report_json(synthetic(3), {}, "run.h5"), dir / "sweep");
+  CHECK(sweep.size() == 5);
+}

@@ -1,0 +1,190 @@
+// The HDF5 run store: round trip, appends in any order, crash leftovers, compaction.
+#include "io/h5.hpp"
+#include "io/run_store.hpp"
+#include "temp_dir.hpp"
+
+#include <doctest/doctest.h>
+
+using namespace ts;
+using namespace ts::io;
+
+namespace {
+
+RunStoreHeader header(int steps = 3) {
+  RunStoreHeader h;
+  h.config_json = R"({"runs":2,"steps":3})";
+  h.database_json = R"({"path":"db.h5"})";
+  h.versions_json = R"({"touchstone":"test"})";
+  h.machine = "test machine";
+  h.steps = steps;
+  h.variant_labels = {"method=a", "method=b"};
+  h.variant_configs = {"{}", "{}"};
+  h.objects = {"cube", "sphere"};
+  h.database_objects = {"cube", "sphere", "bunny"};
+  h.stages = {"ransac", "icp", "evaluate"};
+  return h;
+}
+
+RunRecord record(int variant, int object, int run, int steps = 3) {
+  RunRecord r;
+  r.variant = variant;
+  r.object = object;
+  r.run = run;
+  Rng rng(99, static_cast<std::uint64_t>(variant), static_cast<std::uint64_t>(object),
+          static_cast<std::uint64_t>(run));
+  r.truth.linear() = rng.rotation().toRotationMatrix();
+  r.truth.translation() = Vec3(rng.uniform(), rng.uniform(), rng.uniform());
+  r.wall_time_s = rng.uniform();
+  for (int k = 0; k < steps; ++k) {
+    r.grasps.push_back(static_cast<std::int32_t>(rng.index(50)));
+    RunStepRecord s;
+    s.best_object = static_cast<std::int32_t>(rng.index(3));
+    s.correct = s.best_object == object;
+    s.weight = rng.uniform();
+    s.posterior_true = rng.uniform();
+    s.posterior_best = rng.uniform();
+    s.posterior_entropy = rng.uniform();
+    s.true_rank = static_cast<std::int32_t>(rng.index(4));
+    s.hypotheses = 100;
+    s.contacts = 10 * (k + 1);
+    s.free_points = 7 * k;
+    s.pose.linear() = rng.rotation().toRotationMatrix();
+    s.pose.translation() = Vec3(rng.normal(), rng.normal(), rng.normal());
+    s.position_error_m = rng.uniform();
+    s.orientation_error_rad = rng.uniform();
+    s.symmetric_orientation_error_rad = rng.uniform();
+    s.mssd_m = rng.uniform();
+    s.time_s = rng.uniform();
+    s.stage_times_s = {rng.uniform(), rng.uniform(), rng.uniform()};
+    r.steps.push_back(s);
+  }
+  return r;
+}
+
+void check_equal(const RunRecord& a, const RunRecord& b) {
+  CHECK(a.same_key(b));
+  CHECK(a.grasps == b.grasps);
+  CHECK(a.truth.isApprox(b.truth, 1e-12));
+  CHECK(a.wall_time_s == b.wall_time_s);
+  REQUIRE(a.steps.size() == b.steps.size());
+  for (std::size_t k = 0; k < a.steps.size(); ++k) {
+    const auto &x = a.steps[k], &y = b.steps[k];
+    CHECK(x.best_object == y.best_object);
+    CHECK(x.correct == y.correct);
+    CHECK(x.weight == y.weight);
+    CHECK(x.posterior_true == y.posterior_true);
+    CHECK(x.posterior_best == y.posterior_best);
+    CHECK(x.posterior_entropy == y.posterior_entropy);
+    CHECK(x.true_rank == y.true_rank);
+    CHECK(x.hypotheses == y.hypotheses);
+    CHECK(x.contacts == y.contacts);
+    CHECK(x.free_points == y.free_points);
+    CHECK(x.pose.isApprox(y.pose, 1e-12));
+    CHECK(x.position_error_m == y.position_error_m);
+    CHECK(x.orientation_error_rad == y.orientation_error_rad);
+    CHECK(x.symmetric_orientation_error_rad == y.symmetric_orientation_error_rad);
+    CHECK(x.mssd_m == y.mssd_m);
+    CHECK(x.time_s == y.time_s);
+    CHECK(x.stage_times_s == y.stage_times_s);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("Run store round trip: appends in any order read back sorted") {
+  test::TempDir dir("runstore");
+  const auto path = dir / "run.h5";
+  RunStore::create(path, header());
+  CHECK_THROWS_AS(RunStore::create(path, header()), Error);  // never overwrites
+
+  const RunStoreHeader h = RunStore::read_header(path);
+  CHECK(h.config_json == header().config_json);
+  CHECK(h.variant_labels == header().variant_labels);
+  CHECK(h.stages == header().stages);
+  CHECK(h.database_objects == header().database_objects);
+  CHECK(h.steps == 3);
+
+  RunStore::append(path, {record(1, 0, 1), record(0, 1, 0)});
+  RunStore::append(path, {record(0, 0, 0)});
+  const RunStoreContents c = RunStore::read(path);
+  CHECK_FALSE(c.complete);
+  REQUIRE(c.runs.size() == 3);
+  check_equal(c.runs[0], record(0, 0, 0));
+  check_equal(c.runs[1], record(0, 1, 0));
+  check_equal(c.runs[2], record(1, 0, 1));
+
+  // Bad appends are refused before anything is written.
+  CHECK_THROWS_AS(RunStore::append(path, {record(2, 0, 0)}), Error);
+  CHECK_THROWS_AS(RunStore::append(path, {record(0, 0, 5, 2)}), Error);
+  CHECK(RunStore::read(path).runs.size() == 3);
+}
+
+TEST_CASE("Leftovers of an interrupted append are ignored, later appends stay aligned") {
+  test::TempDir dir("runstore");
+  const auto path = dir / "run.h5";
+  RunStore::create(path, header());
+  RunStore::append(path, {record(0, 0, 0)});
+  {
+    // A crash after some step columns of the next run were written, before its run row.
+    h5::File f = h5::File::open(path, h5::File::Access::read_write);
+    h5::Group st = f.root().open_group("steps");
+    const std::int32_t steps[] = {1, 2};
+    st.append<std::int32_t>("step", steps, 2);
+    const double w[] = {0.5, 0.5};
+    st.append<double>("weight", w, 2);
+    h5::Group rg = f.root().open_group("runs");
+    const std::int64_t first[] = {3};
+    rg.append<std::int64_t>("first_step_row", first, 1);  // half a run row
+    f.close();
+  }
+  REQUIRE(RunStore::read(path).runs.size() == 1);
+  RunStore::append(path, {record(1, 1, 1), record(0, 1, 0)});
+  const RunStoreContents c = RunStore::read(path);
+  REQUIRE(c.runs.size() == 3);
+  check_equal(c.runs[0], record(0, 0, 0));
+  check_equal(c.runs[1], record(0, 1, 0));
+  check_equal(c.runs[2], record(1, 1, 1));
+}
+
+TEST_CASE("Compaction gives the same bytes whatever the completion order") {
+  test::TempDir dir("runstore");
+  const auto a = dir / "a.h5", b = dir / "b.h5";
+  RunStore::create(a, header());
+  RunStore::create(b, header());
+  RunStore::append(a, {record(0, 0, 0), record(0, 0, 1)});
+  RunStore::append(a, {record(1, 1, 0)});
+  RunStore::append(b, {record(1, 1, 0)});
+  RunStore::append(b, {record(0, 0, 1)});
+  RunStore::append(b, {record(0, 0, 0)});
+  CHECK(test::read_bytes(a) != test::read_bytes(b));
+  RunStore::compact(a, true);
+  RunStore::compact(b, true);
+  CHECK(test::read_bytes(a) == test::read_bytes(b));
+  const RunStoreContents c = RunStore::read(a);
+  CHECK(c.complete);
+  REQUIRE(c.runs.size() == 3);
+  check_equal(c.runs[2], record(1, 1, 0));
+  CHECK(std::filesystem::directory_iterator(dir.path()) != std::filesystem::directory_iterator());
+  int files = 0;
+  for (auto& e : std::filesystem::directory_iterator(dir.path())) (void)e, ++files;
+  CHECK(files == 2);  // no temporary left behind
+}
+
+TEST_CASE("Foreign and missing files give clear errors") {
+  test::TempDir dir("runstore");
+  CHECK_THROWS_AS(RunStore::read(dir / "missing.h5"), Error);
+  test::write_text(dir / "text.h5", "not hdf5");
+  CHECK_THROWS_AS(RunStore::read(dir / "text.h5"), Error);
+  {
+    h5::File f = h5::File::create(dir / "other.h5");
+    f.root().set_attribute("format", "touchstone-db");
+    f.close();
+  }
+  try {
+    RunStore::read(dir / "other.h5");
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.message().find("not a Touchstone run store") != std::string::npos);
+    CHECK(e.field() == "/@format");
+  }
+}

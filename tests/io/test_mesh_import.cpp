@@ -1,0 +1,154 @@
+#include "engine/mesh.hpp"
+#include "io/mesh_import.hpp"
+#include "io/sha256.hpp"
+#include "mesh_fixtures.hpp"
+#include "temp_dir.hpp"
+
+#include <doctest/doctest.h>
+
+#include <limits>
+#include <string>
+
+using ts::test::TempDir;
+namespace io = ts::io;
+
+TEST_CASE("sha256: FIPS 180-4 test vectors") {
+  CHECK(io::sha256_hex("") == "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+  CHECK(io::sha256_hex("abc") == "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  CHECK(io::sha256_hex("abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq") ==
+        "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1");
+  // One million 'a', fed in uneven pieces (exercises the block buffer).
+  io::Sha256 h;
+  const std::string piece(997, 'a');
+  std::size_t left = 1000000;
+  while (left > 0) {
+    const std::size_t n = std::min(left, piece.size());
+    h.update(piece.data(), n);
+    left -= n;
+  }
+  CHECK(h.hex_digest() == "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0");
+}
+
+TEST_CASE("mesh import: a box lands in the object frame") {
+  TempDir dir("mesh");
+  const auto p = dir / "box.off";
+  ts::test::write_off(p, ts::test::box_mesh({10, 20, 0}, {12, 24, 1}));
+  const auto m = io::import_mesh(p);
+  CHECK(m.scale == doctest::Approx(0.05));                 // largest side 4 -> 0.20 m
+  CHECK(m.centre.isApprox(ts::Vec3(11, 22, 0.5)));
+  CHECK(m.extent.isApprox(ts::Vec3(0.1, 0.2, 0.05)));
+  const auto box = ts::mesh_bounds(m.mesh);
+  CHECK(box.min().isApprox(ts::Vec3(-0.05, -0.1, -0.025)));
+  CHECK(box.max().isApprox(ts::Vec3(0.05, 0.1, 0.025)));
+  CHECK(m.mesh.vertices.size() == 8);
+  CHECK(m.mesh.faces.size() == 12);
+  CHECK(m.closed);
+  CHECK_FALSE(m.flipped);
+  CHECK(m.warnings.empty());
+  CHECK(ts::mesh_signed_volume(m.mesh) == doctest::Approx(0.1 * 0.2 * 0.05));
+  CHECK(m.sha256 == io::sha256_hex(ts::test::read_bytes(p)));
+
+  const auto half = io::import_mesh(p, {.max_extent = 0.1});
+  CHECK(half.extent.isApprox(ts::Vec3(0.05, 0.1, 0.025)));
+}
+
+TEST_CASE("mesh import: inside-out meshes are flipped, quads triangulated, duplicates welded") {
+  TempDir dir("mesh");
+  const auto inv = dir / "inv.off";
+  ts::test::write_off(inv, ts::test::flipped(ts::test::sphere_mesh(3.0, 2, {1, 1, 1})));
+  const auto m = io::import_mesh(inv);
+  CHECK(m.flipped);
+  CHECK(m.closed);
+  CHECK(ts::mesh_signed_volume(m.mesh) > 0.0);
+  CHECK(m.extent.maxCoeff() == doctest::Approx(0.2));
+
+  // Quads, and the same cube as two separate objects in an OBJ (seams welded on position).
+  ts::test::write_text(dir / "quad.off",
+                       "OFF\n8 6 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n0 0 1\n1 0 1\n0 1 1\n1 1 1\n"
+                       "4 0 2 3 1\n4 4 5 7 6\n4 0 1 5 4\n4 2 6 7 3\n4 0 4 6 2\n4 1 3 7 5\n");
+  const auto q = io::import_mesh(dir / "quad.off");
+  CHECK(q.mesh.faces.size() == 12);
+  CHECK(q.closed);
+  ts::test::write_text(dir / "two.obj",
+                       "o bottom\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\n"
+                       "f 1 3 4 2\nf 1 2 6 5\nf 3 7 8 4\n"
+                       "o top\nv 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n"
+                       "f 9 10 12 11\nf 13 9 11 15\nf 14 16 12 10\n");
+  const auto o = io::import_mesh(dir / "two.obj");
+  CHECK(o.mesh.vertices.size() == 8);
+  CHECK(o.mesh.faces.size() == 12);
+  CHECK(o.closed);
+  CHECK_FALSE(o.flipped);
+
+  // ASCII STL: a tetrahedron (every vertex repeated per facet in STL).
+  ts::test::write_text(dir / "t.stl",
+                       "solid t\n"
+                       "facet normal 0 0 -1\nouter loop\nvertex 0 0 0\nvertex 0 1 0\nvertex 1 0 0\nendloop\nendfacet\n"
+                       "facet normal 0 -1 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 0 1\nendloop\nendfacet\n"
+                       "facet normal -1 0 0\nouter loop\nvertex 0 0 0\nvertex 0 0 1\nvertex 0 1 0\nendloop\nendfacet\n"
+                       "facet normal 1 1 1\nouter loop\nvertex 1 0 0\nvertex 0 1 0\nvertex 0 0 1\nendloop\nendfacet\n"
+                       "endsolid t\n");
+  const auto t = io::import_mesh(dir / "t.stl");
+  CHECK(t.mesh.vertices.size() == 4);
+  CHECK(t.closed);
+  CHECK(ts::mesh_signed_volume(t.mesh) == doctest::Approx(0.2 * 0.2 * 0.2 / 6.0));
+}
+
+TEST_CASE("mesh import: open and non-manifold meshes are kept with a warning") {
+  TempDir dir("mesh");
+  auto open = ts::test::box_mesh({0, 0, 0}, {1, 1, 1});
+  open.faces.resize(10);  // one side missing
+  ts::test::write_off(dir / "open.off", open);
+  const auto m = io::import_mesh(dir / "open.off");
+  CHECK_FALSE(m.closed);
+  CHECK(m.topology.boundary_edges == 4);
+  REQUIRE(m.warnings.size() == 1);
+  CHECK(m.warnings[0].find("open (4 boundary edges)") != std::string::npos);
+
+  // Three triangles on one edge.
+  ts::test::write_text(dir / "fin.off", "OFF\n5 3 0\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n0 0 1\n3 0 1 2\n3 1 0 3\n3 0 1 4\n");
+  const auto n = io::import_mesh(dir / "fin.off");
+  CHECK(n.topology.nonmanifold_edges == 1);
+  CHECK_FALSE(n.closed);
+  CHECK(n.warnings.size() == 2);
+}
+
+TEST_CASE("mesh import: from memory equals from file") {
+  TempDir dir("mesh");
+  const auto p = dir / "s.off";
+  ts::test::write_off(p, ts::test::sphere_mesh(1.0, 1));
+  const auto bytes = ts::test::read_bytes(p);
+  const auto a = io::import_mesh(p);
+  const auto b = io::import_mesh_from_memory(bytes, "pkg.tar.gz:data/s.off");
+  CHECK(a.mesh.vertices == b.mesh.vertices);
+  CHECK(a.mesh.faces.size() == b.mesh.faces.size());
+  CHECK(a.sha256 == b.sha256);
+  CHECK(a.scale == b.scale);
+}
+
+TEST_CASE("mesh import: bad meshes are rejected naming the file") {
+  TempDir dir("mesh");
+  CHECK_THROWS_WITH_AS(io::import_mesh(dir / "missing.off"), doctest::Contains("does not exist"), ts::Error);
+  ts::test::write_text(dir / "garbage.off", "this is not a mesh\n");
+  CHECK_THROWS_WITH_AS(io::import_mesh(dir / "garbage.off"), doctest::Contains("garbage.off"), ts::Error);
+  ts::test::write_text(dir / "nofaces.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n");
+  CHECK_THROWS_WITH_AS(io::import_mesh(dir / "nofaces.off"), doctest::Contains("nofaces.off"), ts::Error);
+  ts::test::write_text(dir / "point.off", "OFF\n3 1 0\n2 2 2\n2 2 2\n2 2 2\n3 0 1 2\n");
+  CHECK_THROWS_AS(io::import_mesh(dir / "point.off"), ts::Error);
+  CHECK_THROWS_AS(io::import_mesh_from_memory("", "x.off"), ts::Error);
+
+  // The same checks on meshes built in memory, with their exact messages.
+  ts::Mesh m = ts::test::box_mesh({0, 0, 0}, {1, 1, 1});
+  m.vertices[3].y() = std::numeric_limits<double>::quiet_NaN();
+  CHECK_THROWS_WITH_AS(io::normalize_mesh(m, "n.off"), "mesh has a non-finite vertex coordinate (n.off, vertex 3)",
+                       ts::Error);
+  ts::Mesh flat;
+  flat.vertices.assign(3, ts::Vec3(1, 2, 3));
+  flat.faces.emplace_back(0, 1, 2);
+  CHECK_THROWS_WITH_AS(io::normalize_mesh(flat, "p.off"), doctest::Contains("zero extent"), ts::Error);
+  CHECK_THROWS_WITH_AS(io::normalize_mesh(ts::Mesh{}, "e.off"), "mesh has no faces (e.off)", ts::Error);
+  ts::Mesh line;
+  line.vertices = {ts::Vec3(0, 0, 0), ts::Vec3(1, 0, 0), ts::Vec3(2, 0, 0)};
+  line.faces.emplace_back(0, 1, 2);
+  CHECK_THROWS_WITH_AS(io::normalize_mesh(line, "l.off"), doctest::Contains("all 1 are degenerate"), ts::Error);
+}
