@@ -32,6 +32,7 @@ struct Pruned {
 /// Pruned features of one triplet point, grouped by object (ascending), nearest first within.
 struct PrunedSet {
   std::vector<Pruned> items;
+  std::vector<double> x, y, z;   ///< the items' coarse points (object frame), for fast scans
   std::vector<std::array<std::uint32_t, 3>> ranges;  ///< (object, begin, end)
 
   std::pair<std::uint32_t, std::uint32_t> range_of(std::uint32_t object) const {
@@ -66,7 +67,7 @@ struct Triplet {
   bool from_boundary = false;   ///< drawn from all points, the interior gave no valid triplet
 };
 
-PrunedSet prune(const FeatureIndex& index, const Feature& f, std::size_t w,
+PrunedSet prune(const Database& db, const FeatureIndex& index, const Feature& f, std::size_t w,
                 const std::vector<std::uint8_t>& allowed) {
   PrunedSet set;
   const std::vector<Neighbour> nn = index.knn(f, w);
@@ -83,6 +84,16 @@ PrunedSet prune(const FeatureIndex& index, const Feature& f, std::size_t w,
     while (j < set.items.size() && set.items[j].object == set.items[i].object) ++j;
     set.ranges.push_back({set.items[i].object, i, j});
     i = j;
+  }
+  const std::size_t n = set.items.size();
+  set.x.resize(n);
+  set.y.resize(n);
+  set.z.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3& p = db.features(set.items[i].object).coarse.points[set.items[i].point];
+    set.x[i] = p.x();
+    set.y[i] = p.y();
+    set.z[i] = p.z();
   }
   return set;
 }
@@ -105,13 +116,20 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
     const bool normals = use_normals && coarse.has_normals();
     const Vec3& q1 = pts[a.point];
     // Second point: same object, distance to the first matching the input's (and, as an
-    // extension, the same angles between normals and chord).
+    // extension, the same angles between normals and chord). Squared distances against a
+    // squared window: no square roots in the scan.
+    auto window = [&](double d) {
+      const double lo = std::max(0.0, d - tol), hi = d + tol;
+      return std::pair(lo * lo, hi * hi);
+    };
+    const auto [lo12, hi12] = window(t.d12);
     const auto [b2, e2] = F2.range_of(a.object);
     buf2.clear();
     for (std::uint32_t j = b2; j < e2; ++j) {
+      const double dx = F2.x[j] - q1.x(), dy = F2.y[j] - q1.y(), dz = F2.z[j] - q1.z();
+      const double d2 = dx * dx + dy * dy + dz * dz;
+      if (d2 < lo12 || d2 > hi12) continue;
       const std::uint32_t k = F2.items[j].point;
-      const double d = (pts[k] - q1).norm();
-      if (std::abs(d - t.d12) > tol) continue;
       if (normals && !similar(signature(q1, coarse.normals[a.point], pts[k], coarse.normals[k]), t.s12, ntol))
         continue;
       buf2.push_back(k);
@@ -119,12 +137,19 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
     if (buf2.empty()) continue;
     const std::uint32_t k2 = buf2[rng.index(buf2.size())];
     const Vec3& q2 = pts[k2];
+    const auto [lo13, hi13] = window(t.d13);
+    const auto [lo23, hi23] = window(t.d23);
     const auto [b3, e3] = F3.range_of(a.object);
     buf3.clear();
     for (std::uint32_t j = b3; j < e3; ++j) {
+      const double ax = F3.x[j] - q1.x(), ay = F3.y[j] - q1.y(), az = F3.z[j] - q1.z();
+      const double a2 = ax * ax + ay * ay + az * az;
+      if (a2 < lo13 || a2 > hi13) continue;
+      const double bx = F3.x[j] - q2.x(), by = F3.y[j] - q2.y(), bz = F3.z[j] - q2.z();
+      const double b2sq = bx * bx + by * by + bz * bz;
+      if (b2sq < lo23 || b2sq > hi23) continue;
       const std::uint32_t k = F3.items[j].point;
       const Vec3& q = pts[k];
-      if (std::abs((q - q1).norm() - t.d13) > tol || std::abs((q - q2).norm() - t.d23) > tol) continue;
       if (normals &&
           (!similar(signature(q1, coarse.normals[a.point], q, coarse.normals[k]), t.s13, ntol) ||
            !similar(signature(q2, coarse.normals[k2], q, coarse.normals[k]), t.s23, ntol)))
@@ -226,7 +251,7 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
       }
       if (!t.valid) continue;
       for (int j = 0; j < 3; ++j)
-        t.pruned[j] = prune(index, scene.features[t.point[j]], s.prune_w, allowed);
+        t.pruned[j] = prune(db, index, scene.features[t.point[j]], s.prune_w, allowed);
     }
   });
   st.time_prune_s = seconds_since(t0);

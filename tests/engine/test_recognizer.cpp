@@ -110,7 +110,9 @@ TEST_CASE("Every method runs through the same path; the batch methods ignore fre
   for (int i = 0; i < 300; ++i) free.push_back(T * (src->fines[1].points[rng.index(src->fines[1].size())] +
                                                     0.03 * src->fines[1].normals[0]));
   for (Method m : {Method::batch_ransac, Method::ransac_icp, Method::ransac_icp_fs, Method::bricpsf}) {
-    Recognizer a(db, index, fast(m)), b(db, index, fast(m));
+    RecognizerSettings s = fast(m);
+    s.ransac.registrations = 30;
+    Recognizer a(db, index, s), b(db, index, s);
     const StepResult ra = a.step(c, {}), rb = b.step(c, free);
     INFO(method_name(m));
     CHECK(ra.valid);
@@ -129,14 +131,16 @@ TEST_CASE("Same seed, 1 or 2 threads: bitwise identical poses and weights") {
   auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
   const Pose T = test::random_pose(9, Vec3(1, 2, 3));
   for (Method m : {Method::bricpsf, Method::ransac_icp}) {
+    RecognizerSettings s = fast(m);
+    if (m == Method::ransac_icp) s.ransac.registrations = 30;  // ICP on every candidate
     std::vector<StepResult> one, two;
     tbb::task_arena a1(1), a2(2);
     a1.execute([&] {
-      Recognizer rec(db, index, fast(m));
+      Recognizer rec(db, index, s);
       one = explore(rec, 0, T, 3, 4, 0.001, 0.0003);
     });
     a2.execute([&] {
-      Recognizer rec(db, index, fast(m));
+      Recognizer rec(db, index, s);
       two = explore(rec, 0, T, 3, 4, 0.001, 0.0003);
     });
     REQUIRE(one.size() == two.size());
