@@ -8,11 +8,20 @@ namespace ts {
 /// Voxel-grid filter (Section 4.1.2): one point per occupied voxel of size `voxel`, the
 /// centroid of the points in it (normals averaged and renormalized when present). The output
 /// order is deterministic (sorted by voxel key), independent of the input order's threads.
+/// Voxels are aligned to the origin (voxel (i,j,k) = [i,i+1) x [j,j+1) x [k,k+1) times `voxel`),
+/// so filtering a union of clouds uses one grid. Non-finite points are dropped. Throws ts::Error
+/// when `voxel` is not positive.
 PointCloud voxel_filter(const PointCloud& cloud, double voxel);
 
-/// PCA normals from neighbours within `radius` (at least 3 needed; otherwise the normal is
-/// NaN-free but flagged by returning a zero vector). Normals are oriented toward `viewpoint_fn`
-/// when given, else away from the cloud centroid.
+/// Voxel-grid filter that keeps input points: one point per occupied voxel, the member nearest
+/// to the voxel's centroid (ties: the earlier input point), with its own normal. Points stay on
+/// the sampled surface (the simulated scanner's fine cloud). Same grid and order as voxel_filter.
+PointCloud voxel_representatives(const PointCloud& cloud, double voxel);
+
+/// PCA normals from neighbours within `radius` (the point itself included; at least
+/// `min_neighbours` needed, otherwise the normal is NaN-free but flagged by returning a zero
+/// vector). Normals are oriented away from the cloud centroid; callers that know better (the
+/// database builder, the contact pipeline) re-orient them against their own reference.
 struct NormalSettings {
   double radius = 0.007;  ///< m, neighbourhood radius (paper: 7 mm)
   int min_neighbours = 3;

@@ -29,6 +29,7 @@ struct ObjectInfo {
   std::string source;              ///< where the mesh came from (manifest source / path)
   std::string mesh_sha256;         ///< checksum of the mesh file bytes
   double scale = 1.0;              ///< object frame = scale * (mesh - bbox centre)
+  Vec3 centre = Vec3::Zero();      ///< that bbox centre, in the mesh file's units
   Vec3 extent = Vec3::Zero();      ///< bounding-box size in the object frame (m)
   std::size_t fine_points = 0;
   std::size_t coarse_points = 0;
@@ -47,9 +48,17 @@ struct ObjectGeometry {
   DistanceField field;
 };
 
+/// Wall-clock seconds per stage of build_object (diagnostics printed by `db build`).
+struct BuildTimings {
+  double scan_s = 0.0;       ///< simulated laser scanner: fine and coarse clouds
+  double features_s = 0.0;   ///< normals and FPFH of the coarse points
+  double field_s = 0.0;      ///< distance field
+};
+
 /// A fully built object (what the builder produces and the store writes).
 struct BuiltObject {
   ObjectInfo info;
+  BuildTimings timings;            ///< filled by build_object
   Mesh mesh;                       ///< object frame (stored so the simulator touches the truth)
   ObjectFeatures features;
   PointCloud fine;

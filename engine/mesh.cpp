@@ -192,6 +192,43 @@ inline Ray make_ray(const Vec3& o, const Vec3& unit_dir) {
   return r;
 }
 
+/// Part of polygon `poly` on one side of the plane x[axis] = at (Sutherland–Hodgman, one plane).
+std::vector<Vec3> clip_polygon(const std::vector<Vec3>& poly, int axis, double at, bool keep_below) {
+  std::vector<Vec3> out;
+  const std::size_t n = poly.size();
+  for (std::size_t k = 0; k < n; ++k) {
+    const Vec3& a = poly[k];
+    const Vec3& b = poly[(k + 1) % n];
+    const double da = keep_below ? at - a[axis] : a[axis] - at;
+    const double db = keep_below ? at - b[axis] : b[axis] - at;
+    if (da >= 0.0) out.push_back(a);
+    if ((da >= 0.0) != (db >= 0.0)) {
+      Vec3 x = a + (da / (da - db)) * (b - a);
+      x[axis] = at;
+      out.push_back(x);
+    }
+  }
+  return out;
+}
+
+/// Append the boxes of `poly` cut into pieces no longer than max_extent (at most 2^depth pieces).
+void split_reference(const std::vector<Vec3>& poly, double max_extent, double pad, int depth,
+                     std::vector<Eigen::AlignedBox3d>& out) {
+  if (poly.empty()) return;
+  Eigen::AlignedBox3d box;
+  for (const auto& p : poly) box.extend(p);
+  int axis = 0;
+  const double extent = box.sizes().maxCoeff(&axis);
+  if (depth <= 0 || !(extent > max_extent)) {
+    // Clipped vertices carry rounding error: pad so the box surely holds its piece.
+    out.emplace_back(box.min() - Vec3::Constant(pad), box.max() + Vec3::Constant(pad));
+    return;
+  }
+  const double mid = 0.5 * (box.min()[axis] + box.max()[axis]);
+  split_reference(clip_polygon(poly, axis, mid, true), max_extent, pad, depth - 1, out);
+  split_reference(clip_polygon(poly, axis, mid, false), max_extent, pad, depth - 1, out);
+}
+
 }  // namespace
 
 struct MeshIndex::Impl {
@@ -214,23 +251,39 @@ void MeshIndex::Impl::build() {
       throw Error("face " + std::to_string(f) + " indexes a missing vertex", "", "faces");
   if (n_faces == 0) return;
 
-  std::vector<int> order(n_faces);
-  std::vector<Eigen::AlignedBox3d> boxes(n_faces);
-  std::vector<Vec3> centres(n_faces);
+  // References: a triangle whose box is long compared with the scene (slivers spanning a gear
+  // face or a pipe) is clipped into several references with tight boxes (early split
+  // clipping, Ernst & Greiner 2007), so rays passing near it do not all have to test it.
+  Eigen::AlignedBox3d scene;
+  for (const auto& fc : mesh.faces)
+    for (int k = 0; k < 3; ++k) scene.extend(mesh.vertices[fc[k]]);
+  const double max_extent = scene.sizes().maxCoeff() / 24.0;
+  const double pad = 1e-12 * std::max(scene.sizes().maxCoeff(), scene.max().cwiseAbs().maxCoeff());
+  const std::size_t max_refs = 4 * static_cast<std::size_t>(n_faces) + 4096;
+  std::vector<Eigen::AlignedBox3d> boxes;
+  std::vector<int> ref_face;
+  boxes.reserve(n_faces);
+  ref_face.reserve(n_faces);
+  std::vector<Vec3> poly;
   for (int f = 0; f < n_faces; ++f) {
-    order[f] = f;
     const auto& fc = mesh.faces[f];
-    boxes[f] = Eigen::AlignedBox3d(mesh.vertices[fc[0]]);
-    boxes[f].extend(mesh.vertices[fc[1]]);
-    boxes[f].extend(mesh.vertices[fc[2]]);
-    centres[f] = boxes[f].center();
+    poly = {mesh.vertices[fc[0]], mesh.vertices[fc[1]], mesh.vertices[fc[2]]};
+    split_reference(poly, max_extent, pad, boxes.size() < max_refs ? 6 : 0, boxes);
+    ref_face.resize(boxes.size(), f);
   }
-  nodes.reserve(2 * n_faces / kLeafSize + 1);
-  build_node(order, boxes, centres, 0, n_faces, 0);
+  const int n_refs = static_cast<int>(boxes.size());
+  std::vector<int> order(n_refs);
+  std::vector<Vec3> centres(n_refs);
+  for (int r = 0; r < n_refs; ++r) {
+    order[r] = r;
+    centres[r] = boxes[r].center();
+  }
+  nodes.reserve(2 * n_refs / kLeafSize + 1);
+  build_node(order, boxes, centres, 0, n_refs, 0);
 
-  tris.resize(n_faces);
-  for (int i = 0; i < n_faces; ++i) {
-    const int f = order[i];
+  tris.resize(n_refs);
+  for (int i = 0; i < n_refs; ++i) {
+    const int f = ref_face[order[i]];
     const auto& fc = mesh.faces[f];
     Tri& t = tris[i];
     t.a = mesh.vertices[fc[0]];
@@ -472,12 +525,14 @@ bool MeshIndex::inside(const Vec3& p) const {
   for (const Vec3& dir : kDirs) {
     const Ray r = make_ray(p, dir.normalized());
     double t_best = std::numeric_limits<double>::infinity();  // never shrinks: count all hits
-    int crossings = 0;
+    std::vector<int> crossed;  // a triangle split into several references counts once
     impl_->traverse_ray(r, 0.0, t_best, [&](int i) {
       const double t = intersect(tris[i], r.o, r.d, 0.0);
-      if (t > 0.0 && t != kInf()) ++crossings;
+      if (t > 0.0 && t != kInf()) crossed.push_back(tris[i].face);
     });
-    votes += crossings & 1;
+    std::sort(crossed.begin(), crossed.end());
+    const auto crossings = std::unique(crossed.begin(), crossed.end()) - crossed.begin();
+    votes += static_cast<int>(crossings & 1);
   }
   return votes >= 2;
 }

@@ -408,6 +408,15 @@ std::vector<std::string> Group::children() const {
   return names;
 }
 
+void Group::remove(const std::string& name) {
+  Guard g;
+  const std::string field = child_path(name);
+  if (!node_) throw Error("HDF5 group used before it was opened", "", field);
+  node_->require_open(field);
+  if (!has(name)) throw Error("cannot remove a missing object", node_->file_name, field);
+  if (H5Ldelete(node_->id, name.c_str(), H5P_DEFAULT) < 0) node_->fail(field, "cannot remove the object");
+}
+
 // --- datasets --------------------------------------------------------------------------------
 template <class T>
 void Group::write(const std::string& name, const T* data, const Shape& shape, const Storage& storage) {
@@ -848,7 +857,7 @@ File File::open(const std::filesystem::path& path, Access access, const std::str
   hid_t id = H5Fopen(path.c_str(), access == Access::read ? H5F_ACC_RDONLY : H5F_ACC_RDWR, fapl.get());
   if (id < 0) {
     const std::string d = hdf5_detail();
-    throw Error("cannot open the HDF5 file (truncated or corrupt?)" + (d.empty() ? "" : ": " + d), name);
+    throw Error(d.empty() ? std::string("cannot open the HDF5 file (corrupt?)") : "cannot open the HDF5 file: " + d, name);
   }
   File f;
   f.node_ = make_file_node(id, name);

@@ -76,6 +76,8 @@ class Group {
   Group require_group(const std::string& name);        ///< open or create
   /// Names of the direct children, sorted by name.
   std::vector<std::string> children() const;
+  /// Unlink a child (group or dataset). Its space is not reclaimed in the file.
+  void remove(const std::string& name);
 
   // --- datasets ---------------------------------------------------------------------------
   /// Write a new dataset of `shape` from `data` (row-major, product(shape) values).

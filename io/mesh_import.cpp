@@ -17,7 +17,10 @@ namespace ts::io {
 
 namespace {
 
-constexpr unsigned kFlags = aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_SortByPType;
+// ValidateDataStructure first: a malformed scene (a truncated file) is then an import error
+// instead of reaching an assertion in a later step (Debian's Assimp aborts on those).
+constexpr unsigned kFlags = aiProcess_ValidateDataStructure | aiProcess_Triangulate |
+                            aiProcess_JoinIdenticalVertices | aiProcess_SortByPType;
 
 void configure(Assimp::Importer& importer) {
   // Drop point and line primitives: only triangles describe a surface.
@@ -173,6 +176,13 @@ ImportedMesh normalize_mesh(Mesh input, const std::string& name, const MeshImpor
     out.warnings.push_back("mesh is non-manifold (" + std::to_string(out.topology.nonmanifold_edges) +
                            " edges shared by more than two faces): it is used as it is");
   return out;
+}
+
+bool is_mesh_extension(const std::string& extension) {
+  if (extension.empty() || extension == ".") return false;
+  std::string ext = extension[0] == '.' ? extension : "." + extension;
+  Assimp::Importer importer;
+  return importer.IsExtensionSupported(ext);
 }
 
 ImportedMesh import_mesh(const std::filesystem::path& file, const MeshImportSettings& settings) {

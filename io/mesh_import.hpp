@@ -50,6 +50,9 @@ ImportedMesh import_mesh(const std::filesystem::path& file, const MeshImportSett
 ImportedMesh import_mesh_from_memory(const std::string& bytes, const std::string& name,
                                      const MeshImportSettings& settings = {});
 
+/// True when Assimp reads files with this extension (".off", "OBJ", ...).
+bool is_mesh_extension(const std::string& extension);
+
 /// Bring a mesh (vertices in any units) into the object frame as described above. Used by both
 /// importers; exposed for callers that build meshes themselves. `name` names it in errors.
 ImportedMesh normalize_mesh(Mesh mesh, const std::string& name, const MeshImportSettings& settings = {});
