@@ -7,12 +7,12 @@
 #include "engine/symmetry.hpp"
 #include "experiments/cli_common.hpp"
 #include "experiments/metrics.hpp"
-#include "io/db_store.hpp"
 #include "io/sha256.hpp"
 
 #include <tbb/parallel_for.h>
 #include <tbb/version.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -41,7 +41,7 @@ constexpr std::uint64_t kRecognizerStream = 0x72656367ULL;  // "recg"
 /// same file). Index i here is objects[i] there.
 class SubsetSource final : public ObjectSource {
  public:
-  SubsetSource(std::shared_ptr<const io::DbReader> base, std::vector<std::size_t> objects)
+  SubsetSource(std::shared_ptr<const ObjectSource> base, std::vector<std::size_t> objects)
       : base_(std::move(base)), objects_(std::move(objects)) {}
   std::size_t size() const override { return objects_.size(); }
   const ObjectInfo& info(std::size_t i) const override { return base_->info(objects_.at(i)); }
@@ -51,7 +51,7 @@ class SubsetSource final : public ObjectSource {
   DistanceField load_field(std::size_t i) const override { return base_->load_field(objects_.at(i)); }
 
  private:
-  std::shared_ptr<const io::DbReader> base_;
+  std::shared_ptr<const ObjectSource> base_;
   std::vector<std::size_t> objects_;
 };
 
@@ -109,26 +109,6 @@ double group_mssd(const Pose& estimate, const Pose& truth, const ObjectTruthMode
   return best;
 }
 
-std::string database_fingerprint(const io::DbReader& db) {
-  io::Sha256 h;
-  auto add = [&](const std::string& s) {
-    h.update(s);
-    h.update("\n");
-  };
-  add(std::to_string(db.schema_version()));
-  add(std::to_string(db.build_seed()));
-  add(std::to_string(db.settings().max_extent));
-  for (std::size_t i = 0; i < db.size(); ++i) {
-    const ObjectInfo& o = db.info(i);
-    add(o.name);
-    add(o.mesh_sha256);
-    add(std::to_string(o.scale));
-    add(std::to_string(o.fine_points) + " " + std::to_string(o.coarse_points));
-    add(std::to_string(db.object_seed(i)));
-  }
-  return h.hex_digest();
-}
-
 datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
   datasets::SimulatorSettings s;
   s.sensors = c.sensors;
@@ -170,12 +150,19 @@ RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
   return s;
 }
 
+std::size_t index_of(const std::vector<std::string>& names, const std::string& name) {
+  const auto it = std::find(names.begin(), names.end(), name);
+  if (it == names.end()) throw Error("unknown object '" + name + "'", {}, "objects");
+  return static_cast<std::size_t>(it - names.begin());
+}
+
 class RecognitionEngine final : public RunEngine {
  public:
-  RecognitionEngine(const ExperimentConfig& config, const std::filesystem::path& path, int threads,
+  RecognitionEngine(const ExperimentConfig& config, EngineDatabase database, int threads,
                     std::function<void(const std::string&)> note)
-      : config_(config), note_(std::move(note)) {
-    reader_ = std::make_shared<io::DbReader>(path);
+      : config_(config), note_(std::move(note)), db_(std::move(database)) {
+    if (!db_.source || !db_.load_mesh) throw Error("the experiment has no database", {}, "--db");
+    reader_ = db_.source;
     std::vector<std::string> names;
     for (std::size_t i = 0; i < reader_->size(); ++i) names.push_back(reader_->info(i).name);
 
@@ -189,7 +176,7 @@ class RecognitionEngine final : public RunEngine {
         throw Error("sweep variants must explore the same objects", {}, "objects");
       }
       std::vector<std::size_t> objects;
-      for (const auto& n : r.database) objects.push_back(reader_->find(n));
+      for (const auto& n : r.database) objects.push_back(index_of(names, n));
       auto [it, inserted] = group_of.emplace(objects, groups_.size());
       if (inserted) {
         DatabaseGroup g;
@@ -216,15 +203,11 @@ class RecognitionEngine final : public RunEngine {
       labels_.push_back(v.label);
       configs_.push_back(to_json(v.config).dump());
     }
-    for (const auto& n : explored_) explored_file_.push_back(reader_->find(n));
+    for (const auto& n : explored_) explored_file_.push_back(index_of(names, n));
 
     header_.config_json = to_json(config).dump();
-    nlohmann::ordered_json db;
-    db["path"] = std::filesystem::absolute(path).string();
-    db["fingerprint"] = database_fingerprint(*reader_);
-    db["objects"] = reader_->size();
-    db["schema_version"] = reader_->schema_version();
-    db["max_extent_m"] = reader_->settings().max_extent;
+    nlohmann::ordered_json db = db_.description;
+    if (!db.is_object() || !db.contains("fingerprint")) db["fingerprint"] = source_fingerprint(*reader_);
     header_.database_json = db.dump();
     nlohmann::ordered_json ver;
     ver["touchstone"] = TS_VERSION;
@@ -275,7 +258,7 @@ class RecognitionEngine final : public RunEngine {
         datasets::SimulatorSettings s = by_key.at(key)->simulation;
         const std::string& name = explored_[static_cast<std::size_t>(object)];
         s.seed = Rng(config_.seed, kPoolStream, name_hash(name)).next();
-        datasets::Simulator sim(reader_->load_mesh(explored_file_[static_cast<std::size_t>(object)]),
+        datasets::Simulator sim(db_.load_mesh(explored_file_[static_cast<std::size_t>(object)]),
                                 name, Gripper(), s);
         results[i] = sim.run();
       });
@@ -411,7 +394,8 @@ class RecognitionEngine final : public RunEngine {
  private:
   ExperimentConfig config_;
   std::function<void(const std::string&)> note_;
-  std::shared_ptr<io::DbReader> reader_;
+  EngineDatabase db_;
+  std::shared_ptr<const ObjectSource> reader_;
   std::vector<std::string> explored_;
   std::vector<std::size_t> explored_file_;
   std::vector<DatabaseGroup> groups_;
@@ -431,10 +415,43 @@ const std::vector<std::string>& recognition_stages() {
 }
 
 std::unique_ptr<RunEngine> make_recognition_engine(const ExperimentConfig& config,
-                                                   const std::filesystem::path& database,
-                                                   int threads,
+                                                   EngineDatabase database, int threads,
                                                    std::function<void(const std::string&)> note) {
-  return std::make_unique<RecognitionEngine>(config, database, threads, std::move(note));
+  return std::make_unique<RecognitionEngine>(config, std::move(database), threads, std::move(note));
+}
+
+std::string source_fingerprint(const ObjectSource& source) {
+  io::Sha256 h;
+  auto add = [&](const std::string& s) {
+    h.update(s);
+    h.update("\n");
+  };
+  std::ostringstream settings;
+  settings.precision(17);
+  const DatabaseSettings& d = source.settings();
+  settings << d.max_extent << ' ' << d.fpfh.normal_radius << ' ' << d.fpfh.feature_radius;
+  add(settings.str());
+  for (std::size_t i = 0; i < source.size(); ++i) {
+    const ObjectInfo& o = source.info(i);
+    std::ostringstream s;
+    s.precision(17);
+    s << o.name << ' ' << o.mesh_sha256 << ' ' << o.scale << ' ' << o.fine_points << ' '
+      << o.coarse_points;
+    add(s.str());
+  }
+  return h.hex_digest();
+}
+
+EngineDatabase memory_database(std::vector<BuiltObject> objects, const DatabaseSettings& settings) {
+  auto meshes = std::make_shared<std::vector<Mesh>>();
+  for (const BuiltObject& o : objects) meshes->push_back(o.mesh);
+  EngineDatabase db;
+  db.source = std::make_shared<MemorySource>(std::move(objects), settings);
+  db.load_mesh = [meshes](std::size_t i) { return meshes->at(i); };
+  db.description["path"] = "(memory)";
+  db.description["fingerprint"] = source_fingerprint(*db.source);
+  db.description["objects"] = db.source->size();
+  return db;
 }
 
 }  // namespace ts::experiments

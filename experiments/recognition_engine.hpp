@@ -14,6 +14,9 @@
 
 #include "experiments/config.hpp"
 #include "experiments/driver.hpp"
+#include "engine/database.hpp"
+
+#include <nlohmann/json.hpp>
 
 #include <filesystem>
 #include <functional>
@@ -22,12 +25,27 @@
 
 namespace ts::experiments {
 
-/// Open the database, resolve the configuration's objects for every variant, and build the run
-/// store header. Throws ts::Error for an unknown object (naming the key) or an unreadable
-/// database. `threads` and `note` (status lines for a terminal; may be empty) are informative.
+/// The database an experiment uses: objects for the recognizer, meshes for the simulator, and
+/// what the run store records about it (its "fingerprint" decides whether --resume may go on).
+struct EngineDatabase {
+  std::shared_ptr<const ObjectSource> source;
+  std::function<Mesh(std::size_t)> load_mesh;  ///< object-frame mesh of object i
+  nlohmann::ordered_json description;          ///< {"path", "fingerprint", ...}
+};
+
+/// A database file (io/db_store). Throws ts::Error for a missing or foreign file.
+EngineDatabase open_database(const std::filesystem::path& path);
+/// Objects held in memory (tests; a database built a moment ago).
+EngineDatabase memory_database(std::vector<BuiltObject> objects, const DatabaseSettings& settings);
+/// SHA-256 over what determines an object source's content: settings, names, mesh checksums,
+/// scales and point counts.
+std::string source_fingerprint(const ObjectSource& source);
+
+/// Resolve the configuration's objects for every variant against `database` and build the run
+/// store header. Throws ts::Error for an unknown object (naming the key). `threads` is recorded;
+/// `note` receives status lines for a terminal (may be empty).
 std::unique_ptr<RunEngine> make_recognition_engine(const ExperimentConfig& config,
-                                                   const std::filesystem::path& database,
-                                                   int threads,
+                                                   EngineDatabase database, int threads,
                                                    std::function<void(const std::string&)> note = {});
 
 /// Names of the per-stage timing columns the recognition engine records.
