@@ -135,7 +135,7 @@ int run_experiment(const ExperimentOptions& o) {
   const int threads = thread_count(o.common);
   std::function<void(const std::string&)> note;
   if (stderr_is_terminal()) note = [](const std::string& line) { std::cerr << line << "\n"; };
-  auto engine = experiments::make_recognition_engine(config, o.db, threads, note);
+  auto engine = experiments::make_recognition_engine(config, experiments::open_database(o.db), threads, note);
   const io::RunStoreHeader& header = engine->header();
   const std::filesystem::path out = o.out;
   std::error_code ec;
