@@ -1,0 +1,522 @@
+#include "datasets/simulator.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <optional>
+
+namespace ts::datasets {
+
+namespace {
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+// Rng stream tags: (seed, tag, index).
+constexpr std::uint64_t kStreamPose = 0, kStreamGeometry = 1, kStreamNoise = 2, kStreamGains = 3;
+
+Vec3 perpendicular(const Vec3& a) {
+  const Vec3 helper = std::abs(a.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+  return a.cross(helper).normalized();
+}
+
+Mat3 small_rotation(const Vec3& w) {
+  const double angle = w.norm();
+  if (angle < 1e-15) return Mat3::Identity();
+  return Eigen::AngleAxisd(angle, w / angle).toRotationMatrix();
+}
+
+// Collision samples of one link, in the link frame, grouped into segments along the link for
+// culling against the mesh.
+struct Segment {
+  Vec3 centre = Vec3::Zero();
+  double radius = 0.0;
+  std::vector<int> rigid, foam;
+};
+
+struct LinkGeometry {
+  std::vector<Vec3> rigid;   // inner face (incl. under the pad) and tip face
+  std::vector<Vec3> foam;    // sensel tops (foam surface)
+  std::vector<Vec3> shell;   // the other faces (outer, sides, joint end): lead only on approach
+  std::vector<Vec3> base;    // sensel bases (pad base plane)
+  Vec3 pad_normal = Vec3::Zero();
+  int pad = -1;              // index into gripper.pads(), -1: no pad
+  std::vector<Segment> segments;
+};
+
+std::vector<double> grid_1d(double lo, double hi, double spacing) {
+  const int n = std::max(1, static_cast<int>(std::ceil((hi - lo) / spacing)));
+  std::vector<double> v;
+  for (int i = 0; i <= n; ++i) v.push_back(lo + (hi - lo) * i / n);
+  return v;
+}
+
+LinkGeometry link_geometry(const Gripper& g, int joint, const GraspSettings& s) {
+  const LinkSpec& l = g.link(joint);
+  const SensorSettings& sensor = g.sensor();
+  LinkGeometry out;
+  const double x_in = -0.5 * l.thickness;
+  for (double y : grid_1d(-0.5 * l.width, 0.5 * l.width, s.inner_spacing))
+    for (double z : grid_1d(0.0, l.length, s.inner_spacing)) out.rigid.emplace_back(x_in, y, z);
+  for (double x : grid_1d(-0.5 * l.thickness, 0.5 * l.thickness, s.other_spacing))
+    for (double y : grid_1d(-0.5 * l.width, 0.5 * l.width, s.other_spacing)) {
+      if (x == x_in) continue;  // shared edge with the inner face
+      out.rigid.emplace_back(x, y, l.length);
+    }
+  const double x_out = 0.5 * l.thickness;
+  for (double y : grid_1d(-0.5 * l.width, 0.5 * l.width, s.other_spacing))
+    for (double z : grid_1d(0.0, l.length, s.other_spacing)) out.shell.emplace_back(x_out, y, z);
+  for (double x : grid_1d(-0.5 * l.thickness, 0.5 * l.thickness, s.other_spacing)) {
+    for (double z : grid_1d(0.0, l.length, s.other_spacing)) {
+      out.shell.emplace_back(x, -0.5 * l.width, z);
+      out.shell.emplace_back(x, 0.5 * l.width, z);
+    }
+    for (double y : grid_1d(-0.5 * l.width, 0.5 * l.width, s.other_spacing)) out.shell.emplace_back(x, y, 0.0);
+  }
+  for (const auto& p : g.pads())
+    if (g.joint_index(p.finger, p.link) == joint) out.pad = static_cast<int>(&p - g.pads().data());
+  if (out.pad >= 0) {
+    const Pose& T = l.T_link_pad;
+    out.pad_normal = T.linear().col(2);
+    for (int j = 0; j < sensor.sensels(); ++j) {
+      const Vec3 b = sensor.sensel_position(j);
+      out.base.push_back(T * b);
+      out.foam.push_back(T * (b + Vec3(0, 0, sensor.foam_thickness)));
+    }
+  }
+  // Three segments along the link.
+  const int nseg = 3;
+  out.segments.resize(nseg);
+  auto seg_of = [&](const Vec3& p) {
+    return std::clamp(static_cast<int>(p.z() / l.length * nseg), 0, nseg - 1);
+  };
+  for (int i = 0; i < static_cast<int>(out.rigid.size()); ++i) out.segments[seg_of(out.rigid[i])].rigid.push_back(i);
+  for (int i = 0; i < static_cast<int>(out.foam.size()); ++i) out.segments[seg_of(out.foam[i])].foam.push_back(i);
+  for (auto& sg : out.segments) {
+    Eigen::AlignedBox3d box;
+    for (int i : sg.rigid) box.extend(out.rigid[i]);
+    for (int i : sg.foam) box.extend(out.foam[i]);
+    if (box.isEmpty()) continue;
+    sg.centre = box.center();
+    for (int i : sg.rigid) sg.radius = std::max(sg.radius, (out.rigid[i] - sg.centre).norm());
+    for (int i : sg.foam) sg.radius = std::max(sg.radius, (out.foam[i] - sg.centre).norm());
+  }
+  return out;
+}
+
+struct Hit {
+  double angle = 0.0;
+  bool rigid = false;
+  int link = 0;          // finger-local link index of the hitting sample
+  double radius = 0.0;   // distance of the hit sample from the joint origin
+};
+}  // namespace
+
+NoiseSettings noise_profile(const std::string& name) {
+  NoiseSettings n;
+  n.name = name;
+  if (name == "ideal") return n;
+  if (name == "underwater" || name == "deepsea") {
+    n.arm_position_sigma = 0.003;
+    n.arm_rotation_sigma_deg = 1.0;
+    n.signal_noise = 0.05;
+    if (name == "deepsea") {
+      n.force_noise = 0.5;
+      n.lateral_sigma = 0.002;
+    }
+    return n;
+  }
+  throw Error("unknown noise profile '" + name + "' (ideal, underwater, deepsea)", {}, "--noise");
+}
+
+struct Simulator::Impl {
+  MeshIndex mesh;
+  std::string name;
+  Gripper gripper;
+  SimulatorSettings settings;
+  Pose T_world_object = Pose::Identity();
+  std::vector<int> pads;
+  std::vector<float> gains_all;          // every pad x sensels
+  std::vector<LinkGeometry> links;       // per joint
+  std::vector<Vec3> palm_samples;        // EEF frame
+  std::vector<double> area_cdf;
+  double normal_sign = 1.0;
+  Vec3 centre = Vec3::Zero();
+  double radius = 0.0;
+
+  Impl(Mesh m, std::string n, Gripper g, SimulatorSettings s)
+      : mesh(std::move(m)), name(std::move(n)), gripper(std::move(g)), settings(std::move(s)) {}
+
+  // ---- geometry helpers -------------------------------------------------------------------
+  Vec3 face_normal(int f) const {
+    const auto& M = mesh.mesh();
+    const auto& t = M.faces[f];
+    const Vec3 n = (M.vertices[t[1]] - M.vertices[t[0]]).cross(M.vertices[t[2]] - M.vertices[t[0]]);
+    const double len = n.norm();
+    return len > 0 ? Vec3(normal_sign * n / len) : Vec3::UnitZ();
+  }
+
+  void finger_poses(const Pose& T_obj_eef, int f, const std::vector<double>& q, std::vector<Pose>& out) const {
+    const int first = gripper.joint_index(f, 0);
+    out.resize(gripper.spec().fingers[f].links.size());
+    gripper.finger_link_poses(f, q.data() + first, out.data());
+    for (auto& T : out) T = T_obj_eef * T;
+  }
+
+  // First hit of the samples of links k.. of finger f while joint k turns from a to b.
+  std::optional<Hit> sweep(const Pose& T_obj_eef, int f, int k, std::vector<double> q, double a, double b,
+                           bool rigid_only) const {
+    const double step = settings.grasp.angle_step_deg * kDeg;
+    const int n = std::max(1, static_cast<int>(std::ceil(std::abs(b - a) / step)));
+    const int jk = gripper.joint_index(f, k);
+    const int nlinks = static_cast<int>(gripper.spec().fingers[f].links.size());
+    std::vector<Pose> P0, P1;
+    q[jk] = a;
+    finger_poses(T_obj_eef, f, q, P0);
+    for (int s = 0; s < n; ++s) {
+      const double t0 = a + (b - a) * s / n, t1 = a + (b - a) * (s + 1) / n;
+      q[jk] = t1;
+      finger_poses(T_obj_eef, f, q, P1);
+      std::optional<Hit> best;
+      double best_frac = 2.0;
+      const Vec3 joint_origin = P0[k].translation();
+      for (int m = k; m < nlinks; ++m) {
+        const LinkGeometry& L = links[gripper.joint_index(f, m)];
+        const double rot = 2.0 * std::sin(0.5 * std::abs(t1 - t0));
+        for (const Segment& sg : L.segments) {
+          if (sg.rigid.empty() && sg.foam.empty()) continue;
+          const Vec3 c0 = P0[m] * sg.centre, c1 = P1[m] * sg.centre;
+          const double reach = sg.radius + (c1 - c0).norm() + rot * sg.radius + 1e-4;
+          if (!mesh.closest_within(c0, reach)) continue;
+          auto test = [&](const Vec3& x, bool rigid) {
+            const Vec3 A = P0[m] * x, B = P1[m] * x;
+            const Vec3 d = B - A;
+            const double len = d.norm();
+            if (!(len > 0)) return;
+            const auto hit = mesh.raycast(A, d, len);
+            if (!hit) return;
+            const double frac = hit->t / len;
+            if (frac < best_frac) {
+              best_frac = frac;
+              best = Hit{t0 + (t1 - t0) * frac, rigid, m, (hit->point - joint_origin).norm()};
+            }
+          };
+          for (int i : sg.rigid) test(L.rigid[i], true);
+          if (!rigid_only)
+            for (int i : sg.foam) test(L.foam[i], false);
+        }
+      }
+      if (best) return best;
+      P0.swap(P1);
+    }
+    return std::nullopt;
+  }
+
+  // Foam compression of each sensel of a pad on link pose T_obj_link (object frame), sampled at
+  // the sensel (plus an optional lateral offset per sensel, pad frame).
+  void compressions(const Pose& T_obj_link, const LinkGeometry& L, const Vec3* lateral, double* out) const {
+    const SensorSettings& s = gripper.sensor();
+    const Pose T_link_pad = gripper.link(gripper.pads()[L.pad].joint).T_link_pad;
+    const Vec3 nrm = T_obj_link.linear() * L.pad_normal;
+    for (std::size_t j = 0; j < L.base.size(); ++j) {
+      Vec3 b = L.base[j];
+      if (lateral) b = T_link_pad * (s.sensel_position(static_cast<int>(j)) + lateral[j]);
+      const auto hit = mesh.raycast(T_obj_link * b, nrm, s.foam_thickness);
+      out[j] = hit ? s.foam_thickness - hit->t : 0.0;
+    }
+  }
+
+  double max_compression(const Pose& T_obj_eef, int f, int k, const std::vector<double>& q) const {
+    std::vector<Pose> P;
+    finger_poses(T_obj_eef, f, q, P);
+    double best = 0.0;
+    std::vector<double> c(gripper.sensor().sensels());
+    for (int m = k; m < static_cast<int>(P.size()); ++m) {
+      const LinkGeometry& L = links[gripper.joint_index(f, m)];
+      if (L.pad < 0) continue;
+      compressions(P[m], L, nullptr, c.data());
+      for (double v : c) best = std::max(best, v);
+    }
+    return best;
+  }
+
+  // Close finger f from the open hand (proximal joint first). Returns touching links.
+  int close_finger(const Pose& T_obj_eef, int f, std::vector<double>& q, Rng& rng) const {
+    const GraspSettings& gs = settings.grasp;
+    const int nlinks = static_cast<int>(gripper.spec().fingers[f].links.size());
+    int touching = 0;
+    for (int k = 0; k < nlinks; ++k) {
+      const int jk = gripper.joint_index(f, k);
+      const LinkSpec& l = gripper.link(jk);
+      const double press = rng.uniform(gs.press_min, gs.press_max);
+      const auto hit = sweep(T_obj_eef, f, k, q, l.open, l.max, false);
+      if (!hit) {
+        q[jk] = l.max;
+        continue;
+      }
+      ++touching;
+      auto back_off = [&](const Hit& h) {
+        return std::max(l.open, h.angle - gs.clearance / std::max(h.radius, 1e-3));
+      };
+      int touched_link = hit->link;
+      if (hit->rigid) {
+        q[jk] = back_off(*hit);
+      } else {
+        // Press: the foam gives until the deepest sensel reaches `press`, unless a rigid part
+        // touches first.
+        const auto rigid = sweep(T_obj_eef, f, k, q, hit->angle, l.max, true);
+        double hi = rigid ? back_off(*rigid) : l.max;
+        double lo = std::min(hit->angle, hi);
+        std::vector<double> x = q;
+        x[jk] = hi;
+        if (max_compression(T_obj_eef, f, k, x) >= press) {
+          for (int it = 0; it < 30 && hi - lo > 1e-7; ++it) {
+            x[jk] = 0.5 * (lo + hi);
+            (max_compression(T_obj_eef, f, k, x) >= press ? hi : lo) = x[jk];
+          }
+        }
+        q[jk] = hi;
+      }
+      // A later link touched: the joints after k cannot close any further.
+      if (touched_link > k) break;
+    }
+    return touching;
+  }
+};
+
+Simulator::Simulator(Mesh object_mesh, std::string object_name, Gripper gripper, SimulatorSettings settings) {
+  if (object_mesh.faces.empty()) throw Error("object mesh has no faces", {}, object_name);
+  if (settings.sensors != 1 && settings.sensors != static_cast<int>(gripper.pads().size()) &&
+      settings.sensors != 6)
+    throw Error("--sensors must be 1 or " + std::to_string(gripper.pads().size()), {}, "--sensors");
+  const auto& gs = settings.grasp;
+  if (!(gs.aim_min_deg <= gs.aim_max_deg) || gs.max_attempts < 1 || !(gs.press_min <= gs.press_max) || !(gs.angle_step_deg > 0) ||
+      !(gs.inner_spacing > 0) || !(gs.other_spacing > 0) || !(gs.clearance >= 0) ||
+      gs.press_max >= gripper.sensor().foam_thickness)
+    throw Error("inconsistent grasp settings", {}, "grasp");
+  if (!(settings.gain_min > 0) || settings.gain_min > settings.gain_max)
+    throw Error("calibration gains must satisfy 0 < min <= max", {}, "gain");
+  const auto& n = settings.noise;
+  for (double v : {n.arm_position_sigma, n.arm_rotation_sigma_deg, n.joint_sigma_deg, n.signal_noise,
+                   n.force_noise, n.lateral_sigma})
+    if (!(v >= 0) || !std::isfinite(v)) throw Error("noise levels must be finite and >= 0", {}, "noise");
+  impl_ = std::make_unique<Impl>(std::move(object_mesh), std::move(object_name), std::move(gripper),
+                                 std::move(settings));
+  Impl& m = *impl_;
+  const Mesh& M = m.mesh.mesh();
+  m.normal_sign = mesh_signed_volume(M) < 0 ? -1.0 : 1.0;
+  double total = 0.0;
+  for (const auto& f : M.faces) {
+    total += 0.5 * (M.vertices[f[1]] - M.vertices[f[0]]).cross(M.vertices[f[2]] - M.vertices[f[0]]).norm();
+    m.area_cdf.push_back(total);
+  }
+  if (!(total > 0)) throw Error("object mesh has zero area", {}, m.name);
+  const auto box = mesh_bounds(M);
+  m.centre = box.center();
+  for (const auto& v : M.vertices) m.radius = std::max(m.radius, (v - m.centre).norm());
+
+  // Object pose and calibration gains.
+  Rng pose_rng(m.settings.seed, kStreamPose);
+  m.T_world_object.linear() = pose_rng.rotation().toRotationMatrix();
+  const double h = m.settings.placement;
+  m.T_world_object.translation() =
+      m.settings.world_offset + Vec3(pose_rng.uniform(-h, h), pose_rng.uniform(-h, h), pose_rng.uniform(-h, h));
+  Rng gain_rng(m.settings.seed, kStreamGains);
+  const int S = m.gripper.sensor().sensels();
+  for (std::size_t i = 0; i < m.gripper.pads().size() * S; ++i)
+    m.gains_all.push_back(static_cast<float>(gain_rng.uniform(m.settings.gain_min, m.settings.gain_max)));
+  if (m.settings.sensors == 1) {
+    m.pads = {m.gripper.single_pad()};
+  } else {
+    for (std::size_t p = 0; p < m.gripper.pads().size(); ++p) m.pads.push_back(static_cast<int>(p));
+  }
+  for (int j = 0; j < m.gripper.joint_count(); ++j) m.links.push_back(link_geometry(m.gripper, j, gs));
+  const auto& palm = m.gripper.spec().palm;
+  // Palm: both discs and the rim (the hand approaches from any side).
+  for (double x : grid_1d(-palm.radius, palm.radius, gs.other_spacing))
+    for (double y : grid_1d(-palm.radius, palm.radius, gs.other_spacing))
+      if (x * x + y * y <= palm.radius * palm.radius) {
+        m.palm_samples.emplace_back(x, y, 0.0);
+        m.palm_samples.emplace_back(x, y, -palm.thickness);
+      }
+  const int rim = std::max(8, static_cast<int>(std::ceil(2 * std::numbers::pi * palm.radius / gs.other_spacing)));
+  for (int i = 0; i < rim; ++i)
+    for (double z : grid_1d(-palm.thickness, 0.0, gs.other_spacing)) {
+      const double phi = 2 * std::numbers::pi * i / rim;
+      m.palm_samples.emplace_back(palm.radius * std::cos(phi), palm.radius * std::sin(phi), z);
+    }
+}
+
+Simulator::~Simulator() = default;
+Simulator::Simulator(Simulator&&) noexcept = default;
+Simulator& Simulator::operator=(Simulator&&) noexcept = default;
+
+const Pose& Simulator::object_pose() const { return impl_->T_world_object; }
+const MeshIndex& Simulator::mesh() const { return impl_->mesh; }
+const SimulatorSettings& Simulator::settings() const { return impl_->settings; }
+const std::vector<int>& Simulator::logged_pads() const { return impl_->pads; }
+
+Simulator::Grasp Simulator::grasp(std::size_t g) const {
+  const Impl& m = *impl_;
+  const GraspSettings& gs = m.settings.grasp;
+  const Gripper& G = m.gripper;
+  const SensorSettings& sensor = G.sensor();
+  Rng rng(m.settings.seed, kStreamGeometry, g);
+
+  // The operator's aim: the single pad's finger at nominal joint angles puts that pad's foam on
+  // a random surface point p, facing it (within max_tilt of -n), rolled at random; the open hand
+  // then comes in from outside along -n until it would touch the object. An aim the hand cannot
+  // reach (blocked more than approach_tolerance short of it) is redrawn (another point, other
+  // angles), up to max_attempts; then the aim that came closest is used.
+  const auto& M = m.mesh.mesh();
+  const PadRef& aim_pad = G.pads()[G.single_pad()];
+  const int aim_links = static_cast<int>(G.spec().fingers[aim_pad.finger].links.size());
+  const double cos_max = std::cos(gs.max_tilt_deg * kDeg);
+  Pose T_obj_eef = Pose::Identity();
+  std::vector<double> q = G.open_angles();
+  const auto open_links = G.link_poses(q);
+  double travel = 0.0, best_shortfall = 1e300;
+  Pose best_eef = Pose::Identity();
+  int attempts = 0;
+  for (bool accepted = false; !accepted && attempts < gs.max_attempts; ++attempts) {
+    // A random surface point (area-uniform) and its outward normal, object frame.
+    const double u = rng.uniform() * m.area_cdf.back();
+    const int face = static_cast<int>(std::min<std::size_t>(
+        std::upper_bound(m.area_cdf.begin(), m.area_cdf.end(), u) - m.area_cdf.begin(), M.faces.size() - 1));
+    const double r1 = std::sqrt(rng.uniform()), r2 = rng.uniform();
+    const auto& tri = M.faces[face];
+    const Vec3 p = (1 - r1) * M.vertices[tri[0]] + r1 * (1 - r2) * M.vertices[tri[1]] + r1 * r2 * M.vertices[tri[2]];
+    const Vec3 n = m.face_normal(face);
+    // Pad frame: z within the cone about -n, random roll, p on the foam at a random sensel spot.
+    const double cos_a = 1.0 - rng.uniform() * (1.0 - cos_max);
+    const double sin_a = std::sqrt(std::max(0.0, 1.0 - cos_a * cos_a));
+    const double beta = rng.uniform(0.0, 2.0 * std::numbers::pi);
+    const Vec3 e1 = perpendicular(-n), e2 = (-n).cross(e1);
+    const Vec3 z = (cos_a * -n + sin_a * (std::cos(beta) * e1 + std::sin(beta) * e2)).normalized();
+    const double roll = rng.uniform(0.0, 2.0 * std::numbers::pi);
+    const Vec3 f1 = perpendicular(z), f2 = z.cross(f1);
+    const Vec3 x = std::cos(roll) * f1 + std::sin(roll) * f2;
+    Pose T_obj_pad = Pose::Identity();
+    T_obj_pad.linear().col(0) = x;
+    T_obj_pad.linear().col(1) = z.cross(x);
+    T_obj_pad.linear().col(2) = z;
+    const double ox = rng.uniform(-0.5, 0.5) * (sensor.rows - 1) * sensor.pitch_x;
+    const double oy = rng.uniform(-0.5, 0.5) * (sensor.cols - 1) * sensor.pitch_y;
+    T_obj_pad.translation() = p - T_obj_pad.linear() * Vec3(ox, oy, sensor.foam_thickness);
+    std::vector<double> nominal = G.open_angles();
+    for (int k = 0; k < aim_links; ++k)
+      nominal[G.joint_index(aim_pad.finger, k)] = rng.uniform(gs.aim_min_deg, gs.aim_max_deg) * kDeg;
+    const Pose target = T_obj_pad * G.pad_pose(nominal, G.single_pad()).inverse();
+    // Come in along -n from outside the object's bounding sphere; stop where the open hand
+    // would touch (ray casts of the palm, link and foam samples).
+    const Vec3 d = -n;
+    const double L = (target.translation() - m.centre).norm() + m.radius + G.reach() + 0.01;
+    T_obj_eef = target;
+    T_obj_eef.translation() -= d * L;
+    travel = L;
+    auto cast = [&](const Vec3& x_eef) {
+      const auto hit = m.mesh.raycast(T_obj_eef * x_eef, d, travel + gs.clearance);
+      if (hit) travel = std::min(travel, hit->t - gs.clearance);
+    };
+    for (const Vec3& s_eef : m.palm_samples) cast(s_eef);
+    for (int j = 0; j < G.joint_count(); ++j) {
+      for (const Vec3& s_link : m.links[j].rigid) cast(open_links[j] * s_link);
+      for (const Vec3& s_link : m.links[j].foam) cast(open_links[j] * s_link);
+      for (const Vec3& s_link : m.links[j].shell) cast(open_links[j] * s_link);
+    }
+    travel = std::max(0.0, travel);
+    accepted = travel >= L - gs.approach_tolerance;
+    T_obj_eef.translation() += d * travel;
+    if (L - travel < best_shortfall) {
+      best_shortfall = L - travel;
+      best_eef = T_obj_eef;
+    }
+  }
+  T_obj_eef = best_eef;
+
+  // 4. Close every finger.
+  Grasp out;
+  out.diagnostics.approach_travel = travel;
+  out.diagnostics.attempts = attempts;
+  for (int f = 0; f < G.finger_count(); ++f) out.diagnostics.touching_links += m.close_finger(T_obj_eef, f, q, rng);
+
+  // 5. What the robot records.
+  Rng noise(m.settings.seed, kStreamNoise, g);
+  const NoiseSettings& ns = m.settings.noise;
+  out.true_arm_pose = m.T_world_object * T_obj_eef;
+  out.true_joints = q;
+  GraspRecord& rec = out.measured;
+  rec.time = m.settings.grasp_interval * static_cast<double>(g);
+  rec.arm_pose = out.true_arm_pose;
+  {
+    const Vec3 dp(noise.normal(), noise.normal(), noise.normal());
+    const Vec3 dr(noise.normal(), noise.normal(), noise.normal());
+    rec.arm_pose.translation() += ns.arm_position_sigma * dp;
+    rec.arm_pose.linear() = (out.true_arm_pose.linear() * small_rotation(ns.arm_rotation_sigma_deg * kDeg * dr)).eval();
+  }
+  rec.joints = q;
+  for (double& v : rec.joints) v += ns.joint_sigma_deg * kDeg * noise.normal();
+
+  const int S = sensor.sensels();
+  const double fold_detect = ns.fold_detect >= 0 ? ns.fold_detect : 2.0 * ns.signal_noise;
+  std::vector<Pose> links = G.link_poses(q);
+  std::vector<double> comp(S);
+  std::vector<Vec3> lateral(S, Vec3::Zero());
+  for (std::size_t slot = 0; slot < m.pads.size(); ++slot) {
+    const int pad = m.pads[slot];
+    const LinkGeometry& Lg = m.links[G.pads()[pad].joint];
+    for (auto& d : lateral) d = Vec3(ns.lateral_sigma * noise.normal(), ns.lateral_sigma * noise.normal(), 0.0);
+    m.compressions(T_obj_eef * links[G.pads()[pad].joint], Lg, ns.lateral_sigma > 0 ? lateral.data() : nullptr,
+                   comp.data());
+    for (int j = 0; j < S; ++j) {
+      const double gain = m.gains_all[static_cast<std::size_t>(pad) * S + j];
+      const double c = comp[j];
+      double e = sensel_signal(sensor, gain, c);
+      const double n_force = noise.normal(), n_signal = noise.normal();
+      if (c > 0) e *= 1.0 + ns.force_noise * n_force;
+      e *= 1.0 + ns.signal_noise * n_signal;
+      e = std::clamp(e, 0.0, sensor.signal_full_scale);
+      rec.tactile.push_back(static_cast<float>(e));
+      const bool beyond = c > sensor.peak_compression * sensor.foam_thickness &&
+                          1.0 - sensor_response(sensor, c / sensor.foam_thickness) >= fold_detect;
+      rec.past_peak.push_back(static_cast<std::uint8_t>(beyond ? FoldHint::past_peak : FoldHint::rising));
+      auto& d = out.diagnostics;
+      d.contact_sensels += sensor_response(sensor, c / sensor.foam_thickness) > sensor.threshold;
+      d.past_peak_sensels += c > sensor.peak_compression * sensor.foam_thickness;
+      d.max_compression = std::max(d.max_compression, c);
+    }
+  }
+  return out;
+}
+
+SimulationResult Simulator::run() const {
+  const Impl& m = *impl_;
+  const std::size_t G = m.settings.grasps;
+  std::vector<Grasp> slots(G);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, G, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t g = r.begin(); g != r.end(); ++g) slots[g] = grasp(g);
+  });
+  SimulationResult out;
+  TactileLog& log = out.log;
+  log.object = m.name;
+  log.noise = m.settings.noise.name;
+  log.seed = m.settings.seed;
+  log.gripper = m.gripper;
+  log.pads = m.pads;
+  const std::size_t S = static_cast<std::size_t>(m.gripper.sensor().sensels());
+  for (int pad : m.pads)
+    log.gains.insert(log.gains.end(), m.gains_all.begin() + pad * S, m.gains_all.begin() + (pad + 1) * S);
+  log.truth = LogGroundTruth{};
+  log.truth->object_pose = m.T_world_object;
+  for (auto& s : slots) {
+    out.grasps_with_contact += s.diagnostics.contact_sensels > 0;
+    log.truth->arm_poses.push_back(s.true_arm_pose);
+    log.truth->joints.push_back(s.true_joints);
+    out.diagnostics.push_back(s.diagnostics);
+    log.grasps.push_back(std::move(s.measured));
+  }
+  return out;
+}
+
+}  // namespace ts::datasets

@@ -1,0 +1,127 @@
+// Data fusion (Section 4.1.2): tactile logs in memory, contact points from tactile images and
+// kinematics (Eq. 1-2), the cumulative voxel-filtered contact cloud PC_cum^cont and the
+// free-space cloud PC^free inside box B (Eq. 3).
+//
+// For the recognizer, the whole interface is:
+//
+//     ts::ExplorationClouds c = ts::exploration_clouds(log, k, settings);   // after k grasps
+//     // c.contacts: PC_cum,k^cont (world frame)   c.free: PC_k^free (world frame)
+//
+// or, step by step without recomputing earlier grasps:
+//
+//     ts::Exploration ex(log, settings);
+//     for (std::size_t k = 1; k <= log.grasps.size(); ++k) {
+//       ex.advance_to(k);
+//       use(ex.contact_cloud(), ex.free_cloud());
+//     }
+//
+// Both give identical clouds for the same k. Coordinates are world coordinates in double;
+// internally everything is computed relative to the first grasp's arm position (origin()), so
+// logs far from the world origin lose no precision. Deterministic: no randomness, fixed order.
+#pragma once
+
+#include "engine/core.hpp"
+#include "engine/free_space.hpp"
+#include "engine/gripper.hpp"
+#include "engine/tactile.hpp"
+
+#include <optional>
+
+namespace ts {
+
+/// One grasp as a robot records it.
+struct GraspRecord {
+  double time = 0.0;                    ///< s, when the tactile images were taken
+  Pose arm_pose = Pose::Identity();     ///< T_world_eef as measured: T_EEF(Θarm) of Eq. 2
+  std::vector<double> joints;           ///< rad, Θfinger, Gripper::joint_count() values
+  std::vector<float> tactile;           ///< signals, pads x sensels (pad-major, j = row*cols+col)
+  std::vector<std::uint8_t> past_peak;  ///< FoldHint per signal (same layout), or empty: unknown
+};
+
+/// Evaluation-only truth (simulated logs): never used to compute contacts or free space.
+struct LogGroundTruth {
+  Pose object_pose = Pose::Identity();  ///< T_world_object
+  std::vector<Pose> arm_poses;          ///< true T_world_eef per grasp
+  std::vector<std::vector<double>> joints;  ///< true joint angles per grasp
+};
+
+struct TactileLog {
+  std::string object;                   ///< explored object's name ("" when unknown)
+  std::string noise = "real";           ///< noise profile of a simulated log; "real" otherwise
+  std::uint64_t seed = 0;               ///< simulator seed (0 for real logs)
+  Gripper gripper;                      ///< description incl. sensor model
+  std::vector<int> pads;                ///< logged pads: indices into gripper.pads()
+  std::vector<float> gains;             ///< calibration gain, pads.size() x sensels
+  std::vector<GraspRecord> grasps;
+  std::optional<LogGroundTruth> truth;
+
+  std::size_t sensels() const { return static_cast<std::size_t>(gripper.sensor().sensels()); }
+  float gain(std::size_t pad_slot, std::size_t sensel) const { return gains[pad_slot * sensels() + sensel]; }
+};
+
+/// Checks a log held in memory (sizes, finiteness, signal range, rigid poses, pads). Throws
+/// ts::Error naming `file` and the offending field as its HDF5 path and indices
+/// ("/grasps/tactile[3][0][17]": grasp 3, logged pad 0, sensel 17).
+void validate(const TactileLog& log, const std::string& file = {});
+/// The per-grasp part of validate() for grasp number `index` (used before appending).
+void validate_grasp(const TactileLog& log, const GraspRecord& grasp, std::size_t index,
+                    const std::string& file = {});
+
+struct ContactSettings {
+  bool keep_ambiguous = true;  ///< keep sensels whose side of the fold is unknown (rising value)
+};
+
+/// Contacts of one grasp, world frame, with diagnostics.
+struct GraspContacts {
+  std::vector<Vec3> points;    ///< P^W of Eq. 2, ordered by (logged pad, sensel)
+  std::vector<int> pad_slot;   ///< index into log.pads for each point
+  int ambiguous = 0;           ///< sensels with kSenselAmbiguous (kept or not)
+  int at_peak = 0;             ///< sensels at or above their calibrated peak
+  int clamped = 0;             ///< past-peak sensels with a signal below the end response
+};
+
+/// Eq. 1 then Eq. 2 for every sensel of every logged pad of grasp `g`.
+GraspContacts grasp_contacts(const TactileLog& log, std::size_t g, const ContactSettings& s = {});
+
+struct ExplorationSettings {
+  double contact_voxel = 0.002;  ///< m, voxel-grid filter of the cumulative contact cloud
+  ContactSettings contact;
+  FreeSpaceSettings free;
+};
+
+struct ExplorationClouds {
+  PointCloud contacts;           ///< PC_cum^cont after the voxel filter (no normals)
+  PointCloud free;               ///< PC^free inside B (Eq. 3), sampled at res_free
+  std::size_t raw_contacts = 0;  ///< contacts before the voxel filter
+  std::vector<std::size_t> contacts_per_grasp;
+};
+
+/// Incremental exploration over a log (holds a reference: the log must outlive it).
+class Exploration {
+ public:
+  Exploration(const TactileLog& log, const ExplorationSettings& settings = {});
+  /// Fuse grasps [steps(), k) (k is clamped to the log's size).
+  void advance_to(std::size_t k);
+  std::size_t steps() const { return steps_; }
+  const Vec3& origin() const { return origin_; }
+  const std::vector<Vec3>& raw_contacts() const { return raw_; }
+  const std::vector<std::size_t>& contacts_per_grasp() const { return per_grasp_; }
+  const OccupancyGrid& grid() const { return grid_; }
+  PointCloud contact_cloud() const;   ///< voxel-filtered PC_cum^cont
+  PointCloud free_cloud() const;      ///< PC^free in B around the current contacts
+
+ private:
+  const TactileLog& log_;
+  ExplorationSettings settings_;
+  Vec3 origin_;
+  OccupancyGrid grid_;
+  std::size_t steps_ = 0;
+  std::vector<Vec3> raw_;
+  std::vector<std::size_t> per_grasp_;
+};
+
+/// Clouds after the first k grasps (the recognizer's entry point).
+ExplorationClouds exploration_clouds(const TactileLog& log, std::size_t k,
+                                     const ExplorationSettings& settings = {});
+
+}  // namespace ts

@@ -1,0 +1,342 @@
+#include "io/log_store.hpp"
+
+#include "io/atomic_file.hpp"
+#include "io/gripper_io.hpp"
+#include "io/h5.hpp"
+
+#include <cmath>
+#include <cstring>
+
+namespace ts::io {
+
+namespace {
+using h5::kAny;
+
+std::array<double, 7> pose_row(const Pose& T) {
+  const Eigen::Quaterniond q(T.linear());
+  const Vec3 t = T.translation();
+  return {t.x(), t.y(), t.z(), q.w(), q.x(), q.y(), q.z()};
+}
+
+// [tx, ty, tz, qw, qx, qy, qz] -> pose. A non-finite row or a quaternion far from unit norm
+// throws; a nearly-unit quaternion is normalized (user logs round their numbers).
+Pose pose_from_row(const double* r, const std::string& file, const std::string& field) {
+  for (int i = 0; i < 7; ++i)
+    if (!std::isfinite(r[i])) throw Error("pose holds a non-finite value", file, field);
+  Eigen::Quaterniond q(r[3], r[4], r[5], r[6]);
+  const double norm = q.norm();
+  if (std::abs(norm - 1.0) > 1e-3)
+    throw Error("pose quaternion has norm " + std::to_string(norm) + ", expected 1", file, field);
+  Pose T = Pose::Identity();
+  T.linear() = q.normalized().toRotationMatrix();
+  T.translation() = Vec3(r[0], r[1], r[2]);
+  return T;
+}
+
+std::string indexed(const std::string& path, std::size_t i) {
+  std::string s = path;
+  s += '[';
+  s += std::to_string(i);
+  s += ']';
+  return s;
+}
+
+h5::Storage chunks(std::uint64_t rows, int deflate = 0) {
+  h5::Storage s;
+  s.chunk_rows = rows;
+  s.deflate = deflate;
+  return s;
+}
+
+std::uint64_t seed_from_attr(std::int64_t v) {
+  std::uint64_t u;
+  std::memcpy(&u, &v, sizeof u);
+  return u;
+}
+std::int64_t seed_to_attr(std::uint64_t u) {
+  std::int64_t v;
+  std::memcpy(&v, &u, sizeof v);
+  return v;
+}
+
+struct Dims {
+  std::uint64_t pads, rows, cols, joints;
+};
+Dims dims_of(const LogHeader& h) {
+  return {h.pads.size(), static_cast<std::uint64_t>(h.gripper.sensor().rows),
+          static_cast<std::uint64_t>(h.gripper.sensor().cols),
+          static_cast<std::uint64_t>(h.gripper.joint_count())};
+}
+
+TactileLog log_of(const LogHeader& h) {
+  TactileLog log;
+  log.object = h.object;
+  log.noise = h.noise;
+  log.seed = h.seed;
+  log.gripper = h.gripper;
+  log.pads = h.pads;
+  log.gains = h.gains;
+  return log;
+}
+
+// Header: root attributes, /gripper, /sensors and (structure of) /ground_truth.
+LogHeader read_header(const h5::File& file) {
+  const std::string name = file.name();
+  const h5::Group root = file.root();
+  if (!root.has_attribute("format") || root.string_attribute("format") != kLogFormat)
+    throw Error("not a Touchstone tactile log (attribute format != \"" + std::string(kLogFormat) + "\")",
+                name, "/format");
+  const std::int64_t version = root.int_attribute("format_version");
+  if (version < 1 || version > kLogFormatVersion)
+    throw Error("unsupported log format_version " + std::to_string(version), name, "/format_version");
+  LogHeader h;
+  h.object = root.has_attribute("object") ? root.string_attribute("object") : "";
+  h.noise = root.has_attribute("noise") ? root.string_attribute("noise") : "real";
+  h.seed = root.has_attribute("seed") ? seed_from_attr(root.int_attribute("seed")) : 0;
+  h.source = root.has_attribute("source") ? root.string_attribute("source") : "";
+
+  const auto desc = file.group("gripper").read_strings("description");
+  if (desc.size() != 1) throw Error("expected one gripper description string", name, "/gripper/description");
+  try {
+    h.gripper = parse_gripper(desc[0], name);
+  } catch (const Error& e) {
+    throw Error("gripper description: " + e.message(), name, "/gripper/description " + e.field());
+  }
+  const SensorSettings& s = h.gripper.sensor();
+  const h5::Group sensors = file.group("sensors");
+  const auto pads = sensors.read<std::int32_t>("pad_index", {kAny});
+  h.pads.assign(pads.begin(), pads.end());
+  const auto P = static_cast<std::int64_t>(h.pads.size());
+  h.gains = sensors.read<float>("gain", {P, s.rows, s.cols});
+  if (root.has_group("ground_truth")) {
+    const auto row = file.group("ground_truth").read<double>("object_pose", {7});
+    h.true_object_pose = pose_from_row(row.data(), name, "/ground_truth/object_pose");
+  }
+  // The header must already be consistent (pads exist, gains positive).
+  validate(log_of(h), name);
+  return h;
+}
+}  // namespace
+
+LogHeader header_of(const TactileLog& log) {
+  LogHeader h;
+  h.object = log.object;
+  h.noise = log.noise;
+  h.seed = log.seed;
+  h.gripper = log.gripper;
+  h.pads = log.pads;
+  h.gains = log.gains;
+  if (log.truth) h.true_object_pose = log.truth->object_pose;
+  return h;
+}
+
+struct LogWriter::Impl {
+  std::optional<AtomicOutput> atomic;
+  h5::File file;
+  LogHeader header;
+  TactileLog shape;   // header as a log (for per-grasp validation)
+  std::size_t grasps = 0;
+  std::string display;
+};
+
+LogWriter::LogWriter() : impl_(std::make_unique<Impl>()) {}
+LogWriter::LogWriter(LogWriter&&) noexcept = default;
+LogWriter& LogWriter::operator=(LogWriter&&) noexcept = default;
+LogWriter::~LogWriter() {
+  if (!impl_ || !impl_->file.is_open()) return;
+  try {
+    // An atomic log that was not closed explicitly is abandoned (the temporary is removed).
+    impl_->file.close();
+  } catch (...) {
+  }
+}
+
+LogWriter LogWriter::create(const std::filesystem::path& path, const LogHeader& header, bool atomic) {
+  LogWriter w;
+  Impl& m = *w.impl_;
+  m.display = path.string();
+  m.header = header;
+  m.shape = log_of(header);
+  validate(m.shape, m.display);
+  if (atomic) {
+    m.atomic.emplace(path);
+    m.file = h5::File::create(*m.atomic);
+  } else {
+    m.file = h5::File::create(path);
+  }
+  const Dims d = dims_of(header);
+  std::lock_guard lock(h5::mutex());
+  h5::Group root = m.file.root();
+  root.set_attribute("format", kLogFormat);
+  root.set_attribute("format_version", static_cast<std::int64_t>(kLogFormatVersion));
+  root.set_attribute("object", header.object);
+  root.set_attribute("noise", header.noise);
+  root.set_attribute("seed", seed_to_attr(header.seed));
+  root.set_attribute("source", header.source);
+  root.create_group("gripper").write_strings("description", {gripper_to_json(header.gripper.spec())});
+  h5::Group sensors = root.create_group("sensors");
+  std::vector<std::int32_t> pads(header.pads.begin(), header.pads.end());
+  sensors.write("pad_index", pads);
+  std::vector<std::string> names;
+  for (int p : header.pads) names.push_back(header.gripper.pads()[p].name);
+  sensors.write_strings("pad_name", names);
+  sensors.write("gain", header.gains.data(), {d.pads, d.rows, d.cols});
+  h5::Group grasps = root.create_group("grasps");
+  grasps.create_extendible<double>("time", {}, chunks(256));
+  grasps.create_extendible<double>("arm_pose", {7}, chunks(256));
+  grasps.create_extendible<double>("joints", {d.joints}, chunks(256));
+  grasps.create_extendible<float>("tactile", {d.pads, d.rows, d.cols}, chunks(32, 4));
+  grasps.create_extendible<std::uint8_t>("past_peak", {d.pads, d.rows, d.cols}, chunks(32, 4));
+  if (header.true_object_pose) {
+    h5::Group truth = root.create_group("ground_truth");
+    const auto row = pose_row(*header.true_object_pose);
+    truth.write("object_pose", row.data(), {7});
+    truth.create_extendible<double>("arm_pose", {7}, chunks(256));
+    truth.create_extendible<double>("joints", {d.joints}, chunks(256));
+  }
+  return w;
+}
+
+LogWriter LogWriter::append_to(const std::filesystem::path& path) {
+  LogWriter w;
+  Impl& m = *w.impl_;
+  m.display = path.string();
+  m.file = h5::File::open(path, h5::File::Access::read_write);
+  std::lock_guard lock(h5::mutex());
+  m.header = read_header(m.file);
+  m.shape = log_of(m.header);
+  const h5::Group grasps = m.file.group("grasps");
+  m.grasps = grasps.shape("time").at(0);
+  for (const char* name : {"arm_pose", "joints", "tactile", "past_peak"})
+    if (grasps.shape(name).at(0) != m.grasps)
+      throw Error("dataset has " + std::to_string(grasps.shape(name).at(0)) + " rows but /grasps/time has " +
+                      std::to_string(m.grasps) + " (interrupted append?)",
+                  m.display, std::string("/grasps/") + name);
+  return w;
+}
+
+const LogHeader& LogWriter::header() const { return impl_->header; }
+std::size_t LogWriter::grasps() const { return impl_->grasps; }
+
+void LogWriter::append(const GraspRecord& grasp, const Pose* truth_arm_pose,
+                       const std::vector<double>* truth_joints) {
+  Impl& m = *impl_;
+  if (!m.file.is_open()) throw Error("log writer is closed", m.display);
+  validate_grasp(m.shape, grasp, m.grasps, m.display);
+  const bool has_truth = m.header.true_object_pose.has_value();
+  if (has_truth != (truth_arm_pose != nullptr))
+    throw Error(has_truth ? "this log has a ground-truth group: the true arm pose is required"
+                          : "this log has no ground-truth group",
+                m.display, "/ground_truth/arm_pose");
+  const Dims d = dims_of(m.header);
+  if (truth_arm_pose) {
+    if (!truth_arm_pose->matrix().allFinite())
+      throw Error("true arm pose is not finite", m.display, indexed("/ground_truth/arm_pose", m.grasps));
+    if (!truth_joints || truth_joints->size() != d.joints)
+      throw Error("true joint angles are required, one per joint", m.display,
+                  indexed("/ground_truth/joints", m.grasps));
+  }
+  std::lock_guard lock(h5::mutex());
+  h5::Group root = m.file.root();
+  h5::Group g = root.open_group("grasps");
+  g.append("time", &grasp.time, 1);
+  const auto pose = pose_row(grasp.arm_pose);
+  g.append("arm_pose", pose.data(), 1);
+  g.append("joints", grasp.joints.data(), 1);
+  g.append("tactile", grasp.tactile.data(), 1);
+  std::vector<std::uint8_t> hints = grasp.past_peak;
+  hints.resize(grasp.tactile.size(), 0);
+  g.append("past_peak", hints.data(), 1);
+  if (truth_arm_pose) {
+    h5::Group t = root.open_group("ground_truth");
+    const auto row = pose_row(*truth_arm_pose);
+    t.append("arm_pose", row.data(), 1);
+    t.append("joints", truth_joints->data(), 1);
+  }
+  ++m.grasps;
+}
+
+void LogWriter::close() {
+  Impl& m = *impl_;
+  if (!m.file.is_open()) return;
+  m.file.close();
+  if (m.atomic) m.atomic->commit();
+}
+
+void write_log(const std::filesystem::path& path, const TactileLog& log) {
+  validate(log, path.string());
+  LogWriter w = LogWriter::create(path, header_of(log), true);
+  for (std::size_t k = 0; k < log.grasps.size(); ++k) {
+    if (log.truth) {
+      const std::vector<double>& joints =
+          log.truth->joints.empty() ? log.grasps[k].joints : log.truth->joints[k];
+      w.append(log.grasps[k], &log.truth->arm_poses[k], &joints);
+    } else {
+      w.append(log.grasps[k]);
+    }
+  }
+  w.close();
+}
+
+TactileLog read_log(const std::filesystem::path& path) {
+  const h5::File file = h5::File::open(path, h5::File::Access::read);
+  const std::string name = file.name();
+  std::lock_guard lock(h5::mutex());
+  const LogHeader h = read_header(file);
+  TactileLog log = log_of(h);
+  const Dims d = dims_of(h);
+  const auto P = static_cast<std::int64_t>(d.pads), R = static_cast<std::int64_t>(d.rows),
+             C = static_cast<std::int64_t>(d.cols), J = static_cast<std::int64_t>(d.joints);
+  const h5::Group g = file.group("grasps");
+  const auto time = g.read<double>("time", {kAny});
+  const std::size_t G = time.size();
+  auto rows_of = [&](const char* ds, const h5::Shape& s) {
+    if (s.at(0) != G)
+      throw Error("dataset has " + std::to_string(s.at(0)) + " rows but /grasps/time has " + std::to_string(G),
+                  name, std::string("/grasps/") + ds);
+  };
+  h5::Shape s;
+  const auto pose = g.read<double>("arm_pose", {kAny, 7}, &s);
+  rows_of("arm_pose", s);
+  const auto joints = g.read<double>("joints", {kAny, J}, &s);
+  rows_of("joints", s);
+  const auto tactile = g.read<float>("tactile", {kAny, P, R, C}, &s);
+  rows_of("tactile", s);
+  std::vector<std::uint8_t> hints;
+  if (g.has_dataset("past_peak")) {
+    hints = g.read<std::uint8_t>("past_peak", {kAny, P, R, C}, &s);
+    rows_of("past_peak", s);
+  }
+  const std::size_t image = d.pads * d.rows * d.cols;
+  log.grasps.resize(G);
+  for (std::size_t k = 0; k < G; ++k) {
+    GraspRecord& r = log.grasps[k];
+    r.time = time[k];
+    r.arm_pose = pose_from_row(&pose[7 * k], name, indexed("/grasps/arm_pose", k));
+    r.joints.assign(joints.begin() + k * d.joints, joints.begin() + (k + 1) * d.joints);
+    r.tactile.assign(tactile.begin() + k * image, tactile.begin() + (k + 1) * image);
+    if (!hints.empty()) r.past_peak.assign(hints.begin() + k * image, hints.begin() + (k + 1) * image);
+  }
+  if (h.true_object_pose) {
+    const h5::Group t = file.group("ground_truth");
+    LogGroundTruth truth;
+    truth.object_pose = *h.true_object_pose;
+    const auto tp = t.read<double>("arm_pose", {kAny, 7}, &s);
+    if (s.at(0) != G)
+      throw Error("ground truth has " + std::to_string(s.at(0)) + " arm poses for " + std::to_string(G) + " grasps",
+                  name, "/ground_truth/arm_pose");
+    for (std::size_t k = 0; k < G; ++k)
+      truth.arm_poses.push_back(pose_from_row(&tp[7 * k], name, indexed("/ground_truth/arm_pose", k)));
+    if (t.has_dataset("joints")) {
+      const auto tj = t.read<double>("joints", {kAny, J}, &s);
+      if (s.at(0) != G) throw Error("ground-truth joint rows do not match the grasps", name, "/ground_truth/joints");
+      for (std::size_t k = 0; k < G; ++k)
+        truth.joints.emplace_back(tj.begin() + k * d.joints, tj.begin() + (k + 1) * d.joints);
+    }
+    log.truth = std::move(truth);
+  }
+  validate(log, name);
+  return log;
+}
+
+}  // namespace ts::io
