@@ -9,7 +9,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cctype>
 #include <cstdio>
+#include <filesystem>
 #include <iomanip>
 #include <iostream>
 #include <memory>
@@ -236,6 +238,9 @@ struct ExportOptions {
 };
 
 int run_export(const ExportOptions& o) {
+  std::string ext = std::filesystem::path(o.out).extension().string();
+  for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext != ".ply" && ext != ".pcd") throw Error("the output must end in .ply or .pcd", o.out, "--out");
   io::DbReader db(o.db);
   const std::size_t i = db.find(o.object);
   if (i == db.size()) {
