@@ -7,6 +7,7 @@
 #include "engine/symmetry.hpp"
 #include "experiments/cli_common.hpp"
 #include "experiments/metrics.hpp"
+#include "io/db_store.hpp"
 #include "io/sha256.hpp"
 
 #include <tbb/parallel_for.h>
@@ -440,6 +441,28 @@ std::string source_fingerprint(const ObjectSource& source) {
     add(s.str());
   }
   return h.hex_digest();
+}
+
+EngineDatabase open_database(const std::filesystem::path& path) {
+  auto reader = std::make_shared<io::DbReader>(path);
+  EngineDatabase db;
+  db.source = reader;
+  db.load_mesh = [reader](std::size_t i) { return reader->load_mesh(i); };
+  std::error_code ec;
+  const auto absolute = std::filesystem::absolute(path, ec);
+  db.description["path"] = ec ? path.string() : absolute.string();
+  // The content fingerprint plus the build seeds: a rebuilt database with other seeds is another
+  // database even when its names and sizes agree.
+  io::Sha256 h;
+  h.update(source_fingerprint(*reader));
+  h.update(std::to_string(reader->schema_version()) + " " + std::to_string(reader->build_seed()));
+  for (std::size_t i = 0; i < reader->size(); ++i) h.update(" " + std::to_string(reader->object_seed(i)));
+  db.description["fingerprint"] = h.hex_digest();
+  db.description["objects"] = reader->size();
+  db.description["schema_version"] = reader->schema_version();
+  db.description["build_seed"] = reader->build_seed();
+  db.description["max_extent_m"] = reader->settings().max_extent;
+  return db;
 }
 
 EngineDatabase memory_database(std::vector<BuiltObject> objects, const DatabaseSettings& settings) {
