@@ -95,22 +95,70 @@ inline bool pair_bins(const Vec3& ps, const Vec3& ns, const Vec3& pt, const Vec3
 
 using Spfh = std::array<double, kFeatureDim>;
 
-/// Step 2 for surface point `s` with its neighbourhood `nb` (s included, any order).
-Spfh spfh(const PointCloud& surface, std::uint32_t s, const std::vector<Neighbour>& nb) {
-  Spfh h{};
-  if (nb.size() < 2) return h;
+/// Points grouped by cells of edge r: a point's r-neighbours lie in the 27 cells around its own,
+/// which form 9 runs of consecutive keys in the sorted cell list. For the SPFH of (nearly) every
+/// surface point this is about 2x faster than one k-d tree radius query per point.
+struct CellGrid {
+  using Key = std::array<std::int64_t, 3>;
+  std::vector<Key> key;                // occupied cells, sorted
+  std::vector<std::uint32_t> first;    // cell c holds order[first[c] .. first[c + 1])
+  std::vector<std::uint32_t> order;    // point indices, grouped by cell, increasing within one
+
+  CellGrid(const std::vector<Vec3>& pts, double r) {
+    std::vector<std::pair<Key, std::uint32_t>> kv;
+    kv.reserve(pts.size());
+    for (std::size_t i = 0; i < pts.size(); ++i)
+      if (finite(pts[i]))
+        kv.push_back({{static_cast<std::int64_t>(std::floor(pts[i].x() / r)),
+                       static_cast<std::int64_t>(std::floor(pts[i].y() / r)),
+                       static_cast<std::int64_t>(std::floor(pts[i].z() / r))},
+                      static_cast<std::uint32_t>(i)});
+    std::sort(kv.begin(), kv.end());
+    for (std::size_t i = 0; i < kv.size(); ++i) {
+      if (i == 0 || kv[i].first != kv[i - 1].first) {
+        key.push_back(kv[i].first);
+        first.push_back(static_cast<std::uint32_t>(i));
+      }
+      order.push_back(kv[i].second);
+    }
+    first.push_back(static_cast<std::uint32_t>(kv.size()));
+  }
+
+  /// Points of the 27 cells around cell c, in cell-key order.
+  void candidates(std::size_t c, std::vector<std::uint32_t>& out) const {
+    out.clear();
+    const Key& k = key[c];
+    for (std::int64_t di = -1; di <= 1; ++di)
+      for (std::int64_t dj = -1; dj <= 1; ++dj) {
+        const Key lo{k[0] + di, k[1] + dj, k[2] - 1}, hi{k[0] + di, k[1] + dj, k[2] + 1};
+        for (auto it = std::lower_bound(key.begin(), key.end(), lo); it != key.end() && *it <= hi; ++it) {
+          const auto g = static_cast<std::size_t>(it - key.begin());
+          out.insert(out.end(), order.begin() + first[g], order.begin() + first[g + 1]);
+        }
+      }
+  }
+};
+
+/// Step 2 for surface point `s`: pairs with every surface point within r (its neighbourhood N,
+/// s included), among the candidates.
+Spfh spfh(const PointCloud& surface, std::uint32_t s, const std::vector<std::uint32_t>& candidates, double r2) {
   std::array<int, kFeatureDim> count{};
+  std::size_t n = 0;
   const Vec3& ps = surface.points[s];
   const Vec3& ns = surface.normals[s];
-  for (const Neighbour& n : nb) {
-    if (n.index == s) continue;
+  for (const std::uint32_t t : candidates) {
+    if ((surface.points[t] - ps).squaredNorm() > r2) continue;
+    ++n;
+    if (t == s) continue;
     int b[3];
-    if (!pair_bins(ps, ns, surface.points[n.index], surface.normals[n.index], b)) continue;
+    if (!pair_bins(ps, ns, surface.points[t], surface.normals[t], b)) continue;
     ++count[b[0]];
     ++count[kBins + b[1]];
     ++count[2 * kBins + b[2]];
   }
-  const double incr = 100.0 / static_cast<double>(nb.size() - 1);
+  Spfh h{};
+  if (n < 2) return h;
+  const double incr = 100.0 / static_cast<double>(n - 1);
   for (int i = 0; i < kFeatureDim; ++i) h[i] = count[i] * incr;
   return h;
 }
@@ -154,18 +202,28 @@ FpfhResult compute_fpfh(const std::vector<Vec3>& keypoints, const std::vector<Ve
       needed.push_back(s);
     }
 
-  // SPFHs. A neighbourhood's order does not matter here (every pair adds the same increment),
-  // so the searches skip sorting and reuse one buffer per chunk.
+  // SPFHs, cell by cell (each point's histogram is written by one task; the order in which a
+  // neighbourhood is visited does not matter, every pair adds the same increment).
   std::vector<Spfh> hist(needed.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, needed.size(), 64),
-                    [&](const tbb::blocked_range<std::size_t>& range) {
-                      std::vector<Neighbour> nb;
-                      for (std::size_t j = range.begin(); j != range.end(); ++j) {
-                        const std::uint32_t s = needed[j];
-                        surface_tree.radius(surface.points[s], r, nb, false);
-                        hist[j] = spfh(surface, s, nb);
-                      }
-                    });
+  if (!needed.empty()) {
+    const CellGrid grid(surface.points, r);
+    const double r2 = r * r;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, grid.key.size(), 4),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                        std::vector<std::uint32_t> candidates;
+                        for (std::size_t c = range.begin(); c != range.end(); ++c) {
+                          bool any = false;
+                          for (std::uint32_t m = grid.first[c]; m < grid.first[c + 1] && !any; ++m)
+                            any = row[grid.order[m]] != kNone;
+                          if (!any) continue;
+                          grid.candidates(c, candidates);
+                          for (std::uint32_t m = grid.first[c]; m < grid.first[c + 1]; ++m) {
+                            const std::uint32_t s = grid.order[m];
+                            if (row[s] != kNone) hist[row[s]] = spfh(surface, s, candidates, r2);
+                          }
+                        }
+                      });
+  }
 
   // Step 3: weighted sum, per-block normalization. Neighbours come sorted by (distance, index),
   // so the summation order is fixed.
