@@ -1,8 +1,6 @@
 // Point-cloud operations: voxel-grid filter (Section 4.1.2), PCA normals, bounds, transforms.
 #include "engine/cloud.hpp"
 
-#include "engine/search.hpp"
-
 #include <Eigen/Eigenvalues>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -153,35 +151,56 @@ PointCloud voxel_representatives(const PointCloud& cloud, double voxel) {
 }
 
 std::vector<Vec3> estimate_normals(const std::vector<Vec3>& points, const NormalSettings& s) {
-  if (!(s.radius > 0.0)) throw Error("normal radius must be positive", "", "radius");
+  if (!(s.radius > 0.0) || !std::isfinite(s.radius)) throw Error("normal radius must be positive", "", "radius");
   const std::size_t n = points.size();
   std::vector<Vec3> normals(n, Vec3::Zero());
   if (n == 0) return normals;
   const Vec3 c = centroid(points);
-  const KdTree3 tree(points);
   const std::size_t min_n = static_cast<std::size_t>(std::max(3, s.min_neighbours));
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 256), [&](const auto& r) {
-    for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      const Vec3& p = points[i];
-      if (!finite(p)) continue;
-      const auto nb = tree.radius(p, s.radius);
-      if (nb.size() < min_n) continue;
-      // Covariance about the neighbourhood mean, accumulated relative to the query point.
-      Vec3 mean = Vec3::Zero();
-      for (const auto& q : nb) mean += points[q.index] - p;
-      mean /= static_cast<double>(nb.size());
-      Mat3 cov = Mat3::Zero();
-      for (const auto& q : nb) {
-        const Vec3 d = points[q.index] - p - mean;
-        cov.noalias() += d * d.transpose();
+  const double r2 = s.radius * s.radius;
+  // Fixed-radius search on a grid of radius-sized cells: a point's neighbours lie in the 27
+  // cells around its own, i.e. in 9 runs of consecutive keys of the sorted cell list. Cells are
+  // processed independently (one parallel task each) and neighbours are visited in cell-key
+  // order, so the result does not depend on the thread count.
+  const VoxelGroups g = group_by_voxel(points, s.radius);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, g.key.size(), 16), [&](const auto& range) {
+    std::vector<std::uint32_t> candidates;
+    for (std::size_t cell = range.begin(); cell != range.end(); ++cell) {
+      candidates.clear();
+      const Key& k = g.key[cell];
+      for (std::int64_t di = -1; di <= 1; ++di)
+        for (std::int64_t dj = -1; dj <= 1; ++dj) {
+          const Key lo{k[0] + di, k[1] + dj, k[2] - 1}, hi{k[0] + di, k[1] + dj, k[2] + 1};
+          for (auto it = std::lower_bound(g.key.begin(), g.key.end(), lo); it != g.key.end() && *it <= hi; ++it) {
+            const auto gi = static_cast<std::size_t>(it - g.key.begin());
+            candidates.insert(candidates.end(), g.order.begin() + g.first[gi], g.order.begin() + g.first[gi + 1]);
+          }
+        }
+      for (std::uint32_t m = g.first[cell]; m < g.first[cell + 1]; ++m) {
+        const std::uint32_t i = g.order[m];
+        const Vec3& p = points[i];
+        // Covariance of the neighbours (relative to p, for precision far from the origin).
+        Vec3 sum = Vec3::Zero();
+        Mat3 sum2 = Mat3::Zero();
+        std::size_t count = 0;
+        for (const std::uint32_t q : candidates) {
+          const Vec3 d = points[q] - p;
+          if (d.squaredNorm() > r2) continue;
+          sum += d;
+          sum2.noalias() += d * d.transpose();
+          ++count;
+        }
+        if (count < min_n) continue;
+        const Vec3 mean = sum / static_cast<double>(count);
+        const Mat3 cov = sum2 / static_cast<double>(count) - mean * mean.transpose();
+        const Eigen::SelfAdjointEigenSolver<Mat3> eig(cov);
+        if (eig.info() != Eigen::Success) continue;
+        Vec3 normal = eig.eigenvectors().col(0);  // smallest eigenvalue
+        if (!finite(normal) || !(normal.squaredNorm() > 0.0)) continue;
+        normal.normalize();
+        if (normal.dot(p - c) < 0.0) normal = -normal;  // away from the cloud centroid
+        normals[i] = normal;
       }
-      const Eigen::SelfAdjointEigenSolver<Mat3> eig(cov);
-      if (eig.info() != Eigen::Success) continue;
-      Vec3 normal = eig.eigenvectors().col(0);  // smallest eigenvalue
-      if (!finite(normal) || !(normal.squaredNorm() > 0.0)) continue;
-      normal.normalize();
-      if (normal.dot(p - c) < 0.0) normal = -normal;  // away from the cloud centroid
-      normals[i] = normal;
     }
   });
   return normals;

@@ -198,3 +198,22 @@ TEST_CASE("voxel_representatives keeps the input point nearest to each voxel's c
     ++v;
   }
 }
+
+TEST_CASE("estimate_normals: identical for 1 and 2 threads, and far from the origin") {
+  Rng rng(21);
+  std::vector<Vec3> pts, far;
+  const Vec3 offset(1e5, -3e4, 2e3);
+  for (int i = 0; i < 20000; ++i) {
+    const Vec3 p = 0.05 * rng.unit_vector();
+    pts.push_back(p);
+    far.push_back(p + offset);
+  }
+  std::vector<Vec3> a, b;
+  tbb::task_arena(1).execute([&] { a = estimate_normals(pts, NormalSettings{}); });
+  tbb::task_arena(2).execute([&] { b = estimate_normals(pts, NormalSettings{}); });
+  CHECK(a == b);
+  const auto f = estimate_normals(far, NormalSettings{});
+  double worst = 1.0;
+  for (std::size_t i = 0; i < pts.size(); ++i) worst = std::min(worst, f[i].dot(a[i]));
+  CHECK(worst > 1.0 - 1e-6);  // same normals 100 km away (a local frame per neighbourhood)
+}
