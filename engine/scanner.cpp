@@ -24,6 +24,7 @@ constexpr std::uint64_t kTrackingStream = 0x5ca1;   // surface samples that trac
 constexpr std::uint64_t kRandomViewStream = 0x7a2d; // random view directions (per view index)
 constexpr std::uint64_t kCoverageStream = 0xc0fe;   // surface samples of surface_coverage
 
+constexpr double kMaxPixels = 1 << 26;  // rays per view: beyond, settings are a mistake
 constexpr double kFailDecay = 0.5;  // weight kept by a sample a chosen view should have covered
 
 struct SurfaceSamples {
@@ -165,6 +166,22 @@ View cast_view(const Mesh& mesh, const Vec3& d, const Vec3& centre, double radiu
   return view;
 }
 
+/// Append the view's first hits in pixel order, with face normals turned toward the scanner.
+void append_hits(const Mesh& mesh, const View& view, PointCloud& hits) {
+  for (int j = 0; j < view.nv; ++j)
+    for (int i = 0; i < view.nu; ++i) {
+      const int f = view.face[std::size_t(j) * view.nu + i];
+      if (f < 0) continue;
+      const auto& fc = mesh.faces[f];
+      Vec3 normal = (mesh.vertices[fc[1]] - mesh.vertices[fc[0]])
+                        .cross(mesh.vertices[fc[2]] - mesh.vertices[fc[0]])
+                        .normalized();
+      if (normal.dot(view.d) > 0.0) normal = -normal;
+      hits.points.push_back(view.hit(i, j));
+      hits.normals.push_back(normal);
+    }
+}
+
 /// Is p within `radius` of a hit of the view? Looks only at the pixels around p's projection.
 bool covered_by(const View& view, const Vec3& p, double radius) {
   const Vec3 rel = p - view.origin;
@@ -277,6 +294,20 @@ class ViewPlanner {
 
 }  // namespace
 
+PointCloud scan_view(const MeshIndex& index, const Vec3& direction, double pitch) {
+  PointCloud hits;
+  const Mesh& mesh = index.mesh();
+  if (mesh.vertices.empty() || !(direction.norm() > 0.0) || !finite(direction)) return hits;
+  if (!(pitch > 0.0)) throw Error("ray pitch must be positive", "", "pitch");
+  const Vec3 centre = mesh_bounds(mesh).center();
+  double radius = 0.0;
+  for (const auto& p : mesh.vertices) radius = std::max(radius, (p - centre).norm());
+  if (std::pow(2.0 * radius / pitch + 2.0, 2.0) > kMaxPixels)
+    throw Error("ray raster too fine for the object's size", "", "pitch");
+  append_hits(mesh, cast_view(mesh, direction.normalized(), centre, radius, pitch), hits);
+  return hits;
+}
+
 double surface_coverage(const MeshIndex& mesh, const std::vector<Vec3>& points, double radius,
                         std::uint64_t seed, int samples) {
   Rng rng(seed, kCoverageStream);
@@ -300,6 +331,8 @@ ScanResult scan_mesh(const MeshIndex& index, const ScanSettings& settings, std::
   if (!(settings.ray_pitch > 0.0)) throw Error("ray pitch must be positive", "", "scan.ray_pitch");
   if (!(settings.coverage_radius > 0.0))
     throw Error("coverage radius must be positive", "", "scan.coverage_radius");
+  if (settings.coverage_samples < 1) throw Error("at least one coverage sample is needed", "", "scan.coverage_samples");
+  if (settings.candidate_views < 1) throw Error("at least one candidate view is needed", "", "scan.candidate_views");
 
   ScanResult result;
   const Mesh& mesh = index.mesh();
@@ -312,6 +345,9 @@ ScanResult scan_mesh(const MeshIndex& index, const ScanSettings& settings, std::
   double radius = 0.0;
   for (const auto& p : mesh.vertices) radius = std::max(radius, (p - centre).norm());
   const double h = settings.ray_pitch * settings.fine_spacing;
+  if (std::pow(2.0 * radius / h + 2.0, 2.0) > kMaxPixels)
+    throw Error("ray raster too fine for the object's size (over " + std::to_string(kMaxPixels) +
+                    " rays per view)", "", "scan.ray_pitch/scan.fine_spacing");
   const bool two_sided = !mesh_topology(mesh).closed();  // open sheets are seen from both sides
 
   const std::size_t n = samples.points.size();
@@ -384,19 +420,7 @@ ScanResult scan_mesh(const MeshIndex& index, const ScanSettings& settings, std::
     const double gain = static_cast<double>(uncovered.size() - still.size()) / n;
     uncovered.swap(still);
 
-    // Keep the first hits, normals turned toward the scanner, in pixel order.
-    for (int j = 0; j < view.nv; ++j)
-      for (int i = 0; i < view.nu; ++i) {
-        const int f = view.face[std::size_t(j) * view.nu + i];
-        if (f < 0) continue;
-        const auto& fc = mesh.faces[f];
-        Vec3 normal = (mesh.vertices[fc[1]] - mesh.vertices[fc[0]])
-                          .cross(mesh.vertices[fc[2]] - mesh.vertices[fc[0]])
-                          .normalized();
-        if (normal.dot(d) > 0.0) normal = -normal;
-        hits.points.push_back(view.hit(i, j));
-        hits.normals.push_back(normal);
-      }
+    append_hits(mesh, view, hits);
 
     stalled = gain < settings.min_gain ? stalled + 1 : 0;
     if (stalled >= std::max(1, settings.stall_views) && !next_phase()) break;

@@ -46,6 +46,11 @@ struct ScanResult {
 /// the result is identical for any thread count and deterministic for a given seed.
 ScanResult scan_mesh(const MeshIndex& mesh, const ScanSettings& settings, std::uint64_t seed);
 
+/// One view of the scanner: the first hits of an orthographic raster of parallel rays along
+/// `direction` (pitch in m) covering the mesh, in raster order, with the hit faces' normals
+/// turned toward the scanner. scan_mesh is made of such views.
+PointCloud scan_view(const MeshIndex& mesh, const Vec3& direction, double pitch);
+
 /// Fraction of mesh area within `radius` of some point (area-weighted surface samples drawn
 /// from ts::Rng(seed); 0 for an empty mesh or an empty cloud).
 double surface_coverage(const MeshIndex& mesh, const std::vector<Vec3>& points, double radius,

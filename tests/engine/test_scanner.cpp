@@ -118,6 +118,43 @@ TEST_CASE("scanner: identical results for 1 and 2 threads; seeds matter only thr
   CHECK(c.coverage >= 0.99);
 }
 
+TEST_CASE("scan_view returns exactly the first hits of its parallel rays") {
+  // Oracle: MeshIndex::raycast from behind each hit along the view direction must find that
+  // very point first (no farther surface, nothing skipped in front); the number of hits on a
+  // sphere is its projected disc area over pitch^2.
+  const double pitch = 0.0012;
+  Rng rng(17);
+  for (const auto& [name, mesh] :
+       {std::pair<std::string, Mesh>{"sphere", test::make_sphere(0.1, 4)},
+        std::pair<std::string, Mesh>{"torus", test::make_torus(0.07, 0.03, 64, 32)},
+        std::pair<std::string, Mesh>{"cube", test::make_box(Vec3(0.1, 0.1, 0.1), 3)}}) {
+    CAPTURE(name);
+    const MeshIndex index(mesh);
+    for (int k = 0; k < 3; ++k) {
+      // Random directions, and an axis-aligned one for the cube (its side faces seen edge-on).
+      const Vec3 d = (name == "cube" && k == 0) ? Vec3(0, 0, -1) : rng.unit_vector();
+      const PointCloud hits = scan_view(index, d, pitch);
+      REQUIRE(hits.has_normals());
+      int wrong = 0;
+      for (std::size_t i = 0; i < hits.size(); ++i) {
+        const auto hit = index.raycast(hits.points[i] - 0.5 * d, d);
+        if (!hit || (hit->point - hits.points[i]).norm() > 1e-9) ++wrong;
+        if (hits.normals[i].dot(d) > 0.0 || std::abs(std::abs(hits.normals[i].dot(hit ? hit->normal : Vec3::Zero())) - 1.0) > 1e-9) ++wrong;
+      }
+      CHECK(wrong == 0);
+      if (name == "sphere") {
+        // The icosphere's silhouette is slightly inside the sphere: 1% tolerance.
+        CHECK(static_cast<double>(hits.size()) == doctest::Approx(M_PI * 0.01 / (pitch * pitch)).epsilon(0.01));
+      }
+      if (name == "cube" && k == 0) {
+        // Pixel centres sit at half a pitch inside the projected square's edge, then every pitch.
+        const auto per_side = static_cast<std::size_t>(std::floor(0.2 / pitch + 0.5));
+        CHECK(hits.size() == per_side * per_side);
+      }
+    }
+  }
+}
+
 TEST_CASE("surface_coverage measures the covered area fraction") {
   const MeshIndex index(test::make_sphere(0.08, 4));
   // Dense points on the upper hemisphere only: the covered fraction is one half plus the band
@@ -145,6 +182,15 @@ TEST_CASE("scanner: bad settings are reported, empty meshes give an empty scan")
   s = ScanSettings{};
   s.ray_pitch = -1.0;
   CHECK_THROWS_AS(scan_mesh(index, s, 1), Error);
+  s = ScanSettings{};
+  s.fine_spacing = 1e-7;  // 4e12 rays per view
+  CHECK_THROWS_AS(scan_mesh(index, s, 1), Error);
+  s = ScanSettings{};
+  s.coverage_samples = 0;
+  CHECK_THROWS_AS(scan_mesh(index, s, 1), Error);
+  s = ScanSettings{};
+  s.max_views = 0;
+  CHECK(scan_mesh(index, s, 1).fine.empty());
   const ScanResult r = scan_mesh(MeshIndex(Mesh{}), ScanSettings{}, 1);
   CHECK(r.fine.empty());
   CHECK(r.coverage == 0.0);

@@ -1,0 +1,145 @@
+#include "engine/icp.hpp"
+
+#include "engine/kabsch.hpp"
+
+#include <Eigen/Cholesky>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <numeric>
+
+namespace ts {
+
+namespace {
+
+struct Pair {
+  double d2;
+  std::uint32_t contact;   ///< index into scene.ordered
+  std::uint32_t model;     ///< index into the fine cloud
+};
+
+/// One Gauss-Newton step of point-to-plane ICP in the object frame: the small motion
+/// (omega, v) about the centroid c of the moved contacts y that minimizes
+/// sum (n . (y + omega x (y - c) + v - z))^2. Returns false when the system is degenerate.
+bool plane_step(const std::vector<Vec3>& y, const std::vector<Vec3>& z, const std::vector<Vec3>& n,
+                Pose& delta) {
+  const std::size_t m = y.size();
+  Vec3 c = Vec3::Zero();
+  for (const Vec3& p : y) c += p;
+  c /= static_cast<double>(m);
+  Eigen::Matrix<double, 6, 6> H = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 1> g = Eigen::Matrix<double, 6, 1>::Zero();
+  for (std::size_t i = 0; i < m; ++i) {
+    Eigen::Matrix<double, 6, 1> J;
+    J.head<3>() = (y[i] - c).cross(n[i]);
+    J.tail<3>() = n[i];
+    const double r = n[i].dot(y[i] - z[i]);
+    H.noalias() += J * J.transpose();
+    g.noalias() += J * r;
+  }
+  // A little damping keeps directions the contacts do not constrain (a flat patch) still.
+  const double mu = 1e-9 * H.trace() + 1e-300;
+  H.diagonal().array() += mu;
+  const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(H);
+  if (ldlt.info() != Eigen::Success) return false;
+  const Eigen::Matrix<double, 6, 1> x = -ldlt.solve(g);
+  if (!x.allFinite()) return false;
+  const Vec3 omega = x.head<3>(), v = x.tail<3>();
+  const double angle = omega.norm();
+  Mat3 R = Mat3::Identity();
+  if (angle > 0.0) R = Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix();
+  delta = Pose::Identity();
+  delta.linear() = R;
+  delta.translation() = c + v - R * c;
+  return true;
+}
+
+}  // namespace
+
+IcpResult icp(const Scene& scene, const ObjectGeometry& geo, const Pose& T_init,
+              const IcpSettings& s) {
+  IcpResult res;
+  res.T_scene_object = T_init;
+  const std::size_t C = scene.ordered.size();
+  const std::size_t m = s.max_points == 0 ? C : std::min(C, s.max_points);
+  const bool plane = s.metric == IcpMetric::point_to_plane && geo.fine.has_normals();
+  if (m < 3 || geo.tree.size() < 3 || !T_init.matrix().allFinite()) return res;
+  res.valid = true;
+  const double gate2 = s.max_correspondence > 0.0 ? s.max_correspondence * s.max_correspondence
+                                                  : std::numeric_limits<double>::infinity();
+  const double min_rot = s.min_rotation_deg * std::numbers::pi / 180.0;
+  const double trim = std::clamp(s.trim_fraction, 0.0, 1.0);
+  const std::vector<Vec3>& model = geo.tree.points();
+
+  std::vector<Pair> pairs(m);
+  std::vector<Vec3> src, dst, nrm;
+  src.reserve(m);
+  dst.reserve(m);
+  nrm.reserve(m);
+  Pose T = T_init;
+  for (int it = 0; it < s.max_iterations; ++it) {
+    const Pose T_os = T.inverse();
+    for (std::size_t i = 0; i < m; ++i) {
+      const Neighbour nb = geo.tree.nearest(T_os * scene.ordered[i]);
+      pairs[i] = {nb.sq_distance, static_cast<std::uint32_t>(i), nb.index};
+    }
+    std::size_t keep = m;
+    if (trim < 1.0) {
+      keep = std::min(m, std::max<std::size_t>(3, static_cast<std::size_t>(std::ceil(trim * double(m)))));
+      auto by_distance = [](const Pair& a, const Pair& b) {
+        return a.d2 < b.d2 || (a.d2 == b.d2 && a.contact < b.contact);
+      };
+      std::nth_element(pairs.begin(), pairs.begin() + (keep - 1), pairs.end(), by_distance);
+      std::sort(pairs.begin(), pairs.begin() + keep,
+                [](const Pair& a, const Pair& b) { return a.contact < b.contact; });  // fixed order
+    }
+    src.clear();
+    dst.clear();
+    nrm.clear();
+    double sq = 0.0;
+    for (std::size_t j = 0; j < keep; ++j) {
+      const Pair& p = pairs[j];
+      if (p.d2 > gate2) continue;
+      sq += p.d2;
+      if (plane) {
+        src.push_back(T_os * scene.ordered[p.contact]);  // contact in the object frame
+        nrm.push_back(geo.fine.normals[p.model]);
+      } else {
+        src.push_back(model[p.model]);
+      }
+      dst.push_back(plane ? model[p.model] : scene.ordered[p.contact]);
+    }
+    res.iterations = it + 1;
+    if (src.size() < 3) break;
+    res.pairs = src.size();
+    res.rms = std::sqrt(sq / static_cast<double>(src.size()));
+    Pose delta;  // the update, as a motion of the scene frame
+    if (plane) {
+      Pose d_obj;
+      if (!plane_step(src, dst, nrm, d_obj)) break;
+      const Pose T_new = (d_obj * T_os).inverse();
+      delta = T_new * T.inverse();
+      T = T_new;
+    } else {
+      const RigidFit fit = kabsch(src, dst);
+      if (!fit.valid) break;
+      delta = fit.T_target_source * T.inverse();
+      T = fit.T_target_source;
+    }
+    if (!T.matrix().allFinite()) {
+      T = res.T_scene_object;
+      break;
+    }
+    res.T_scene_object = T;
+    if (delta.translation().norm() < s.min_translation && rotation_angle(delta.linear()) < min_rot) {
+      res.converged = true;
+      break;
+    }
+  }
+  res.T_scene_object = T;
+  return res;
+}
+
+}  // namespace ts

@@ -1,0 +1,46 @@
+// Least-squares rigid registration of paired points (Arun, Huang & Blostein 1987, with Umeyama's
+// reflection fix), used by triplet registration (Section 4.3.2) and every ICP iteration.
+// Numerics: both point sets are centred in a local frame before anything is squared (dive logs
+// sit far from the origin), and degenerate configurations are rejected by geometry (the ratio of
+// singular values of the centred points), never by the residual.
+#pragma once
+
+#include "engine/core.hpp"
+
+#include <span>
+
+namespace ts {
+
+struct KabschSettings {
+  double min_sv_ratio = 1e-3;   ///< sigma2/sigma1 of either centred set below this: degenerate
+  double min_spread = 1e-12;    ///< m, sigma1 (RMS radius) below this: all points coincide
+};
+
+/// A rigid fit target_i ~= T_target_source * source_i, with diagnostics.
+struct RigidFit {
+  Pose T_target_source = Pose::Identity();
+  bool valid = false;             ///< false: too few points, non-finite, coincident or collinear
+  bool reflection_fixed = false;  ///< the unconstrained optimum was a reflection (det = -1)
+  double rms = 0.0;               ///< m, weighted RMS residual after the fit
+  double sv_ratio = 0.0;          ///< min over both sets of sigma2/sigma1 of the centred points
+};
+
+/// Weighted Kabsch/Arun. `weights` is empty (all 1) or one non-negative weight per pair.
+/// Never returns NaN: invalid inputs give valid = false and the identity.
+RigidFit kabsch(std::span<const Vec3> source, std::span<const Vec3> target,
+                std::span<const double> weights = {}, const KabschSettings& settings = {});
+
+/// Singular values (descending) of the centred point set, divided by sqrt(n): the RMS spreads
+/// along the principal axes. Computed in a frame centred on the points.
+Vec3 principal_spreads(std::span<const Vec3> points);
+
+/// Geometric test of a triangle (triplet sampling and registration, Section 4.3.2): true when the
+/// three points are finite, pairwise distinct and far from collinear, i.e. the smaller in-plane
+/// spread is at least `min_sv_ratio` times the larger. Independent of position and scale.
+bool triangle_well_conditioned(const Vec3& a, const Vec3& b, const Vec3& c, double min_sv_ratio);
+
+/// The rotation angle of R in radians, in [0, pi] (Eq. 10), computed stably near 0 and pi
+/// (from the quaternion rather than arccos of the trace).
+double rotation_angle(const Mat3& R);
+
+}  // namespace ts

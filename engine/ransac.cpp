@@ -1,0 +1,268 @@
+#include "engine/ransac.hpp"
+
+#include "engine/kabsch.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+#include <optional>
+
+namespace ts {
+
+namespace {
+
+constexpr std::uint64_t kTagTriplet = 0x7121;
+constexpr std::uint64_t kTagRegistration = 0x7e61;
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+/// One pruned feature: which object, which coarse point.
+struct Pruned {
+  std::uint32_t object;
+  std::uint32_t point;
+};
+
+/// Pruned features of one triplet point, grouped by object (ascending), nearest first within.
+struct PrunedSet {
+  std::vector<Pruned> items;
+  std::vector<std::array<std::uint32_t, 3>> ranges;  ///< (object, begin, end)
+
+  std::pair<std::uint32_t, std::uint32_t> range_of(std::uint32_t object) const {
+    auto it = std::lower_bound(ranges.begin(), ranges.end(), object,
+                               [](const auto& r, std::uint32_t o) { return r[0] < o; });
+    if (it == ranges.end() || (*it)[0] != object) return {0, 0};
+    return {(*it)[1], (*it)[2]};
+  }
+};
+
+/// Sign-free angles of a point pair with normals: |n_a . n_b|, |n_a . u|, |n_b . u| (u the unit
+/// chord), as cosines. Invariant to rigid motions and to flipped normals.
+struct PairSignature {
+  double nn = 0, na = 0, nb = 0;
+};
+inline PairSignature signature(const Vec3& pa, const Vec3& na, const Vec3& pb, const Vec3& nb) {
+  const Vec3 u = (pb - pa).normalized();
+  return {std::abs(na.dot(nb)), std::abs(na.dot(u)), std::abs(nb.dot(u))};
+}
+inline bool similar(const PairSignature& a, const PairSignature& b, double tol) {
+  return std::abs(a.nn - b.nn) <= tol && std::abs(a.na - b.na) <= tol && std::abs(a.nb - b.nb) <= tol;
+}
+
+struct Triplet {
+  bool valid = false;
+  std::array<std::uint32_t, 3> point{};   ///< contact indices
+  std::array<Vec3, 3> p;                  ///< scene frame
+  std::array<Vec3, 3> n;                  ///< scene normals
+  PairSignature s12, s13, s23;
+  double d12 = 0, d13 = 0, d23 = 0;
+  std::array<PrunedSet, 3> pruned;
+  bool from_boundary = false;   ///< drawn from all points, the interior gave no valid triplet
+};
+
+PrunedSet prune(const FeatureIndex& index, const Feature& f, std::size_t w,
+                const std::vector<std::uint8_t>& allowed) {
+  PrunedSet set;
+  const std::vector<Neighbour> nn = index.knn(f, w);
+  set.items.reserve(nn.size());
+  for (const Neighbour& nb : nn) {
+    const FeatureRef& r = index.ref(nb.index);
+    if (r.object < allowed.size() && allowed[r.object]) set.items.push_back({r.object, r.point});
+  }
+  // Group by object, keeping the nearest-first order inside each group.
+  std::stable_sort(set.items.begin(), set.items.end(),
+                   [](const Pruned& a, const Pruned& b) { return a.object < b.object; });
+  for (std::uint32_t i = 0; i < set.items.size();) {
+    std::uint32_t j = i;
+    while (j < set.items.size() && set.items[j].object == set.items[i].object) ++j;
+    set.ranges.push_back({set.items[i].object, i, j});
+    i = j;
+  }
+  return set;
+}
+
+std::optional<Candidate> register_once(const Triplet& t, const Database& db,
+                                       const RansacSettings& s, Rng& rng,
+                                       std::vector<std::uint32_t>& buf2,
+                                       std::vector<std::uint32_t>& buf3) {
+  const PrunedSet& F1 = t.pruned[0];
+  const PrunedSet& F2 = t.pruned[1];
+  const PrunedSet& F3 = t.pruned[2];
+  if (F1.items.empty() || F2.items.empty() || F3.items.empty()) return std::nullopt;
+  const double tol = s.distance_tolerance;
+  const bool use_normals = s.normal_tolerance_deg > 0.0;
+  const double ntol = std::sin(std::min(90.0, s.normal_tolerance_deg) * std::numbers::pi / 180.0);
+  for (int attempt = 0; attempt < s.registration_attempts; ++attempt) {
+    const Pruned& a = F1.items[rng.index(F1.items.size())];
+    const PointCloud& coarse = db.features(a.object).coarse;
+    const std::vector<Vec3>& pts = coarse.points;
+    const bool normals = use_normals && coarse.has_normals();
+    const Vec3& q1 = pts[a.point];
+    // Second point: same object, distance to the first matching the input's (and, as an
+    // extension, the same angles between normals and chord).
+    const auto [b2, e2] = F2.range_of(a.object);
+    buf2.clear();
+    for (std::uint32_t j = b2; j < e2; ++j) {
+      const std::uint32_t k = F2.items[j].point;
+      const double d = (pts[k] - q1).norm();
+      if (std::abs(d - t.d12) > tol) continue;
+      if (normals && !similar(signature(q1, coarse.normals[a.point], pts[k], coarse.normals[k]), t.s12, ntol))
+        continue;
+      buf2.push_back(k);
+    }
+    if (buf2.empty()) continue;
+    const std::uint32_t k2 = buf2[rng.index(buf2.size())];
+    const Vec3& q2 = pts[k2];
+    const auto [b3, e3] = F3.range_of(a.object);
+    buf3.clear();
+    for (std::uint32_t j = b3; j < e3; ++j) {
+      const std::uint32_t k = F3.items[j].point;
+      const Vec3& q = pts[k];
+      if (std::abs((q - q1).norm() - t.d13) > tol || std::abs((q - q2).norm() - t.d23) > tol) continue;
+      if (normals &&
+          (!similar(signature(q1, coarse.normals[a.point], q, coarse.normals[k]), t.s13, ntol) ||
+           !similar(signature(q2, coarse.normals[k2], q, coarse.normals[k]), t.s23, ntol)))
+        continue;
+      buf3.push_back(k);
+    }
+    if (buf3.empty()) continue;
+    const Vec3& q3 = pts[buf3[rng.index(buf3.size())]];
+    if (!triangle_well_conditioned(q1, q2, q3, s.min_sv_ratio)) continue;
+    const std::array<Vec3, 3> src{q1, q2, q3};
+    const RigidFit fit = kabsch(src, t.p);
+    if (!fit.valid) continue;
+    Candidate c;
+    c.object = a.object;
+    c.T_scene_object = fit.T_target_source;
+    return c;
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::vector<std::uint8_t> objects_spanning(const Scene& scene, const Database& db, double slack) {
+  std::vector<std::uint8_t> allowed(db.size(), 1);
+  for (std::size_t o = 0; o < db.size(); ++o)
+    allowed[o] = db.info(o).extent.norm() + slack >= scene.diameter ? 1 : 0;
+  return allowed;
+}
+
+FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings& settings,
+                                 const std::vector<std::uint8_t>& objects) {
+  std::vector<Feature> features;
+  std::vector<FeatureRef> refs;
+  for (std::size_t o = 0; o < db.size(); ++o) {
+    if (!objects.empty() && (o >= objects.size() || !objects[o])) continue;
+    const ObjectFeatures& f = db.features(o);
+    for (std::size_t i = 0; i < f.features.size(); ++i) {
+      features.push_back(f.features[i]);
+      refs.push_back({static_cast<std::uint32_t>(o), static_cast<std::uint32_t>(i)});
+    }
+  }
+  return FeatureIndex(std::move(features), std::move(refs), settings);
+}
+
+std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
+                                         const FeatureIndex& index,
+                                         const std::vector<std::uint8_t>& allowed,
+                                         const RansacSettings& s, std::uint64_t seed,
+                                         std::uint64_t step, RansacStats* stats) {
+  RansacStats st;
+  for (std::uint8_t a : allowed) st.objects_allowed += a;
+  std::vector<Candidate> out;
+  const int N = std::max(0, s.triplets), R = std::max(0, s.registrations);
+
+  // Sampling pools: interior points with a feature first; all points with a feature when no
+  // valid triplet can be drawn from the interior (small or narrow patches).
+  std::vector<std::uint32_t> interior, valid;
+  for (std::uint32_t i = 0; i < scene.contacts.size(); ++i) {
+    if (!scene.feature_valid[i]) continue;
+    valid.push_back(i);
+    if (scene.interior[i]) interior.push_back(i);
+  }
+  if (valid.size() < 3 || N == 0 || R == 0 || index.size() == 0 || st.objects_allowed == 0) {
+    if (stats) *stats = st;
+    return out;
+  }
+  const double spacing = std::min(s.min_spacing > 0.0 ? s.min_spacing : scene.feature_radius,
+                                  0.3 * scene.diameter);
+
+  // Triplet sampling and feature pruning, one slot per triplet.
+  auto t0 = Clock::now();
+  std::vector<Triplet> trip(static_cast<std::size_t>(N));
+  tbb::parallel_for(tbb::blocked_range<int>(0, N, 1), [&](const tbb::blocked_range<int>& r) {
+    for (int i = r.begin(); i != r.end(); ++i) {
+      Triplet& t = trip[static_cast<std::size_t>(i)];
+      Rng rng(seed, step, kTagTriplet, static_cast<std::uint64_t>(i));
+      for (int a = 0; a < 2 * s.triplet_attempts && !t.valid; ++a) {
+        const bool inner = a < s.triplet_attempts && interior.size() >= 3;
+        if (!inner && a < s.triplet_attempts) continue;
+        const std::vector<std::uint32_t>& pool = inner ? interior : valid;
+        t.from_boundary = !inner;
+        std::array<std::uint32_t, 3> k{};
+        for (auto& x : k) x = pool[rng.index(pool.size())];
+        const Vec3 &p1 = scene.contacts.points[k[0]], &p2 = scene.contacts.points[k[1]],
+                   &p3 = scene.contacts.points[k[2]];
+        const double d12 = (p2 - p1).norm(), d13 = (p3 - p1).norm(), d23 = (p3 - p2).norm();
+        if (d12 < spacing || d13 < spacing || d23 < spacing) continue;
+        if (!triangle_well_conditioned(p1, p2, p3, s.min_sv_ratio)) continue;
+        t.valid = true;
+        t.point = k;
+        t.p = {p1, p2, p3};
+        t.n = {scene.contacts.normals[k[0]], scene.contacts.normals[k[1]], scene.contacts.normals[k[2]]};
+        t.s12 = signature(p1, t.n[0], p2, t.n[1]);
+        t.s13 = signature(p1, t.n[0], p3, t.n[2]);
+        t.s23 = signature(p2, t.n[1], p3, t.n[2]);
+        t.d12 = d12;
+        t.d13 = d13;
+        t.d23 = d23;
+      }
+      if (!t.valid) continue;
+      for (int j = 0; j < 3; ++j)
+        t.pruned[j] = prune(index, scene.features[t.point[j]], s.prune_w, allowed);
+    }
+  });
+  st.time_prune_s = seconds_since(t0);
+  for (const Triplet& t : trip) {
+    st.triplets += t.valid;
+    if (t.valid && t.from_boundary) st.boundary_fallback = true;
+    if (t.valid)
+      for (const PrunedSet& ps : t.pruned) st.pruned += ps.items.size();
+  }
+
+  // Triplet registration, one slot per (triplet, registration).
+  t0 = Clock::now();
+  const std::size_t slots = static_cast<std::size_t>(N) * static_cast<std::size_t>(R);
+  std::vector<std::optional<Candidate>> cand(slots);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, slots, 16),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      std::vector<std::uint32_t> buf2, buf3;
+                      for (std::size_t k = r.begin(); k != r.end(); ++k) {
+                        const std::size_t i = k / static_cast<std::size_t>(R);
+                        if (!trip[i].valid) continue;
+                        Rng rng(seed, step, kTagRegistration, k);
+                        cand[k] = register_once(trip[i], db, s, rng, buf2, buf3);
+                        if (cand[k]) cand[k]->slot = static_cast<std::uint32_t>(k);
+                      }
+                    });
+  st.time_register_s = seconds_since(t0);
+  std::vector<std::uint8_t> reached(db.size(), 0);
+  for (auto& c : cand) {
+    if (!c) continue;
+    reached[c->object] = 1;
+    out.push_back(*c);
+  }
+  st.registrations = out.size();
+  for (std::uint8_t r : reached) st.objects_reached += r;
+  if (stats) *stats = st;
+  return out;
+}
+
+}  // namespace ts

@@ -1,0 +1,329 @@
+#include "engine/recognizer.hpp"
+
+#include "engine/kabsch.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+#include <set>
+
+namespace ts {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+template <class F>
+void parallel_each(std::size_t n, F&& f) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
+                    });
+}
+
+/// Hypotheses in the scene frame while a step works on them.
+struct Working {
+  Candidate cand;        ///< object, T_scene_object, slot
+  Evaluation eval;
+  int born = 0;
+  int icp_iterations = 0;
+  bool icp_converged = false;
+};
+
+/// Fixed total order: weight descending, then older first, then slot.
+bool better(const Working& a, const Working& b) {
+  if (a.eval.log_weight != b.eval.log_weight) return a.eval.log_weight > b.eval.log_weight;
+  if (a.born != b.born) return a.born < b.born;
+  return a.cand.slot < b.cand.slot;
+}
+
+void preload(const Database& db, const std::vector<Working>& w) {
+  std::set<std::uint32_t> objects;
+  for (const Working& h : w) objects.insert(h.cand.object);
+  for (std::uint32_t o : objects) (void)db.geometry(o);
+}
+
+/// ICP every hypothesis against its own object (Algorithm 1, line 4), in parallel.
+void refine_all(const Scene& scene, const Database& db, const IcpSettings& s,
+                std::vector<Working>& w) {
+  preload(db, w);
+  parallel_each(w.size(), [&](std::size_t i) {
+    Working& h = w[i];
+    const IcpResult r = icp(scene, db.geometry(h.cand.object), h.cand.T_scene_object, s);
+    if (r.valid) h.cand.T_scene_object = r.T_scene_object;
+    h.icp_iterations = r.iterations;
+    h.icp_converged = r.converged;
+  });
+}
+
+/// Complete evaluation of every hypothesis (Algorithm 1, line 5), in parallel.
+void evaluate_each(const Scene& scene, const Database& db, const EvaluateSettings& s,
+                   std::vector<Working>& w) {
+  preload(db, w);
+  parallel_each(w.size(), [&](std::size_t i) {
+    Working& h = w[i];
+    h.eval = evaluate(scene, db.geometry(h.cand.object), db.info(h.cand.object),
+                      h.cand.T_scene_object, s);
+  });
+}
+
+bool duplicates(const Working& a, const Working& b, double distance) {
+  if (a.cand.object != b.cand.object) return false;
+  const Pose d = a.cand.T_scene_object.inverse() * b.cand.T_scene_object;
+  return d.translation().norm() < distance &&
+         rotation_angle(d.linear()) < 2.0 * std::numbers::pi / 180.0;
+}
+
+/// Append from `from` (sorted) to `into` until it holds `limit`, skipping duplicates if asked.
+void take(std::vector<Working>& into, const std::vector<Working>& from, std::size_t limit,
+          bool dedupe, double distance) {
+  for (const Working& h : from) {
+    if (into.size() >= limit) break;
+    if (dedupe) {
+      bool dup = false;
+      for (const Working& k : into)
+        if (duplicates(k, h, distance)) { dup = true; break; }
+      if (dup) continue;
+    }
+    into.push_back(h);
+  }
+}
+
+std::vector<Working> from_scored(const std::vector<Candidate>& cands,
+                                 const std::vector<ScoredCandidate>& top, int born) {
+  std::vector<Working> w;
+  w.reserve(top.size());
+  for (const ScoredCandidate& sc : top) {
+    Working h;
+    h.cand = cands[sc.index];
+    h.eval = sc.eval;
+    h.born = born;
+    w.push_back(h);
+  }
+  return w;
+}
+
+}  // namespace
+
+std::string_view method_name(Method m) {
+  switch (m) {
+    case Method::batch_ransac: return "batch-ransac";
+    case Method::ransac_icp: return "ransac-icp";
+    case Method::ransac_icp_fs: return "ransac-icp-fs";
+    case Method::bricpsf: return "bricpsf";
+  }
+  return "bricpsf";
+}
+
+std::optional<Method> parse_method(std::string_view name) {
+  for (Method m : {Method::batch_ransac, Method::ransac_icp, Method::ransac_icp_fs,
+                   Method::bricpsf})
+    if (method_name(m) == name) return m;
+  return std::nullopt;
+}
+
+RecognizerSettings RecognizerSettings::scaled(double f) const {
+  RecognizerSettings s = *this;
+  s.dedupe_distance *= f;
+  s.scene.query_voxel *= f;
+  s.ransac.min_spacing *= f;
+  s.ransac.distance_tolerance *= f;
+  s.ransac.size_slack *= f;
+  s.icp.min_translation *= f;
+  s.icp.max_correspondence *= f;
+  s.evaluate.d_outlier *= f;
+  s.evaluate.res_free *= f;
+  return s;
+}
+
+Recognizer::Recognizer(const Database& db, std::shared_ptr<const FeatureIndex> index,
+                       RecognizerSettings settings)
+    : db_(db), index_(std::move(index)), s_(std::move(settings)) {
+  if (!s_.objects.empty() && s_.objects.size() != db_.size())
+    throw Error("object mask has " + std::to_string(s_.objects.size()) + " entries, the database " +
+                std::to_string(db_.size()) + " objects", {}, "objects");
+  if (!index_)
+    index_ = std::make_shared<FeatureIndex>(build_feature_index(db_, s_.index, s_.objects));
+  if (!(s_.psi >= 0.0 && s_.psi <= 1.0)) throw Error("psi must be in [0, 1]", {}, "psi");
+  if (s_.n_p == 0) throw Error("n_p must be positive", {}, "n_p");
+}
+
+Recognizer::Recognizer(const Database& db, RecognizerSettings settings)
+    : Recognizer(db, nullptr, std::move(settings)) {}
+
+void Recognizer::reset() {
+  step_ = 0;
+  state_.clear();
+}
+
+StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<Vec3>& free_world) {
+  const auto t_start = Clock::now();
+  ++step_;
+  StepResult res;
+  res.step = step_;
+  res.posteriors.assign(db_.size(), 0.0);
+  const auto step_u = static_cast<std::uint64_t>(step_);
+
+  // The query in a local frame (Section 4.1.2 clouds; Section 4.3.1 normals and features).
+  auto t0 = Clock::now();
+  const Scene scene = prepare_scene(contacts_world, free_world, db_.settings().fpfh, s_.scene,
+                                    s_.seed, step_u);
+  res.times.prepare_s = seconds_since(t0);
+  res.contacts = scene.contacts.size();
+  res.free_points = scene.free_space.size();
+  res.unobservable_dof = scene.unobservable_dof;
+  res.pose_ambiguous = scene.unobservable_dof > 0;
+  if (scene.contacts.empty()) {  // nothing to match: the state waits for data
+    res.geometry_loads = db_.geometry_loads();
+    res.times.total_s = seconds_since(t_start);
+    return res;
+  }
+
+  const bool with_free = s_.method == Method::ransac_icp_fs || s_.method == Method::bricpsf;
+  EvaluateSettings ev = s_.evaluate;
+  ev.free_space = ev.free_space && with_free;
+
+  // Batch RANSAC hypothesis generation (Section 4.3.2), every method, every step.
+  std::vector<std::uint8_t> allowed = objects_spanning(scene, db_, s_.ransac.size_slack);
+  if (!s_.objects.empty())
+    for (std::size_t o = 0; o < allowed.size(); ++o) allowed[o] = allowed[o] && s_.objects[o];
+  RansacStats rs;
+  const std::vector<Candidate> cands =
+      ransac_candidates(scene, db_, *index_, allowed, s_.ransac, s_.seed, step_u, &rs);
+  res.times.prune_s = rs.time_prune_s;
+  res.times.register_s = rs.time_register_s;
+  res.candidates = cands.size();
+  res.objects_allowed = rs.objects_allowed;
+  res.boundary_fallback = rs.boundary_fallback;
+
+  const std::size_t n_p = s_.n_p;
+  std::vector<Working> next;
+  SelectStats ss;
+  auto select = [&](const std::vector<Candidate>& c, std::size_t k) {
+    const auto te = Clock::now();
+    const auto top = select_top(scene, db_, c, k, ev, &ss);
+    res.times.evaluate_s += seconds_since(te);
+    res.evaluated_full += ss.full;
+    res.rejected_early += ss.rejected_prefix + ss.rejected_later;
+    return from_scored(c, top, step_);
+  };
+
+  switch (s_.method) {
+    case Method::batch_ransac: {
+      take(next, select(cands, n_p), n_p, s_.dedupe, s_.dedupe_distance);
+      break;
+    }
+    case Method::ransac_icp:
+    case Method::ransac_icp_fs: {
+      // Section 5.4: each registration refined by ICP, then evaluated.
+      std::vector<Candidate> pool = cands;
+      if (s_.icp_top > 0.0 && s_.icp_top < 1.0) {
+        const auto k = static_cast<std::size_t>(std::ceil(s_.icp_top * double(cands.size())));
+        std::vector<Working> pre = select(cands, std::max(k, n_p));
+        pool.clear();
+        for (const Working& h : pre) pool.push_back(h.cand);
+      }
+      std::vector<Working> w(pool.size());
+      for (std::size_t i = 0; i < pool.size(); ++i) w[i].cand = pool[i];
+      t0 = Clock::now();
+      refine_all(scene, db_, s_.icp, w);
+      res.times.icp_s += seconds_since(t0);
+      std::vector<Candidate> refined(w.size());
+      for (std::size_t i = 0; i < w.size(); ++i) refined[i] = w[i].cand;
+      std::vector<Working> top = select(refined, s_.dedupe ? 4 * n_p : n_p);
+      // carry the ICP diagnostics over
+      for (Working& h : top)
+        for (const Working& x : w)
+          if (x.cand.slot == h.cand.slot) {
+            h.icp_iterations = x.icp_iterations;
+            h.icp_converged = x.icp_converged;
+            break;
+          }
+      take(next, top, n_p, s_.dedupe, s_.dedupe_distance);
+      break;
+    }
+    case Method::bricpsf: {
+      // Algorithm 1, lines 3-7: evolve the old hypotheses with ICP, evaluate with Eq. 6.
+      std::vector<Working> old(state_.size());
+      for (std::size_t i = 0; i < state_.size(); ++i) {
+        old[i].cand.object = state_[i].object;
+        old[i].cand.T_scene_object = scene.to_scene(state_[i].pose);
+        old[i].cand.slot = state_[i].slot;
+        old[i].born = state_[i].born;
+      }
+      t0 = Clock::now();
+      refine_all(scene, db_, s_.icp, old);
+      res.times.icp_s += seconds_since(t0);
+      t0 = Clock::now();
+      evaluate_each(scene, db_, ev, old);
+      res.times.evaluate_s += seconds_since(t0);
+      std::sort(old.begin(), old.end(), better);
+
+      // Line 8-9: new hypotheses from Batch RANSAC; resample Psi*n_p old + (1-Psi)*n_p new.
+      const auto k_old = std::min(old.size(),
+                                  static_cast<std::size_t>(std::lround(s_.psi * double(n_p))));
+      take(next, old, k_old, s_.dedupe, s_.dedupe_distance);
+      const std::size_t k_new = n_p - next.size();
+      std::vector<Working> fresh = select(cands, s_.dedupe ? 2 * k_new : k_new);
+      if (s_.refine_new) {
+        t0 = Clock::now();
+        refine_all(scene, db_, s_.icp, fresh);
+        res.times.icp_s += seconds_since(t0);
+        t0 = Clock::now();
+        evaluate_each(scene, db_, ev, fresh);
+        res.times.evaluate_s += seconds_since(t0);
+        std::sort(fresh.begin(), fresh.end(), better);
+      }
+      take(next, fresh, n_p, s_.dedupe, s_.dedupe_distance);
+      // Too few new ones: fill with the next-best old hypotheses.
+      if (next.size() < n_p) {
+        std::vector<Working> rest(old.begin() + static_cast<std::ptrdiff_t>(k_old), old.end());
+        take(next, rest, n_p, s_.dedupe, s_.dedupe_distance);
+      }
+      break;
+    }
+  }
+  std::sort(next.begin(), next.end(), better);
+
+  // The new state in world coordinates; the best hypothesis and the posterior per object.
+  state_.clear();
+  double max_lw = -std::numeric_limits<double>::infinity();
+  for (const Working& h : next) max_lw = std::max(max_lw, h.eval.log_weight);
+  double total = 0.0;
+  for (const Working& h : next) {
+    Hypothesis out;
+    out.object = h.cand.object;
+    out.pose = scene.to_world(h.cand.T_scene_object);
+    out.log_weight = h.eval.log_weight;
+    out.weight = std::exp(h.eval.log_weight);
+    out.born = h.born;
+    out.slot = h.cand.slot;
+    out.icp_iterations = h.icp_iterations;
+    out.icp_converged = h.icp_converged;
+    state_.push_back(out);
+    // log-sum-exp normalization: finite even when every wt underflows
+    const double rel = std::isfinite(max_lw) ? std::exp(h.eval.log_weight - max_lw) : 1.0;
+    res.posteriors[h.cand.object] += rel;
+    total += rel;
+  }
+  if (total > 0.0)
+    for (double& p : res.posteriors) p /= total;
+  res.hypotheses = state_;
+  res.valid = !state_.empty();
+  if (res.valid) {
+    res.best = state_.front();
+    res.posterior = res.posteriors[res.best.object];
+  }
+  res.geometry_loads = db_.geometry_loads();
+  res.times.total_s = seconds_since(t_start);
+  return res;
+}
+
+}  // namespace ts

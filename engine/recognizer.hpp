@@ -1,0 +1,121 @@
+// Sequential object recognition and 6-DOF localization (Section 4.4): BRICPSF, Batch RANSAC
+// with ICP and Free Space, and its ablations, as one code path.
+//
+//   batch-ransac   Section 4.3.2: every step on its own; hypotheses scored by Eq. 5.
+//   ransac-icp     Section 5.4: every RANSAC hypothesis refined by ICP, scored by Eq. 5.
+//   ransac-icp-fs  Section 5.4: as ransac-icp, scored by Eq. 6 (contact x free space).
+//   bricpsf        Algorithm 1: the n_p hypotheses of the previous step are refined by ICP and
+//                  re-evaluated (Eq. 6); Batch RANSAC proposes new ones (Eq. 6); the best
+//                  Psi*n_p old and (1-Psi)*n_p new form the new state. A hypothesis keeps its
+//                  object for life.
+//
+// A step takes the cumulative contact and free-space clouds in world coordinates; all work is
+// done in a frame centred on the contacts, and poses are reported as T_world_object.
+// Deterministic for a seed and any thread count (the caller's task arena decides the threads).
+#pragma once
+
+#include "engine/database.hpp"
+#include "engine/evaluate.hpp"
+#include "engine/icp.hpp"
+#include "engine/ransac.hpp"
+#include "engine/scene.hpp"
+
+#include <memory>
+#include <optional>
+#include <string_view>
+
+namespace ts {
+
+enum class Method { batch_ransac, ransac_icp, ransac_icp_fs, bricpsf };
+std::string_view method_name(Method m);                  ///< "bricpsf", "batch-ransac", ...
+std::optional<Method> parse_method(std::string_view name);
+
+struct RecognizerSettings {
+  Method method = Method::bricpsf;
+  std::size_t n_p = 100;            ///< hypotheses kept per step (Section 5.5: 100)
+  double psi = 0.8;                 ///< share of evolved old hypotheses in resampling (0.8)
+  bool refine_new = false;          ///< extension: ICP on the new RANSAC hypotheses chosen in
+                                    ///< resampling before they join (bricpsf)
+  bool dedupe = false;              ///< extension: drop hypotheses that duplicate a better one
+                                    ///< (same object, pose within dedupe_distance / 2 degrees)
+  double dedupe_distance = 0.002;   ///< m
+  double icp_top = 0.0;             ///< ransac-icp(-fs): ICP only the best share of candidates
+                                    ///< by pre-ICP score (0: all, as in the paper)
+  std::uint64_t seed = 1;           ///< every random draw derives from (seed, step, task)
+  std::vector<std::uint8_t> objects;  ///< objects the recognizer may answer (1 = yes), by
+                                      ///< database index; empty: all
+  SceneSettings scene;
+  RansacSettings ransac;
+  IcpSettings icp;
+  EvaluateSettings evaluate;
+  FeatureIndexSettings index;
+
+  /// Every length multiplied by `factor` (objects of another size scale).
+  RecognizerSettings scaled(double factor) const;
+};
+
+struct Hypothesis {
+  std::uint32_t object = 0;
+  Pose pose = Pose::Identity();     ///< T_world_object
+  double log_weight = -std::numeric_limits<double>::infinity();  ///< ln wt (Eq. 5 or 6)
+  double weight = 0.0;              ///< wt = exp(log_weight)
+  int born = 0;                     ///< step that created it
+  std::uint32_t slot = 0;           ///< RANSAC slot that created it (triplet * R + r)
+  int icp_iterations = 0;           ///< of the last refinement (0: none)
+  bool icp_converged = false;
+};
+
+struct StageTimes {
+  double prepare_s = 0.0;           ///< normals, FPFH, interior points of the contacts
+  double prune_s = 0.0;             ///< triplet sampling + W-nearest feature queries
+  double register_s = 0.0;          ///< triplet registrations (Kabsch)
+  double icp_s = 0.0;               ///< ICP of hypotheses
+  double evaluate_s = 0.0;          ///< Eq. 4-9 (with early rejection)
+  double total_s = 0.0;
+};
+
+struct StepResult {
+  int step = 0;                     ///< 1-based
+  bool valid = false;               ///< there is at least one hypothesis
+  Hypothesis best;                  ///< the hypothesis with the largest weight
+  double posterior = 0.0;           ///< posterior of best.object
+  std::vector<Hypothesis> hypotheses;  ///< the state S_t, best first
+  std::vector<double> posteriors;   ///< per database object: weights summed, normalized
+  std::size_t contacts = 0, free_points = 0;
+  int unobservable_dof = 6;         ///< pose DOF the contacts leave unconstrained (flat: 3)
+  bool pose_ambiguous = true;       ///< unobservable_dof > 0: do not trust the pose
+  std::size_t candidates = 0;       ///< RANSAC registrations this step
+  std::size_t evaluated_full = 0;   ///< candidates evaluated completely
+  std::size_t rejected_early = 0;   ///< candidates rejected by the exact bound
+  std::size_t objects_allowed = 0;  ///< objects large enough to span the contacts
+  std::size_t geometry_loads = 0;   ///< objects whose geometry the database has loaded so far
+  bool boundary_fallback = false;   ///< triplets had to use patch-boundary points
+  StageTimes times;
+};
+
+class Recognizer {
+ public:
+  /// `index` may be shared between recognizers over the same database; build it with
+  /// build_feature_index(db, settings.index, settings.objects).
+  Recognizer(const Database& db, std::shared_ptr<const FeatureIndex> index,
+             RecognizerSettings settings);
+  /// Builds the feature index itself.
+  Recognizer(const Database& db, RecognizerSettings settings);
+
+  /// One exploration step with the cumulative clouds (world frame). Free space may be empty.
+  StepResult step(const PointCloud& contacts_world, const std::vector<Vec3>& free_world);
+  void reset();                     ///< forget the hypotheses; the next step is step 1
+  int steps_done() const { return step_; }
+  const std::vector<Hypothesis>& hypotheses() const { return state_; }
+  const RecognizerSettings& settings() const { return s_; }
+  const Database& database() const { return db_; }
+
+ private:
+  const Database& db_;
+  std::shared_ptr<const FeatureIndex> index_;
+  RecognizerSettings s_;
+  int step_ = 0;
+  std::vector<Hypothesis> state_;   ///< S_t, world poses, best first
+};
+
+}  // namespace ts

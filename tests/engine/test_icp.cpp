@@ -1,0 +1,101 @@
+#include "engine/icp.hpp"
+#include "engine/kabsch.hpp"
+#include "engine/pose_error.hpp"
+#include "recognition_fixture.hpp"
+
+#include <doctest/doctest.h>
+
+using namespace ts;
+
+namespace {
+
+struct IcpCase {
+  std::shared_ptr<test::TestSource> src = test::make_source();
+  Database db{src};
+  std::size_t obj = 4;  // the wedge: no symmetry
+  Pose truth = test::random_pose(31, Vec3(0.2, 0.1, -0.3));
+  Scene scene(int patches, double noise = 0.0, std::uint64_t seed = 5) {
+    const PointCloud c = test::touch(src->fines[obj], truth, patches, seed, 0.0, noise);
+    return prepare_scene(c, {}, db.settings().fpfh, {}, 1, 1);
+  }
+};
+
+Pose perturbed(const Pose& T, double dist, double deg, std::uint64_t seed) {
+  Rng rng(seed);
+  Pose P = T;
+  P.translation() += dist * rng.unit_vector();
+  P.linear() = Eigen::AngleAxisd(deg * test::kPi / 180, rng.unit_vector()).toRotationMatrix() * P.linear();
+  return P;
+}
+
+}  // namespace
+
+TEST_CASE("ICP converges from a perturbed pose to the truth (both metrics)") {
+  IcpCase c;
+  const Scene sc = c.scene(12);
+  const ObjectGeometry& geo = c.db.geometry(c.obj);
+  for (IcpMetric metric : {IcpMetric::point_to_point, IcpMetric::point_to_plane}) {
+    IcpSettings s;
+    s.metric = metric;
+    s.max_iterations = 100;
+    int iterations = 0;
+    for (int trial = 0; trial < 5; ++trial) {
+      const Pose start = perturbed(sc.to_scene(c.truth), 0.004, 4.0, 100 + trial);
+      const IcpResult r = icp(sc, geo, start, s);
+      CHECK(r.valid);
+      CHECK(r.converged);
+      const PoseError e = pose_error(sc.to_world(r.T_scene_object), c.truth);
+      CHECK(e.position_m < 5e-4);
+      CHECK(e.orientation_deg < 0.5);
+      iterations += r.iterations;
+    }
+    MESSAGE((metric == IcpMetric::point_to_plane ? "point-to-plane" : "point-to-point")
+            << ": mean iterations " << iterations / 5.0);
+  }
+}
+
+TEST_CASE("Trimmed ICP resists outlying contacts") {
+  IcpCase c;
+  Scene sc = c.scene(12);
+  // Replace every 5th contact (in evaluation order) by an outlier 3 cm off the surface.
+  Rng rng(9);
+  for (std::size_t i = 0; i < sc.ordered.size(); i += 5) sc.ordered[i] += 0.03 * rng.unit_vector();
+  const ObjectGeometry& geo = c.db.geometry(c.obj);
+  const Pose start = perturbed(sc.to_scene(c.truth), 0.003, 3.0, 7);
+  IcpSettings plain;
+  plain.max_iterations = 100;
+  IcpSettings trimmed = plain;
+  trimmed.trim_fraction = 0.75;
+  const PoseError ep = pose_error(sc.to_world(icp(sc, geo, start, plain).T_scene_object), c.truth);
+  const PoseError et = pose_error(sc.to_world(icp(sc, geo, start, trimmed).T_scene_object), c.truth);
+  CHECK(et.position_m < 1e-3);
+  CHECK(et.orientation_deg < 1.0);
+  CHECK(et.position_m < ep.position_m);
+}
+
+TEST_CASE("ICP on degenerate input keeps the initial pose and says so") {
+  IcpCase c;
+  const ObjectGeometry& geo = c.db.geometry(c.obj);
+  Scene tiny = c.scene(1);
+  tiny.ordered.resize(2);
+  const Pose start = test::random_pose(3, Vec3(0, 0, 0));
+  const IcpResult r = icp(tiny, geo, start, {});
+  CHECK_FALSE(r.valid);
+  CHECK(r.T_scene_object.isApprox(start));
+  Pose bad = start;
+  bad.translation().x() = std::nan("");
+  const IcpResult rb = icp(c.scene(3), geo, bad, {});
+  CHECK_FALSE(rb.valid);
+}
+
+TEST_CASE("ICP is deterministic") {
+  IcpCase c;
+  const Scene sc = c.scene(8, 0.0005);
+  const ObjectGeometry& geo = c.db.geometry(c.obj);
+  const Pose start = perturbed(sc.to_scene(c.truth), 0.004, 4.0, 1);
+  IcpSettings s;
+  s.trim_fraction = 0.9;
+  const IcpResult a = icp(sc, geo, start, s), b = icp(sc, geo, start, s);
+  CHECK(a.T_scene_object.matrix() == b.T_scene_object.matrix());
+  CHECK(a.iterations == b.iterations);
+}

@@ -1,0 +1,180 @@
+#include "engine/kabsch.hpp"
+#include "engine/pose_error.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <numbers>
+
+using namespace ts;
+
+namespace {
+
+Pose random_pose(Rng& rng, double spread) {
+  Pose T = Pose::Identity();
+  T.linear() = rng.rotation().toRotationMatrix();
+  T.translation() = Vec3(rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)) * spread;
+  return T;
+}
+
+std::vector<Vec3> random_points(Rng& rng, std::size_t n, double size) {
+  std::vector<Vec3> p(n);
+  for (auto& x : p) x = Vec3(rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)) * size;
+  return p;
+}
+
+double angle_between(const Pose& a, const Pose& b) {
+  return rotation_angle(a.linear().transpose() * b.linear());
+}
+
+}  // namespace
+
+TEST_CASE("Kabsch recovers an exact rigid transform") {
+  Rng rng(11);
+  for (int trial = 0; trial < 50; ++trial) {
+    const Pose T = random_pose(rng, 0.5);
+    const auto src = random_points(rng, 3 + trial, 0.1);
+    std::vector<Vec3> dst;
+    for (const Vec3& p : src) dst.push_back(T * p);
+    const RigidFit fit = kabsch(src, dst);
+    REQUIRE(fit.valid);
+    CHECK(angle_between(fit.T_target_source, T) < 1e-9);
+    CHECK((fit.T_target_source.translation() - T.translation()).norm() < 1e-9);
+    CHECK(fit.rms < 1e-9);
+    CHECK(fit.T_target_source.linear().determinant() == doctest::Approx(1.0));
+  }
+}
+
+TEST_CASE("Kabsch with noise: residual near the noise, pose close") {
+  Rng rng(12);
+  const Pose T = random_pose(rng, 0.3);
+  const auto src = random_points(rng, 2000, 0.1);
+  std::vector<Vec3> dst;
+  const double sigma = 0.001;
+  for (const Vec3& p : src) dst.push_back(T * p + sigma * Vec3(rng.normal(), rng.normal(), rng.normal()));
+  const RigidFit fit = kabsch(src, dst);
+  REQUIRE(fit.valid);
+  CHECK(fit.rms == doctest::Approx(sigma * std::sqrt(3.0)).epsilon(0.1));
+  CHECK(angle_between(fit.T_target_source, T) < 1e-3);
+}
+
+TEST_CASE("Kabsch corrects reflections: a mirrored target gives a proper rotation") {
+  Rng rng(13);
+  const auto src = random_points(rng, 40, 0.1);
+  std::vector<Vec3> dst;
+  for (const Vec3& p : src) dst.emplace_back(-p.x(), p.y(), p.z());  // mirror image
+  const RigidFit fit = kabsch(src, dst);
+  REQUIRE(fit.valid);
+  CHECK(fit.reflection_fixed);
+  CHECK(fit.T_target_source.linear().determinant() == doctest::Approx(1.0));
+  CHECK((fit.T_target_source.linear() * fit.T_target_source.linear().transpose() - Mat3::Identity())
+            .norm() < 1e-12);
+}
+
+TEST_CASE("Kabsch on a planar triplet (the RANSAC case) is exact and proper") {
+  Rng rng(14);
+  for (int trial = 0; trial < 200; ++trial) {
+    const Pose T = random_pose(rng, 1.0);
+    const auto src = random_points(rng, 3, 0.05);
+    if (!triangle_well_conditioned(src[0], src[1], src[2], 0.1)) continue;
+    std::vector<Vec3> dst;
+    for (const Vec3& p : src) dst.push_back(T * p);
+    const RigidFit fit = kabsch(src, dst);
+    REQUIRE(fit.valid);
+    CHECK(angle_between(fit.T_target_source, T) < 1e-8);
+    CHECK(fit.T_target_source.linear().determinant() == doctest::Approx(1.0));
+  }
+}
+
+TEST_CASE("Degenerate inputs are rejected by geometry, never NaN") {
+  const Vec3 a(0, 0, 0), b(0.01, 0, 0), c(0.02, 0, 0);
+  SUBCASE("collinear") {
+    const std::array<Vec3, 3> s{a, b, c};
+    const RigidFit fit = kabsch(s, s);
+    CHECK_FALSE(fit.valid);
+    CHECK(fit.T_target_source.matrix().allFinite());
+    CHECK_FALSE(triangle_well_conditioned(a, b, c, 0.01));
+  }
+  SUBCASE("near-collinear") {
+    const Vec3 c2(0.02, 1e-9, 0);
+    const std::array<Vec3, 3> s{a, b, c2};
+    CHECK_FALSE(kabsch(s, s).valid);
+    CHECK_FALSE(triangle_well_conditioned(a, b, c2, 0.01));
+    // but the residual of this fit would be zero: rejection is by geometry
+  }
+  SUBCASE("coincident") {
+    const std::array<Vec3, 3> s{a, a, a};
+    CHECK_FALSE(kabsch(s, s).valid);
+    CHECK_FALSE(triangle_well_conditioned(a, a, a, 0.01));
+  }
+  SUBCASE("two coincident of three") {
+    CHECK_FALSE(triangle_well_conditioned(a, a, Vec3(0, 0.01, 0), 0.01));
+  }
+  SUBCASE("too few, mismatched, non-finite") {
+    const std::array<Vec3, 2> two{a, b};
+    CHECK_FALSE(kabsch(two, two).valid);
+    const std::array<Vec3, 3> s{a, b, Vec3(0, 0.01, 0)};
+    const std::array<Vec3, 3> t{a, b, Vec3(0, std::nan(""), 0)};
+    CHECK_FALSE(kabsch(s, t).valid);
+    const std::array<Vec3, 4> four{a, b, c, a};
+    CHECK_FALSE(kabsch(s, four).valid);
+    const std::array<double, 3> w{0, 0, 0};
+    CHECK_FALSE(kabsch(s, s, w).valid);
+  }
+  SUBCASE("triangle test is scale invariant") {
+    const double h = std::sqrt(3.0) / 2.0;
+    for (double scale : {1e-6, 1e-2, 1.0, 1e3}) {
+      CHECK(triangle_well_conditioned(Vec3(0, 0, 0), Vec3(scale, 0, 0), Vec3(scale / 2, scale * h, 0), 0.5));
+    }
+  }
+}
+
+TEST_CASE("Kabsch far from the origin (100 km) is as accurate as at the origin") {
+  Rng rng(15);
+  const Pose T = random_pose(rng, 0.1);
+  const auto local = random_points(rng, 30, 0.05);
+  const Vec3 far(1.0e5, -0.7e5, 3.2e3);
+  std::vector<Vec3> src, dst;
+  for (const Vec3& p : local) {
+    src.push_back(p + far);
+    dst.push_back(T * p + far);  // the same motion, both clouds 100 km out
+  }
+  const RigidFit fit = kabsch(src, dst);
+  REQUIRE(fit.valid);
+  CHECK(angle_between(fit.T_target_source, T) < 1e-9);
+  for (std::size_t i = 0; i < src.size(); ++i)
+    CHECK((fit.T_target_source * src[i] - dst[i]).norm() < 1e-7);
+}
+
+TEST_CASE("Weights: zero-weighted outliers do not move the fit") {
+  Rng rng(16);
+  const Pose T = random_pose(rng, 0.2);
+  auto src = random_points(rng, 20, 0.1);
+  std::vector<Vec3> dst;
+  std::vector<double> w;
+  for (std::size_t i = 0; i < src.size(); ++i) {
+    dst.push_back(T * src[i]);
+    w.push_back(1.0);
+  }
+  for (int i = 0; i < 5; ++i) {
+    src.push_back(Vec3::Random());
+    dst.push_back(Vec3::Random() * 10.0);
+    w.push_back(0.0);
+  }
+  const RigidFit fit = kabsch(src, dst, w);
+  REQUIRE(fit.valid);
+  CHECK(angle_between(fit.T_target_source, T) < 1e-9);
+}
+
+TEST_CASE("rotation_angle agrees with Eq. 10 and stays accurate near 0 and pi") {
+  Rng rng(17);
+  for (int i = 0; i < 1000; ++i) {
+    const Mat3 R = rng.rotation().toRotationMatrix();
+    CHECK(rotation_angle(R) == doctest::Approx(rotation_angle_eq10(R)).epsilon(1e-6));
+  }
+  for (double a : {1e-9, 1e-6, 1e-3, 0.5, 3.0, std::numbers::pi - 1e-7}) {
+    const Mat3 R = Eigen::AngleAxisd(a, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+    CHECK(rotation_angle(R) == doctest::Approx(a).epsilon(1e-6));
+  }
+  CHECK(rotation_angle(Mat3::Identity()) == 0.0);
+}

@@ -1,0 +1,124 @@
+#include "engine/kabsch.hpp"
+#include "engine/pose_error.hpp"
+#include "engine/ransac.hpp"
+#include "engine/symmetry.hpp"
+#include "recognition_fixture.hpp"
+
+#include <doctest/doctest.h>
+#include <tbb/task_arena.h>
+
+using namespace ts;
+
+namespace {
+
+RansacSettings quick() {
+  RansacSettings s;
+  s.triplets = 10;
+  s.registrations = 100;
+  s.prune_w = 1500;
+  s.normal_tolerance_deg = 15.0;
+  return s;
+}
+
+struct Fixture {
+  std::shared_ptr<test::TestSource> src = test::make_source();
+  Database db{src};
+  FeatureIndex index = build_feature_index(db, {.exact = true});
+  Scene scene(std::size_t obj, const Pose& T, int patches, std::uint64_t seed = 3) {
+    return prepare_scene(test::touch(src->fines[obj], T, patches, seed), {}, db.settings().fpfh, {}, 1, 1);
+  }
+};
+
+}  // namespace
+
+TEST_CASE("Batch RANSAC: some registration of the true object lands near the truth") {
+  Fixture f;
+  for (std::size_t obj : {1u, 4u}) {
+    const Pose T = test::random_pose(50 + obj, Vec3(0.5, 0.5, 0.5));
+    const Scene sc = f.scene(obj, T, 8);
+    RansacStats st;
+    const auto cands = ransac_candidates(sc, f.db, f.index, objects_spanning(sc, f.db, 0.02), quick(), 1, 1, &st);
+    CHECK(st.triplets == 10);
+    CHECK(cands.size() > 100);
+    double best_pos = 1e9, best_ori = 1e9;
+    SymmetryCache symmetries;
+    const SymmetryGroup& sym = symmetries.get(f.db, obj);
+    for (const Candidate& c : cands) {
+      if (c.object != obj) continue;
+      const PoseError e = pose_error(sc.to_world(c.T_scene_object), T, &sym);
+      if (e.symmetric_position_m < 0.01) best_ori = std::min(best_ori, e.symmetric_orientation_deg);
+      best_pos = std::min(best_pos, e.symmetric_position_m);
+    }
+    // Triplet registrations are coarse (5 mm database voxels); they must land in ICP's basin.
+    INFO("object " << f.db.info(obj).name << " best position " << best_pos << " orientation " << best_ori);
+    CHECK(best_pos < 0.01);
+    CHECK(best_ori < 15.0);
+  }
+}
+
+TEST_CASE("Batch RANSAC: identical candidates for 1 and 2 threads and for the same seed") {
+  Fixture f;
+  const Scene sc = f.scene(1, test::random_pose(7, Vec3(0, 0, 0)), 6);
+  const auto allowed = objects_spanning(sc, f.db, 0.02);
+  std::vector<Candidate> a, b, c;
+  tbb::task_arena one(1), two(2);
+  one.execute([&] { a = ransac_candidates(sc, f.db, f.index, allowed, quick(), 9, 4); });
+  two.execute([&] { b = ransac_candidates(sc, f.db, f.index, allowed, quick(), 9, 4); });
+  two.execute([&] { c = ransac_candidates(sc, f.db, f.index, allowed, quick(), 10, 4); });
+  REQUIRE(a.size() == b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    CHECK(a[i].object == b[i].object);
+    CHECK(a[i].slot == b[i].slot);
+    CHECK(a[i].T_scene_object.matrix() == b[i].T_scene_object.matrix());
+  }
+  bool differs = a.size() != c.size();
+  for (std::size_t i = 0; !differs && i < a.size(); ++i)
+    differs = a[i].T_scene_object.matrix() != c[i].T_scene_object.matrix();
+  CHECK(differs);  // another seed draws other triplets
+}
+
+TEST_CASE("Batch RANSAC: objects too small to span the contacts are excluded before matching") {
+  Fixture f;
+  const Pose T = test::random_pose(8, Vec3(0, 0, 0));
+  const Scene sc = f.scene(0, T, 14);  // the 12 x 8 x 5 cm box, touched all over
+  const auto allowed = objects_spanning(sc, f.db, 0.0);
+  for (std::size_t o = 0; o < f.db.size(); ++o)
+    CHECK(bool(allowed[o]) == (f.db.info(o).extent.norm() >= sc.diameter));
+  CHECK(allowed[0]);
+  std::size_t excluded = 0;
+  for (auto a : allowed) excluded += a ? 0 : 1;
+  CHECK(excluded > 0);
+  const auto cands = ransac_candidates(sc, f.db, f.index, allowed, quick(), 1, 1);
+  for (const Candidate& c : cands) CHECK(allowed[c.object]);
+}
+
+TEST_CASE("Batch RANSAC: degenerate clouds give no candidates and no NaN") {
+  Fixture f;
+  SUBCASE("collinear contacts") {
+    PointCloud line;
+    for (int i = 0; i < 60; ++i) line.points.emplace_back(0.001 * i, 0.0, 0.0);
+    const Scene sc = prepare_scene(line, {}, f.db.settings().fpfh, {}, 1, 1);
+    CHECK(ransac_candidates(sc, f.db, f.index, objects_spanning(sc, f.db, 0.02), quick(), 1, 1).empty());
+  }
+  SUBCASE("identical contacts") {
+    PointCloud same;
+    same.points.assign(40, Vec3(1, 2, 3));
+    const Scene sc = prepare_scene(same, {}, f.db.settings().fpfh, {}, 1, 1);
+    CHECK(ransac_candidates(sc, f.db, f.index, objects_spanning(sc, f.db, 0.02), quick(), 1, 1).empty());
+  }
+  SUBCASE("empty") {
+    const Scene sc = prepare_scene({}, {}, f.db.settings().fpfh, {}, 1, 1);
+    CHECK(ransac_candidates(sc, f.db, f.index, objects_spanning(sc, f.db, 0.02), quick(), 1, 1).empty());
+  }
+}
+
+TEST_CASE("Batch RANSAC: every candidate is a proper rigid transform") {
+  Fixture f;
+  const Scene sc = f.scene(3, test::random_pose(9, Vec3(1, 1, 1)), 5);
+  for (const Candidate& c : ransac_candidates(sc, f.db, f.index, objects_spanning(sc, f.db, 0.02), quick(), 1, 1)) {
+    const Mat3 R = c.T_scene_object.linear();
+    CHECK(R.allFinite());
+    CHECK(R.determinant() == doctest::Approx(1.0).epsilon(1e-9));
+    CHECK((R * R.transpose() - Mat3::Identity()).norm() < 1e-9);
+  }
+}

@@ -1,0 +1,205 @@
+#include "engine/pose_error.hpp"
+#include "engine/recognizer.hpp"
+#include "engine/symmetry.hpp"
+#include "recognition_fixture.hpp"
+
+#include <doctest/doctest.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <map>
+#include <numeric>
+
+using namespace ts;
+
+namespace {
+
+/// Paper structure, smaller numbers (unit tests must be fast).
+RecognizerSettings fast(Method m = Method::bricpsf) {
+  RecognizerSettings s;
+  s.method = m;
+  s.n_p = 40;
+  s.ransac.triplets = 10;
+  s.ransac.registrations = 100;
+  s.ransac.prune_w = 1500;
+  s.ransac.normal_tolerance_deg = 15.0;
+  s.index.exact = true;
+  s.icp.max_points = 96;
+  return s;
+}
+
+void check_finite(const StepResult& r) {
+  CHECK(std::isfinite(r.best.log_weight) == r.valid);
+  CHECK(r.best.pose.matrix().allFinite());
+  for (const Hypothesis& h : r.hypotheses) {
+    CHECK(h.pose.matrix().allFinite());
+    CHECK_FALSE(std::isnan(h.log_weight));
+    CHECK_FALSE(std::isnan(h.weight));
+  }
+  for (double p : r.posteriors) CHECK(std::isfinite(p));
+}
+
+std::vector<StepResult> explore(Recognizer& rec, std::size_t obj, const Pose& T, int steps,
+                                std::uint64_t seed, double offset = 0.0, double noise = 0.0,
+                                const Vec3& shift = Vec3::Zero()) {
+  auto src = test::make_source();
+  std::vector<StepResult> out;
+  for (int k = 1; k <= steps; ++k) {
+    PointCloud c = test::touch(src->fines[obj], T, k, seed, offset, noise);
+    for (Vec3& p : c.points) p += shift;
+    out.push_back(rec.step(c, {}));
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("BRICPSF recognizes asymmetric and symmetric objects and localizes them") {
+  auto src = test::make_source();
+  Database db(src);
+  auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
+  SymmetryCache symmetries;
+  for (std::size_t obj : {1u, 3u, 4u}) {  // nut (D5), hexbar (D6), wedge (none)
+    Recognizer rec(db, index, fast());
+    const Pose T = test::random_pose(40 + obj, Vec3(0.4, -0.3, 0.2));
+    const auto steps = explore(rec, obj, T, 8, 11 + obj, 0.0005, 0.0002);
+    const StepResult& last = steps.back();
+    INFO("object " << db.info(obj).name);
+    REQUIRE(last.valid);
+    CHECK(last.best.object == obj);
+    const PoseError e = pose_error(last.best.pose, T, &symmetries.get(db, obj));
+    CHECK(e.symmetric_position_m < 0.003);
+    CHECK(e.symmetric_orientation_deg < 3.0);
+    CHECK(last.posterior > 0.5);
+    for (const StepResult& r : steps) check_finite(r);
+  }
+}
+
+TEST_CASE("Recognizer invariants: state size, posterior, objects kept for life") {
+  auto src = test::make_source();
+  Database db(src);
+  Recognizer rec(db, fast());
+  const Pose T = test::random_pose(5, Vec3(0, 0, 0));
+  std::map<std::pair<int, std::uint32_t>, std::uint32_t> object_of;
+  for (const StepResult& r : explore(rec, 4, T, 5, 3)) {
+    REQUIRE(r.valid);
+    CHECK(r.hypotheses.size() <= 40);
+    CHECK(std::accumulate(r.posteriors.begin(), r.posteriors.end(), 0.0) == doctest::Approx(1.0));
+    CHECK(r.posterior == doctest::Approx(r.posteriors[r.best.object]));
+    CHECK(r.best.log_weight == r.hypotheses.front().log_weight);
+    for (std::size_t i = 1; i < r.hypotheses.size(); ++i)
+      CHECK(r.hypotheses[i - 1].log_weight >= r.hypotheses[i].log_weight);
+    for (const Hypothesis& h : r.hypotheses) {
+      const auto key = std::make_pair(h.born, h.slot);
+      auto [it, fresh] = object_of.emplace(key, h.object);
+      CHECK(it->second == h.object);  // a hypothesis keeps its object
+      CHECK(h.weight == doctest::Approx(std::exp(h.log_weight)));
+    }
+    check_finite(r);
+  }
+}
+
+TEST_CASE("Every method runs through the same path; the batch methods ignore free space") {
+  auto src = test::make_source();
+  Database db(src);
+  auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
+  const Pose T = test::random_pose(6, Vec3(0.1, 0.1, 0.1));
+  const PointCloud c = test::touch(src->fines[1], T, 6, 8);
+  std::vector<Vec3> free;  // a shell of free space just outside the true surface
+  Rng rng(2);
+  for (int i = 0; i < 300; ++i) free.push_back(T * (src->fines[1].points[rng.index(src->fines[1].size())] +
+                                                    0.03 * src->fines[1].normals[0]));
+  for (Method m : {Method::batch_ransac, Method::ransac_icp, Method::ransac_icp_fs, Method::bricpsf}) {
+    Recognizer a(db, index, fast(m)), b(db, index, fast(m));
+    const StepResult ra = a.step(c, {}), rb = b.step(c, free);
+    INFO(method_name(m));
+    CHECK(ra.valid);
+    check_finite(ra);
+    check_finite(rb);
+    const bool uses_free = m == Method::ransac_icp_fs || m == Method::bricpsf;
+    if (!uses_free) CHECK(ra.best.log_weight == rb.best.log_weight);
+    CHECK(parse_method(method_name(m)) == m);
+  }
+  CHECK_FALSE(parse_method("nonsense"));
+}
+
+TEST_CASE("Same seed, 1 or 2 threads: bitwise identical poses and weights") {
+  auto src = test::make_source();
+  Database db(src);
+  auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
+  const Pose T = test::random_pose(9, Vec3(1, 2, 3));
+  for (Method m : {Method::bricpsf, Method::ransac_icp}) {
+    std::vector<StepResult> one, two;
+    tbb::task_arena a1(1), a2(2);
+    a1.execute([&] {
+      Recognizer rec(db, index, fast(m));
+      one = explore(rec, 0, T, 3, 4, 0.001, 0.0003);
+    });
+    a2.execute([&] {
+      Recognizer rec(db, index, fast(m));
+      two = explore(rec, 0, T, 3, 4, 0.001, 0.0003);
+    });
+    REQUIRE(one.size() == two.size());
+    for (std::size_t k = 0; k < one.size(); ++k) {
+      REQUIRE(one[k].hypotheses.size() == two[k].hypotheses.size());
+      CHECK(one[k].posteriors == two[k].posteriors);
+      for (std::size_t i = 0; i < one[k].hypotheses.size(); ++i) {
+        const Hypothesis &x = one[k].hypotheses[i], &y = two[k].hypotheses[i];
+        CHECK(x.object == y.object);
+        CHECK(x.log_weight == y.log_weight);
+        CHECK(x.pose.matrix() == y.pose.matrix());
+      }
+    }
+  }
+}
+
+TEST_CASE("Geometry is loaded only for objects a hypothesis reaches") {
+  // A database with a 1 cm object among 10 cm ones: touching a big object never loads it.
+  auto big = test::make_source();
+  auto src = std::make_shared<test::TestSource>(*big);
+  src->add("pebble", test::scaled(test::sphere_mesh(0.005), 1.0), 77);
+  Database db(src);
+  Recognizer rec(db, fast());
+  const Pose T = test::random_pose(12, Vec3(0, 0, 0));
+  const auto steps = explore(rec, 0, T, 4, 5);
+  const std::size_t pebble = db.find("pebble");
+  CHECK_FALSE(db.geometry_loaded(pebble));
+  std::size_t reached = 0;
+  for (std::size_t o = 0; o < db.size(); ++o) reached += db.geometry_loaded(o) ? 1 : 0;
+  CHECK(reached == db.geometry_loads());
+  CHECK(steps.back().objects_allowed < db.size());
+}
+
+TEST_CASE("Exact early rejection: the selected top k equal a full evaluation's") {
+  auto src = test::make_source();
+  Database db(src);
+  const FeatureIndex index = build_feature_index(db, fast().index);
+  const Pose T = test::random_pose(13, Vec3(0, 0, 0));
+  std::vector<Vec3> free;
+  Rng rng(1);
+  for (int i = 0; i < 400; ++i) free.push_back(T * Vec3(rng.uniform(-0.15, 0.15), rng.uniform(-0.15, 0.15), rng.uniform(-0.15, 0.15)));
+  const Scene sc = prepare_scene(test::touch(src->fines[4], T, 6, 2), free, db.settings().fpfh, {}, 1, 1);
+  const auto cands = ransac_candidates(sc, db, index, objects_spanning(sc, db, 0.02), fast().ransac, 1, 1);
+  REQUIRE(cands.size() > 200);
+  for (bool with_free : {false, true}) {
+  EvaluateSettings es;
+  es.free_space = with_free;
+  const auto all = evaluate_all(sc, db, cands, es);
+  std::vector<std::uint32_t> order(cands.size());
+  std::iota(order.begin(), order.end(), 0u);
+  std::sort(order.begin(), order.end(), [&](auto a, auto b) {
+    return all[a].log_weight > all[b].log_weight || (all[a].log_weight == all[b].log_weight && a < b);
+  });
+  for (std::size_t k : {1u, 20u, 100u}) {
+    SelectStats st;
+    const auto top = select_top(sc, db, cands, k, es, &st);
+    REQUIRE(top.size() == k);
+    for (std::size_t i = 0; i < k; ++i) {
+      CHECK(top[i].index == order[i]);
+      CHECK(top[i].eval.log_weight == all[order[i]].log_weight);
+    }
+    if (k <= 20 && !with_free) CHECK(st.full < cands.size() / 2);  // most were rejected early
+    CHECK(st.full + st.rejected_prefix + st.rejected_later == cands.size());
+  }
+  }
+}

@@ -1,0 +1,172 @@
+// Stiff and extreme cases: each must give a flagged or correct answer, never NaN or a crash.
+#include "engine/kabsch.hpp"
+#include "engine/pose_error.hpp"
+#include "engine/recognizer.hpp"
+#include "engine/symmetry.hpp"
+#include "recognition_fixture.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <limits>
+
+using namespace ts;
+
+namespace {
+
+RecognizerSettings fast() {
+  RecognizerSettings s;
+  s.n_p = 40;
+  s.ransac.triplets = 10;
+  s.ransac.registrations = 100;
+  s.ransac.prune_w = 1500;
+  s.ransac.normal_tolerance_deg = 15.0;
+  s.index.exact = true;
+  s.icp.max_points = 96;
+  return s;
+}
+
+void check_finite(const StepResult& r) {
+  CHECK(r.best.pose.matrix().allFinite());
+  for (const Hypothesis& h : r.hypotheses) {
+    CHECK(h.pose.matrix().allFinite());
+    CHECK_FALSE(std::isnan(h.log_weight));
+  }
+  for (double p : r.posteriors) CHECK(std::isfinite(p));
+}
+
+}  // namespace
+
+TEST_CASE("A single flat patch gives a flagged answer (rotation about the normal unobservable)") {
+  auto src = test::make_source();
+  Database db(src);
+  Recognizer rec(db, fast());
+  // A 4 mm taxel grid on the big face of the box (z = +0.025), 3 x 2 cm, slightly noisy.
+  const Pose T = test::random_pose(21, Vec3(0.3, 0.3, 0.3));
+  PointCloud c;
+  Rng rng(1);
+  for (int i = 0; i < 8; ++i)
+    for (int j = 0; j < 6; ++j)
+      c.points.push_back(T * Vec3(-0.015 + 0.004 * i, -0.01 + 0.004 * j, 0.025 + 0.0002 * rng.normal()));
+  const StepResult r = rec.step(c, {});
+  check_finite(r);
+  CHECK(r.unobservable_dof >= 3);
+  CHECK(r.pose_ambiguous);
+  // Patches all over the object remove the ambiguity.
+  Recognizer rec2(db, fast());
+  const StepResult r2 = rec2.step(test::touch(src->fines[4], T, 10, 3), {});
+  CHECK(r2.unobservable_dof == 0);
+  CHECK_FALSE(r2.pose_ambiguous);
+}
+
+TEST_CASE("Contacts 100 km from the origin give the same answer as at the origin") {
+  auto src = test::make_source();
+  Database db(src);
+  auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
+  const Pose T = test::random_pose(22, Vec3(0.05, -0.02, 0.01));
+  const Vec3 far(1.0e5, -0.6e5, -2.5e3);
+  Recognizer near_rec(db, index, fast()), far_rec(db, index, fast());
+  for (int k = 1; k <= 4; ++k) {
+    PointCloud c = test::touch(src->fines[4], T, 2 * k, 31, 0.0005, 0.0002);
+    PointCloud cf = c;
+    for (Vec3& p : cf.points) p += far;
+    std::vector<Vec3> free{T * Vec3(0, 0, 0.2), T * Vec3(0.2, 0, 0)}, freef = free;
+    for (Vec3& p : freef) p += far;
+    const StepResult a = near_rec.step(c, free), b = far_rec.step(cf, freef);
+    check_finite(b);
+    REQUIRE(a.valid == b.valid);
+    CHECK(a.best.object == b.best.object);
+    Pose bt = b.best.pose;
+    bt.translation() -= far;
+    CHECK((bt.translation() - a.best.pose.translation()).norm() < 1e-6);
+    CHECK(rotation_angle(bt.linear().transpose() * a.best.pose.linear()) < 1e-6);
+    CHECK(b.best.log_weight == doctest::Approx(a.best.log_weight).epsilon(1e-6));
+  }
+}
+
+TEST_CASE("Objects of 1 cm and 2 m with scaled parameters are recognized alike") {
+  for (double scale : {0.08, 15.0}) {  // the 10-15 cm shapes become about 1 cm and 2 m
+    auto src = test::make_source(scale);
+    Database db(src);
+    Recognizer rec(db, fast().scaled(scale));
+    const std::size_t obj = 4;
+    const Pose T = test::random_pose(23, Vec3(1.0, 2.0, 3.0) * scale);
+    StepResult r;
+    for (int k = 1; k <= 6; ++k)
+      r = rec.step(test::touch(src->fines[obj], T, k, 17, 0.0, 0.0, scale), {});
+    INFO("scale " << scale);
+    check_finite(r);
+    REQUIRE(r.valid);
+    CHECK(r.best.object == obj);
+    const PoseError e = pose_error(r.best.pose, T);
+    CHECK(e.position_m < 0.01 * scale);
+    CHECK(e.orientation_deg < 2.0);
+  }
+}
+
+TEST_CASE("All contacts identical, an empty cloud, non-finite points: flagged, never NaN") {
+  auto src = test::make_source();
+  Database db(src);
+  Recognizer rec(db, fast());
+  SUBCASE("identical") {
+    PointCloud same;
+    same.points.assign(50, Vec3(10, 20, 30));
+    const StepResult r = rec.step(same, {Vec3(10, 20, 30.1)});
+    check_finite(r);
+    CHECK_FALSE(r.valid);
+    CHECK(r.unobservable_dof == 6);
+  }
+  SUBCASE("empty, then data") {
+    const StepResult r = rec.step({}, {});
+    check_finite(r);
+    CHECK_FALSE(r.valid);
+    CHECK(r.contacts == 0);
+    const Pose T = test::random_pose(24, Vec3(0, 0, 0));
+    const StepResult r2 = rec.step(test::touch(src->fines[4], T, 6, 5), {});
+    CHECK(r2.valid);
+    check_finite(r2);
+  }
+  SUBCASE("non-finite points are dropped") {
+    const Pose T = test::random_pose(25, Vec3(0, 0, 0));
+    PointCloud c = test::touch(src->fines[4], T, 5, 6);
+    const std::size_t n = c.size();
+    c.points.emplace_back(std::numeric_limits<double>::quiet_NaN(), 0, 0);
+    c.points.emplace_back(0, std::numeric_limits<double>::infinity(), 0);
+    const StepResult r = rec.step(c, {Vec3(std::nan(""), 0, 0)});
+    check_finite(r);
+    CHECK(r.valid);
+    CHECK(r.contacts == n);
+  }
+  SUBCASE("two points, three collinear points") {
+    PointCloud two;
+    two.points = {Vec3(0, 0, 0), Vec3(0.01, 0, 0)};
+    check_finite(rec.step(two, {}));
+    PointCloud line;
+    for (int i = 0; i < 30; ++i) line.points.emplace_back(0.002 * i, 0.0, 0.0);
+    const StepResult r = rec.step(line, {});
+    check_finite(r);
+    CHECK_FALSE(r.valid);
+  }
+}
+
+TEST_CASE("Symmetric objects are not counted wrong when the pose is right up to symmetry") {
+  auto src = test::make_source();
+  Database db(src);
+  auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
+  SymmetryCache symmetries;
+  for (std::size_t obj : {1u, 2u, 5u}) {  // nut (D5), ball (sphere), cube (octahedral)
+    Recognizer rec(db, index, fast());
+    const Pose T = test::random_pose(60 + obj, Vec3(0.2, 0.2, 0.2));
+    StepResult r;
+    for (int k = 1; k <= 10; ++k) r = rec.step(test::touch(src->fines[obj], T, k, 70 + obj), {});
+    INFO("object " << db.info(obj).name);
+    REQUIRE(r.valid);
+    CHECK(r.best.object == obj);
+    const SymmetryGroup& g = symmetries.get(db, obj);
+    CHECK_FALSE(g.trivial());
+    const PoseError e = pose_error(r.best.pose, T, &g);
+    CHECK(e.symmetric_orientation_deg < 3.0);
+    CHECK(e.symmetric_position_m < 0.003);
+    CHECK(e.symmetric_orientation_deg <= e.orientation_deg);
+  }
+}
