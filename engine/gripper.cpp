@@ -50,12 +50,12 @@ GripperSpec default_gripper_spec() {
     proximal.name = "proximal";
     proximal.length = 0.075;
     proximal.joint_origin = Vec3::Zero();
-    proximal.open = -25.0 * kDeg;
-    proximal.min = -30.0 * kDeg;
+    proximal.open = -40.0 * kDeg;
+    proximal.min = -45.0 * kDeg;
     proximal.max = 100.0 * kDeg;
     LinkSpec distal;
     distal.name = "distal";
-    distal.length = 0.070;
+    distal.length = 0.064;  // the 60 mm pad covers it nearly to the tip
     distal.joint_origin = Vec3(0, 0, proximal.length);
     distal.open = 0.0;
     distal.min = -10.0 * kDeg;

@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
     tbb::task_arena arena(threads);
     const auto tmp = std::filesystem::temp_directory_path() / ("bench_simulate_" + std::to_string(::getpid()) + ".h5");
     std::vector<double> sim_times, total_times;
-    std::size_t all_grasps = 0, all_contact = 0;
+    std::size_t all_grasps = 0, all_contact = 0, all_points = 0;
     double worst_rate = 1.0;
     std::string worst_object;
     for (const auto& e : entries) {
@@ -93,7 +93,11 @@ int main(int argc, char** argv) {
       io::write_log(tmp, result.log);
       const double t_total = seconds_since(t0);
       std::size_t contact = 0;
-      for (std::size_t g = 0; g < result.log.grasps.size(); ++g) contact += !grasp_contacts(result.log, g).points.empty();
+      for (std::size_t g = 0; g < result.log.grasps.size(); ++g) {
+        const std::size_t n = grasp_contacts(result.log, g).points.size();
+        contact += n > 0;
+        all_points += n;
+      }
       const double rate = static_cast<double>(contact) / grasps;
       if (rate < worst_rate) worst_rate = rate, worst_object = e.name;
       sim_times.push_back(t_sim);
@@ -112,6 +116,8 @@ int main(int argc, char** argv) {
     std::printf("grasps with contact on the logged pad: %zu / %zu = %.1f %% [target >= 70 %%]; lowest object: %s %.0f %%\n",
                 all_contact, all_grasps, 100.0 * all_contact / std::max<std::size_t>(1, all_grasps),
                 worst_object.c_str(), 100.0 * worst_rate);
+    std::printf("contact points per grasp with contact: %.1f\n",
+                static_cast<double>(all_points) / std::max<std::size_t>(1, all_contact));
   } catch (const std::exception& ex) {
     std::fprintf(stderr, "bench_simulate: error: %s\n", ex.what());
     return 1;
