@@ -60,8 +60,8 @@ struct BuiltObject {
   ObjectInfo info;
   BuildTimings timings;            ///< filled by build_object
   Mesh mesh;                       ///< object frame (stored so the simulator touches the truth)
-  ObjectFeatures features;
-  PointCloud fine;
+  ObjectFeatures features;         ///< coarse keypoints with PCA normals (as queries compute them)
+  PointCloud fine;                 ///< scanner cloud, exact outward face normals
   DistanceField field;
 };
 
@@ -118,7 +118,12 @@ class Database {
 };
 
 /// Build one object from a mesh already in its object frame (see io/mesh_import for the
-/// frame). Deterministic for a seed. Uses TBB inside; call from within the caller's arena.
+/// frame): scan_mesh (settings.scan) gives the fine cloud; PCA normals (fpfh.normal_radius)
+/// on it, oriented by the scanner's outward normals, feed FPFH at one fine point per
+/// scan.coarse_voxel (keypoints with an empty neighbourhood are dropped); the distance field
+/// is signed when the mesh is closed. Fills info's extent, closed, counts and coverage (the
+/// caller's name, source, checksum, scale and centre are kept). Deterministic for a seed and
+/// any thread count. Uses TBB inside; call from within the caller's arena.
 BuiltObject build_object(const Mesh& object_frame_mesh, ObjectInfo info,
                          const DatabaseSettings& settings, std::uint64_t seed);
 

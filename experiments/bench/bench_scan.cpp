@@ -2,11 +2,15 @@
 // scan time and surface coverage, and a summary. The time includes building the mesh's BVH
 // (what build_object pays), not the mesh import.
 //
-//   build/bench/bench_scan [MANIFEST=datasets/dev45.tsv] [THREADS=1]
+//   build/bench/bench_scan [MANIFEST=datasets/dev45.tsv] [THREADS=1] [--build]
+//
+// With --build, each object is built completely (build_object: scan, normals + FPFH, distance
+// field, default DatabaseSettings) and the per-stage times are printed as well.
 //
 // Run from the repository root (the manifest's relative paths resolve against its folder).
 #include "datasets/archive.hpp"
 #include "datasets/manifest.hpp"
+#include "engine/database.hpp"
 #include "engine/scanner.hpp"
 #include "experiments/cli_common.hpp"
 #include "io/mesh_import.hpp"
@@ -36,6 +40,7 @@ struct Row {
   std::size_t faces = 0;
   bool closed = false;
   ts::ScanResult scan;
+  ts::BuildTimings timings;
   double wall = 0.0, cpu = 0.0;
 };
 
@@ -49,8 +54,14 @@ double median(std::vector<double> v) {
 
 int main(int argc, char** argv) {
   try {
-    const std::string manifest = argc > 1 ? argv[1] : "datasets/dev45.tsv";
-    const int threads = argc > 2 ? std::max(1, std::atoi(argv[2])) : 1;
+    std::vector<std::string> args;
+    bool build = false;
+    for (int i = 1; i < argc; ++i) {
+      if (std::string(argv[i]) == "--build") build = true;
+      else args.emplace_back(argv[i]);
+    }
+    const std::string manifest = args.size() > 0 ? args[0] : "datasets/dev45.tsv";
+    const int threads = args.size() > 1 ? std::max(1, std::atoi(args[1].c_str())) : 1;
     const auto entries = ts::datasets::read_manifest(manifest);
 
     // Read every archive once.
@@ -60,15 +71,17 @@ int main(int argc, char** argv) {
     std::map<std::string, std::map<std::string, std::string>> members;
     for (const auto& [archive, names] : wanted) members[archive] = ts::datasets::read_archive_members(archive, names);
 
-    const ts::ScanSettings settings;
+    const ts::DatabaseSettings db_settings;
+    const ts::ScanSettings& settings = db_settings.scan;
     std::printf("bench_scan: %zu objects from %s, %d thread(s), %s\n", entries.size(), manifest.c_str(),
                 threads, ts::cli::machine_description().c_str());
     std::printf("settings: fine_spacing %.4f m, ray pitch %.2f x fine, coverage radius %.4f m, "
                 "target %.3f, max incidence %.0f/%.0f deg, max extent 0.20 m\n",
                 settings.fine_spacing, settings.ray_pitch, settings.coverage_radius,
                 settings.target_coverage, settings.max_incidence_deg, settings.grazing_incidence_deg);
-    std::printf("%-22s %7s %6s %5s %9s %7s %6s %8s %8s %8s\n", "object", "faces", "closed", "views",
-                "rays", "fine", "coarse", "coverage", "wall_s", "cpu_s");
+    std::printf("%-22s %7s %6s %5s %9s %7s %6s %8s %8s %8s%s\n", "object", "faces", "closed", "views",
+                "rays", "fine", "coarse", "coverage", "wall_s", "cpu_s",
+                build ? "   scan_s   feat_s  field_s" : "");
 
     tbb::task_arena arena(threads);
     std::vector<Row> rows;
@@ -84,14 +97,27 @@ int main(int argc, char** argv) {
       const auto t0 = std::chrono::steady_clock::now();
       const double c0 = cpu_seconds();
       arena.execute([&] {
-        const ts::MeshIndex index(imported.mesh);
-        row.scan = ts::scan_mesh(index, settings, 1);
+        if (build) {
+          ts::ObjectInfo info;
+          info.name = e.name;
+          ts::BuiltObject obj = ts::build_object(imported.mesh, info, db_settings, 1);
+          row.timings = obj.timings;
+          row.scan.fine = std::move(obj.fine);
+          row.scan.coarse = std::move(obj.features.coarse);
+          row.scan.coverage = obj.info.coverage;
+          row.scan.views = -1;  // not reported by build_object
+        } else {
+          const ts::MeshIndex index(imported.mesh);
+          row.scan = ts::scan_mesh(index, settings, 1);
+        }
       });
       row.cpu = cpu_seconds() - c0;
       row.wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      std::printf("%-22s %7zu %6s %5d %9zu %7zu %6zu %8.4f %8.3f %8.3f\n", row.name.c_str(), row.faces,
+      std::printf("%-22s %7zu %6s %5d %9zu %7zu %6zu %8.4f %8.3f %8.3f", row.name.c_str(), row.faces,
                   row.closed ? "yes" : "no", row.scan.views, row.scan.rays, row.scan.fine.size(),
                   row.scan.coarse.size(), row.scan.coverage, row.wall, row.cpu);
+      if (build) std::printf(" %8.3f %8.3f %8.3f", row.timings.scan_s, row.timings.features_s, row.timings.field_s);
+      std::printf("\n");
       std::fflush(stdout);
       rows.push_back(std::move(row));
     }
@@ -109,7 +135,13 @@ int main(int argc, char** argv) {
       else below += " " + r.name + "(" + std::to_string(r.scan.coverage).substr(0, 6) + ")";
     }
     auto sum = [](const std::vector<double>& v) { double s = 0; for (double x : v) s += x; return s; };
-    std::printf("\nsummary: %zu objects, %d thread(s)\n", rows.size(), threads);
+    std::printf("\nsummary: %zu objects, %d thread(s)%s\n", rows.size(), threads,
+                build ? ", full build_object (views/rays not reported)" : ", scan only");
+    if (build) {
+      double scan = 0, feat = 0, field = 0;
+      for (const auto& r : rows) scan += r.timings.scan_s, feat += r.timings.features_s, field += r.timings.field_s;
+      std::printf("  stage totals (wall s): scan %.2f  features %.2f  field %.2f\n", scan, feat, field);
+    }
     std::printf("  wall s per object: mean %.3f  median %.3f  max %.3f  total %.2f\n",
                 sum(wall) / std::max<std::size_t>(1, rows.size()), median(wall),
                 wall.empty() ? 0.0 : *std::max_element(wall.begin(), wall.end()), sum(wall));
