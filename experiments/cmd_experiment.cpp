@@ -135,7 +135,15 @@ int run_experiment(const ExperimentOptions& o) {
   const int threads = thread_count(o.common);
   std::function<void(const std::string&)> note;
   if (stderr_is_terminal()) note = [](const std::string& line) { std::cerr << line << "\n"; };
-  auto engine = experiments::make_recognition_engine(config, experiments::open_database(o.db), threads, note);
+  std::unique_ptr<experiments::RunEngine> engine;
+  try {
+    engine = experiments::make_recognition_engine(config, experiments::open_database(o.db), threads, note);
+  } catch (const Error& e) {
+    // An unknown object: name the database and the flag (or key) that listed it.
+    if (!e.file().empty() || (e.field() != "objects" && e.field() != "database")) throw;
+    const bool flag = e.field() == "objects" && !o.objects.empty();
+    throw Error(e.message(), o.db, flag ? "--objects" : e.field());
+  }
   const io::RunStoreHeader& header = engine->header();
   const std::filesystem::path out = o.out;
   std::error_code ec;
