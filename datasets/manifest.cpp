@@ -1,12 +1,25 @@
 #include "datasets/manifest.hpp"
 
 #include "engine/core.hpp"
+#include "io/db_store.hpp"
 
 #include <fstream>
 #include <set>
 #include <sstream>
 
 namespace ts::datasets {
+
+std::pair<std::string, std::string> split_archive_path(const std::string& path) {
+  // ARCHIVE:MEMBER, where ARCHIVE ends in a tar suffix.
+  for (const char* suffix : {".tar.gz:", ".tgz:", ".tar:"}) {
+    const auto pos = path.find(suffix);
+    if (pos != std::string::npos) {
+      const auto split = pos + std::string(suffix).size() - 1;
+      return {path.substr(0, split), path.substr(split + 1)};
+    }
+  }
+  return {path, {}};
+}
 
 std::vector<ManifestEntry> read_manifest(const std::filesystem::path& manifest) {
   std::ifstream in(manifest);
@@ -31,19 +44,13 @@ std::vector<ManifestEntry> read_manifest(const std::filesystem::path& manifest) 
     e.line = number;
     if (e.name.empty() || fields[1].empty())
       throw Error("manifest line has an empty path or name", manifest.string(), where);
+    io::check_object_name(e.name, manifest.string(), where);
     if (!names.insert(e.name).second)
       throw Error("duplicate object name '" + e.name + "'", manifest.string(), where);
-    std::string path = fields[1];
-    // ARCHIVE:MEMBER, where ARCHIVE ends in a tar suffix.
-    for (const char* suffix : {".tar.gz:", ".tgz:", ".tar:"}) {
-      const auto pos = path.find(suffix);
-      if (pos != std::string::npos) {
-        const auto split = pos + std::string(suffix).size() - 1;
-        e.member = path.substr(split + 1);
-        path = path.substr(0, split);
-        break;
-      }
-    }
+    auto [path, member] = split_archive_path(fields[1]);
+    e.member = member;
+    if (!e.member.empty() && e.member.back() == '/')
+      throw Error("archive member '" + e.member + "' is a folder", manifest.string(), where);
     std::filesystem::path p(path);
     e.path = p.is_absolute() ? p : base / p;
     out.push_back(std::move(e));

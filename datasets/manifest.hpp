@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace ts::datasets {
@@ -16,6 +17,10 @@ struct ManifestEntry {
   std::string name;
   int line = 0;                 ///< 1-based line in the manifest
 };
+
+/// Split "ARCHIVE:MEMBER" (ARCHIVE ending in .tar.gz, .tgz or .tar) into the archive path and
+/// the member; a plain path gives an empty member.
+std::pair<std::string, std::string> split_archive_path(const std::string& path);
 
 /// Parse a manifest. Throws ts::Error naming the file and line on a malformed line or a
 /// duplicate object name.

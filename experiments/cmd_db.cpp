@@ -1,7 +1,322 @@
+// `touchstone db build|add|info|export`: the object database (README "The object database",
+// io/FORMAT_DB.md).
 #include "experiments/cli_common.hpp"
+
+#include "datasets/db_builder.hpp"
+#include "engine/core.hpp"
+#include "io/cloud_io.hpp"
+#include "io/db_store.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <cctype>
+#include <cstdio>
+#include <filesystem>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <sstream>
 
 namespace ts::cli {
 
-void register_db(CLI::App& app) { (void)app; }
+namespace {
+
+using json = nlohmann::ordered_json;
+
+// --- shared ----------------------------------------------------------------------------------
+/// The build parameters a user may set; defaults from ts::DatabaseSettings.
+void add_build_parameters(CLI::App* sub, DatabaseSettings& s, int& deflate) {
+  const auto positive = CLI::PositiveNumber;
+  sub->add_option("--max-extent", s.max_extent, "Largest bounding-box side of every object, m")
+      ->check(positive)->capture_default_str();
+  sub->add_option("--fine-spacing", s.scan.fine_spacing, "Scanner: fine cloud spacing (voxel filter), m")
+      ->check(positive)->capture_default_str();
+  sub->add_option("--coarse-voxel", s.scan.coarse_voxel, "Scanner: coarse (feature) cloud voxel, m")
+      ->check(positive)->capture_default_str();
+  sub->add_option("--max-views", s.scan.max_views, "Scanner: most viewpoints per object")
+      ->check(CLI::Range(1, 100000))->capture_default_str();
+  sub->add_option("--ray-pitch", s.scan.ray_pitch, "Scanner: raster pitch of a view, as a fraction of --fine-spacing")
+      ->check(positive)->capture_default_str();
+  sub->add_option("--target-coverage", s.scan.target_coverage, "Scanner: stop at this covered area fraction")
+      ->check(CLI::Range(0.0, 1.0))->capture_default_str();
+  sub->add_option("--normal-radius", s.fpfh.normal_radius, "FPFH: normal estimation radius, m (paper: 0.007)")
+      ->check(positive)->capture_default_str();
+  sub->add_option("--feature-radius", s.fpfh.feature_radius, "FPFH: feature radius, m (paper: 0.010)")
+      ->check(positive)->capture_default_str();
+  sub->add_option("--field-voxel", s.field.fine_voxel, "Distance field: narrow-band voxel, m")
+      ->check(positive)->capture_default_str();
+  sub->add_option("--field-band", s.field.fine_band_voxels, "Distance field: narrow-band half-width, voxels")
+      ->check(CLI::Range(1, 1000))->capture_default_str();
+  sub->add_option("--field-coarse-voxel", s.field.coarse_voxel, "Distance field: coarse grid voxel, m")
+      ->check(positive)->capture_default_str();
+  sub->add_option("--field-margin", s.field.coarse_margin, "Distance field: coarse grid margin around the object, m")
+      ->check(CLI::NonNegativeNumber)->capture_default_str();
+  sub->add_option("--compress", deflate, "zlib level 0-9 for the stored arrays (0: none, fastest)")
+      ->check(CLI::Range(0, 9))->capture_default_str();
+}
+
+json params_json(const DatabaseSettings& s, std::uint64_t seed) {
+  json p = json::object();
+  for (const auto& v : io::settings_values(s)) {
+    json value = v.integer ? json(static_cast<std::int64_t>(v.value)) : json(v.value);
+    if (v.group.empty()) p[v.name] = value;
+    else p[v.group][v.name] = value;
+  }
+  p["seed"] = seed;
+  return p;
+}
+
+void print_warnings(const std::string& name, const std::vector<std::string>& warnings, const std::string& where) {
+  for (const auto& w : warnings) std::cerr << "touchstone: warning: " << name << ": " << w << " (" << where << ")\n";
+}
+
+std::string fixed(double v, int digits) {
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(digits) << v;
+  return s.str();
+}
+
+// --- db build --------------------------------------------------------------------------------
+struct BuildOptions {
+  CommonOptions common;
+  std::string manifest, meshes, out;
+  DatabaseSettings settings;
+  int deflate = 0;
+};
+
+int run_build(const BuildOptions& o) {
+  const auto inputs = o.manifest.empty() ? datasets::inputs_from_folder(o.meshes)
+                                         : datasets::inputs_from_manifest(o.manifest);
+  datasets::BuildSettings bs;
+  bs.database = o.settings;
+  bs.seed = o.common.seed;
+  bs.write.deflate = o.deflate;
+  const bool tty = stderr_is_terminal();
+  if (tty)
+    bs.progress = [](std::size_t done, std::size_t total, const std::string& name) {
+      std::cerr << "\r\033[K[" << done << "/" << total << "] " << name << std::flush;
+    };
+  const auto report = datasets::build_database(inputs, o.out, bs);
+  if (tty) std::cerr << "\r\033[K";
+  for (std::size_t i = 0; i < inputs.size(); ++i) print_warnings(report.names[i], report.warnings[i], inputs[i].display());
+
+  const auto& t = report.times;
+  const int threads = thread_count(o.common);
+  std::cerr << "built " << report.names.size() << " objects into " << o.out << " in " << fixed(t.wall_s, 2) << " s ("
+            << threads << " threads; " << machine_description() << ")\n"
+            << "  per stage, seconds (import/scan/features/field summed over objects):\n"
+            << "    read archives " << fixed(t.read_s, 2) << "\n"
+            << "    import        " << fixed(t.import_s, 2) << "\n"
+            << "    scan          " << fixed(t.scan_s, 2) << "\n"
+            << "    features      " << fixed(t.features_s, 2) << "\n"
+            << "    field         " << fixed(t.field_s, 2) << "\n"
+            << "    write         " << fixed(t.write_s, 2) << "\n";
+  if (o.common.json) {
+    json j;
+    j["out"] = o.out;
+    j["objects"] = report.names;
+    json warnings = json::array();
+    for (std::size_t i = 0; i < report.names.size(); ++i)
+      for (const auto& w : report.warnings[i]) warnings.push_back({{"object", report.names[i]}, {"message", w}});
+    j["warnings"] = warnings;
+    j["times_s"] = {{"read", t.read_s},         {"import", t.import_s}, {"scan", t.scan_s}, {"features", t.features_s},
+                    {"field", t.field_s},       {"write", t.write_s},   {"wall", t.wall_s}};
+    j["threads"] = threads;
+    j["machine"] = machine_description();
+    std::cout << j.dump(2) << '\n';
+  }
+  return 0;
+}
+
+// --- db add ----------------------------------------------------------------------------------
+struct AddOptions {
+  CommonOptions common;
+  bool seed_given = false;
+  std::string db, mesh, name;
+};
+
+int run_add(const AddOptions& o) {
+  const auto input = datasets::input_from_path(o.mesh, o.name);
+  DatabaseSettings settings;
+  std::uint64_t seed = 0;
+  std::size_t before = 0;
+  {
+    io::DbReader db(o.db);
+    if (db.find(input.name) < db.size())
+      throw Error("object '" + input.name + "' already exists in the database", o.db);
+    settings = db.settings();
+    // The database's own seed unless --seed is given: then `db add` builds the object exactly
+    // as `db build` would have.
+    seed = io::object_seed(o.seed_given ? o.common.seed : db.build_seed(), input.name);
+    before = db.size();
+  }
+  auto result = datasets::build_one(input, settings, seed);
+  print_warnings(input.name, result.warnings, input.display());
+  io::append_to_database(o.db, {{&result.object, seed}});
+  if (o.common.json) {
+    json j;
+    j["db"] = o.db;
+    j["object"] = input.name;
+    j["objects"] = before + 1;
+    j["fine_points"] = result.object.fine.size();
+    j["coarse_points"] = result.object.features.coarse.size();
+    std::cout << j.dump(2) << '\n';
+  } else {
+    std::cout << "added " << input.name << " to " << o.db << " (" << before + 1 << " objects): "
+              << result.object.fine.size() << " fine points, " << result.object.features.coarse.size()
+              << " coarse points, coverage " << fixed(100.0 * result.object.info.coverage, 1) << " %\n";
+  }
+  return 0;
+}
+
+// --- db info ---------------------------------------------------------------------------------
+struct InfoOptions {
+  CommonOptions common;
+  std::string db;
+};
+
+int run_info(const InfoOptions& o) {
+  io::DbReader db(o.db);
+  if (o.common.json) {
+    json j;
+    j["schema_version"] = db.schema_version();
+    json objects = json::array();
+    for (std::size_t i = 0; i < db.size(); ++i) {
+      const auto& info = db.info(i);
+      objects.push_back({{"name", info.name},
+                         {"extent_m", {info.extent.x(), info.extent.y(), info.extent.z()}},
+                         {"fine_points", info.fine_points},
+                         {"coarse_points", info.coarse_points},
+                         {"feature_dim", db.feature_dim()},
+                         {"source", info.source},
+                         {"mesh_sha256", info.mesh_sha256},
+                         {"scale", info.scale},
+                         {"closed", info.closed},
+                         {"coverage", info.coverage},
+                         {"mesh_faces", db.mesh_faces(i)}});
+    }
+    j["objects"] = objects;
+    j["params"] = params_json(db.settings(), db.build_seed());
+    std::cout << j.dump(2) << '\n';
+    return 0;
+  }
+  const auto& s = db.settings();
+  std::size_t fine = 0, coarse = 0, open = 0;
+  std::size_t width = 4;
+  for (std::size_t i = 0; i < db.size(); ++i) width = std::max(width, db.info(i).name.size());
+  std::ostringstream table;
+  table << std::left << std::setw(static_cast<int>(width)) << "name" << std::right << "  " << std::setw(20)
+        << "extent (mm)" << std::setw(9) << "fine" << std::setw(8) << "coarse" << std::setw(8) << "closed"
+        << std::setw(10) << "coverage" << '\n';
+  for (std::size_t i = 0; i < db.size(); ++i) {
+    const auto& info = db.info(i);
+    fine += info.fine_points;
+    coarse += info.coarse_points;
+    open += info.closed ? 0 : 1;
+    const std::string extent = fixed(1000 * info.extent.x(), 0) + " x " + fixed(1000 * info.extent.y(), 0) + " x " +
+                               fixed(1000 * info.extent.z(), 0);
+    table << std::left << std::setw(static_cast<int>(width)) << info.name << std::right << "  " << std::setw(20)
+          << extent << std::setw(9) << info.fine_points << std::setw(8) << info.coarse_points << std::setw(8)
+          << (info.closed ? "yes" : "no") << std::setw(9) << fixed(100.0 * info.coverage, 1) << "%\n";
+  }
+  std::cout << o.db << ": object database, schema " << db.schema_version() << ", " << db.size() << " objects ("
+            << open << " open meshes), " << fine << " fine and " << coarse << " coarse points\n"
+            << "params: max extent " << s.max_extent << " m; scan: fine spacing " << s.scan.fine_spacing
+            << " m, coarse voxel " << s.scan.coarse_voxel << " m; fpfh: normal radius " << s.fpfh.normal_radius
+            << " m, feature radius " << s.fpfh.feature_radius << " m (" << db.feature_dim()
+            << " bins); field: voxel " << s.field.fine_voxel << " m, coarse voxel " << s.field.coarse_voxel
+            << " m; seed " << db.build_seed() << "\n\n"
+            << table.str();
+  return 0;
+}
+
+// --- db export -------------------------------------------------------------------------------
+struct ExportOptions {
+  CommonOptions common;
+  std::string db, object, out, cloud = "fine";
+  bool ascii = false;
+};
+
+int run_export(const ExportOptions& o) {
+  std::string ext = std::filesystem::path(o.out).extension().string();
+  for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext != ".ply" && ext != ".pcd") throw Error("the output must end in .ply or .pcd", o.out, "--out");
+  io::DbReader db(o.db);
+  const std::size_t i = db.find(o.object);
+  if (i == db.size()) {
+    std::string names;
+    for (std::size_t k = 0; k < db.size() && k < 12; ++k) names += (k ? ", " : "") + db.info(k).name;
+    if (db.size() > 12) names += ", ...";
+    throw Error("no object '" + o.object + "' in the database (it holds: " + names + ")", o.db, "--object");
+  }
+  const PointCloud cloud = o.cloud == "fine" ? db.load_fine(i) : db.load_features(i).coarse;
+  io::write_cloud(o.out, cloud,
+                  {o.ascii ? io::CloudEncoding::ascii : io::CloudEncoding::binary, io::CloudPrecision::automatic});
+  if (o.common.json) {
+    json j;
+    j["db"] = o.db;
+    j["object"] = o.object;
+    j["cloud"] = o.cloud;
+    j["out"] = o.out;
+    j["points"] = cloud.size();
+    std::cout << j.dump(2) << '\n';
+  } else {
+    std::cout << "wrote " << cloud.size() << " " << o.cloud << " points of " << o.object << " (object frame, with normals) to "
+              << o.out << '\n';
+  }
+  return 0;
+}
+
+}  // namespace
+
+void register_db(CLI::App& app) {
+  auto* db = app.add_subcommand("db", "Object database: build, add, info, export");
+  db->require_subcommand(1);
+
+  {
+    auto o = std::make_shared<BuildOptions>();
+    auto* sub = db->add_subcommand("build", "Build an object database from a manifest or a folder of meshes");
+    auto* src = sub->add_option_group("source", "Where the meshes come from (one of)");
+    src->add_option("--manifest", o->manifest, "Manifest: source<TAB>path<TAB>name per line (path may be ARCHIVE:MEMBER)");
+    src->add_option("--meshes", o->meshes, "Folder of mesh files (any format Assimp reads); names from file names");
+    src->require_option(1);
+    sub->add_option("--out", o->out, "Output database (HDF5)")->required();
+    add_build_parameters(sub, o->settings, o->deflate);
+    add_common(sub, o->common);
+    sub->callback([o] { run_command(o->common, [o] { return run_build(*o); }); });
+  }
+  {
+    auto o = std::make_shared<AddOptions>();
+    auto* sub = db->add_subcommand("add", "Append one mesh to a database (built with the database's parameters)");
+    sub->add_option("db", o->db, "Database (HDF5)")->required();
+    sub->add_option("mesh", o->mesh, "Mesh file, or ARCHIVE:MEMBER")->required();
+    sub->add_option("--name", o->name, "Object name (default: the file name without extension)");
+    add_common(sub, o->common);
+    sub->callback([o, sub] {
+      o->seed_given = sub->get_option("--seed")->count() > 0;
+      run_command(o->common, [o] { return run_add(*o); });
+    });
+  }
+  {
+    auto o = std::make_shared<InfoOptions>();
+    auto* sub = db->add_subcommand("info", "Summary of a database (reads no point data)");
+    sub->add_option("db", o->db, "Database (HDF5)")->required();
+    add_common(sub, o->common);
+    sub->callback([o] { run_command(o->common, [o] { return run_info(*o); }); });
+  }
+  {
+    auto o = std::make_shared<ExportOptions>();
+    auto* sub = db->add_subcommand("export", "Write an object's cloud (object frame, with normals) as PLY or PCD");
+    sub->add_option("db", o->db, "Database (HDF5)")->required();
+    sub->add_option("--object", o->object, "Object name")->required();
+    sub->add_option("--out", o->out, "Output .ply or .pcd")->required();
+    sub->add_option("--cloud", o->cloud, "Which cloud: fine (default) or coarse (the feature points)")
+        ->check(CLI::IsMember({"fine", "coarse"}))
+        ->capture_default_str();
+    sub->add_flag("--ascii", o->ascii, "Write ascii instead of binary");
+    add_common(sub, o->common);
+    sub->callback([o] { run_command(o->common, [o] { return run_export(*o); }); });
+  }
+}
 
 }  // namespace ts::cli

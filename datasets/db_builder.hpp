@@ -1,0 +1,89 @@
+// Building an object database from meshes: read (files or archive members), import into the
+// object frame, build every object (scanner, FPFH, distance field) in parallel over TBB, write.
+//
+// Determinism: object i is built with io::object_seed(seed, name) into its own slot and the
+// file is written serially in input order, so the database is byte-identical for any thread
+// count (and an object's data do not depend on the other objects).
+#pragma once
+
+#include "engine/database.hpp"
+#include "io/db_store.hpp"
+#include "io/mesh_import.hpp"
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace ts::datasets {
+
+/// One mesh to build: a file, or a member of a tar archive.
+struct MeshInput {
+  std::string name;             ///< object name
+  std::string source;           ///< provenance stored in the database
+  std::filesystem::path path;   ///< mesh file, or the archive when `member` is set
+  std::string member;           ///< archive member, or empty
+  std::string origin;           ///< where the input was declared (for errors), e.g. "m.tsv"
+  std::string origin_field;     ///< e.g. "line 12"
+
+  /// "path" or "archive:member" (what errors name).
+  std::string display() const;
+};
+
+/// Inputs from a manifest (datasets/manifest.hpp); errors name the manifest and the line.
+std::vector<MeshInput> inputs_from_manifest(const std::filesystem::path& manifest);
+/// Every mesh file (an extension Assimp reads) directly in `folder`, sorted by file name; the
+/// object name is the file name without its extension.
+std::vector<MeshInput> inputs_from_folder(const std::filesystem::path& folder);
+/// One mesh given on the command line: a file or "ARCHIVE:MEMBER"; name defaults to the stem.
+MeshInput input_from_path(const std::string& path, const std::string& name = {});
+
+/// Seconds per stage. import/scan/features/field are summed over objects (each object's time
+/// on its own thread, so with several threads they add up to more than the wall time);
+/// read (archives), write and wall are wall-clock.
+struct BuildTimes {
+  double read_s = 0.0;
+  double import_s = 0.0;
+  double scan_s = 0.0;
+  double features_s = 0.0;
+  double field_s = 0.0;
+  double write_s = 0.0;
+  double wall_s = 0.0;
+};
+
+struct BuildSettings {
+  DatabaseSettings database;
+  std::uint64_t seed = 1;                   ///< build seed (each object: io::object_seed)
+  io::DbWriteSettings write;
+  /// Called after each object is built (done, total, name), under a lock, from the thread that
+  /// built it; may be empty.
+  std::function<void(std::size_t, std::size_t, const std::string&)> progress;
+};
+
+/// An imported and built object, with what the import noticed.
+struct BuildResult {
+  BuiltObject object;
+  std::uint64_t seed = 0;
+  bool flipped = false;                 ///< faces were wound inward (flipped on import)
+  std::vector<std::string> warnings;    ///< open / non-manifold mesh
+  double import_s = 0.0;
+};
+
+struct BuildReport {
+  std::vector<std::string> names;                    ///< input order
+  std::vector<std::vector<std::string>> warnings;    ///< per object
+  std::vector<bool> flipped;
+  std::vector<double> coverage;
+  BuildTimes times;
+};
+
+/// Import one mesh (bytes already read when `bytes` is given) and build it with `seed`.
+BuildResult build_one(const MeshInput& input, const DatabaseSettings& settings, std::uint64_t seed,
+                      const std::string* bytes = nullptr);
+
+/// Build every input and write the database to `out` (atomically). Throws the error of the
+/// first failing input (in input order); nothing is written then.
+BuildReport build_database(const std::vector<MeshInput>& inputs, const std::filesystem::path& out,
+                           const BuildSettings& settings);
+
+}  // namespace ts::datasets

@@ -1,0 +1,480 @@
+#include "io/db_store.hpp"
+
+#include "io/atomic_file.hpp"
+#include "io/h5.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+namespace ts::io {
+
+namespace {
+
+static_assert(sizeof(Vec3) == 3 * sizeof(double), "Vec3 arrays are written as [n,3] doubles");
+static_assert(sizeof(Eigen::Vector3i) == 3 * sizeof(std::int32_t), "faces are written as [n,3] int32");
+static_assert(sizeof(std::array<std::int32_t, 3>) == 3 * sizeof(std::int32_t));
+static_assert(sizeof(Feature) == kFeatureDim * sizeof(float));
+
+// --- build parameters ------------------------------------------------------------------------
+// One table per settings struct, so writing, reading and `db info` list the same fields.
+// The size checks below fail to compile when a settings struct gains (or loses) a field: add it
+// to its table (and to io/FORMAT_DB.md) so that every build parameter is stored.
+static_assert(sizeof(ScanSettings) == 88,  // 8 doubles, 5 ints, padding
+              "ScanSettings changed: update scan_fields() in io/db_store.cpp");
+static_assert(sizeof(FpfhSettings) == 2 * sizeof(double),
+              "FpfhSettings changed: update fpfh_fields() in io/db_store.cpp");
+static_assert(sizeof(DistanceFieldSettings) == 32,  // 3 doubles, 1 int, padding
+              "DistanceFieldSettings changed: update field_fields() in io/db_store.cpp");
+template <class S>
+struct Field {
+  const char* name;
+  double S::*real = nullptr;
+  int S::*integer = nullptr;
+};
+
+const std::vector<Field<ScanSettings>>& scan_fields() {
+  static const std::vector<Field<ScanSettings>> f = {
+      {"fine_spacing", &ScanSettings::fine_spacing},
+      {"coarse_voxel", &ScanSettings::coarse_voxel},
+      {"ray_pitch", &ScanSettings::ray_pitch},
+      {"max_views", nullptr, &ScanSettings::max_views},
+      {"candidate_views", nullptr, &ScanSettings::candidate_views},
+      {"target_coverage", &ScanSettings::target_coverage},
+      {"random_every", nullptr, &ScanSettings::random_every},
+      {"stall_views", nullptr, &ScanSettings::stall_views},
+      {"min_gain", &ScanSettings::min_gain},
+      {"coverage_radius", &ScanSettings::coverage_radius},
+      {"max_incidence_deg", &ScanSettings::max_incidence_deg},
+      {"grazing_incidence_deg", &ScanSettings::grazing_incidence_deg},
+      {"coverage_samples", nullptr, &ScanSettings::coverage_samples}};
+  return f;
+}
+const std::vector<Field<FpfhSettings>>& fpfh_fields() {
+  static const std::vector<Field<FpfhSettings>> f = {{"normal_radius", &FpfhSettings::normal_radius},
+                                                     {"feature_radius", &FpfhSettings::feature_radius}};
+  return f;
+}
+const std::vector<Field<DistanceFieldSettings>>& field_fields() {
+  static const std::vector<Field<DistanceFieldSettings>> f = {
+      {"fine_voxel", &DistanceFieldSettings::fine_voxel},
+      {"fine_band_voxels", nullptr, &DistanceFieldSettings::fine_band_voxels},
+      {"coarse_voxel", &DistanceFieldSettings::coarse_voxel},
+      {"coarse_margin", &DistanceFieldSettings::coarse_margin}};
+  return f;
+}
+
+template <class S>
+void write_fields(h5::Group g, const S& s, const std::vector<Field<S>>& fields) {
+  for (const auto& f : fields) {
+    if (f.real) g.set_attribute(f.name, s.*f.real);
+    else g.set_attribute(f.name, static_cast<std::int64_t>(s.*f.integer));
+  }
+}
+
+template <class S>
+void read_fields(const h5::Group& g, S& s, const std::vector<Field<S>>& fields) {
+  for (const auto& f : fields) {
+    if (f.real) {
+      s.*f.real = g.double_attribute(f.name);
+      if (!std::isfinite(s.*f.real))
+        throw Error("parameter is not a finite number", g.file(), g.path() + "@" + f.name);
+    } else {
+      s.*f.integer = static_cast<int>(g.int_attribute(f.name));
+    }
+  }
+}
+
+void write_params(h5::Group root, const DatabaseSettings& s, std::uint64_t seed) {
+  auto p = root.create_group("params");
+  p.set_attribute("max_extent", s.max_extent);
+  p.set_attribute("seed", static_cast<std::int64_t>(seed));
+  write_fields(p.create_group("scan"), s.scan, scan_fields());
+  write_fields(p.create_group("fpfh"), s.fpfh, fpfh_fields());
+  write_fields(p.create_group("field"), s.field, field_fields());
+}
+
+// --- arrays ----------------------------------------------------------------------------------
+void write_vec3(h5::Group g, const std::string& name, const std::vector<Vec3>& v, const h5::Storage& st) {
+  g.write(name, v.empty() ? nullptr : v.data()->data(), {v.size(), 3}, st);
+}
+
+std::vector<Vec3> read_vec3(const h5::Group& g, const std::string& name, std::size_t n) {
+  const auto raw = g.read<double>(name, {static_cast<std::int64_t>(n), 3});
+  std::vector<Vec3> out(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    out[i] = Vec3(raw[3 * i], raw[3 * i + 1], raw[3 * i + 2]);
+    if (!finite(out[i]))
+      throw Error("non-finite value in row " + std::to_string(i), g.file(), g.child_path(name));
+  }
+  return out;
+}
+
+std::int64_t count_attribute(const h5::Group& g, const std::string& name) {
+  const auto v = g.int_attribute(name);
+  if (v < 0) throw Error("negative count", g.file(), g.path() + "@" + name);
+  return v;
+}
+
+Vec3 vec3_attribute(const h5::Group& g, const std::string& name) {
+  const auto v = g.doubles_attribute(name, 3);
+  const Vec3 out(v[0], v[1], v[2]);
+  if (!finite(out)) throw Error("non-finite value", g.file(), g.path() + "@" + name);
+  return out;
+}
+
+void write_sparse(h5::Group g, const std::string& prefix, const SparseGrid& grid, const h5::Storage& st,
+                  const std::string& file) {
+  if (grid.ijk.size() != grid.value.size())
+    throw Error("distance field has " + std::to_string(grid.ijk.size()) + " voxels but " +
+                    std::to_string(grid.value.size()) + " values",
+                file, g.child_path(prefix));
+  g.write(prefix + "_ijk", grid.ijk.empty() ? nullptr : grid.ijk.data()->data(), {grid.ijk.size(), 3}, st);
+  g.write(prefix + "_value", grid.value.data(), {grid.value.size()}, st);
+  g.set_attribute(prefix + "_voxel", grid.voxel);
+}
+
+SparseGrid read_sparse(const h5::Group& g, const std::string& prefix) {
+  SparseGrid grid;
+  grid.voxel = g.double_attribute(prefix + "_voxel");
+  if (!(grid.voxel > 0.0) || !std::isfinite(grid.voxel))
+    throw Error("voxel size must be positive", g.file(), g.path() + "@" + prefix + "_voxel");
+  h5::Shape shape;
+  const auto ijk = g.read<std::int32_t>(prefix + "_ijk", {h5::kAny, 3}, &shape);
+  grid.value = g.read<float>(prefix + "_value", {static_cast<std::int64_t>(shape[0])});
+  grid.ijk.resize(shape[0]);
+  for (std::size_t i = 0; i < grid.ijk.size(); ++i) grid.ijk[i] = {ijk[3 * i], ijk[3 * i + 1], ijk[3 * i + 2]};
+  for (std::size_t i = 0; i < grid.value.size(); ++i)
+    if (!std::isfinite(grid.value[i]))
+      throw Error("non-finite value in row " + std::to_string(i), g.file(), g.child_path(prefix + "_value"));
+  return grid;
+}
+
+void write_object(h5::Group objects, const StoredObject& stored, const DbWriteSettings& w, const std::string& file) {
+  if (!stored.object) throw Error("no object to write", file);
+  const BuiltObject& o = *stored.object;
+  const ObjectInfo& info = o.info;
+  const std::string where = "/objects/" + info.name;
+  check_object_name(info.name, file, "/objects");
+  // Consistency of what we are about to store.
+  if (!o.fine.has_normals() && !o.fine.empty()) throw Error("fine cloud has no normals", file, where);
+  if (!o.features.coarse.has_normals() && !o.features.coarse.empty())
+    throw Error("coarse cloud has no normals", file, where);
+  if (o.features.features.size() != o.features.coarse.size())
+    throw Error("object has " + std::to_string(o.features.features.size()) + " features for " +
+                    std::to_string(o.features.coarse.size()) + " coarse points",
+                file, where);
+  const h5::Storage st{.deflate = w.deflate};
+
+  auto g = objects.create_group(info.name);
+  g.set_attribute("name", info.name);
+  g.set_attribute("source", info.source);
+  g.set_attribute("mesh_sha256", info.mesh_sha256);
+  g.set_attribute("scale", info.scale);
+  g.set_attribute("centre", std::vector<double>{info.centre.x(), info.centre.y(), info.centre.z()});
+  g.set_attribute("extent", std::vector<double>{info.extent.x(), info.extent.y(), info.extent.z()});
+  g.set_attribute("closed", static_cast<std::int64_t>(info.closed ? 1 : 0));
+  g.set_attribute("coverage", info.coverage);
+  g.set_attribute("seed", static_cast<std::int64_t>(stored.seed));
+  g.set_attribute("fine_points", static_cast<std::int64_t>(o.fine.size()));
+  g.set_attribute("coarse_points", static_cast<std::int64_t>(o.features.coarse.size()));
+  g.set_attribute("mesh_vertices", static_cast<std::int64_t>(o.mesh.vertices.size()));
+  g.set_attribute("mesh_faces", static_cast<std::int64_t>(o.mesh.faces.size()));
+
+  write_vec3(g, "mesh/vertices", o.mesh.vertices, st);
+  g.write("mesh/faces", o.mesh.faces.empty() ? nullptr : o.mesh.faces.data()->data(), {o.mesh.faces.size(), 3}, st);
+  write_vec3(g, "fine/points", o.fine.points, st);
+  write_vec3(g, "fine/normals", o.fine.normals, st);
+  write_vec3(g, "coarse/points", o.features.coarse.points, st);
+  write_vec3(g, "coarse/normals", o.features.coarse.normals, st);
+  g.write("features", o.features.features.empty() ? nullptr : o.features.features.data()->data(),
+          {o.features.features.size(), static_cast<std::uint64_t>(kFeatureDim)}, st);
+
+  auto field = g.create_group("field");
+  field.set_attribute("signed", static_cast<std::int64_t>(o.field.is_signed() ? 1 : 0));
+  field.set_attribute("coarse_margin", o.field.coarse_margin());
+  write_sparse(field, "fine", o.field.fine_sparse(), st, file);
+  write_sparse(field, "coarse", o.field.coarse_sparse(), st, file);
+}
+
+void check_unique(const std::vector<StoredObject>& objects, std::set<std::string> names, const std::string& file) {
+  for (const auto& s : objects) {
+    if (!s.object) throw Error("no object to write", file);
+    if (!names.insert(s.object->info.name).second)
+      throw Error("object '" + s.object->info.name + "' already exists in the database", file);
+  }
+}
+
+/// Root checks shared by the reader and append: format, schema, feature size.
+void check_root(const h5::Group& root) {
+  if (!root.has_attribute("schema_version"))
+    throw Error("not a Touchstone object database (no schema_version attribute)", root.file(), "/");
+  if (!root.has_attribute("format") || root.string_attribute("format") != kDbFormatName)
+    throw Error("not a Touchstone object database (format attribute is not '" + std::string(kDbFormatName) + "')",
+                root.file(), "/@format");
+  const auto v = root.int_attribute("schema_version");
+  if (v != kDbSchemaVersion)
+    throw Error("database schema version " + std::to_string(v) + " is not supported (this program reads version " +
+                    std::to_string(kDbSchemaVersion) + "); rebuild the database",
+                root.file(), "/@schema_version");
+  if (root.int_attribute("feature_dim") != kFeatureDim)
+    throw Error("features have " + std::to_string(root.int_attribute("feature_dim")) + " bins, expected " +
+                    std::to_string(kFeatureDim),
+                root.file(), "/@feature_dim");
+}
+
+}  // namespace
+
+namespace {
+template <class S>
+void append_values(std::vector<SettingValue>& out, const char* group, const S& s, const std::vector<Field<S>>& fields) {
+  for (const auto& f : fields)
+    out.push_back({group, f.name, f.real ? s.*f.real : static_cast<double>(s.*f.integer), f.real == nullptr});
+}
+}  // namespace
+
+std::vector<SettingValue> settings_values(const DatabaseSettings& s) {
+  std::vector<SettingValue> out{{"", "max_extent", s.max_extent, false}};
+  append_values(out, "scan", s.scan, scan_fields());
+  append_values(out, "fpfh", s.fpfh, fpfh_fields());
+  append_values(out, "field", s.field, field_fields());
+  return out;
+}
+
+std::uint64_t object_seed(std::uint64_t build_seed, const std::string& name) {
+  std::uint64_t h = 0xcbf29ce484222325ULL;  // FNV-1a of the name
+  for (unsigned char c : name) h = (h ^ c) * 0x100000001b3ULL;
+  return Rng(build_seed, h, 0x0b7ec7).next();
+}
+
+void check_object_name(const std::string& name, const std::string& file, const std::string& field) {
+  auto bad = [&](const std::string& why) { throw Error("invalid object name '" + name + "': " + why, file, field); };
+  if (name.empty()) bad("empty");
+  if (name == "." || name == "..") bad("reserved");
+  if (name.find('/') != std::string::npos) bad("contains '/'");
+  for (unsigned char c : name)
+    if (c < 0x20 || c == 0x7f) bad("contains a control character");
+  if (name.front() == ' ' || name.back() == ' ') bad("leading or trailing blank");
+}
+
+void write_database(const std::filesystem::path& path, const std::vector<StoredObject>& objects,
+                    const DatabaseSettings& settings, std::uint64_t build_seed, const DbWriteSettings& write) {
+  const std::string file = path.string();
+  check_unique(objects, {}, file);
+  AtomicOutput out(path);
+  {
+    std::lock_guard<std::recursive_mutex> lock(h5::mutex());
+    auto f = h5::File::create(out);
+    auto root = f.root();
+    root.set_attribute("format", kDbFormatName);
+    root.set_attribute("schema_version", kDbSchemaVersion);
+    root.set_attribute("feature_dim", static_cast<std::int64_t>(kFeatureDim));
+    write_params(root, settings, build_seed);
+    std::vector<std::string> order;
+    auto objs = root.create_group("objects");
+    for (const auto& s : objects) {
+      write_object(objs, s, write, file);
+      order.push_back(s.object->info.name);
+    }
+    root.write_strings("order", order);
+    f.close();
+  }
+  out.commit();
+}
+
+void append_to_database(const std::filesystem::path& path, const std::vector<StoredObject>& objects,
+                        const DbWriteSettings& write) {
+  const std::string file = path.string();
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) throw Error("database does not exist", file);
+  AtomicOutput out(path);
+  std::filesystem::copy_file(path, out.temp_path(), std::filesystem::copy_options::overwrite_existing, ec);
+  if (ec) throw Error("cannot copy the database to append to it: " + ec.message(), file);
+  {
+    std::lock_guard<std::recursive_mutex> lock(h5::mutex());
+    auto f = h5::File::open(out.temp_path(), h5::File::Access::read_write, file);
+    auto root = f.root();
+    check_root(root);
+    auto order = root.read_strings("order");
+    check_unique(objects, std::set<std::string>(order.begin(), order.end()), file);
+    auto objs = root.open_group("objects");
+    for (const auto& s : objects) {
+      write_object(objs, s, write, file);
+      order.push_back(s.object->info.name);
+    }
+    root.remove("order");
+    root.write_strings("order", order);
+    f.close();
+  }
+  out.commit();
+}
+
+// --- reader ----------------------------------------------------------------------------------
+struct DbReader::Impl {
+  std::string path;
+  h5::File file;
+  std::int64_t schema = 0;
+  int feature_dim = kFeatureDim;
+  std::uint64_t seed = 0;
+  DatabaseSettings settings;
+  std::vector<ObjectInfo> infos;
+  std::vector<std::uint64_t> seeds;
+  std::vector<std::size_t> vertices, faces;
+  std::vector<h5::Group> groups;
+
+  const h5::Group& group(std::size_t i) const {
+    if (i >= groups.size())
+      throw Error("object index " + std::to_string(i) + " out of range (" + std::to_string(groups.size()) +
+                      " objects)",
+                  path);
+    return groups[i];
+  }
+};
+
+DbReader::DbReader(const std::filesystem::path& path) : impl_(std::make_unique<Impl>()) {
+  std::lock_guard<std::recursive_mutex> lock(h5::mutex());
+  Impl& d = *impl_;
+  d.path = path.string();
+  d.file = h5::File::open(path, h5::File::Access::read);
+  const auto root = d.file.root();
+  check_root(root);
+  d.schema = root.int_attribute("schema_version");
+
+  const auto params = root.open_group("params");
+  d.settings.max_extent = params.double_attribute("max_extent");
+  d.seed = static_cast<std::uint64_t>(params.int_attribute("seed"));
+  read_fields(params.open_group("scan"), d.settings.scan, scan_fields());
+  read_fields(params.open_group("fpfh"), d.settings.fpfh, fpfh_fields());
+  read_fields(params.open_group("field"), d.settings.field, field_fields());
+
+  const auto order = root.read_strings("order");
+  const auto objects = root.open_group("objects");
+  std::set<std::string> seen;
+  for (const auto& name : order) {
+    if (!seen.insert(name).second) throw Error("object '" + name + "' is listed twice", d.path, "/order");
+    auto g = objects.open_group(name);
+    ObjectInfo info;
+    info.name = g.string_attribute("name");
+    if (info.name != name)
+      throw Error("object group holds the name '" + info.name + "'", d.path, g.path() + "@name");
+    info.source = g.string_attribute("source");
+    info.mesh_sha256 = g.string_attribute("mesh_sha256");
+    info.scale = g.double_attribute("scale");
+    info.centre = vec3_attribute(g, "centre");
+    info.extent = vec3_attribute(g, "extent");
+    info.closed = g.int_attribute("closed") != 0;
+    info.coverage = g.double_attribute("coverage");
+    info.fine_points = static_cast<std::size_t>(count_attribute(g, "fine_points"));
+    info.coarse_points = static_cast<std::size_t>(count_attribute(g, "coarse_points"));
+    d.vertices.push_back(static_cast<std::size_t>(count_attribute(g, "mesh_vertices")));
+    d.faces.push_back(static_cast<std::size_t>(count_attribute(g, "mesh_faces")));
+    d.seeds.push_back(static_cast<std::uint64_t>(g.int_attribute("seed")));
+    d.infos.push_back(std::move(info));
+    d.groups.push_back(std::move(g));
+  }
+  if (objects.children().size() != order.size())
+    throw Error("/objects holds " + std::to_string(objects.children().size()) + " objects but /order lists " +
+                    std::to_string(order.size()),
+                d.path, "/order");
+}
+
+DbReader::~DbReader() {
+  std::lock_guard<std::recursive_mutex> lock(h5::mutex());
+  impl_.reset();
+}
+
+std::size_t DbReader::size() const { return impl_->infos.size(); }
+const ObjectInfo& DbReader::info(std::size_t i) const {
+  impl_->group(i);
+  return impl_->infos[i];
+}
+const DatabaseSettings& DbReader::settings() const { return impl_->settings; }
+const std::string& DbReader::path() const { return impl_->path; }
+std::int64_t DbReader::schema_version() const { return impl_->schema; }
+int DbReader::feature_dim() const { return impl_->feature_dim; }
+std::uint64_t DbReader::build_seed() const { return impl_->seed; }
+std::uint64_t DbReader::object_seed(std::size_t i) const {
+  impl_->group(i);
+  return impl_->seeds[i];
+}
+std::size_t DbReader::mesh_vertices(std::size_t i) const {
+  impl_->group(i);
+  return impl_->vertices[i];
+}
+std::size_t DbReader::mesh_faces(std::size_t i) const {
+  impl_->group(i);
+  return impl_->faces[i];
+}
+
+std::size_t DbReader::find(const std::string& name) const {
+  for (std::size_t i = 0; i < size(); ++i)
+    if (impl_->infos[i].name == name) return i;
+  return size();
+}
+
+ObjectFeatures DbReader::load_features(std::size_t i) const {
+  std::lock_guard<std::recursive_mutex> lock(h5::mutex());
+  const auto& g = impl_->group(i);
+  const std::size_t n = impl_->infos[i].coarse_points;
+  ObjectFeatures out;
+  out.coarse.points = read_vec3(g, "coarse/points", n);
+  out.coarse.normals = read_vec3(g, "coarse/normals", n);
+  const auto raw = g.read<float>("features", {static_cast<std::int64_t>(n), kFeatureDim});
+  out.features.resize(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    std::copy_n(raw.begin() + static_cast<std::ptrdiff_t>(k * kFeatureDim), kFeatureDim, out.features[k].begin());
+    for (float v : out.features[k])
+      if (!std::isfinite(v))
+        throw Error("non-finite value in row " + std::to_string(k), impl_->path, g.child_path("features"));
+  }
+  return out;
+}
+
+PointCloud DbReader::load_fine(std::size_t i) const {
+  std::lock_guard<std::recursive_mutex> lock(h5::mutex());
+  const auto& g = impl_->group(i);
+  const std::size_t n = impl_->infos[i].fine_points;
+  PointCloud out;
+  out.points = read_vec3(g, "fine/points", n);
+  out.normals = read_vec3(g, "fine/normals", n);
+  return out;
+}
+
+DistanceField DbReader::load_field(std::size_t i) const {
+  SparseGrid fine, coarse;
+  bool is_signed = false;
+  double margin = 0.0;
+  {
+    std::lock_guard<std::recursive_mutex> lock(h5::mutex());
+    const auto field = impl_->group(i).open_group("field");
+    is_signed = field.int_attribute("signed") != 0;
+    margin = field.double_attribute("coarse_margin");
+    if (!(margin >= 0.0) || !std::isfinite(margin))
+      throw Error("coarse margin must be a non-negative number", impl_->path, field.path() + "@coarse_margin");
+    fine = read_sparse(field, "fine");
+    coarse = read_sparse(field, "coarse");
+  }
+  // Building the grids needs no HDF5: outside the lock, so other threads can read meanwhile.
+  return DistanceField::from_sparse(std::move(fine), std::move(coarse), is_signed, margin);
+}
+
+Mesh DbReader::load_mesh(std::size_t i) const {
+  std::lock_guard<std::recursive_mutex> lock(h5::mutex());
+  const auto& g = impl_->group(i);
+  Mesh out;
+  out.vertices = read_vec3(g, "mesh/vertices", impl_->vertices[i]);
+  const auto nf = impl_->faces[i];
+  const auto raw = g.read<std::int32_t>("mesh/faces", {static_cast<std::int64_t>(nf), 3});
+  out.faces.resize(nf);
+  const auto nv = static_cast<std::int32_t>(out.vertices.size());
+  for (std::size_t k = 0; k < nf; ++k) {
+    out.faces[k] = Eigen::Vector3i(raw[3 * k], raw[3 * k + 1], raw[3 * k + 2]);
+    for (int c = 0; c < 3; ++c)
+      if (out.faces[k][c] < 0 || out.faces[k][c] >= nv)
+        throw Error("face " + std::to_string(k) + " refers to a missing vertex", impl_->path,
+                    g.child_path("mesh/faces"));
+  }
+  return out;
+}
+
+}  // namespace ts::io

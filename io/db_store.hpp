@@ -1,0 +1,103 @@
+// The object database on disk: one HDF5 file, format in io/FORMAT_DB.md.
+//
+// - write_database(): a whole database, written under a temporary name and renamed when done.
+//   The bytes depend only on the objects, settings and seeds (no timestamps), so a build is
+//   byte-identical for any thread count.
+// - append_to_database(): `db add`. Works on a copy that replaces the original only when
+//   everything succeeded; on any failure (duplicate name, disk full, ...) the original file is
+//   untouched.
+// - DbReader: the engine's ObjectSource over a file. Opening reads only the summary (root,
+//   parameter and per-object attributes): `db info` never touches point data. Every load checks
+//   the dataset shapes against the summary, and all HDF5 access is serialised by the global HDF5
+//   mutex, so a DbReader may be used from many threads.
+#pragma once
+
+#include "engine/database.hpp"
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace ts::io {
+
+/// Schema version written by this program; readers refuse other versions.
+constexpr std::int64_t kDbSchemaVersion = 1;
+/// Value of the root attribute "format".
+constexpr const char* kDbFormatName = "touchstone-object-database";
+
+struct DbWriteSettings {
+  int deflate = 0;   ///< zlib level 0..9 for the large datasets (0: uncompressed, fastest)
+};
+
+/// What a database records beside each object's data: the seed each object was built with.
+struct StoredObject {
+  const BuiltObject* object = nullptr;
+  std::uint64_t seed = 0;
+};
+
+/// Object names become HDF5 group names: non-empty, no '/', not "." or "..", no control
+/// characters, no leading or trailing blanks. Throws ts::Error naming `file` and `field`.
+void check_object_name(const std::string& name, const std::string& file = {},
+                       const std::string& field = {});
+
+/// Write a whole database (atomically). Names must be unique. `build_seed` is the --seed of
+/// the build (each object's own seed is stored with it).
+void write_database(const std::filesystem::path& path, const std::vector<StoredObject>& objects,
+                    const DatabaseSettings& settings, std::uint64_t build_seed,
+                    const DbWriteSettings& write = {});
+
+/// Append objects to an existing database (built with the database's settings). The original
+/// file is replaced only when everything succeeded.
+void append_to_database(const std::filesystem::path& path, const std::vector<StoredObject>& objects,
+                        const DbWriteSettings& write = {});
+
+class DbReader final : public ObjectSource {
+ public:
+  /// Open and read the summary. Throws ts::Error for a missing, foreign, truncated or
+  /// incompatible file (naming the file and the field).
+  explicit DbReader(const std::filesystem::path& path);
+  ~DbReader() override;
+
+  std::size_t size() const override;
+  const ObjectInfo& info(std::size_t i) const override;
+  const DatabaseSettings& settings() const override;
+  ObjectFeatures load_features(std::size_t i) const override;
+  PointCloud load_fine(std::size_t i) const override;
+  DistanceField load_field(std::size_t i) const override;
+
+  /// The object-frame mesh (the simulator touches it).
+  Mesh load_mesh(std::size_t i) const;
+  /// Index of `name`, or size() when absent.
+  std::size_t find(const std::string& name) const;
+
+  const std::string& path() const;
+  std::int64_t schema_version() const;
+  int feature_dim() const;
+  std::uint64_t build_seed() const;
+  std::uint64_t object_seed(std::size_t i) const;
+  std::size_t mesh_vertices(std::size_t i) const;
+  std::size_t mesh_faces(std::size_t i) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Every build parameter as stored under /params: group ("" for max_extent, else "scan",
+/// "fpfh" or "field"), name, value, and whether it is an integer. For reports (`db info`).
+struct SettingValue {
+  std::string group;
+  std::string name;
+  double value = 0.0;
+  bool integer = false;
+};
+std::vector<SettingValue> settings_values(const DatabaseSettings& settings);
+
+/// Seed of one object: derived from the build seed and the object's name (not its position),
+/// so an object's data do not depend on the order of the manifest, on threads, or on whether it
+/// was built with `db build` or appended with `db add`.
+std::uint64_t object_seed(std::uint64_t build_seed, const std::string& name);
+
+}  // namespace ts::io

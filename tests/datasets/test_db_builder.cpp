@@ -1,0 +1,116 @@
+#include "datasets/db_builder.hpp"
+#include "io/db_store.hpp"
+#include "mesh_fixtures.hpp"
+#include "temp_dir.hpp"
+
+#include <doctest/doctest.h>
+#include <tbb/task_arena.h>
+
+#include <cstdlib>
+
+namespace fs = std::filesystem;
+using ts::test::TempDir;
+
+namespace {
+/// Coarse settings: these tests check plumbing, not accuracy.
+ts::DatabaseSettings fast_settings() {
+  ts::DatabaseSettings s;
+  s.scan.fine_spacing = 0.006;
+  s.scan.coarse_voxel = 0.02;
+  s.scan.max_views = 24;
+  s.fpfh.normal_radius = 0.015;
+  s.fpfh.feature_radius = 0.03;
+  s.field.fine_voxel = 0.01;
+  s.field.fine_band_voxels = 2;
+  s.field.coarse_voxel = 0.04;
+  s.field.coarse_margin = 0.04;
+  return s;
+}
+}  // namespace
+
+TEST_CASE("db builder: a folder lists its mesh files, sorted, named by stem") {
+  TempDir dir("builder");
+  ts::test::write_off(dir / "b.off", ts::test::box_mesh({0, 0, 0}, {1, 1, 1}));
+  ts::test::write_text(dir / "a.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  ts::test::write_text(dir / ".hidden.off", "OFF\n");
+  ts::test::write_text(dir / "notes.txt", "not a mesh");
+  fs::create_directories(dir / "sub.off");
+  const auto inputs = ts::datasets::inputs_from_folder(dir.path());
+  REQUIRE(inputs.size() == 2);
+  CHECK(inputs[0].name == "a");
+  CHECK(inputs[1].name == "b");
+  CHECK(inputs[1].source == "file: b.off");
+  CHECK(inputs[1].member.empty());
+
+  ts::test::write_text(dir / "a.stl", "solid a\nendsolid a\n");
+  CHECK_THROWS_WITH_AS(ts::datasets::inputs_from_folder(dir.path()), doctest::Contains("two meshes would be named 'a'"),
+                       ts::Error);
+  TempDir empty("builder");
+  CHECK_THROWS_WITH_AS(ts::datasets::inputs_from_folder(empty.path()), doctest::Contains("no mesh files"), ts::Error);
+  CHECK_THROWS_WITH_AS(ts::datasets::inputs_from_folder(dir / "none"), doctest::Contains("does not exist"), ts::Error);
+}
+
+TEST_CASE("db builder: paths given on the command line and manifest lines") {
+  const auto a = ts::datasets::input_from_path("pkg/data.tar.gz:data/meshes/cow.off");
+  CHECK(a.path == fs::path("pkg/data.tar.gz"));
+  CHECK(a.member == "data/meshes/cow.off");
+  CHECK(a.name == "cow");
+  CHECK(a.display() == "pkg/data.tar.gz:data/meshes/cow.off");
+  CHECK(ts::datasets::input_from_path("x/bunny.ply", "rabbit").name == "rabbit");
+  CHECK_THROWS_WITH_AS(ts::datasets::input_from_path("x/bunny.ply", "a/b"), doctest::Contains("invalid object name"),
+                       ts::Error);
+
+  TempDir dir("builder");
+  ts::test::write_text(dir / "m.tsv", "# x\nsrc\tcache/a.tar.gz:m/x.off\tx\n\nsrc\ty.obj\ty\n");
+  const auto in = ts::datasets::inputs_from_manifest(dir / "m.tsv");
+  REQUIRE(in.size() == 2);
+  CHECK(in[0].source == "src: a.tar.gz:m/x.off");
+  CHECK(in[0].origin_field == "line 2");
+  CHECK(in[1].origin_field == "line 4");
+  ts::test::write_text(dir / "bad.tsv", "src\ty.obj\tbad/name\n");
+  CHECK_THROWS_WITH_AS(ts::datasets::inputs_from_manifest(dir / "bad.tsv"), doctest::Contains("line 1"), ts::Error);
+}
+
+TEST_CASE("db builder: meshes inside an archive; the first bad mesh in input order is the error") {
+  TempDir dir("builder");
+  fs::create_directories(dir / "src/m");
+  ts::test::write_off(dir / "src/m/box.off", ts::test::box_mesh({0, 0, 0}, {2, 1, 1}));
+  ts::test::write_off(dir / "src/m/ball.off", ts::test::sphere_mesh(1.0, 1));
+  REQUIRE(std::system(("tar -C '" + (dir / "src").string() + "' -czf '" + (dir / "meshes.tar.gz").string() +
+                       "' m >/dev/null 2>&1")
+                          .c_str()) == 0);
+  ts::test::write_text(dir / "m.tsv", "pkg\tmeshes.tar.gz:m/ball.off\tball\npkg\tmeshes.tar.gz:m/box.off\tbox\n");
+  ts::datasets::BuildSettings settings;
+  settings.database = fast_settings();
+  std::size_t progress_calls = 0;
+  settings.progress = [&](std::size_t done, std::size_t total, const std::string&) {
+    ++progress_calls;
+    CHECK(done <= total);
+  };
+  tbb::task_arena arena(2);
+  const auto report = arena.execute(
+      [&] { return ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "m.tsv"), dir / "db.h5", settings); });
+  CHECK(progress_calls == 2);
+  CHECK(report.names == std::vector<std::string>{"ball", "box"});
+  CHECK(report.times.wall_s > 0.0);
+  ts::io::DbReader db(dir / "db.h5");
+  REQUIRE(db.size() == 2);
+  CHECK(db.info(1).source == "pkg: meshes.tar.gz:m/box.off");
+  CHECK(db.info(1).extent.isApprox(ts::Vec3(0.2, 0.1, 0.1)));
+  CHECK(db.info(0).closed);
+
+  // Two bad inputs: the error is the first one's, whatever the threads did.
+  ts::test::write_text(dir / "src/bad1.off", "OFF\n3 1 0\n0 0 0\n");
+  ts::test::write_text(dir / "src/bad2.off", "OFF\n3 1 0\n1 1 1\n");
+  std::vector<ts::datasets::MeshInput> inputs = {ts::datasets::input_from_path((dir / "src/m/box.off").string()),
+                                                 ts::datasets::input_from_path((dir / "src/bad2.off").string()),
+                                                 ts::datasets::input_from_path((dir / "src/bad1.off").string())};
+  for (int rep = 0; rep < 3; ++rep)
+    CHECK_THROWS_WITH_AS(arena.execute([&] { return ts::datasets::build_database(inputs, dir / "x.h5", settings); }),
+                         doctest::Contains("bad2.off"), ts::Error);
+  CHECK_FALSE(fs::exists(dir / "x.h5"));
+  inputs.pop_back();
+  inputs[1] = ts::datasets::input_from_path((dir / "src/m/ball.off").string(), "box");
+  CHECK_THROWS_WITH_AS(ts::datasets::build_database(inputs, dir / "x.h5", settings), doctest::Contains("duplicate"),
+                       ts::Error);
+}

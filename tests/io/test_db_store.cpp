@@ -1,0 +1,292 @@
+#include "engine/database.hpp"
+#include "io/db_store.hpp"
+#include "io/h5.hpp"
+#include "mesh_fixtures.hpp"
+#include "temp_dir.hpp"
+
+#include <doctest/doctest.h>
+
+#include <thread>
+
+namespace fs = std::filesystem;
+namespace h5 = ts::io::h5;
+using ts::test::TempDir;
+
+namespace {
+
+ts::PointCloud random_cloud(ts::Rng& rng, std::size_t n) {
+  ts::PointCloud c;
+  for (std::size_t i = 0; i < n; ++i) {
+    c.points.emplace_back(rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1));
+    c.normals.push_back(rng.unit_vector());
+  }
+  return c;
+}
+
+ts::SparseGrid random_grid(ts::Rng& rng, double voxel, int n) {
+  ts::SparseGrid g;
+  g.voxel = voxel;
+  for (int i = 0; i < n; ++i) {  // sorted by (i, j, k), as the field stores them
+    g.ijk.push_back({i / 9 - 2, (i / 3) % 3 - 1, i % 3 - 1});
+    g.value.push_back(static_cast<float>(rng.uniform(-0.01, 0.01)));
+  }
+  return g;
+}
+
+/// A synthetic object: every array has distinctive contents (no engine computation needed).
+ts::BuiltObject synthetic_object(const std::string& name, std::uint64_t seed) {
+  ts::Rng rng(seed);
+  ts::BuiltObject o;
+  o.info.name = name;
+  o.info.source = "test\t" + name + ".off";
+  o.info.mesh_sha256 = std::string(64, 'a');
+  o.info.scale = rng.uniform(0.1, 2.0);
+  o.info.centre = ts::Vec3(rng.uniform(), rng.uniform(), rng.uniform());
+  o.info.extent = ts::Vec3(0.2, 0.1, 0.05);
+  o.info.closed = seed % 2 == 0;
+  o.info.coverage = 0.995;
+  o.mesh = ts::test::box_mesh({-0.1, -0.05, -0.025}, {0.1, 0.05, 0.025});
+  o.fine = random_cloud(rng, 200 + seed);
+  o.features.coarse = random_cloud(rng, 20 + seed);
+  for (std::size_t i = 0; i < o.features.coarse.size(); ++i) {
+    ts::Feature f;
+    for (auto& v : f) v = static_cast<float>(rng.uniform(0, 100));
+    o.features.features.push_back(f);
+  }
+  o.info.fine_points = o.fine.size();
+  o.info.coarse_points = o.features.coarse.size();
+  o.field = ts::DistanceField::from_sparse(random_grid(rng, 0.002, 27), random_grid(rng, 0.01, 45), o.info.closed, 0.2);
+  return o;
+}
+
+ts::DatabaseSettings custom_settings() {
+  ts::DatabaseSettings s;
+  s.max_extent = 0.3;
+  s.scan.fine_spacing = 0.002;
+  s.scan.max_views = 17;
+  s.fpfh.feature_radius = 0.025;
+  s.field.fine_band_voxels = 4;
+  return s;
+}
+
+std::vector<ts::io::StoredObject> stored(const std::vector<ts::BuiltObject>& objects) {
+  std::vector<ts::io::StoredObject> out;
+  for (const auto& o : objects) out.push_back({&o, ts::io::object_seed(5, o.info.name)});
+  return out;
+}
+std::vector<ts::io::StoredObject> stored_one(const ts::BuiltObject& o) {
+  return {{&o, ts::io::object_seed(5, o.info.name)}};
+}
+
+void check_same(const ts::io::DbReader& db, std::size_t i, const ts::BuiltObject& o) {
+  const auto& info = db.info(i);
+  CHECK(info.name == o.info.name);
+  CHECK(info.source == o.info.source);
+  CHECK(info.mesh_sha256 == o.info.mesh_sha256);
+  CHECK(info.scale == o.info.scale);
+  CHECK(info.centre == o.info.centre);
+  CHECK(info.extent == o.info.extent);
+  CHECK(info.closed == o.info.closed);
+  CHECK(info.coverage == o.info.coverage);
+  CHECK(info.fine_points == o.fine.size());
+  CHECK(info.coarse_points == o.features.coarse.size());
+  CHECK(db.object_seed(i) == ts::io::object_seed(5, o.info.name));
+  const auto fine = db.load_fine(i);
+  CHECK(fine.points == o.fine.points);
+  CHECK(fine.normals == o.fine.normals);
+  const auto feat = db.load_features(i);
+  CHECK(feat.coarse.points == o.features.coarse.points);
+  CHECK(feat.coarse.normals == o.features.coarse.normals);
+  CHECK(feat.features == o.features.features);
+  const auto mesh = db.load_mesh(i);
+  CHECK(mesh.vertices == o.mesh.vertices);
+  CHECK(mesh.faces == o.mesh.faces);
+  const auto field = db.load_field(i);
+  CHECK(field.is_signed() == o.field.is_signed());
+  CHECK(field.coarse_margin() == o.field.coarse_margin());
+  CHECK(field.fine_sparse().ijk == o.field.fine_sparse().ijk);
+  CHECK(field.fine_sparse().value == o.field.fine_sparse().value);
+  CHECK(field.coarse_sparse().voxel == o.field.coarse_sparse().voxel);
+  CHECK(field.coarse_sparse().value == o.field.coarse_sparse().value);
+}
+
+}  // namespace
+
+TEST_CASE("db store: write, read back everything, identical bytes") {
+  TempDir dir("db");
+  std::vector<ts::BuiltObject> objects;
+  objects.push_back(synthetic_object("cube", 1));
+  objects.push_back(synthetic_object("sphere", 2));
+  const auto settings = custom_settings();
+  ts::io::write_database(dir / "a.h5", stored(objects), settings, 5);
+  ts::io::write_database(dir / "b.h5", stored(objects), settings, 5);
+  CHECK(ts::test::read_bytes(dir / "a.h5") == ts::test::read_bytes(dir / "b.h5"));
+
+  ts::io::DbReader db(dir / "a.h5");
+  CHECK(db.schema_version() == ts::io::kDbSchemaVersion);
+  CHECK(db.feature_dim() == 33);
+  CHECK(db.build_seed() == 5);
+  REQUIRE(db.size() == 2);
+  CHECK(db.find("sphere") == 1);
+  CHECK(db.find("torus") == 2);
+  CHECK(db.settings().max_extent == 0.3);
+  CHECK(db.settings().scan.fine_spacing == 0.002);
+  CHECK(db.settings().scan.max_views == 17);
+  CHECK(db.settings().scan.coverage_radius == ts::ScanSettings{}.coverage_radius);
+  CHECK(db.settings().fpfh.feature_radius == 0.025);
+  CHECK(db.settings().field.fine_band_voxels == 4);
+  check_same(db, 0, objects[0]);
+  check_same(db, 1, objects[1]);
+  CHECK(db.mesh_faces(0) == 12);
+
+  // The engine's lazy cache over the file.
+  ts::Database cache(std::make_shared<ts::io::DbReader>(dir / "a.h5"));
+  CHECK(cache.find("cube") == 0);
+  CHECK_FALSE(cache.geometry_loaded(1));
+  CHECK(cache.geometry(1).fine.points == objects[1].fine.points);
+  CHECK(cache.geometry_loads() == 1);
+}
+
+TEST_CASE("db store: compressed databases read the same") {
+  TempDir dir("db");
+  std::vector<ts::BuiltObject> objects;
+  objects.push_back(synthetic_object("a", 3));
+  ts::io::write_database(dir / "z.h5", stored(objects), {}, 5, {.deflate = 4});
+  ts::io::DbReader db(dir / "z.h5");
+  check_same(db, 0, objects[0]);
+}
+
+TEST_CASE("db store: append keeps the others, and a failed append leaves the file as it was") {
+  TempDir dir("db");
+  std::vector<ts::BuiltObject> objects;
+  objects.push_back(synthetic_object("a", 1));
+  objects.push_back(synthetic_object("b", 2));
+  ts::io::write_database(dir / "db.h5", stored_one(objects[0]), custom_settings(), 5);
+  ts::io::append_to_database(dir / "db.h5", stored_one(objects[1]));
+  {
+    ts::io::DbReader db(dir / "db.h5");
+    REQUIRE(db.size() == 2);
+    CHECK(db.settings().max_extent == 0.3);
+    check_same(db, 0, objects[0]);
+    check_same(db, 1, objects[1]);
+  }
+  const auto before = ts::test::read_bytes(dir / "db.h5");
+  auto dup = synthetic_object("b", 7);
+  CHECK_THROWS_WITH_AS(ts::io::append_to_database(dir / "db.h5", {{&dup, 1}}),
+                       doctest::Contains("object 'b' already exists in the database"), ts::Error);
+  CHECK(ts::test::read_bytes(dir / "db.h5") == before);
+  auto bad = synthetic_object("c", 8);
+  bad.features.features.pop_back();  // inconsistent: fails half-way through writing
+  CHECK_THROWS_WITH_AS(ts::io::append_to_database(dir / "db.h5", {{&bad, 1}}), doctest::Contains("features for"),
+                       ts::Error);
+  CHECK(ts::test::read_bytes(dir / "db.h5") == before);
+  for (const auto& e : fs::directory_iterator(dir.path())) CHECK(e.path().filename() == "db.h5");
+  CHECK_THROWS_WITH_AS(ts::io::append_to_database(dir / "none.h5", {{&bad, 1}}), doctest::Contains("does not exist"),
+                       ts::Error);
+}
+
+TEST_CASE("db store: info is lazy; loads check every shape") {
+  TempDir dir("db");
+  std::vector<ts::BuiltObject> objects;
+  objects.push_back(synthetic_object("a", 1));
+  objects.push_back(synthetic_object("b", 2));
+  ts::io::write_database(dir / "db.h5", stored(objects), {}, 5);
+  {
+    auto f = h5::File::open(dir / "db.h5", h5::File::Access::read_write);
+    auto a = f.group("objects/a");
+    a.remove("fine/points");            // point data gone...
+    a.remove("fine/normals");
+    std::vector<double> two(2 * objects[0].fine.size(), 0.0);
+    a.write("fine/normals", two.data(), {objects[0].fine.size(), 2});
+    a.remove("features");
+    f.close();
+  }
+  {
+    ts::io::DbReader db(dir / "db.h5");  // ...yet the summary opens
+    CHECK(db.info(0).fine_points == objects[0].fine.size());
+    CHECK_THROWS_WITH_AS(db.load_fine(0), doctest::Contains("dataset is missing"), ts::Error);
+    CHECK_THROWS_WITH_AS(db.load_fine(0), doctest::Contains("/objects/a/fine/points)"), ts::Error);
+    CHECK_THROWS_WITH_AS(db.load_features(0), doctest::Contains("/objects/a/features"), ts::Error);
+    check_same(db, 1, objects[1]);
+  }
+
+  // A count attribute that disagrees with the data is caught at load.
+  {
+    auto f = h5::File::open(dir / "db.h5", h5::File::Access::read_write);
+    f.group("objects/b").set_attribute("fine_points", std::int64_t{3});
+    f.close();
+  }
+  ts::io::DbReader db2(dir / "db.h5");
+  const std::string expected = "dataset has shape [" + std::to_string(objects[1].fine.size()) +
+                               ",3], expected [3,3] (" + (dir / "db.h5").string() + ", /objects/b/fine/points)";
+  CHECK_THROWS_WITH_AS(db2.load_fine(1), expected.c_str(), ts::Error);
+}
+
+TEST_CASE("db store: foreign, truncated and incompatible files are refused") {
+  TempDir dir("db");
+  std::vector<ts::BuiltObject> objects;
+  objects.push_back(synthetic_object("a", 1));
+  ts::io::write_database(dir / "db.h5", stored(objects), {}, 5);
+  const auto bytes = ts::test::read_bytes(dir / "db.h5");
+  ts::test::write_text(dir / "cut.h5", bytes.substr(0, bytes.size() - 100));
+  CHECK_THROWS_WITH_AS(ts::io::DbReader(dir / "cut.h5"), doctest::Contains("truncated"), ts::Error);
+  ts::test::write_text(dir / "text.h5", "hello");
+  CHECK_THROWS_WITH_AS(ts::io::DbReader(dir / "text.h5"), doctest::Contains("not an HDF5 file"), ts::Error);
+  {
+    auto f = h5::File::create(dir / "other.h5");
+    f.root().write("x", std::vector<double>{1.0});
+    f.close();
+  }
+  CHECK_THROWS_WITH_AS(ts::io::DbReader(dir / "other.h5"), doctest::Contains("not a Touchstone object database"),
+                       ts::Error);
+  {
+    auto f = h5::File::open(dir / "db.h5", h5::File::Access::read_write);
+    f.root().set_attribute("schema_version", std::int64_t{99});
+    f.close();
+  }
+  CHECK_THROWS_WITH_AS(ts::io::DbReader(dir / "db.h5"), doctest::Contains("schema version 99 is not supported"),
+                       ts::Error);
+}
+
+TEST_CASE("db store: object names and seeds") {
+  for (const char* bad : {"", ".", "..", "a/b", " a", "a ", "tab\there"})
+    CHECK_THROWS_WITH_AS(ts::io::check_object_name(bad, "m.tsv", "line 3"), doctest::Contains("invalid object name"),
+                         ts::Error);
+  CHECK_NOTHROW(ts::io::check_object_name("bunny_2 (scan)"));
+  CHECK(ts::io::object_seed(1, "cube") == ts::io::object_seed(1, "cube"));
+  CHECK(ts::io::object_seed(1, "cube") != ts::io::object_seed(2, "cube"));
+  CHECK(ts::io::object_seed(1, "cube") != ts::io::object_seed(1, "cuba"));
+
+  TempDir dir("db");
+  auto a = synthetic_object("a", 1);
+  auto b = synthetic_object("a", 2);
+  CHECK_THROWS_WITH_AS(ts::io::write_database(dir / "d.h5", {{&a, 1}, {&b, 2}}, {}, 1),
+                       doctest::Contains("object 'a' already exists"), ts::Error);
+  CHECK_FALSE(fs::exists(dir / "d.h5"));
+}
+
+TEST_CASE("db store: concurrent loads from one reader") {
+  TempDir dir("db");
+  std::vector<ts::BuiltObject> objects;
+  for (int k = 0; k < 4; ++k) {
+    std::string name = "o";
+    name += std::to_string(k);
+    objects.push_back(synthetic_object(name, static_cast<std::uint64_t>(k)));
+  }
+  ts::io::write_database(dir / "db.h5", stored(objects), {}, 5);
+  ts::io::DbReader db(dir / "db.h5");
+  std::vector<int> ok(4, 0);
+  std::vector<std::thread> threads;
+  for (int k = 0; k < 4; ++k)
+    threads.emplace_back([&, k] {
+      bool good = true;
+      for (int rep = 0; rep < 10; ++rep) {
+        const auto i = static_cast<std::size_t>((k + rep) % 4);
+        good = good && db.load_fine(i).points == objects[i].fine.points &&
+               db.load_features(i).features == objects[i].features.features;
+      }
+      ok[static_cast<std::size_t>(k)] = good;
+    });
+  for (auto& t : threads) t.join();
+  CHECK(ok == std::vector<int>(4, 1));
+}
