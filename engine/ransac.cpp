@@ -67,13 +67,12 @@ struct Triplet {
   bool from_boundary = false;   ///< drawn from all points, the interior gave no valid triplet
 };
 
-PrunedSet prune(const Database& db, const FeatureIndex& index, const Feature& f, std::size_t w,
+PrunedSet prune(const Database& db, const FeatureSearch& search, const std::vector<Neighbour>& nn,
                 const std::vector<std::uint8_t>& allowed) {
   PrunedSet set;
-  const std::vector<Neighbour> nn = index.knn(f, w);
   set.items.reserve(nn.size());
   for (const Neighbour& nb : nn) {
-    const FeatureRef& r = index.ref(nb.index);
+    const FeatureRef& r = search.ref(nb.index);
     if (r.object < allowed.size() && allowed[r.object]) set.items.push_back({r.object, r.point});
   }
   // Group by object, keeping the nearest-first order inside each group.
@@ -194,8 +193,28 @@ FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings&
   return FeatureIndex(std::move(features), std::move(refs), settings);
 }
 
+std::size_t FeatureSearch::size() const {
+  return table ? table->size() : index ? index->size() : 0;
+}
+
+const FeatureRef& FeatureSearch::ref(std::size_t i) const {
+  return table ? table->ref(i) : index->ref(i);
+}
+
+std::vector<std::vector<Neighbour>> FeatureSearch::knn(const std::vector<Feature>& queries,
+                                                       std::size_t w) const {
+  if (table) return table->knn(queries, w);
+  std::vector<std::vector<Neighbour>> out(queries.size());
+  if (!index) return out;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t q = r.begin(); q != r.end(); ++q) out[q] = index->knn(queries[q], w);
+                    });
+  return out;
+}
+
 std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
-                                         const FeatureIndex& index,
+                                         const FeatureSearch& search,
                                          const std::vector<std::uint8_t>& allowed,
                                          const RansacSettings& s, std::uint64_t seed,
                                          std::uint64_t step, RansacStats* stats) {
@@ -212,7 +231,7 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
     valid.push_back(i);
     if (scene.interior[i]) interior.push_back(i);
   }
-  if (valid.size() < 3 || N == 0 || R == 0 || index.size() == 0 || st.objects_allowed == 0) {
+  if (valid.size() < 3 || N == 0 || R == 0 || search.size() == 0 || st.objects_allowed == 0) {
     if (stats) *stats = st;
     return out;
   }
@@ -249,11 +268,29 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
         t.d13 = d13;
         t.d23 = d23;
       }
-      if (!t.valid) continue;
-      for (int j = 0; j < 3; ++j)
-        t.pruned[j] = prune(db, index, scene.features[t.point[j]], s.prune_w, allowed);
     }
   });
+  // Feature-based database pruning: the W nearest database features of every triplet point,
+  // all queries of the step in one batch.
+  std::vector<Feature> queries;
+  for (const Triplet& t : trip)
+    if (t.valid)
+      for (int j = 0; j < 3; ++j) queries.push_back(scene.features[t.point[j]]);
+  const auto nearest = search.knn(queries, s.prune_w);
+  {
+    std::vector<std::array<std::size_t, 2>> jobs;  // (triplet, first query)
+    std::size_t q = 0;
+    for (std::size_t i = 0; i < trip.size(); ++i)
+      if (trip[i].valid) {
+        jobs.push_back({i, q});
+        q += 3;
+      }
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t k = r.begin(); k != r.end(); ++k)
+        for (int j = 0; j < 3; ++j)
+          trip[jobs[k][0]].pruned[j] = prune(db, search, nearest[jobs[k][1] + j], allowed);
+    });
+  }
   st.time_prune_s = seconds_since(t0);
   for (const Triplet& t : trip) {
     st.triplets += t.valid;

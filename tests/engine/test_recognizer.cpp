@@ -57,7 +57,7 @@ std::vector<StepResult> explore(Recognizer& rec, std::size_t obj, const Pose& T,
 TEST_CASE("BRICPSF recognizes asymmetric and symmetric objects and localizes them") {
   auto src = test::make_source();
   Database db(src);
-  auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
+  std::shared_ptr<const FeatureIndex> index;  // the shared FeatureTable is used
   SymmetryCache symmetries;
   for (std::size_t obj : {1u, 3u, 4u}) {  // nut (D5), hexbar (D6), wedge (none)
     Recognizer rec(db, index, fast());
@@ -102,7 +102,7 @@ TEST_CASE("Recognizer invariants: state size, posterior, objects kept for life")
 TEST_CASE("Every method runs through the same path; the batch methods ignore free space") {
   auto src = test::make_source();
   Database db(src);
-  auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
+  std::shared_ptr<const FeatureIndex> index;  // the shared FeatureTable is used
   const Pose T = test::random_pose(6, Vec3(0.1, 0.1, 0.1));
   const PointCloud c = test::touch(src->fines[1], T, 6, 8);
   std::vector<Vec3> free;  // a shell of free space just outside the true surface
@@ -128,7 +128,7 @@ TEST_CASE("Every method runs through the same path; the batch methods ignore fre
 TEST_CASE("Same seed, 1 or 2 threads: bitwise identical poses and weights") {
   auto src = test::make_source();
   Database db(src);
-  auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
+  std::shared_ptr<const FeatureIndex> index;  // the shared FeatureTable is used
   const Pose T = test::random_pose(9, Vec3(1, 2, 3));
   for (Method m : {Method::bricpsf, Method::ransac_icp}) {
     RecognizerSettings s = fast(m);
@@ -177,7 +177,7 @@ TEST_CASE("Geometry is loaded only for objects a hypothesis reaches") {
 TEST_CASE("Exact early rejection: the selected top k equal a full evaluation's") {
   auto src = test::make_source();
   Database db(src);
-  const FeatureIndex index = build_feature_index(db, fast().index);
+  const FeatureSearch index{FeatureTable::shared(db), nullptr};
   const Pose T = test::random_pose(13, Vec3(0, 0, 0));
   std::vector<Vec3> free;
   Rng rng(1);
