@@ -13,9 +13,7 @@ namespace ts {
 namespace {
 
 constexpr int kDim = kFeatureDim;
-constexpr std::size_t kBlock = 256;          ///< rows per block (dims-major inside a block)
-constexpr std::size_t kChunkBlocks = 32;     ///< blocks per parallel task (fixed: determinism)
-constexpr std::size_t kSampleStride = 8;     ///< every k-th block primes the threshold
+constexpr std::size_t kBlock = 128;          ///< rows per block (dims-major inside a block)
 
 struct Item {
   float d;
@@ -40,8 +38,9 @@ void block_distances(const float* __restrict blk, const float* __restrict q, flo
 }  // namespace
 
 struct FeatureTable::Impl {
-  std::vector<FeatureRef> refs;
-  std::vector<float> blocks;   ///< nblocks x kDim x kBlock, padding rows far away
+  std::vector<FeatureRef> refs;     ///< per table row (rows are in k-d leaf order)
+  std::vector<float> blocks;        ///< nblocks x kDim x kBlock, padding rows far away
+  std::vector<float> lo, hi;        ///< nblocks x kDim: bounding box of each block's rows
   std::size_t rows = 0;
   std::size_t nblocks() const { return (rows + kBlock - 1) / kBlock; }
   const float* block(std::size_t b) const { return blocks.data() + b * kDim * kBlock; }
@@ -52,23 +51,72 @@ FeatureTable::~FeatureTable() = default;
 FeatureTable::FeatureTable(FeatureTable&&) noexcept = default;
 FeatureTable& FeatureTable::operator=(FeatureTable&&) noexcept = default;
 
+namespace {
+
+/// Order rows like the leaves of a k-d tree (split at the median of the widest dimension until
+/// a piece fits a block), so that each block holds similar features and a ball around its mean
+/// bounds it tightly. Deterministic (ties by row).
+void kd_order(const std::vector<const Feature*>& f, std::vector<std::uint32_t>& idx, std::size_t lo,
+              std::size_t hi) {
+  if (hi - lo <= kBlock) return;
+  int dim = 0;
+  float widest = -1.0f;
+  for (int d = 0; d < kDim; ++d) {
+    float mn = (*f[idx[lo]])[d], mx = mn;
+    for (std::size_t i = lo; i < hi; ++i) {
+      mn = std::min(mn, (*f[idx[i]])[d]);
+      mx = std::max(mx, (*f[idx[i]])[d]);
+    }
+    if (mx - mn > widest) widest = mx - mn, dim = d;
+  }
+  // Split on a multiple of the block size so that leaves fill whole blocks.
+  const std::size_t half = lo + ((hi - lo) / 2 + kBlock - 1) / kBlock * kBlock;
+  const std::size_t mid = std::min(half, hi);
+  std::nth_element(idx.begin() + static_cast<std::ptrdiff_t>(lo), idx.begin() + static_cast<std::ptrdiff_t>(mid),
+                   idx.begin() + static_cast<std::ptrdiff_t>(hi), [&](std::uint32_t a, std::uint32_t b) {
+                     const float va = (*f[a])[dim], vb = (*f[b])[dim];
+                     return va < vb || (va == vb && a < b);
+                   });
+  kd_order(f, idx, lo, mid);
+  kd_order(f, idx, mid, hi);
+}
+
+}  // namespace
+
 FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& objects)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
+  std::vector<FeatureRef> refs;
+  std::vector<const Feature*> feats;
   for (std::size_t o = 0; o < db.size(); ++o) {
     if (!objects.empty() && (o >= objects.size() || !objects[o])) continue;
-    const std::size_t n = db.features(o).features.size();
-    for (std::size_t i = 0; i < n; ++i)
-      m.refs.push_back({static_cast<std::uint32_t>(o), static_cast<std::uint32_t>(i)});
+    const auto& fs = db.features(o).features;
+    for (std::size_t i = 0; i < fs.size(); ++i) {
+      refs.push_back({static_cast<std::uint32_t>(o), static_cast<std::uint32_t>(i)});
+      feats.push_back(&fs[i]);
+    }
   }
-  if (m.refs.size() >= std::numeric_limits<std::uint32_t>::max())
+  if (refs.size() >= std::numeric_limits<std::uint32_t>::max())
     throw Error("FeatureTable: too many features");
-  m.rows = m.refs.size();
-  m.blocks.assign(m.nblocks() * kDim * kBlock, 1e18f);  // padding never wins
-  for (std::size_t i = 0; i < m.rows; ++i) {
-    const Feature& f = db.features(m.refs[i].object).features[m.refs[i].point];
-    float* blk = m.blocks.data() + (i / kBlock) * kDim * kBlock;
-    for (int d = 0; d < kDim; ++d) blk[static_cast<std::size_t>(d) * kBlock + i % kBlock] = f[d];
+  m.rows = refs.size();
+  std::vector<std::uint32_t> idx(m.rows);
+  for (std::uint32_t i = 0; i < m.rows; ++i) idx[i] = i;
+  kd_order(feats, idx, 0, m.rows);
+  const std::size_t nb = m.nblocks();
+  m.refs.resize(m.rows);
+  m.blocks.assign(nb * kDim * kBlock, 1e18f);  // padding never wins
+  m.lo.assign(nb * kDim, std::numeric_limits<float>::infinity());
+  m.hi.assign(nb * kDim, -std::numeric_limits<float>::infinity());
+  for (std::size_t r = 0; r < m.rows; ++r) {
+    m.refs[r] = refs[idx[r]];
+    const Feature& f = *feats[idx[r]];
+    const std::size_t b = r / kBlock;
+    float* blk = m.blocks.data() + b * kDim * kBlock;
+    for (int d = 0; d < kDim; ++d) {
+      blk[static_cast<std::size_t>(d) * kBlock + r % kBlock] = f[d];
+      m.lo[b * kDim + d] = std::min(m.lo[b * kDim + d], f[d]);
+      m.hi[b * kDim + d] = std::max(m.hi[b * kDim + d], f[d]);
+    }
   }
 }
 
@@ -83,76 +131,51 @@ std::vector<std::vector<Neighbour>> FeatureTable::knn(const std::vector<Feature>
   if (Q == 0 || w == 0 || m.rows == 0) return out;
   w = std::min(w, m.rows);
   const std::size_t nb = m.nblocks();
-
-  // 1. Prime a threshold per query from every kSampleStride-th block: the value that about
-  //    1.5 W rows of the whole table are expected to reach. Only a filter: if fewer than W
-  //    rows pass it, that query is scanned again without it.
-  std::vector<float> tau(Q, std::numeric_limits<float>::infinity());
-  const std::size_t sampled_blocks = (nb + kSampleStride - 1) / kSampleStride;
-  const std::size_t sampled_rows = sampled_blocks * kBlock;
-  const std::size_t want = static_cast<std::size_t>(1.5 * double(w) * double(sampled_rows) / double(nb * kBlock)) + 8;
-  if (nb >= 4 * kSampleStride && want < sampled_rows) {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, Q, 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      std::vector<float> d(sampled_rows);
-      for (std::size_t q = r.begin(); q != r.end(); ++q) {
-        for (std::size_t s = 0; s < sampled_blocks; ++s)
-          block_distances(m.block(s * kSampleStride), queries[q].data(), d.data() + s * kBlock);
-        std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(want), d.end());
-        tau[q] = d[want];
-      }
-    });
-  }
-
-  // 2. One pass over fixed chunks of blocks; every chunk keeps, per query, the rows <= tau.
-  auto scan = [&](const std::vector<std::size_t>& which, const std::vector<float>& limit) {
-    const std::size_t chunks = (nb + kChunkBlocks - 1) / kChunkBlocks;
-    std::vector<std::vector<std::vector<Item>>> found(chunks, std::vector<std::vector<Item>>(which.size()));
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      float d[kBlock];
-      for (std::size_t c = r.begin(); c != r.end(); ++c) {
-        const std::size_t b1 = std::min(nb, (c + 1) * kChunkBlocks);
-        for (std::size_t b = c * kChunkBlocks; b < b1; ++b)
-          for (std::size_t j = 0; j < which.size(); ++j) {
-            const std::size_t q = which[j];
-            block_distances(m.block(b), queries[q].data(), d);
-            const float t = limit[q];
-            auto& f = found[c][j];
-            for (std::size_t i = 0; i < kBlock; ++i)
-              if (d[i] <= t) f.push_back({d[i], static_cast<std::uint32_t>(b * kBlock + i)});
-          }
-      }
-    });
-    // Per query, in chunk order: the w best by (distance, row).
-    std::vector<std::vector<Item>> merged(which.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, which.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t j = r.begin(); j != r.end(); ++j) {
-        auto& all = merged[j];
-        for (std::size_t c = 0; c < chunks; ++c) all.insert(all.end(), found[c][j].begin(), found[c][j].end());
-        all.erase(std::remove_if(all.begin(), all.end(), [&](const Item& x) { return x.row >= m.rows; }), all.end());
-        if (all.size() > w) {
-          std::nth_element(all.begin(), all.begin() + static_cast<std::ptrdiff_t>(w - 1), all.end(), before);
-          all.resize(w);
+  // Best-first over blocks, per query: blocks in increasing order of the lower bound (distance
+  // to the block's bounding box); stop when the bound exceeds the w-th distance found so far.
+  // Exact: a skipped block's rows are all farther than w rows already found.
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, Q, 1), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<std::pair<float, std::uint32_t>> order(nb);
+    std::vector<Item> cand;
+    float d[kBlock];
+    for (std::size_t q = range.begin(); q != range.end(); ++q) {
+      const float* qv = queries[q].data();
+      for (std::size_t b = 0; b < nb; ++b) {
+        // squared distance from q to the block's bounding box, slightly shrunk (a float
+        // row distance is never below it)
+        double s2 = 0.0;
+        for (int k = 0; k < kDim; ++k) {
+          const double x = qv[k], l = m.lo[b * kDim + k], h = m.hi[b * kDim + k];
+          const double e = x < l ? l - x : (x > h ? x - h : 0.0);
+          s2 += e * e;
         }
-        std::sort(all.begin(), all.end(), before);
+        order[b] = {static_cast<float>(s2 * (1.0 - 1e-5)), static_cast<std::uint32_t>(b)};
       }
-    });
-    return merged;
-  };
-  std::vector<std::size_t> all_queries(Q);
-  for (std::size_t q = 0; q < Q; ++q) all_queries[q] = q;
-  auto merged = scan(all_queries, tau);
-  std::vector<std::size_t> again;
-  for (std::size_t q = 0; q < Q; ++q)
-    if (merged[q].size() < w) again.push_back(q);
-  if (!again.empty()) {
-    std::vector<float> open(Q, std::numeric_limits<float>::infinity());
-    auto second = scan(again, open);
-    for (std::size_t j = 0; j < again.size(); ++j) merged[again[j]] = std::move(second[j]);
-  }
-  for (std::size_t q = 0; q < Q; ++q) {
-    out[q].reserve(merged[q].size());
-    for (const Item& x : merged[q]) out[q].push_back({x.row, static_cast<double>(x.d)});
-  }
+      std::sort(order.begin(), order.end());
+      cand.clear();
+      float tau = std::numeric_limits<float>::infinity();
+      for (const auto& [lb, b] : order) {
+        if (lb > tau) break;
+        block_distances(m.block(b), qv, d);
+        const std::size_t base = std::size_t{b} * kBlock;
+        for (std::size_t i = 0; i < kBlock; ++i)
+          if (d[i] <= tau && base + i < m.rows) cand.push_back({d[i], static_cast<std::uint32_t>(base + i)});
+        if (cand.size() >= 2 * w) {
+          std::nth_element(cand.begin(), cand.begin() + static_cast<std::ptrdiff_t>(w - 1), cand.end(), before);
+          cand.resize(w);
+          tau = cand[w - 1].d;
+          for (const Item& x : cand) tau = std::max(tau, x.d);
+        }
+      }
+      if (cand.size() > w) {
+        std::nth_element(cand.begin(), cand.begin() + static_cast<std::ptrdiff_t>(w - 1), cand.end(), before);
+        cand.resize(w);
+      }
+      std::sort(cand.begin(), cand.end(), before);
+      out[q].reserve(cand.size());
+      for (const Item& x : cand) out[q].push_back({x.row, static_cast<double>(x.d)});
+    }
+  });
   return out;
 }
 

@@ -1,8 +1,9 @@
-// Exact W-nearest feature search by batched brute force: the database-wide feature set
-// KT_db,cum^feat of Section 4.3.2 as one table, scanned once per step for all query features
-// together (SIMD over rows). With W = 3000 of ~200k FPFH features, a tree visits most of the
-// set anyway; one streaming pass with a primed threshold is several times faster, exact, and
-// returns the same neighbours for any thread count.
+// Exact W-nearest feature search: the database-wide feature set KT_db,cum^feat of Section 4.3.2
+// as a table of blocks of 256 rows in k-d leaf order, each with its bounding box.
+// A query visits blocks best-first by their lower bound and computes all distances of a block
+// at once (SIMD over rows); it stops when no unvisited block can hold a nearer row. With W =
+// 3000 of ~200k FPFH features a classic tree visits most of the set one point at a time; this
+// visits few blocks, is exact, and returns the same neighbours for any thread count.
 #pragma once
 
 #include "engine/database.hpp"
@@ -24,7 +25,7 @@ class FeatureTable {
   std::size_t size() const;
   const FeatureRef& ref(std::size_t i) const;
   /// For each query, the w nearest rows by squared L2 distance (accumulated in float over the
-  /// 33 bins in order), sorted by (distance, row). Exact. Parallel (TBB) over fixed row chunks.
+  /// 33 bins in order), sorted by (distance, row). Exact. Parallel (TBB) over queries.
   std::vector<std::vector<Neighbour>> knn(const std::vector<Feature>& queries, std::size_t w) const;
 
   /// One table per (database, object mask), shared while someone holds it.

@@ -32,7 +32,7 @@ struct Pruned {
 /// Pruned features of one triplet point, grouped by object (ascending), nearest first within.
 struct PrunedSet {
   std::vector<Pruned> items;
-  std::vector<double> x, y, z;   ///< the items' coarse points (object frame), for fast scans
+  std::vector<float> x, y, z;    ///< the items' coarse points (object frame), for fast scans
   std::vector<std::array<std::uint32_t, 3>> ranges;  ///< (object, begin, end)
 
   std::pair<std::uint32_t, std::uint32_t> range_of(std::uint32_t object) const {
@@ -42,6 +42,18 @@ struct PrunedSet {
     return {(*it)[1], (*it)[2]};
   }
 };
+
+/// in[j - b] = 1 when the squared distance of item j to c lies in [lo, hi] (vectorized scan).
+__attribute__((target_clones("avx2", "default")))
+void shell_mask(const float* __restrict x, const float* __restrict y, const float* __restrict z,
+                std::uint32_t n, float cx, float cy, float cz, float lo, float hi,
+                std::uint8_t* __restrict in) {
+  for (std::uint32_t j = 0; j < n; ++j) {
+    const float dx = x[j] - cx, dy = y[j] - cy, dz = z[j] - cz;
+    const float d2 = dx * dx + dy * dy + dz * dz;
+    in[j] = static_cast<std::uint8_t>((d2 >= lo) & (d2 <= hi));
+  }
+}
 
 /// Sign-free angles of a point pair with normals: |n_a . n_b|, |n_a . u|, |n_b . u| (u the unit
 /// chord), as cosines. Invariant to rigid motions and to flipped normals.
@@ -64,6 +76,7 @@ struct Triplet {
   PairSignature s12, s13, s23;
   double d12 = 0, d13 = 0, d23 = 0;
   std::array<PrunedSet, 3> pruned;
+  std::vector<std::uint32_t> first;   ///< items of pruned[0] whose object is in all three sets
   bool from_boundary = false;   ///< drawn from all points, the interior gave no valid triplet
 };
 
@@ -90,9 +103,9 @@ PrunedSet prune(const Database& db, const FeatureSearch& search, const std::vect
   set.z.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
     const Vec3& p = db.features(set.items[i].object).coarse.points[set.items[i].point];
-    set.x[i] = p.x();
-    set.y[i] = p.y();
-    set.z[i] = p.z();
+    set.x[i] = static_cast<float>(p.x());
+    set.y[i] = static_cast<float>(p.y());
+    set.z[i] = static_cast<float>(p.z());
   }
   return set;
 }
@@ -100,7 +113,9 @@ PrunedSet prune(const Database& db, const FeatureSearch& search, const std::vect
 std::optional<Candidate> register_once(const Triplet& t, const Database& db,
                                        const RansacSettings& s, Rng& rng,
                                        std::vector<std::uint32_t>& buf2,
-                                       std::vector<std::uint32_t>& buf3) {
+                                       std::vector<std::uint32_t>& buf3,
+                                       std::vector<std::uint8_t>& mask,
+                                       std::vector<std::uint8_t>& mask2) {
   const PrunedSet& F1 = t.pruned[0];
   const PrunedSet& F2 = t.pruned[1];
   const PrunedSet& F3 = t.pruned[2];
@@ -108,26 +123,28 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
   const double tol = s.distance_tolerance;
   const bool use_normals = s.normal_tolerance_deg > 0.0;
   const double ntol = std::sin(std::min(90.0, s.normal_tolerance_deg) * std::numbers::pi / 180.0);
+  if (t.first.empty()) return std::nullopt;
   for (int attempt = 0; attempt < s.registration_attempts; ++attempt) {
-    const Pruned& a = F1.items[rng.index(F1.items.size())];
+    const Pruned& a = F1.items[t.first[rng.index(t.first.size())]];
     const PointCloud& coarse = db.features(a.object).coarse;
     const std::vector<Vec3>& pts = coarse.points;
     const bool normals = use_normals && coarse.has_normals();
     const Vec3& q1 = pts[a.point];
     // Second point: same object, distance to the first matching the input's (and, as an
     // extension, the same angles between normals and chord). Squared distances against a
-    // squared window: no square roots in the scan.
+    // squared window, vectorized over the object's pruned items.
     auto window = [&](double d) {
       const double lo = std::max(0.0, d - tol), hi = d + tol;
-      return std::pair(lo * lo, hi * hi);
+      return std::pair(static_cast<float>(lo * lo), static_cast<float>(hi * hi));
     };
     const auto [lo12, hi12] = window(t.d12);
     const auto [b2, e2] = F2.range_of(a.object);
+    mask.resize(std::max(e2 - b2, 1u));
+    shell_mask(&F2.x[b2], &F2.y[b2], &F2.z[b2], e2 - b2, float(q1.x()), float(q1.y()), float(q1.z()),
+               lo12, hi12, mask.data());
     buf2.clear();
     for (std::uint32_t j = b2; j < e2; ++j) {
-      const double dx = F2.x[j] - q1.x(), dy = F2.y[j] - q1.y(), dz = F2.z[j] - q1.z();
-      const double d2 = dx * dx + dy * dy + dz * dz;
-      if (d2 < lo12 || d2 > hi12) continue;
+      if (!mask[j - b2]) continue;
       const std::uint32_t k = F2.items[j].point;
       if (normals && !similar(signature(q1, coarse.normals[a.point], pts[k], coarse.normals[k]), t.s12, ntol))
         continue;
@@ -139,14 +156,15 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
     const auto [lo13, hi13] = window(t.d13);
     const auto [lo23, hi23] = window(t.d23);
     const auto [b3, e3] = F3.range_of(a.object);
+    mask.resize(std::max(e3 - b3, 1u));
+    mask2.resize(std::max(e3 - b3, 1u));
+    shell_mask(&F3.x[b3], &F3.y[b3], &F3.z[b3], e3 - b3, float(q1.x()), float(q1.y()), float(q1.z()),
+               lo13, hi13, mask.data());
+    shell_mask(&F3.x[b3], &F3.y[b3], &F3.z[b3], e3 - b3, float(q2.x()), float(q2.y()), float(q2.z()),
+               lo23, hi23, mask2.data());
     buf3.clear();
     for (std::uint32_t j = b3; j < e3; ++j) {
-      const double ax = F3.x[j] - q1.x(), ay = F3.y[j] - q1.y(), az = F3.z[j] - q1.z();
-      const double a2 = ax * ax + ay * ay + az * az;
-      if (a2 < lo13 || a2 > hi13) continue;
-      const double bx = F3.x[j] - q2.x(), by = F3.y[j] - q2.y(), bz = F3.z[j] - q2.z();
-      const double b2sq = bx * bx + by * by + bz * bz;
-      if (b2sq < lo23 || b2sq > hi23) continue;
+      if (!(mask[j - b3] & mask2[j - b3])) continue;
       const std::uint32_t k = F3.items[j].point;
       const Vec3& q = pts[k];
       if (normals &&
@@ -286,9 +304,16 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
         q += 3;
       }
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t k = r.begin(); k != r.end(); ++k)
-        for (int j = 0; j < 3; ++j)
-          trip[jobs[k][0]].pruned[j] = prune(db, search, nearest[jobs[k][1] + j], allowed);
+      for (std::size_t k = r.begin(); k != r.end(); ++k) {
+        Triplet& t = trip[jobs[k][0]];
+        for (int j = 0; j < 3; ++j) t.pruned[j] = prune(db, search, nearest[jobs[k][1] + j], allowed);
+        // Registration draws its first feature among objects that all three sets reach.
+        for (std::uint32_t i = 0; i < t.pruned[0].items.size(); ++i) {
+          const std::uint32_t o = t.pruned[0].items[i].object;
+          const auto r2 = t.pruned[1].range_of(o), r3 = t.pruned[2].range_of(o);
+          if (r2.second > r2.first && r3.second > r3.first) t.first.push_back(i);
+        }
+      }
     });
   }
   st.time_prune_s = seconds_since(t0);
@@ -306,11 +331,12 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, slots, 16),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       std::vector<std::uint32_t> buf2, buf3;
+                      std::vector<std::uint8_t> mask, mask2;
                       for (std::size_t k = r.begin(); k != r.end(); ++k) {
                         const std::size_t i = k / static_cast<std::size_t>(R);
                         if (!trip[i].valid) continue;
                         Rng rng(seed, step, kTagRegistration, k);
-                        cand[k] = register_once(trip[i], db, s, rng, buf2, buf3);
+                        cand[k] = register_once(trip[i], db, s, rng, buf2, buf3, mask, mask2);
                         if (cand[k]) cand[k]->slot = static_cast<std::uint32_t>(k);
                       }
                     });

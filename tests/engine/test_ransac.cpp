@@ -145,16 +145,23 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
   }
   Database db(src);
   std::vector<Feature> queries;
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> rows;  // table row -> (object, point)
-  for (std::uint32_t o = 0; o < 3; ++o)
-    for (std::uint32_t i = 0; i < db.features(o).features.size(); ++i) rows.emplace_back(o, i);
+  std::size_t total = 0;
+  for (std::uint32_t o = 0; o < 3; ++o) total += db.features(o).features.size();
   for (int q = 0; q < 20; ++q) {
     Feature x = db.features(static_cast<std::size_t>(q % 3)).features[static_cast<std::size_t>(q * 37)];
     for (auto& v : x) v += static_cast<float>(rng.uniform(-0.5, 0.5));
     queries.push_back(x);
   }
   const FeatureTable table(db);
-  REQUIRE(table.size() == rows.size());
+  REQUIRE(table.size() == total);
+  // Every (object, point) appears once among the table's rows.
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> rows;  // table row -> (object, point)
+  for (std::size_t r = 0; r < table.size(); ++r) rows.emplace_back(table.ref(r).object, table.ref(r).point);
+  {
+    auto sorted = rows;
+    std::sort(sorted.begin(), sorted.end());
+    CHECK(std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end());
+  }
   for (std::size_t w : {1u, 50u, 700u, 20000u}) {
     std::vector<std::vector<Neighbour>> one, two;
     tbb::task_arena a1(1), a2(2);
