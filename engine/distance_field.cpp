@@ -1,34 +1,40 @@
-// Two-level distance field on OpenVDB FloatGrids (see distance_field.hpp).
+// Two-level distance field on OpenVDB FloatGrids (see distance_field.hpp). Index ijk stands for
+// the object-frame point ijk * voxel (voxel centres).
 //
-// Both levels come from openvdb::tools::meshToVolume, which stores at voxel centres (index ijk
-// <-> object-frame point ijk * voxel) the distance to the closest triangle it finds while growing
-// its narrow band (exact for almost every voxel; rare voxels near sharp features are off by a
-// fraction of a voxel). The fine level is a band of +-fine_band_voxels. The coarse level is made
-// dense over the box B = bbox(mesh) grown by coarse_margin (rounded out to whole voxels, so each
-// point of bbox + margin has its 8 interpolation corners); its band reaches every voxel closer
-// than coarse_margin + 2 voxels, and farther voxels hold the band's background value, a lower
-// bound on their distance.
+// Fine level: a band of +-fine_band_voxels around the surface. openvdb::tools::meshToVolume
+// finds the band and classifies inside/outside (signed fields), but its values come from
+// closest triangles propagated through the band, which on dev45 were off by up to 2 mm for a
+// few voxels per thousand (thin parts, sharp edges); every band value is therefore replaced by
+// the exact distance from the mesh's BVH (MeshIndex), keeping meshToVolume's sign.
+//
+// Coarse level: dense over the box B = bbox(mesh) grown by coarse_margin and rounded out to
+// whole voxels (each point of bbox + margin has its 8 interpolation corners inside), exact BVH
+// distances up to coarse_margin + 2 voxels and that cap (a lower bound) beyond; the sign comes
+// from the fine level's classification of space (band values, or meshToVolume's inside/outside
+// tiles). A coarse meshToVolume run was tried first: its propagated values were off by up to
+// 24 mm in thin regions.
 //
 // Queries interpolate trilinearly from the fine level when its 8 corners are all active, else
 // from the coarse level. Outside B nothing is stored; there the distance to the surface is at
 // least dist(p, B) + coarse_margin (B shrunk by the margin still contains the mesh's bounding
 // box), and that lower bound is returned.
 //
-// Determinism: each meshToVolume run executes in its own single-thread task arena, so the grids
-// (and their serialized bytes) cannot depend on how TBB splits the work; the fine and coarse
-// runs proceed side by side. (On dev45, 1- and 2-thread runs happened to agree, but nothing in
-// OpenVDB promises it.)
+// Determinism: meshToVolume runs in a single-thread task arena, so its output cannot depend on
+// how TBB splits the work; the exact values are computed per voxel into their own slots and
+// written serially. Same mesh and settings => same grids and bytes for any thread count.
 #include "engine/distance_field.hpp"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/MeshToVolume.h>
-#include <tbb/parallel_invoke.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <mutex>
+#include <optional>
 
 namespace ts {
 
@@ -59,8 +65,8 @@ Grid::Ptr run_mesh_to_volume(const Mesh& mesh, double voxel, float ext_band, flo
                              bool is_signed) {
   const MeshAdapter adapter{mesh, 1.0 / voxel};
   const auto transform = openvdb::math::Transform::createLinearTransform(voxel);
-  // No renormalization: it smooths bumps from self-intersecting meshes but moves the values of
-  // clean meshes away from the exact distances (on 12 dev45 meshes the mean error at voxel centres was 2-7x larger with it).
+  // No renormalization: it smooths the values near self-intersections, and the values are
+  // replaced by exact distances anyway.
   const int flags = openvdb::tools::DISABLE_RENORMALIZATION |
                     (is_signed ? 0 : openvdb::tools::UNSIGNED_DISTANCE_FIELD);
   Grid::Ptr grid;
@@ -186,7 +192,40 @@ DistanceField DistanceField::build(const Mesh& mesh, bool is_signed, const Dista
   im.fine_voxel = s.fine_voxel;
   im.coarse_voxel = s.coarse_voxel;
 
-  // Coarse box in index space: every point of bbox + margin has its 8 corners inside.
+  const MeshIndex index(mesh);   // exact point-to-triangle distances (BVH)
+
+  // Fine level: band topology and inside/outside from meshToVolume, values exact.
+  const double fv = s.fine_voxel;
+  im.fine = run_mesh_to_volume(mesh, fv, static_cast<float>(s.fine_band_voxels),
+                               static_cast<float>(s.fine_band_voxels), is_signed);
+  {
+    std::vector<openvdb::Coord> coords;
+    std::vector<float> values;
+    coords.reserve(im.fine->activeVoxelCount());
+    for (auto it = im.fine->cbeginValueOn(); it; ++it)
+      if (it.isVoxelValue()) {
+        coords.push_back(it.getCoord());
+        values.push_back(*it);
+      }
+    const double reach = (s.fine_band_voxels + 1.0) * fv;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, coords.size(), 256), [&](const auto& range) {
+      for (std::size_t n = range.begin(); n != range.end(); ++n) {
+        const openvdb::Coord& c = coords[n];
+        const Vec3 p = Vec3(c.x(), c.y(), c.z()) * fv;
+        // meshToVolume's value is the distance to one triangle, an upper bound: searching
+        // within it (plus float slack) prunes the BVH hard. The full band is the fallback.
+        auto hit = index.closest_within(p, std::abs(values[n]) * (1.0 + 1e-5) + 1e-9);
+        if (!hit) hit = index.closest_within(p, reach);
+        if (!hit) continue;   // not expected inside the band; keep meshToVolume's value
+        const auto d = static_cast<float>(hit->distance);
+        values[n] = (is_signed && values[n] < 0.0f) ? -d : d;
+      }
+    });
+    auto acc = im.fine->getUnsafeAccessor();
+    for (std::size_t n = 0; n < coords.size(); ++n) acc.setValueOnly(coords[n], values[n]);
+  }
+
+  // Coarse level: dense over the box, every point of bbox + margin having its 8 corners inside.
   const double cv = s.coarse_voxel;
   const Vec3 lo = (bbox.min().array() - s.coarse_margin) / cv;
   const Vec3 hi = (bbox.max().array() + s.coarse_margin) / cv;
@@ -194,28 +233,47 @@ DistanceField DistanceField::build(const Mesh& mesh, bool is_signed, const Dista
                             static_cast<int>(std::floor(lo.z())));
   const openvdb::Coord cmax(static_cast<int>(std::ceil(hi.x())), static_cast<int>(std::ceil(hi.y())),
                             static_cast<int>(std::ceil(hi.z())));
-  // Band of the coarse run: reaches every voxel closer than margin + 2 voxels; farther voxels
-  // keep the background value, itself a lower bound on their distance.
-  const auto coarse_band = static_cast<float>(std::ceil(s.coarse_margin / cv) + 2.0);
-  const auto fine_band = static_cast<float>(s.fine_band_voxels);
-
-  // The two serial meshToVolume runs side by side.
-  Grid::Ptr wide;
-  tbb::parallel_invoke(
-      [&] { im.fine = run_mesh_to_volume(mesh, s.fine_voxel, fine_band, fine_band, is_signed); },
-      [&] { wide = run_mesh_to_volume(mesh, cv, coarse_band, coarse_band, is_signed); });
-
-  im.coarse = Grid::create(wide->background());
+  const openvdb::Coord dim = cmax - cmin + openvdb::Coord(1);
+  const std::size_t nx = static_cast<std::size_t>(dim.x()), ny = static_cast<std::size_t>(dim.y()),
+                    nz = static_cast<std::size_t>(dim.z());
+  // Farther than `cap` from the surface a voxel holds `cap`, a lower bound on its distance.
+  const double cap = s.coarse_margin + 2.0 * cv;
+  std::vector<float> dense(nx * ny * nz);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nx * ny), [&](const auto& range) {
+    auto fine_acc = im.fine->getConstUnsafeAccessor();
+    for (std::size_t ij = range.begin(); ij != range.end(); ++ij) {
+      const int i = cmin.x() + static_cast<int>(ij / ny), j = cmin.y() + static_cast<int>(ij % ny);
+      double prev = cap;   // distance of the previous voxel of this column
+      for (std::size_t kk = 0; kk < nz; ++kk) {
+        const int k = cmin.z() + static_cast<int>(kk);
+        const Vec3 p = Vec3(i, j, k) * cv;
+        // Triangle inequality: d(p) <= d(previous voxel) + cv, a tight bound for the BVH.
+        const double bound = prev + cv * (1.0 + 1e-9) + 1e-12;
+        std::optional<ClosestPoint> hit;
+        if (bound < cap) hit = index.closest_within(p, bound);
+        if (!hit) hit = index.closest_within(p, cap);
+        double d = hit ? hit->distance : cap;
+        prev = d;
+        if (is_signed) {
+          // Inside/outside from the fine level: band values, or the sign of the inactive
+          // interior/exterior tiles (meshToVolume's flood fill) away from the surface.
+          const openvdb::Coord f(static_cast<int>(std::lround(p.x() / fv)), static_cast<int>(std::lround(p.y() / fv)),
+                                 static_cast<int>(std::lround(p.z() / fv)));
+          if (fine_acc.getValue(f) < 0.0f) d = -d;
+        }
+        dense[ij * nz + kk] = static_cast<float>(d);
+      }
+    }
+  });
+  im.coarse = Grid::create(static_cast<float>(cap));
   im.coarse->setTransform(openvdb::math::Transform::createLinearTransform(cv));
   {
-    auto src = wide->getConstUnsafeAccessor();
-    auto dst = im.coarse->getUnsafeAccessor();
-    for (int i = cmin.x(); i <= cmax.x(); ++i)
-      for (int j = cmin.y(); j <= cmax.y(); ++j)
-        for (int k = cmin.z(); k <= cmax.z(); ++k) {
-          const openvdb::Coord c(i, j, k);
-          dst.setValue(c, src.getValue(c));   // outside the band: +-background (a bound)
-        }
+    auto acc = im.coarse->getUnsafeAccessor();
+    for (std::size_t ij = 0; ij < nx * ny; ++ij)
+      for (std::size_t kk = 0; kk < nz; ++kk)
+        acc.setValue(openvdb::Coord(cmin.x() + static_cast<int>(ij / ny), cmin.y() + static_cast<int>(ij % ny),
+                                    cmin.z() + static_cast<int>(kk)),
+                     dense[ij * nz + kk]);
   }
   im.set_box();
   return df;

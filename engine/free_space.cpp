@@ -6,6 +6,7 @@
 #include <cmath>
 #include <mutex>
 #include <tuple>
+#include <unordered_map>
 
 namespace ts {
 
@@ -19,6 +20,13 @@ void init_openvdb() {
 }
 
 using Key = std::array<std::int64_t, 3>;
+struct KeyHash {
+  std::size_t operator()(const Key& k) const {
+    std::uint64_t h = 1469598103934665603ULL;
+    for (auto v : k) h = (h ^ static_cast<std::uint64_t>(v)) * 1099511628211ULL;
+    return static_cast<std::size_t>(h);
+  }
+};
 }  // namespace
 
 struct OccupancyGrid::Impl {
@@ -30,7 +38,36 @@ struct OccupancyGrid::Impl {
     init_openvdb();
     grid = openvdb::Int32Grid::create(0);
   }
-  Impl(const Impl& other) : voxel(other.voxel), origin(other.origin), grid(other.grid->deepCopy()) {}
+  Impl(const Impl& other)
+      : voxel(other.voxel), origin(other.origin), grid(other.grid->deepCopy()), cube_res(other.cube_res),
+        cubes(other.cubes) {}
+
+  // Free voxels per cube of size cube_res (for free_cloud), kept up to date by every update
+  // once free_cloud has been called with that size.
+  double cube_res = 0.0;
+  std::unordered_map<Key, std::int32_t, KeyHash> cubes;
+
+  Key cube_of(const openvdb::Coord& c) const {
+    return {static_cast<std::int64_t>(std::floor(c.x() * voxel / cube_res)),
+            static_cast<std::int64_t>(std::floor(c.y() * voxel / cube_res)),
+            static_cast<std::int64_t>(std::floor(c.z() * voxel / cube_res))};
+  }
+  void changed(const openvdb::Coord& c, std::int32_t before, std::int32_t after) {
+    if (cube_res <= 0.0 || (before == kFree) == (after == kFree)) return;
+    const Key k = cube_of(c);
+    if (after == kFree) {
+      ++cubes[k];
+    } else if (--cubes[k] == 0) {
+      cubes.erase(k);
+    }
+  }
+  template <class Accessor>
+  void set_free(Accessor& acc, const openvdb::Coord& c) {
+    const std::int32_t before = acc.getValue(c);
+    if (before == kOccupied || before == kFree) return;
+    acc.setValue(c, kFree);
+    changed(c, before, kFree);
+  }
 
   Vec3 local(const Vec3& p_world) const { return (p_world - origin) / voxel; }
   openvdb::Coord coord_of(const Vec3& p_world) const {
@@ -97,8 +134,7 @@ void OccupancyGrid::mark_free_box(const Pose& T_world_box, const Vec3& lo, const
       for (int k = static_cast<int>(kmin); k <= static_cast<int>(kmax); ++k) {
         const Vec3 pb = base + dir * k;
         if ((pb.array() < lo.array() - 1e-12).any() || (pb.array() > hi.array() + 1e-12).any()) continue;
-        const openvdb::Coord c(i, j, k);
-        if (acc.getValue(c) != kOccupied) acc.setValue(c, kFree);
+        impl_->set_free(acc, openvdb::Coord(i, j, k));
       }
     }
 }
@@ -121,14 +157,16 @@ void OccupancyGrid::mark_free_cylinder(const Pose& T_world_cyl, double radius, d
       for (int k = i0.z(); k <= i1.z(); ++k) {
         const Vec3 p = T_cyl_local * Vec3(i * v, j * v, k * v);
         if (p.z() < z0 || p.z() > z1 || p.x() * p.x() + p.y() * p.y() > radius * radius) continue;
-        const openvdb::Coord c(i, j, k);
-        if (acc.getValue(c) != kOccupied) acc.setValue(c, kFree);
+        impl_->set_free(acc, openvdb::Coord(i, j, k));
       }
 }
 
 void OccupancyGrid::mark_occupied(const Vec3& p_world) {
   if (!p_world.allFinite()) return;
-  impl_->grid->tree().setValue(impl_->coord_of(p_world), kOccupied);
+  const openvdb::Coord c = impl_->coord_of(p_world);
+  const std::int32_t before = impl_->grid->tree().getValue(c);
+  impl_->grid->tree().setValue(c, kOccupied);
+  impl_->changed(c, before, kOccupied);
 }
 
 void OccupancyGrid::merge(const OccupancyGrid& other) {
@@ -137,7 +175,11 @@ void OccupancyGrid::merge(const OccupancyGrid& other) {
   auto acc = impl_->grid->getAccessor();
   for (auto it = other.impl_->grid->cbeginValueOn(); it; ++it) {
     const openvdb::Coord c = it.getCoord();
-    if (*it > acc.getValue(c)) acc.setValue(c, *it);
+    const std::int32_t before = acc.getValue(c);
+    if (*it > before) {
+      acc.setValue(c, *it);
+      impl_->changed(c, before, *it);
+    }
   }
 }
 
@@ -178,38 +220,50 @@ std::vector<Vec3> OccupancyGrid::free_centres() const {
 
 std::vector<Vec3> OccupancyGrid::free_cloud(const Eigen::AlignedBox3d& box, double res) const {
   if (box.isEmpty() || !(res > 0.0)) return {};
-  const double v = impl_->voxel;
-  // Local coordinates (relative to origin) of the free voxel centres inside the box.
-  const Eigen::AlignedBox3d local_box(box.min() - impl_->origin, box.max() - impl_->origin);
-  struct Item {
-    Key key;
-    Vec3 local;
-  };
-  std::vector<Item> items;
-  for (const auto& c : sorted_free(*impl_->grid)) {
-    const Vec3 l = v * Vec3(c.x(), c.y(), c.z());
-    if (!local_box.contains(l)) continue;
-    items.push_back({{static_cast<std::int64_t>(std::floor(l.x() / res)),
-                      static_cast<std::int64_t>(std::floor(l.y() / res)),
-                      static_cast<std::int64_t>(std::floor(l.z() / res))},
-                     l});
+  Impl& m = *impl_;
+  const double v = m.voxel;
+  if (m.cube_res != res) {  // (re)build the per-cube counts once; updates keep them current
+    m.cube_res = res;
+    m.cubes.clear();
+    for (auto it = m.grid->cbeginValueOn(); it; ++it)
+      if (*it == kFree) ++m.cubes[m.cube_of(it.getCoord())];
   }
-  std::stable_sort(items.begin(), items.end(),
-                   [](const Item& a, const Item& b) { return a.key < b.key; });
+  std::vector<Key> keys;
+  keys.reserve(m.cubes.size());
+  for (const auto& [k, n] : m.cubes) keys.push_back(k);
+  std::sort(keys.begin(), keys.end());
+  const Eigen::AlignedBox3d local_box(box.min() - m.origin, box.max() - m.origin);
+  const auto acc = m.grid->getConstAccessor();
   std::vector<Vec3> out;
-  for (std::size_t b = 0; b < items.size();) {
-    std::size_t e = b;
-    Vec3 mean = Vec3::Zero();
-    while (e < items.size() && items[e].key == items[b].key) mean += items[e++].local;
-    mean /= static_cast<double>(e - b);
-    std::size_t best = b;
-    double best_d = (items[b].local - mean).squaredNorm();
-    for (std::size_t i = b + 1; i < e; ++i) {
-      const double d = (items[i].local - mean).squaredNorm();
-      if (d < best_d) best_d = d, best = i;  // ties keep the smaller (i, j, k)
+  for (const Key& k : keys) {
+    const Vec3 lo = res * Vec3(k[0], k[1], k[2]), hi = lo + Vec3::Constant(res);
+    if (!local_box.intersects(Eigen::AlignedBox3d(lo, hi))) continue;
+    const Vec3 centre = lo + Vec3::Constant(0.5 * res);
+    auto usable = [&](const openvdb::Coord& c) {
+      const Vec3 l = v * Vec3(c.x(), c.y(), c.z());
+      return acc.getValue(c) == kFree && m.cube_of(c) == k && local_box.contains(l);
+    };
+    // The free voxel nearest to the cube's centre (ties: the smaller (i, j, k)): the centre
+    // voxel itself when free, else a scan of the cube in increasing (i, j, k).
+    const openvdb::Coord mid(static_cast<int>(std::lround(centre.x() / v)), static_cast<int>(std::lround(centre.y() / v)),
+                             static_cast<int>(std::lround(centre.z() / v)));
+    bool found = false;
+    openvdb::Coord best;
+    double best_d = 0.0;
+    auto consider = [&](const openvdb::Coord& c) {
+      if (!usable(c)) return;
+      const double d = (v * Vec3(c.x(), c.y(), c.z()) - centre).squaredNorm();
+      if (!found || d < best_d) found = true, best = c, best_d = d;
+    };
+    consider(mid);  // the voxel centre nearest to the cube's centre: taken when usable
+    if (!found) {
+      const Eigen::Vector3i i0 = (lo / v).array().floor().cast<int>() - 1;
+      const Eigen::Vector3i i1 = (hi / v).array().ceil().cast<int>() + 1;
+      for (int i = i0.x(); i <= i1.x(); ++i)
+        for (int j = i0.y(); j <= i1.y(); ++j)
+          for (int l = i0.z(); l <= i1.z(); ++l) consider(openvdb::Coord(i, j, l));
     }
-    out.push_back(impl_->origin + items[best].local);
-    b = e;
+    if (found) out.push_back(m.origin + v * Vec3(best.x(), best.y(), best.z()));
   }
   return out;
 }
@@ -223,16 +277,21 @@ void mark_swept_volume(OccupancyGrid& grid, const Gripper& gripper, const Pose& 
     grid.mark_free_cylinder(T_world_eef, spec.palm.radius, -spec.palm.thickness, 0.0);
   const auto waypoints = gripper.closing_waypoints(joints);
   const double max_step = 0.5 * grid.voxel();
-  const double reach = gripper.reach();
   std::vector<Pose> links;
   for (std::size_t w = 0; w < waypoints.size(); ++w) {
     int steps = 1;
     if (w > 0) {
-      double dmax = 0.0;
-      for (std::size_t j = 0; j < joints.size(); ++j)
-        dmax = std::max(dmax, std::abs(waypoints[w][j] - waypoints[w - 1][j]));
-      // A point at distance <= reach from every joint axis moves <= reach * dθ.
-      steps = std::max(1, static_cast<int>(std::ceil(reach * dmax / max_step)));
+      // A point of finger f moves at most Σ_k lever(k) |dθ_k| over the segment.
+      double move = 0.0;
+      for (int f = 0; f < gripper.finger_count(); ++f) {
+        double m = 0.0;
+        for (std::size_t k = 0; k < gripper.spec().fingers[f].links.size(); ++k) {
+          const int j = gripper.joint_index(f, static_cast<int>(k));
+          m += gripper.lever(j) * std::abs(waypoints[w][j] - waypoints[w - 1][j]);
+        }
+        move = std::max(move, m);
+      }
+      steps = std::max(1, static_cast<int>(std::ceil(move / max_step)));
     }
     for (int s = (w == 0 ? 0 : 1); s <= (w == 0 ? 0 : steps); ++s) {
       std::vector<double> q = waypoints[w];

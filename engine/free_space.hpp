@@ -11,7 +11,7 @@
 // link covered its centre, else unknown. So grids built grasp by grasp, in any order or in
 // parallel and then merged, are identical.
 //
-// Not thread-safe for writes; const queries are thread-safe.
+// Not thread-safe for writes; const queries are thread-safe except free_cloud (it caches).
 #pragma once
 
 #include "engine/core.hpp"
@@ -58,9 +58,13 @@ class OccupancyGrid {
   std::size_t occupied_count() const;
   /// Centres of all free voxels in world coordinates, ordered by (i, j, k).
   std::vector<Vec3> free_centres() const;
-  /// Free-space cloud: one free voxel centre per cube of size `res` inside `box` (world), the
-  /// one nearest to the mean of the cube's free voxel centres (so every point is a real free
-  /// voxel centre, never a mean that could fall inside the object). Ordered by cube key.
+  /// Free-space cloud (Section 4.1.2): one point per cube of size `res` (cubes aligned to the
+  /// grid origin) that holds a free voxel centre inside `box` (world): the free voxel centre
+  /// nearest to the cube's centre (ties: the smaller (i, j, k)). Every point is a real free
+  /// voxel centre, never an average that could fall inside the object. Ordered by cube key.
+  /// Cost: proportional to the number of cubes; per-cube counts are cached on the first call
+  /// with a given `res` and then kept current by every update, so this call is not
+  /// thread-safe (the other const queries are).
   std::vector<Vec3> free_cloud(const Eigen::AlignedBox3d& box, double res) const;
 
  private:

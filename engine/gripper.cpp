@@ -50,12 +50,12 @@ GripperSpec default_gripper_spec() {
     proximal.name = "proximal";
     proximal.length = 0.075;
     proximal.joint_origin = Vec3::Zero();
-    proximal.open = -25.0 * kDeg;
-    proximal.min = -30.0 * kDeg;
+    proximal.open = -40.0 * kDeg;
+    proximal.min = -45.0 * kDeg;
     proximal.max = 100.0 * kDeg;
     LinkSpec distal;
     distal.name = "distal";
-    distal.length = 0.070;
+    distal.length = 0.064;  // the 60 mm pad covers it nearly to the tip
     distal.joint_origin = Vec3(0, 0, proximal.length);
     distal.open = 0.0;
     distal.min = -10.0 * kDeg;
@@ -95,6 +95,7 @@ Gripper::Gripper(GripperSpec spec, const std::string& file) : spec_(std::move(sp
             "finger base must be a finite rigid transform", file, where + ".base");
     require(!finger.links.empty(), "a finger needs at least one link", file, where + ".links");
     first_joint_.push_back(static_cast<int>(joint_of_.size()));
+    std::vector<double> radius;
     double chain = finger.T_eef_base.translation().norm();
     for (int k = 0; k < static_cast<int>(finger.links.size()); ++k) {
       const LinkSpec& l = finger.links[k];
@@ -121,6 +122,17 @@ Gripper::Gripper(GripperSpec spec, const std::string& file) : spec_(std::move(sp
                                       spec_.sensor.foam_thickness);
       const double link_r = std::max(std::hypot(fat, 0.5 * l.width, l.length), pad_r);
       reach_ = std::max(reach_, chain + link_r);
+      radius.push_back(link_r);
+    }
+    // lever of joint k: offsets of the later joints plus the largest link radius from k on
+    const int n = static_cast<int>(finger.links.size());
+    for (int k = 0; k < n; ++k) {
+      double lever = 0.0, r = 0.0;
+      for (int m = k; m < n; ++m) {
+        if (m > k) lever += finger.links[m].joint_origin.norm();
+        r = std::max(r, radius[m]);
+      }
+      lever_.push_back(lever + r);
     }
   }
   require(single_pad() >= 0, "single_pad '" + spec_.single_pad + "' names no pad", file,

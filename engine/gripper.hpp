@@ -106,6 +106,9 @@ class Gripper {
   /// Largest distance of any point of the hand (palm, links, foam) from the EEF origin over the
   /// joint range: a bound for broad-phase tests.
   double reach() const { return reach_; }
+  /// Largest distance of any point of the links moved by `joint` (its link and the ones after
+  /// it) from that joint's axis origin: a point moves at most lever * |dθ|.
+  double lever(int joint) const { return lever_[joint]; }
 
  private:
   GripperSpec spec_;
@@ -113,6 +116,7 @@ class Gripper {
   std::vector<int> first_joint_;
   std::vector<PadRef> pads_;
   double reach_ = 0.0;
+  std::vector<double> lever_;
 };
 
 /// The compiled-in default: a three-finger gripper like the paper's SeeGrip (three fingers at

@@ -173,12 +173,17 @@ std::vector<Neighbour> KdTree3::knn(const Vec3& q, std::size_t k) const {
 
 std::vector<Neighbour> KdTree3::radius(const Vec3& q, double radius) const {
   std::vector<Neighbour> out;
-  if (!impl_ || !impl_->tree || !(radius >= 0.0)) return out;
+  this->radius(q, radius, out, true);
+  return out;
+}
+
+void KdTree3::radius(const Vec3& q, double radius, std::vector<Neighbour>& out, bool sorted) const {
+  out.clear();
+  if (!impl_ || !impl_->tree || !(radius >= 0.0)) return;
   NanoRadiusSet set(radius * radius, out);
   const double qv[3] = {q.x(), q.y(), q.z()};
   impl_->tree->findNeighbors(set, qv, nanoflann::SearchParams());
-  sort_neighbours(out);
-  return out;
+  if (sorted) sort_neighbours(out);
 }
 
 // ---------------------------------------------------------------------------------------------

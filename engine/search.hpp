@@ -32,6 +32,10 @@ class KdTree3 {
   std::vector<Neighbour> knn(const Vec3& q, std::size_t k) const;
   /// All points within `radius`, sorted by distance then index.
   std::vector<Neighbour> radius(const Vec3& q, double radius) const;
+  /// All points within `radius` into `out` (cleared first; its capacity is reused). Unsorted,
+  /// the order is the tree's traversal order, which depends only on the points and q (so it is
+  /// still deterministic); `sorted` = true sorts as radius() does.
+  void radius(const Vec3& q, double radius, std::vector<Neighbour>& out, bool sorted) const;
 
  private:
   struct Impl;

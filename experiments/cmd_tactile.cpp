@@ -1,7 +1,254 @@
+// `touchstone simulate`, `touchstone log info`, `touchstone log export`: tactile logs.
+#include "datasets/simulator.hpp"
+#include "engine/fusion.hpp"
 #include "experiments/cli_common.hpp"
+#include "io/cloud_io.hpp"
+#include "io/db_store.hpp"
+#include "io/gripper_io.hpp"
+#include "io/log_store.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
 
 namespace ts::cli {
 
-void register_tactile(CLI::App& app) { (void)app; }
+namespace {
+using ojson = nlohmann::ordered_json;
+
+ojson pose_json(const Pose& T) {
+  const Eigen::Quaterniond q(T.linear());
+  const Vec3 t = T.translation();
+  return {{"t", {t.x(), t.y(), t.z()}}, {"q", {q.w(), q.x(), q.y(), q.z()}}};
+}
+
+// ---- simulate -------------------------------------------------------------------------------
+struct SimulateOptions {
+  CommonOptions common;
+  std::string db, object, out, noise = "ideal", gripper;
+  std::size_t grasps = 40;
+  int sensors = 1;
+  // Monte Carlo overrides of the noise profile (negative: keep the profile's value)
+  double arm_position_sigma = -1, arm_rotation_sigma_deg = -1, joint_sigma_deg = -1;
+  double signal_noise = -1, force_noise = -1, lateral_sigma = -1;
+  std::vector<double> offset;
+};
+
+int run_simulate(const SimulateOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const io::DbReader db(o.db);
+  const std::size_t index = db.find(o.object);
+  if (index >= db.size()) {
+    std::string names;
+    for (std::size_t i = 0; i < db.size() && i < 8; ++i) names += (i ? ", " : "") + db.info(i).name;
+    if (db.size() > 8) names += ", ...";
+    throw Error("unknown object '" + o.object + "' (the database holds " + std::to_string(db.size()) +
+                    " objects: " + names + ")",
+                o.db, "--object");
+  }
+  const Gripper gripper = o.gripper.empty() ? Gripper() : io::read_gripper(o.gripper);
+  datasets::SimulatorSettings s;
+  s.grasps = o.grasps;
+  s.sensors = o.sensors;
+  s.seed = o.common.seed;
+  s.noise = datasets::noise_profile(o.noise);
+  auto set = [](double v, double& field) {
+    if (v >= 0) field = v;
+  };
+  set(o.arm_position_sigma, s.noise.arm_position_sigma);
+  set(o.arm_rotation_sigma_deg, s.noise.arm_rotation_sigma_deg);
+  set(o.joint_sigma_deg, s.noise.joint_sigma_deg);
+  set(o.signal_noise, s.noise.signal_noise);
+  set(o.force_noise, s.noise.force_noise);
+  set(o.lateral_sigma, s.noise.lateral_sigma);
+  if (!o.offset.empty()) s.world_offset = Vec3(o.offset[0], o.offset[1], o.offset[2]);
+
+  const datasets::Simulator sim(db.load_mesh(index), db.info(index).name, gripper, s);
+  const datasets::SimulationResult result = sim.run();
+  std::ostringstream source;
+  source << "touchstone simulate --object " << o.object << " --grasps " << o.grasps << " --noise " << o.noise
+         << " --sensors " << o.sensors << " --seed " << o.common.seed;
+  io::LogHeader header = io::header_of(result.log);
+  header.source = source.str();
+  io::LogWriter writer = io::LogWriter::create(o.out, header, true);
+  for (std::size_t g = 0; g < result.log.grasps.size(); ++g)
+    writer.append(result.log.grasps[g], &result.log.truth->arm_poses[g], &result.log.truth->joints[g]);
+  writer.close();
+
+  std::size_t contacts = 0;
+  for (std::size_t g = 0; g < result.log.grasps.size(); ++g) contacts += grasp_contacts(result.log, g).points.size();
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (o.common.json) {
+    ojson j;
+    j["object"] = result.log.object;
+    j["grasps"] = result.log.grasps.size();
+    j["grasps_with_contact"] = result.grasps_with_contact;
+    j["contacts"] = contacts;
+    j["noise"] = s.noise.name;
+    j["sensors"] = result.log.pads.size();
+    j["seed"] = o.common.seed;
+    j["out"] = o.out;
+    j["time_s"] = seconds;
+    std::cout << j.dump() << '\n';
+  } else {
+    std::cout << "simulated " << result.log.grasps.size() << " grasps on '" << result.log.object << "' ("
+              << s.noise.name << ", " << result.log.pads.size() << (result.log.pads.size() == 1 ? " pad" : " pads")
+              << "): " << result.grasps_with_contact << " with contact, " << contacts << " contact points -> "
+              << o.out << " (" << std::fixed << std::setprecision(2) << seconds << " s)\n";
+  }
+  return 0;
+}
+
+// ---- log info -------------------------------------------------------------------------------
+struct LogInfoOptions {
+  CommonOptions common;
+  std::string log;
+};
+
+int run_log_info(const LogInfoOptions& o) {
+  const TactileLog log = io::read_log(o.log);
+  std::vector<std::size_t> per_grasp;
+  int ambiguous = 0;
+  for (std::size_t g = 0; g < log.grasps.size(); ++g) {
+    const GraspContacts c = grasp_contacts(log, g);
+    per_grasp.push_back(c.points.size());
+    ambiguous += c.ambiguous;
+  }
+  std::vector<std::string> pads;
+  for (int p : log.pads) pads.push_back(log.gripper.pads()[p].name);
+  const double duration = log.grasps.empty() ? 0.0 : log.grasps.back().time - log.grasps.front().time;
+  if (o.common.json) {
+    ojson j;
+    j["object"] = log.object;
+    j["grasps"] = log.grasps.size();
+    j["contacts_per_grasp"] = per_grasp;
+    j["ground_truth"] = log.truth ? pose_json(log.truth->object_pose) : ojson(nullptr);
+    j["noise"] = log.noise;
+    j["sensors"] = log.pads.size();
+    j["pads"] = pads;
+    j["gripper"] = log.gripper.spec().name;
+    j["seed"] = log.seed;
+    j["duration_s"] = duration;
+    j["ambiguous_sensels"] = ambiguous;
+    std::cout << j.dump() << '\n';
+    return 0;
+  }
+  std::size_t total = 0, with = 0;
+  for (auto n : per_grasp) total += n, with += n > 0;
+  std::cout << o.log << "\n"
+            << "  object        " << (log.object.empty() ? "(unknown)" : log.object) << "\n"
+            << "  noise         " << log.noise << "\n"
+            << "  gripper       " << log.gripper.spec().name << ", pads logged:";
+  for (const auto& p : pads) std::cout << ' ' << p;
+  std::cout << "\n  grasps        " << log.grasps.size() << " (" << with << " with contact, " << total
+            << " contact points";
+  if (ambiguous) std::cout << ", " << ambiguous << " sensels on an unknown side of the fold";
+  std::cout << ")\n  ground truth  ";
+  if (log.truth) {
+    const auto j = pose_json(log.truth->object_pose);
+    std::cout << "object at t = " << j["t"].dump() << ", q = " << j["q"].dump() << "\n";
+  } else {
+    std::cout << "none\n";
+  }
+  return 0;
+}
+
+// ---- log export -----------------------------------------------------------------------------
+struct LogExportOptions {
+  CommonOptions common;
+  std::string log, out, free;
+  std::size_t grasps = 0;          // 0: all
+  bool ascii = false;
+  ExplorationSettings exploration;
+};
+
+int run_log_export(const LogExportOptions& o) {
+  const TactileLog log = io::read_log(o.log);
+  const std::size_t k = o.grasps == 0 ? log.grasps.size() : std::min(o.grasps, log.grasps.size());
+  const ExplorationClouds clouds = exploration_clouds(log, k, o.exploration);
+  io::CloudWriteSettings ws;
+  ws.encoding = o.ascii ? io::CloudEncoding::ascii : io::CloudEncoding::binary;
+  io::write_cloud(o.out, clouds.contacts, ws);
+  if (!o.free.empty()) io::write_cloud(o.free, clouds.free, ws);
+  if (o.common.json) {
+    ojson j;
+    j["grasps"] = k;
+    j["contacts"] = clouds.contacts.size();
+    j["raw_contacts"] = clouds.raw_contacts;
+    j["out"] = o.out;
+    j["free_points"] = o.free.empty() ? ojson(nullptr) : ojson(clouds.free.size());
+    j["free_out"] = o.free.empty() ? ojson(nullptr) : ojson(o.free);
+    std::cout << j.dump() << '\n';
+  } else {
+    std::cout << "wrote " << clouds.contacts.size() << " contact points (" << clouds.raw_contacts
+              << " before the voxel filter) of " << k << " grasps -> " << o.out << "\n";
+    if (!o.free.empty()) std::cout << "wrote " << clouds.free.size() << " free-space points -> " << o.free << "\n";
+  }
+  return 0;
+}
+}  // namespace
+
+void register_tactile(CLI::App& app) {
+  // simulate
+  {
+    auto opt = std::make_shared<SimulateOptions>();
+    CLI::App* sub = app.add_subcommand("simulate", "Simulate random grasps on a database object; write a tactile log");
+    sub->add_option("--db", opt->db, "Object database (HDF5)")->required();
+    sub->add_option("--object", opt->object, "Name of the object to explore")->required();
+    sub->add_option("--grasps", opt->grasps, "Number of grasps")->required()->check(CLI::Range(1, 1000000));
+    sub->add_option("--noise", opt->noise, "Noise profile")
+        ->check(CLI::IsMember({"ideal", "underwater", "deepsea"}))
+        ->capture_default_str();
+    sub->add_option("--sensors", opt->sensors, "Pads logged: 1 (middle distal, as in the paper) or 6")
+        ->check(CLI::IsMember({1, 6}))
+        ->capture_default_str();
+    sub->add_option("--out", opt->out, "Tactile log to write (HDF5)")->required();
+    sub->add_option("--gripper", opt->gripper, "Gripper description (JSON; default: the built-in touchstone-3f)");
+    auto mc = "Noise overrides (Monte Carlo studies)";
+    sub->add_option("--arm-position-sigma", opt->arm_position_sigma, "m per axis, per grasp")->group(mc)->check(CLI::NonNegativeNumber);
+    sub->add_option("--arm-rotation-sigma", opt->arm_rotation_sigma_deg, "deg per axis, per grasp")->group(mc)->check(CLI::NonNegativeNumber);
+    sub->add_option("--joint-sigma", opt->joint_sigma_deg, "deg, finger joint readings")->group(mc)->check(CLI::NonNegativeNumber);
+    sub->add_option("--signal-noise", opt->signal_noise, "relative sensel signal noise")->group(mc)->check(CLI::NonNegativeNumber);
+    sub->add_option("--force-noise", opt->force_noise, "relative force-resolution noise of contacted sensels")->group(mc)->check(CLI::NonNegativeNumber);
+    sub->add_option("--lateral-sigma", opt->lateral_sigma, "m, lateral sampling error of a sensel")->group(mc)->check(CLI::NonNegativeNumber);
+    sub->add_option("--offset", opt->offset, "X Y Z: world position of the object (m; e.g. a dive site far from the origin)")
+        ->expected(3);
+    add_common(sub, opt->common);
+    sub->callback([opt] { run_command(opt->common, [opt] { return run_simulate(*opt); }); });
+  }
+  // log info | export
+  CLI::App* log = app.add_subcommand("log", "Inspect and export tactile logs");
+  log->require_subcommand(1);
+  {
+    auto opt = std::make_shared<LogInfoOptions>();
+    CLI::App* sub = log->add_subcommand("info", "Summary of a tactile log");
+    sub->add_option("log", opt->log, "Tactile log (HDF5)")->required();
+    add_common(sub, opt->common);
+    sub->callback([opt] { run_command(opt->common, [opt] { return run_log_info(*opt); }); });
+  }
+  {
+    auto opt = std::make_shared<LogExportOptions>();
+    CLI::App* sub = log->add_subcommand("export", "Cumulative contact cloud (and free space) as PLY/PCD");
+    sub->add_option("log", opt->log, "Tactile log (HDF5)")->required();
+    sub->add_option("--out", opt->out, "Contact cloud to write (.ply or .pcd)")->required();
+    sub->add_option("--grasps", opt->grasps, "Use the first K grasps (default: all)")->check(CLI::PositiveNumber);
+    sub->add_option("--free", opt->free, "Also write the free-space cloud of Eq. 3 (.ply or .pcd)");
+    sub->add_flag("--ascii", opt->ascii, "Write ASCII instead of binary");
+    auto fs = "Fusion parameters";
+    sub->add_option("--voxel", opt->exploration.contact_voxel, "m, voxel filter of the contact cloud")
+        ->group(fs)->check(CLI::PositiveNumber)->capture_default_str();
+    sub->add_option("--res-free", opt->exploration.free.res_free, "m, free-space sampling")
+        ->group(fs)->check(CLI::PositiveNumber)->capture_default_str();
+    sub->add_option("--s-obj-max", opt->exploration.free.s_obj_max, "m, largest object (box B of Eq. 3)")
+        ->group(fs)->check(CLI::NonNegativeNumber)->capture_default_str();
+    sub->add_option("--occupancy-voxel", opt->exploration.free.voxel, "m, occupancy grid voxel")
+        ->group(fs)->check(CLI::PositiveNumber)->capture_default_str();
+    add_common(sub, opt->common);
+    sub->callback([opt] { run_command(opt->common, [opt] { return run_log_export(*opt); }); });
+  }
+}
 
 }  // namespace ts::cli

@@ -242,7 +242,10 @@ void append_runs(h5::Group root, const RunStoreHeader& h, const std::vector<RunR
   rg.append("variant", variant.data(), n);
 }
 
-std::vector<RunRecord> read_runs(const h5::File& file, const RunStoreHeader& h) {
+/// Committed runs, sorted by key (first copy of a key kept). `rows`, when given, receives each
+/// returned run's row in /runs.
+std::vector<RunRecord> read_runs(const h5::File& file, const RunStoreHeader& h,
+                                 std::vector<std::size_t>* rows = nullptr) {
   h5::Group root = file.root();
   h5::Group rg = root.open_group("runs");
   h5::Group st = root.open_group("steps");
@@ -273,6 +276,7 @@ std::vector<RunRecord> read_runs(const h5::File& file, const RunStoreHeader& h) 
   if (S) m = std::min(m, stage.size() / S);
 
   std::vector<RunRecord> out;
+  std::vector<std::size_t> source;
   out.reserve(n);
   for (std::size_t i = 0; i < n; ++i) {
     RunRecord r;
@@ -304,15 +308,35 @@ std::vector<RunRecord> read_runs(const h5::File& file, const RunStoreHeader& h) 
       r.steps.push_back(std::move(s));
     }
     out.push_back(std::move(r));
+    source.push_back(i);
   }
   // Sort by key; keep the first copy of a key (duplicates cannot arise from our writer, but a
   // reader should not double-count if they ever do).
-  std::stable_sort(out.begin(), out.end(), [](const RunRecord& a, const RunRecord& b) {
-    return std::tie(a.variant, a.object, a.run) < std::tie(b.variant, b.object, b.run);
+  std::vector<std::size_t> order(out.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    return std::tie(out[a].variant, out[a].object, out[a].run) <
+           std::tie(out[b].variant, out[b].object, out[b].run);
   });
-  out.erase(std::unique(out.begin(), out.end(),
-                        [](const RunRecord& a, const RunRecord& b) { return a.same_key(b); }),
-            out.end());
+  std::vector<RunRecord> sorted;
+  sorted.reserve(out.size());
+  if (rows) rows->clear();
+  for (std::size_t i : order) {
+    if (!sorted.empty() && sorted.back().same_key(out[i])) continue;
+    sorted.push_back(std::move(out[i]));
+    if (rows) rows->push_back(source[i]);
+  }
+  return sorted;
+}
+
+/// Rows `rows` (each `width` values) of a flat column, in that order.
+template <class T>
+std::vector<T> gather(const std::vector<T>& column, std::size_t width, const std::vector<std::size_t>& rows) {
+  std::vector<T> out;
+  out.reserve(rows.size() * width);
+  for (std::size_t r : rows)
+    out.insert(out.end(), column.begin() + static_cast<std::ptrdiff_t>(r * width),
+               column.begin() + static_cast<std::ptrdiff_t>((r + 1) * width));
   return out;
 }
 
@@ -359,12 +383,65 @@ void RunStore::append(const std::filesystem::path& path, const std::vector<RunRe
 }
 
 void RunStore::compact(const std::filesystem::path& path, bool complete) {
-  const RunStoreContents c = read(path);
+  // Copy the stored values themselves (no round trip through Pose), so compacting twice changes
+  // nothing and equal runs give equal bytes however often their store was resumed.
+  RunStoreHeader h;
+  std::vector<std::size_t> rows;
+  struct Columns {
+    std::vector<std::int32_t> variant, object, run, grasps, step;
+    std::vector<double> truth, wall, pose, stage;
+    std::vector<std::uint8_t> correct;
+    std::vector<std::vector<std::int32_t>> ints;
+    std::vector<std::vector<double>> dbls;
+  } c;
+  {
+    h5::File f = h5::File::open(path, h5::File::Access::read);
+    h = parse_header(f);
+    const std::vector<RunRecord> runs = read_runs(f, h, &rows);  // validates, picks the rows
+    h5::Group rg = f.root().open_group("runs");
+    h5::Group st = f.root().open_group("steps");
+    const auto steps = static_cast<std::size_t>(h.steps);
+    const std::size_t S = h.stages.size();
+    c.variant = gather(rg.read<std::int32_t>("variant", {h5::kAny}), 1, rows);
+    c.object = gather(rg.read<std::int32_t>("object", {h5::kAny}), 1, rows);
+    c.run = gather(rg.read<std::int32_t>("run", {h5::kAny}), 1, rows);
+    c.grasps = gather(rg.read<std::int32_t>("grasps", {h5::kAny, h.steps}), steps, rows);
+    c.truth = gather(rg.read<double>("truth", {h5::kAny, 7}), 7, rows);
+    c.wall = gather(rg.read<double>("wall_time_s", {h5::kAny}), 1, rows);
+    const auto first = rg.read<std::int64_t>("first_step_row", {h5::kAny});
+    std::vector<std::size_t> step_rows;
+    for (std::size_t r : rows)
+      for (std::size_t k = 0; k < steps; ++k) step_rows.push_back(static_cast<std::size_t>(first[r]) + k);
+    c.step = gather(st.read<std::int32_t>("step", {h5::kAny}), 1, step_rows);
+    c.correct = gather(st.read<std::uint8_t>("correct", {h5::kAny}), 1, step_rows);
+    for (const char* n : kStepInts) c.ints.push_back(gather(st.read<std::int32_t>(n, {h5::kAny}), 1, step_rows));
+    for (const char* n : kStepDoubles) c.dbls.push_back(gather(st.read<double>(n, {h5::kAny}), 1, step_rows));
+    c.pose = gather(st.read<double>("pose", {h5::kAny, 7}), 7, step_rows);
+    if (S) c.stage = gather(st.read<double>("stage_times_s", {h5::kAny, static_cast<std::int64_t>(S)}), S, step_rows);
+    f.close();
+  }
+  const std::size_t n = rows.size(), m = n * static_cast<std::size_t>(h.steps);
   AtomicOutput out(path);
   {
     h5::File f = h5::File::create(out);
-    write_header(f.root(), c.header);
-    append_runs(f.root(), c.header, c.runs);
+    write_header(f.root(), h);
+    h5::Group st = f.root().open_group("steps");
+    h5::Group rg = f.root().open_group("runs");
+    st.append("step", c.step.data(), m);
+    st.append("correct", c.correct.data(), m);
+    for (std::size_t i = 0; i < std::size(kStepInts); ++i) st.append(kStepInts[i], c.ints[i].data(), m);
+    for (std::size_t i = 0; i < std::size(kStepDoubles); ++i) st.append(kStepDoubles[i], c.dbls[i].data(), m);
+    st.append("pose", c.pose.data(), m);
+    if (!h.stages.empty()) st.append("stage_times_s", c.stage.data(), m);
+    std::vector<std::int64_t> first(n);
+    for (std::size_t i = 0; i < n; ++i) first[i] = static_cast<std::int64_t>(i) * h.steps;
+    rg.append("first_step_row", first.data(), n);
+    rg.append("grasps", c.grasps.data(), n);
+    rg.append("truth", c.truth.data(), n);
+    rg.append("wall_time_s", c.wall.data(), n);
+    rg.append("run", c.run.data(), n);
+    rg.append("object", c.object.data(), n);
+    rg.append("variant", c.variant.data(), n);
     f.root().set_attribute("complete", std::int64_t{complete ? 1 : 0});
     f.close();
   }

@@ -115,7 +115,18 @@ TEST_CASE("KdTree3 knn and radius match brute force on random clouds") {
     for (int q = 0; q < 50; ++q) {
       const Vec3 query(rng.uniform(-0.12, 0.12), rng.uniform(-0.12, 0.12), rng.uniform(-0.12, 0.12));
       for (std::size_t k : {1u, 5u, 32u, 5000u}) check_same(tree.knn(query, k), brute_knn(pts, query, k));
-      for (double r : {0.0, 0.01, 0.05, 1.0}) check_same(tree.radius(query, r), brute_radius(pts, query, r));
+      for (double r : {0.0, 0.01, 0.05, 1.0}) {
+        const auto want = brute_radius(pts, query, r);
+        check_same(tree.radius(query, r), want);
+        std::vector<Neighbour> buffer(3, Neighbour{99, 1.0});   // cleared by the call
+        tree.radius(query, r, buffer, true);
+        check_same(buffer, want);
+        tree.radius(query, r, buffer, false);   // same set, traversal order
+        std::sort(buffer.begin(), buffer.end(), [](const Neighbour& a, const Neighbour& b) {
+          return a.sq_distance < b.sq_distance || (a.sq_distance == b.sq_distance && a.index < b.index);
+        });
+        check_same(buffer, want);
+      }
       const auto nn = tree.nearest(query);
       const auto b = brute_knn(pts, query, 1);
       CHECK(nn.index == b[0].index);

@@ -74,11 +74,13 @@ TEST_CASE("occupied wins, updates commute, merge equals sequential updates") {
 }
 
 TEST_CASE("free-space cloud: one real free voxel centre per res_free cube, inside box B") {
+  // (the representative is the free voxel nearest to the cube's centre; see the last check)
   const Vec3 origin(1e5, 0, 0);
   OccupancyGrid grid(0.004, origin);
   Pose T = Pose::Identity();
   T.translation() = origin;
-  grid.mark_free_box(T, Vec3(-0.1, -0.1, -0.1), Vec3(0.1, 0.1, 0.1));
+  // x < 0.013 m: the cubes at x in [0, 0.04) are partly free, their centres are not
+  grid.mark_free_box(T, Vec3(-0.1, -0.1, -0.1), Vec3(0.013, 0.1, 0.1));
   // Eq. 3: B = bbox of contacts + 2 s_obj_max, centred on their centroid.
   const std::vector<Vec3> contacts = {origin + Vec3(0.01, 0, 0), origin + Vec3(0.03, 0.02, 0)};
   const auto B = free_space_box(contacts, 0.05);
@@ -93,7 +95,7 @@ TEST_CASE("free-space cloud: one real free voxel centre per res_free cube, insid
     CHECK(grid.state(p) == Occupancy::free);
     CHECK(B.contains(p));
     CHECK(std::find(free.begin(), free.end(), p) != free.end());
-    const Vec3 l = (p - origin) / 0.04;
+    const Vec3 l = Vec3(((p - origin) / 0.004).array().round()) * 0.004 / 0.04;  // voxel index -> cube
     CHECK(cubes.insert({std::lround(std::floor(l.x())), std::lround(std::floor(l.y())),
                         std::lround(std::floor(l.z()))}).second);
   }
@@ -101,11 +103,30 @@ TEST_CASE("free-space cloud: one real free voxel centre per res_free cube, insid
   std::set<std::array<long, 3>> expected;
   for (const Vec3& p : free)
     if (B.contains(p)) {
-      const Vec3 l = (p - origin) / 0.04;
+      const Vec3 l = Vec3(((p - origin) / 0.004).array().round()) * 0.004 / 0.04;  // voxel index -> cube
       expected.insert({std::lround(std::floor(l.x())), std::lround(std::floor(l.y())),
                        std::lround(std::floor(l.z()))});
     }
   CHECK(cubes == expected);
+  // Updates after the first call keep the cached per-cube counts current.
+  const Vec3 c0 = cloud.front();
+  grid.mark_occupied(c0);
+  const auto again = grid.free_cloud(B, 0.04);
+  CHECK(again.size() == cloud.size());
+  CHECK(std::find(again.begin(), again.end(), c0) == again.end());
+  for (const Vec3& p : again) CHECK(grid.state(p) == Occupancy::free);
+  // The representative is the free voxel nearest to its cube's centre.
+  for (const Vec3& p : again) {
+    const Vec3 ijk = ((p - origin) / 0.004).array().round();
+    const Vec3 key = (ijk * 0.004 / 0.04).array().floor();
+    const Vec3 centre = (key + Vec3::Constant(0.5)) * 0.04;
+    const double d = (ijk * 0.004 - centre).norm();
+    for (const Vec3& q : free) {
+      const Vec3 qi = ((q - origin) / 0.004).array().round();
+      if (((qi * 0.004 / 0.04).array().floor() == key.array()).all() && B.contains(q) && grid.state(q) == Occupancy::free)
+        REQUIRE((qi * 0.004 - centre).norm() >= d - 1e-12);
+    }
+  }
 }
 
 TEST_CASE("swept volume: the links along the closing path, no voxel elsewhere") {

@@ -51,16 +51,16 @@ TEST_CASE("forward kinematics: straight fingers") {
   Gripper g;
   const std::vector<double> q(6, 0.0);
   // Middle finger at azimuth 0: base (0.05, 0, 0). Distal pad: link 2 origin at z = 0.075, pad
-  // on the inner face (x = -0.01) at mid-length 0.035; the pad faces -x (the palm axis).
+  // on the inner face (x = -0.01) at mid-length 0.032; the pad faces -x (the palm axis).
   const Pose T = g.pad_pose(q, g.pad_index("middle.distal"));
-  check_vec(T.translation(), Vec3(0.04, 0.0, 0.11));
+  check_vec(T.translation(), Vec3(0.04, 0.0, 0.107));
   check_vec(T.linear().col(2), Vec3(-1, 0, 0));   // pad normal
   check_vec(T.linear().col(0), Vec3(0, 0, 1));    // pad length along the finger
   check_vec(T.linear().col(1), Vec3(0, 1, 0));
   // Left finger at azimuth 120°: base 0.05 (cos 120°, sin 120°, 0), same offsets rotated.
   const double c = std::cos(120 * kDeg), s = std::sin(120 * kDeg);
   const Pose L = g.pad_pose(q, g.pad_index("left.distal"));
-  check_vec(L.translation(), Vec3(0.05 * c - 0.01 * c, 0.05 * s - 0.01 * s, 0.11));
+  check_vec(L.translation(), Vec3(0.05 * c - 0.01 * c, 0.05 * s - 0.01 * s, 0.107));
   check_vec(L.linear().col(2), Vec3(-c, -s, 0));
   const Pose P = g.pad_pose(q, g.pad_index("right.proximal"));
   const double c3 = std::cos(240 * kDeg), s3 = std::sin(240 * kDeg);
@@ -72,23 +72,23 @@ TEST_CASE("forward kinematics: bent middle finger, computed by hand") {
   // θ1 = 90°: the proximal link lies across the palm, the distal pad faces the palm (-z).
   {
     const Pose T = g.pad_pose(joints_of(g, 90 * kDeg, 0.0), 1);
-    // pad origin = base + Ry(-90°) (-0.01, 0, 0.11) = (0.05, 0, 0) + (-0.11, 0, -0.01)
-    check_vec(T.translation(), Vec3(-0.06, 0.0, -0.01), 1e-12);
+    // pad origin = base + Ry(-90°) (-0.01, 0, 0.107) = (0.05, 0, 0) + (-0.107, 0, -0.01)
+    check_vec(T.translation(), Vec3(-0.057, 0.0, -0.01), 1e-12);
     check_vec(T.linear().col(2), Vec3(0, 0, -1), 1e-12);
   }
   // θ1 = 30°, θ2 = 45°: with Ry(φ) = [[cos φ, 0, sin φ], [0, 1, 0], [-sin φ, 0, cos φ]] and
   // closing = rotation by -θ about y:
-  //   v  = Ry(-45°) (-0.01, 0, 0.035) + (0, 0, 0.075)
+  //   v  = Ry(-45°) (-0.01, 0, 0.032) + (0, 0, 0.075)
   //   p  = (0.05, 0, 0) + Ry(-30°) v
   {
     const double a1 = 30 * kDeg, a2 = 45 * kDeg;
-    const double vx = std::cos(a2) * -0.01 - std::sin(a2) * 0.035;
-    const double vz = std::sin(a2) * -0.01 + std::cos(a2) * 0.035 + 0.075;
+    const double vx = std::cos(a2) * -0.01 - std::sin(a2) * 0.032;
+    const double vz = std::sin(a2) * -0.01 + std::cos(a2) * 0.032 + 0.075;
     const double px = 0.05 + std::cos(a1) * vx - std::sin(a1) * vz;
     const double pz = std::sin(a1) * vx + std::cos(a1) * vz;
     const Pose T = g.pad_pose(joints_of(g, a1, a2), 1);
     check_vec(T.translation(), Vec3(px, 0.0, pz), 1e-12);
-    check_vec(T.translation(), Vec3(-0.023896, 0.0, 0.064352), 1e-6);  // the same, by calculator
+    check_vec(T.translation(), Vec3(-0.020997, 0.0, 0.063575), 1e-6);  // the same, by calculator
     // the pad normal turned by 75° from -x toward -z
     check_vec(T.linear().col(2), Vec3(-std::cos(75 * kDeg), 0, -std::sin(75 * kDeg)), 1e-12);
   }
@@ -103,8 +103,8 @@ TEST_CASE("Eq. 2: world contact = T_EEF * T_sensor * P^L") {
   // Sensel 0 of the middle distal pad, contact 1 mm above the base: P^L = (-0.0275, -0.0125, 0.001).
   const Vec3 PL(-0.0275, -0.0125, 0.001);
   const Vec3 PW = T_eef * g.pad_pose(q, 1) * PL;
-  // In the EEF frame: pad origin (0.04, 0, 0.11) + x_L*(0,0,1) + y_L*(0,1,0) + z_L*(-1,0,0)
-  const Vec3 P_eef(0.04 - 0.001, -0.0125, 0.11 - 0.0275);
+  // In the EEF frame: pad origin (0.04, 0, 0.107) + x_L*(0,0,1) + y_L*(0,1,0) + z_L*(-1,0,0)
+  const Vec3 P_eef(0.04 - 0.001, -0.0125, 0.107 - 0.0275);
   // Rz(90°): (x, y, z) -> (-y, x, z)
   check_vec(PW, Vec3(1.0 + 0.0125, 2.0 + P_eef.x(), 3.0 + P_eef.z()), 1e-12);
 }

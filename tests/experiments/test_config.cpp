@@ -214,3 +214,18 @@ TEST_CASE("Canonical JSON and the first result-determining difference") {
   CHECK(j.at("ransac.triplets").is_null());
   CHECK_FALSE(j.contains("ransac.samples"));  // derived key, not stored twice
 }
+
+TEST_CASE("Every study configuration of experiments/studies parses") {
+  const fs::path dir = fs::path(TS_SOURCE_DIR) / "experiments" / "studies";
+  std::size_t n = 0;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    if (e.path().extension() != ".toml") continue;
+    ++n;
+    CAPTURE(e.path().string());
+    ExperimentConfig c;
+    load_config_file(c, e.path());
+    CHECK_FALSE(c.name.empty());
+    CHECK(expand_variants(c).size() >= 1);
+  }
+  CHECK(n >= 10);
+}

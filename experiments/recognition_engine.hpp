@@ -1,0 +1,54 @@
+// The real RunEngine: simulated grasp pools (datasets/simulator) explored by the recognizer
+// (engine/recognizer), scored against the simulator's ground truth.
+//
+// Per explored object and noise setting, one pool of `pool` random grasps is simulated once
+// (Section 5.1: the object stays fixed, the hand grasps it at random places). A run draws
+// `steps` distinct grasps from the pool in random order (Section 5.2), fuses them step by step
+// (engine/fusion: cumulative contacts and free space) and runs the recognizer on each step.
+//
+// Seeds: the pool of an object comes from (seed, object name); a run's grasp order and its
+// recognizer stream from (seed, object name, run). They do not depend on the variant, so sweep
+// variants compare on the same grasps (common random numbers), nor on which other objects an
+// experiment explores.
+#pragma once
+
+#include "experiments/config.hpp"
+#include "experiments/driver.hpp"
+#include "engine/database.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+
+namespace ts::experiments {
+
+/// The database an experiment uses: objects for the recognizer, meshes for the simulator, and
+/// what the run store records about it (its "fingerprint" decides whether --resume may go on).
+struct EngineDatabase {
+  std::shared_ptr<const ObjectSource> source;
+  std::function<Mesh(std::size_t)> load_mesh;  ///< object-frame mesh of object i
+  nlohmann::ordered_json description;          ///< {"path", "fingerprint", ...}
+};
+
+/// A database file (io/db_store). Throws ts::Error for a missing or foreign file.
+EngineDatabase open_database(const std::filesystem::path& path);
+/// Objects held in memory (tests; a database built a moment ago).
+EngineDatabase memory_database(std::vector<BuiltObject> objects, const DatabaseSettings& settings);
+/// SHA-256 over what determines an object source's content: settings, names, mesh checksums,
+/// scales and point counts.
+std::string source_fingerprint(const ObjectSource& source);
+
+/// Resolve the configuration's objects for every variant against `database` and build the run
+/// store header. Throws ts::Error for an unknown object (naming the key). `threads` is recorded;
+/// `note` receives status lines for a terminal (may be empty).
+std::unique_ptr<RunEngine> make_recognition_engine(const ExperimentConfig& config,
+                                                   EngineDatabase database, int threads,
+                                                   std::function<void(const std::string&)> note = {});
+
+/// Names of the per-stage timing columns the recognition engine records.
+const std::vector<std::string>& recognition_stages();
+
+}  // namespace ts::experiments

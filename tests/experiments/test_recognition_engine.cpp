@@ -1,0 +1,156 @@
+// The real engine (simulator + recognizer) on a small in-memory database: complete, consistent
+// records; the same results for 1 and 2 threads and after an interruption.
+#include "engine/recognition_fixture.hpp"
+#include "experiments/recognition_engine.hpp"
+#include "temp_dir.hpp"
+
+#include <doctest/doctest.h>
+
+#include <tbb/task_arena.h>
+
+#include <cmath>
+
+using namespace ts;
+using namespace ts::experiments;
+
+namespace {
+
+EngineDatabase small_database() {
+  auto src = test::make_source(1.0);
+  EngineDatabase db;
+  db.source = src;
+  db.load_mesh = [src](std::size_t i) { return src->meshes.at(i); };
+  db.description["path"] = "(test)";
+  db.description["fingerprint"] = source_fingerprint(*src);
+  return db;
+}
+
+ExperimentConfig small_config() {
+  ExperimentConfig c;
+  set_key(c, "objects", {"box,nut"});
+  set_key(c, "runs", {"2"});
+  set_key(c, "steps", {"3"});
+  set_key(c, "pool", {"5"});
+  set_key(c, "bricpsf.hypotheses", {"20"});
+  set_key(c, "ransac.samples", {"5x40"});
+  set_key(c, "seed", {"3"});
+  validate(c);
+  return c;
+}
+
+std::vector<io::RunRecord> run_all(RunEngine& engine, const ExperimentConfig& c,
+                                   const std::filesystem::path& store, int threads,
+                                   bool parallel_runs, const std::atomic<bool>* stop = nullptr,
+                                   std::function<void(const Progress&)> progress = {}) {
+  if (!std::filesystem::exists(store)) io::RunStore::create(store, engine.header());
+  DriveSettings s;
+  s.parallel_runs = parallel_runs;
+  s.stop = stop;
+  s.on_progress = std::move(progress);
+  tbb::task_arena(threads).execute([&] { drive(engine, all_tasks(engine.header(), c.runs), store, s); });
+  return io::RunStore::read(store).runs;
+}
+
+void check_same_results(const std::vector<io::RunRecord>& a, const std::vector<io::RunRecord>& b) {
+  REQUIRE(a.size() == b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    CHECK(a[i].same_key(b[i]));
+    CHECK(a[i].grasps == b[i].grasps);
+    CHECK(a[i].truth.isApprox(b[i].truth, 0.0));
+    REQUIRE(a[i].steps.size() == b[i].steps.size());
+    for (std::size_t k = 0; k < a[i].steps.size(); ++k) {
+      const auto &x = a[i].steps[k], &y = b[i].steps[k];
+      CHECK(x.best_object == y.best_object);
+      CHECK(x.correct == y.correct);
+      CHECK(x.weight == y.weight);
+      CHECK(x.posterior_true == y.posterior_true);
+      CHECK(x.hypotheses == y.hypotheses);
+      CHECK(x.contacts == y.contacts);
+      CHECK(x.free_points == y.free_points);
+      CHECK(x.position_error_m == y.position_error_m);
+      CHECK(x.symmetric_orientation_error_rad == y.symmetric_orientation_error_rad);
+      CHECK(x.mssd_m == y.mssd_m);
+      CHECK(x.pose.isApprox(y.pose, 0.0));
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("Recognition engine: consistent records, thread-count and resume independent") {
+  test::TempDir dir("engine");
+  const ExperimentConfig c = small_config();
+  auto engine = make_recognition_engine(c, small_database(), 2);
+  const io::RunStoreHeader& h = engine->header();
+  CHECK(h.objects == std::vector<std::string>{"box", "nut"});
+  CHECK(h.database_objects.size() == 6);
+  CHECK(h.stages == recognition_stages());
+  CHECK(h.steps == 3);
+
+  const auto serial = run_all(*engine, c, dir / "serial.h5", 1, false);
+  REQUIRE(serial.size() == 4);
+  long contacts = 0;
+  for (const auto& r : serial) {
+    CHECK(r.grasps.size() == 3);
+    CHECK(r.truth.isApprox(serial[r.object == 0 ? 0 : 2].truth, 0.0));  // one pool per object
+    for (const auto& s : r.steps) {
+      CHECK(s.best_object >= -1);
+      CHECK(s.best_object < 6);
+      const bool right = s.best_object >= 0 &&
+                         h.database_objects[static_cast<std::size_t>(s.best_object)] ==
+                             h.objects[static_cast<std::size_t>(r.object)];
+      CHECK(s.correct == right);
+      CHECK(s.posterior_true >= 0.0);
+      CHECK(s.posterior_true <= 1.0 + 1e-12);
+      CHECK(std::isfinite(s.position_error_m));
+      CHECK(std::isfinite(s.mssd_m));
+      CHECK(s.symmetric_orientation_error_rad <= s.orientation_error_rad + 1e-12);
+      CHECK(s.stage_times_s.size() == recognition_stages().size());
+      CHECK(s.time_s > 0.0);
+      contacts += s.contacts;
+    }
+    // Cumulative clouds grow (or stay) step by step.
+    CHECK(r.steps[2].contacts >= r.steps[0].contacts);
+  }
+
+  CHECK(contacts > 0);
+
+  const auto parallel = run_all(*engine, c, dir / "parallel.h5", 2, true);
+  check_same_results(serial, parallel);
+
+  // Interrupted after the first stored run, then resumed by a fresh engine.
+  std::atomic<bool> stop{false};
+  const auto first = run_all(*engine, c, dir / "resumed.h5", 2, true, &stop,
+                             [&](const Progress&) { stop = true; });
+  CHECK(first.size() >= 1);
+  CHECK(first.size() < 4);
+  auto engine2 = make_recognition_engine(c, small_database(), 1);
+  check_resumable(io::RunStore::read_header(dir / "resumed.h5"), engine2->header(), "resumed.h5");
+  const auto resumed = run_all(*engine2, c, dir / "resumed.h5", 1, true);
+  check_same_results(serial, resumed);
+}
+
+TEST_CASE("Recognition engine: database subsets and unknown objects") {
+  ExperimentConfig c = small_config();
+  set_key(c, "objects", {"wedge"});
+  set_key(c, "runs", {"1"});
+  set_key(c, "sweep.database_size", {"2", "6"});
+  auto engine = make_recognition_engine(c, small_database(), 1);
+  CHECK(engine->header().variant_labels.size() == 2);
+  test::TempDir dir("engine");
+  const auto runs = run_all(*engine, c, dir / "subset.h5", 1, true);
+  REQUIRE(runs.size() == 2);
+  // With 2 objects the recognizer knows only the wedge and the first database object (box).
+  for (const auto& s : runs[0].steps)
+    CHECK((s.best_object == -1 || s.best_object == 0 || s.best_object == 4));
+
+  ExperimentConfig bad = small_config();
+  set_key(bad, "objects", {"box,teapot"});
+  try {
+    make_recognition_engine(bad, small_database(), 1);
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.field() == "objects");
+    CHECK(e.message().find("teapot") != std::string::npos);
+  }
+}

@@ -1,0 +1,151 @@
+// `touchstone simulate`, `log info`, `log export` run as a user runs them: JSON keys of the
+// interface contract, byte-identical logs for any --threads, exported clouds, clear errors.
+#include "io/cloud_io.hpp"
+#include "io/db_store.hpp"
+#include "io/log_store.hpp"
+#include "mesh_fixtures.hpp"
+#include "temp_dir.hpp"
+
+#include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
+
+#include <cstdlib>
+#include <sys/wait.h>
+
+using namespace ts;
+
+namespace {
+struct Run {
+  int code = -1;
+  std::string out, err;
+};
+
+Run touchstone(const test::TempDir& dir, const std::string& args) {
+  const auto out = dir / "stdout.txt", err = dir / "stderr.txt";
+  const std::string cmd = std::string(TS_BINARY_DIR) + "/touchstone " + args + " >" + out.string() + " 2>" + err.string();
+  const int status = std::system(cmd.c_str());
+  Run r;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.out = test::read_bytes(out);
+  r.err = test::read_bytes(err);
+  return r;
+}
+
+BuiltObject object(const std::string& name, Mesh mesh) {
+  BuiltObject o;
+  o.info.name = name;
+  o.info.source = "test";
+  o.info.mesh_sha256 = std::string(64, '0');
+  o.info.closed = true;
+  o.info.extent = mesh_bounds(mesh).sizes();
+  o.mesh = std::move(mesh);
+  SparseGrid g;
+  g.voxel = 0.01;
+  g.ijk = {{0, 0, 0}};
+  g.value = {0.0f};
+  o.field = DistanceField::from_sparse(g, g, true, 0.2);
+  return o;
+}
+
+std::filesystem::path make_db(const test::TempDir& dir) {
+  const auto path = dir / "db.h5";
+  std::vector<BuiltObject> objects;
+  objects.push_back(object("ball", test::sphere_mesh(0.05, 2)));
+  objects.push_back(object("brick", test::box_mesh({-0.08, -0.04, -0.03}, {0.08, 0.04, 0.03})));
+  std::vector<io::StoredObject> stored;
+  for (const auto& o : objects) stored.push_back({&o, 1});
+  io::write_database(path, stored, DatabaseSettings{}, 1);
+  return path;
+}
+}  // namespace
+
+TEST_CASE("simulate -> log info -> log export") {
+  test::TempDir dir("cli");
+  const auto db = make_db(dir);
+  const auto log = dir / "ball.h5";
+  Run r = touchstone(dir, "simulate --db " + db.string() + " --object ball --grasps 12 --noise underwater --seed 4 --out " +
+                              log.string() + " --json");
+  REQUIRE_MESSAGE(r.code == 0, r.err);
+  const auto sim = nlohmann::json::parse(r.out);
+  CHECK(sim["grasps"] == 12);
+  CHECK(sim["sensors"] == 1);
+
+  r = touchstone(dir, "log info " + log.string() + " --json");
+  REQUIRE_MESSAGE(r.code == 0, r.err);
+  const auto info = nlohmann::json::parse(r.out);
+  for (const char* key : {"object", "grasps", "contacts_per_grasp", "ground_truth", "noise", "sensors"})
+    CHECK_MESSAGE(info.contains(key), key);
+  CHECK(info["object"] == "ball");
+  CHECK(info["grasps"] == 12);
+  CHECK(info["noise"] == "underwater");
+  CHECK(info["sensors"] == 1);
+  REQUIRE(info["contacts_per_grasp"].size() == 12);
+  std::size_t contacts = 0;
+  for (const auto& n : info["contacts_per_grasp"]) contacts += n.get<std::size_t>();
+  CHECK(contacts == sim["contacts"].get<std::size_t>());
+  CHECK(info["ground_truth"]["t"].size() == 3);
+  CHECK(info["ground_truth"]["q"].size() == 4);
+  const TactileLog read = io::read_log(log);
+  CHECK(info["ground_truth"]["t"][0].get<double>() == doctest::Approx(read.truth->object_pose.translation().x()));
+
+  r = touchstone(dir, "log info " + log.string());
+  CHECK(r.code == 0);
+  CHECK(r.out.find("underwater") != std::string::npos);
+
+  const auto ply = dir / "c.ply", pcd = dir / "f.pcd";
+  r = touchstone(dir, "log export " + log.string() + " --grasps 8 --out " + ply.string() + " --free " + pcd.string() + " --json");
+  REQUIRE_MESSAGE(r.code == 0, r.err);
+  const auto ex = nlohmann::json::parse(r.out);
+  CHECK(ex["grasps"] == 8);
+  const PointCloud c = io::read_cloud(ply), f = io::read_cloud(pcd);
+  CHECK(c.size() == ex["contacts"].get<std::size_t>());
+  CHECK(f.size() == ex["free_points"].get<std::size_t>());
+  CHECK(c.size() > 0);
+  CHECK(f.size() > 0);
+  const auto clouds = exploration_clouds(read, 8);
+  CHECK(c.points.size() == clouds.contacts.points.size());
+}
+
+TEST_CASE("same seed: byte-identical logs for --threads 1 and 2") {
+  test::TempDir dir("cli");
+  const auto db = make_db(dir);
+  for (const char* threads : {"1", "2"}) {
+    const Run r = touchstone(dir, "simulate --db " + db.string() + " --object brick --grasps 8 --sensors 6 --noise deepsea --seed 9 --threads " +
+                                      threads + " --out " + (dir / (std::string("t") + threads + ".h5")).string());
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+  }
+  CHECK(test::read_bytes(dir / "t1.h5") == test::read_bytes(dir / "t2.h5"));
+}
+
+TEST_CASE("bad input: one error line, exit 1 (usage: 2), no output left behind") {
+  test::TempDir dir("cli");
+  const auto db = make_db(dir);
+  const auto out = dir / "x.h5";
+  Run r = touchstone(dir, "simulate --db " + db.string() + " --object teapot --grasps 3 --out " + out.string());
+  CHECK(r.code == 1);
+  CHECK(r.err.rfind("touchstone: error: unknown object 'teapot'", 0) == 0);
+  CHECK(r.err.find(db.string()) != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(out));
+  r = touchstone(dir, "simulate --db " + (dir / "none.h5").string() + " --object ball --grasps 3 --out " + out.string());
+  CHECK(r.code == 1);
+  CHECK_FALSE(std::filesystem::exists(out));
+  r = touchstone(dir, "simulate --db " + db.string() + " --object ball --grasps 3 --sensors 3 --out " + out.string());
+  CHECK(r.code == 2);
+  r = touchstone(dir, "simulate --db " + db.string() + " --object ball --grasps 3 --noise murky --out " + out.string());
+  CHECK(r.code == 2);
+  test::write_text(dir / "g.json", "{\"name\": \"broken\", \"fingers\": [");
+  r = touchstone(dir, "simulate --db " + db.string() + " --object ball --grasps 3 --gripper " + (dir / "g.json").string() +
+                          " --out " + out.string());
+  CHECK(r.code == 1);
+  CHECK(r.err.find("g.json") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(out));
+  // A database is not a log.
+  r = touchstone(dir, "log info " + db.string());
+  CHECK(r.code == 1);
+  CHECK(r.err.rfind("touchstone: error: not a Touchstone tactile log", 0) == 0);
+  r = touchstone(dir, "log export " + db.string() + " --out " + (dir / "c.ply").string());
+  CHECK(r.code == 1);
+  CHECK_FALSE(std::filesystem::exists(dir / "c.ply"));
+  r = touchstone(dir, "log export " + db.string() + " --out " + (dir / "c.xyz").string());
+  CHECK(r.code == 1);
+}
