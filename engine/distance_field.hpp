@@ -38,6 +38,8 @@ class DistanceField {
 
   /// Build from a mesh in the object frame. `is_signed`: negative inside (closed meshes only).
   static DistanceField build(const Mesh& mesh, bool is_signed, const DistanceFieldSettings& s);
+  /// Same, reusing the mesh's BVH (its exact distances fill the grids). Uses TBB inside.
+  static DistanceField build(const MeshIndex& mesh, bool is_signed, const DistanceFieldSettings& s);
   static DistanceField from_sparse(SparseGrid fine, SparseGrid coarse, bool is_signed,
                                    double coarse_margin);
   SparseGrid fine_sparse() const;

@@ -211,11 +211,41 @@ TEST_CASE("FeatureIndex exact mode matches brute force, ties included") {
   }
 }
 
+TEST_CASE("FeatureIndex ties: among identical features the smaller indices win, in both modes") {
+  // 12 distinct features, each repeated 250 times in shuffled positions (flat faces give exactly
+  // this: many identical histograms).
+  Rng rng(23);
+  std::vector<Feature> distinct(12);
+  for (auto& f : distinct)
+    for (auto& v : f) v = static_cast<float>(rng.index(20));
+  std::vector<Feature> feats;
+  for (int rep = 0; rep < 250; ++rep)
+    for (const auto& f : distinct) feats.push_back(f);
+  for (std::size_t i = feats.size(); i > 1; --i) std::swap(feats[i - 1], feats[rng.index(i)]);
+  const std::vector<FeatureRef> refs(feats.size());
+  FeatureIndexSettings exact;
+  exact.exact = true;
+  FeatureIndexSettings approx;
+  approx.exact = false;
+  approx.checks = static_cast<int>(feats.size());   // exhaustive, so ties must be exact too
+  const FeatureIndex a(feats, refs, exact), b(feats, refs, approx);
+  for (int q = 0; q < 12; ++q) {
+    Feature query = distinct[q];
+    query[q] += 0.25f;
+    for (std::size_t w : {1u, 100u, 250u, 400u, 777u}) {
+      const auto want = brute_features(feats, query, w);
+      check_same(a.knn(query, w), want);
+      check_same(b.knn(query, w), want);
+    }
+  }
+}
+
 TEST_CASE("FeatureIndex approximate mode is reproducible and exact when checks cover everything") {
   Rng rng(22);
   const auto feats = random_features(rng, 4000);
   std::vector<FeatureRef> refs(feats.size());
   FeatureIndexSettings s;
+  s.exact = false;
   s.trees = 4;
   s.checks = 128;
   const FeatureIndex a(feats, refs, s), b(feats, refs, s);
@@ -268,6 +298,7 @@ TEST_CASE("FeatureIndex rejects bad input and handles the empty index") {
   f[1][4] = std::nanf("");
   CHECK_THROWS_AS(FeatureIndex(f, std::vector<FeatureRef>(3), {}), Error);
   FeatureIndexSettings bad;
+  bad.exact = false;
   bad.checks = 0;
   CHECK_THROWS_AS(FeatureIndex(std::vector<Feature>(2), std::vector<FeatureRef>(2), bad), Error);
   const FeatureIndex empty;
