@@ -166,7 +166,10 @@ DistanceField::~DistanceField() = default;
 DistanceField::DistanceField(DistanceField&&) noexcept = default;
 DistanceField& DistanceField::operator=(DistanceField&&) noexcept = default;
 
-DistanceField DistanceField::build(const Mesh& mesh, bool is_signed, const DistanceFieldSettings& s) {
+namespace {
+
+/// Throws on what meshToVolume and the BVH cannot take; returns the mesh's bounding box.
+Eigen::AlignedBox3d checked_bounds(const Mesh& mesh, const DistanceFieldSettings& s) {
   if (!(s.fine_voxel > 0.0) || !(s.coarse_voxel > 0.0) || s.fine_band_voxels < 1 ||
       !(s.coarse_margin >= 0.0) || !std::isfinite(s.coarse_margin))
     throw Error("distance field: voxels must be > 0, band >= 1 voxel, margin >= 0", {}, "field");
@@ -180,9 +183,25 @@ DistanceField DistanceField::build(const Mesh& mesh, bool is_signed, const Dista
     if (!finite(v)) throw Error("distance field: non-finite vertex", {}, "vertices");
     bbox.extend(v);
   }
-  const Vec3 span = (bbox.max() - bbox.min()).array() + 2.0 * s.coarse_margin;
-  if (span.maxCoeff() / s.coarse_voxel > 4000.0 || (bbox.max() - bbox.min()).maxCoeff() / s.fine_voxel > 1e5)
-    throw Error("distance field: too many voxels for this mesh size", {}, "fine_voxel/coarse_voxel");
+  return bbox;
+}
+
+}  // namespace
+
+DistanceField DistanceField::build(const Mesh& mesh, bool is_signed, const DistanceFieldSettings& s) {
+  checked_bounds(mesh, s);
+  return build(MeshIndex(mesh), is_signed, s);
+}
+
+DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const DistanceFieldSettings& s) {
+  const Mesh& mesh = index.mesh();
+  const Eigen::AlignedBox3d bbox = checked_bounds(mesh, s);
+  // Refuse settings whose grids cannot fit in memory (dense coarse box; fine band ~ area x band).
+  const Vec3 cells = ((bbox.max() - bbox.min()).array() + 2.0 * s.coarse_margin) / s.coarse_voxel + 3.0;
+  if (cells.prod() > 5e7)
+    throw Error("distance field: the coarse grid would exceed 5e7 voxels", {}, "coarse_voxel");
+  if (mesh_area(mesh) / (s.fine_voxel * s.fine_voxel) * (2.0 * s.fine_band_voxels + 1.0) > 2e8)
+    throw Error("distance field: the fine band would exceed 2e8 voxels", {}, "fine_voxel");
   init_openvdb();
 
   DistanceField df;
@@ -191,8 +210,6 @@ DistanceField DistanceField::build(const Mesh& mesh, bool is_signed, const Dista
   im.coarse_margin = s.coarse_margin;
   im.fine_voxel = s.fine_voxel;
   im.coarse_voxel = s.coarse_voxel;
-
-  const MeshIndex index(mesh);   // exact point-to-triangle distances (BVH)
 
   // Fine level: band topology and inside/outside from meshToVolume, values exact.
   const double fv = s.fine_voxel;
@@ -250,8 +267,10 @@ DistanceField DistanceField::build(const Mesh& mesh, bool is_signed, const Dista
         // Triangle inequality: d(p) <= d(previous voxel) + cv, a tight bound for the BVH.
         const double bound = prev + cv * (1.0 + 1e-9) + 1e-12;
         std::optional<ClosestPoint> hit;
-        if (bound < cap) hit = index.closest_within(p, bound);
-        if (!hit) hit = index.closest_within(p, cap);
+        if (bbox.squaredExteriorDistance(p) < cap * cap) {   // else d >= dist(p, bbox) >= cap
+          if (bound < cap) hit = index.closest_within(p, bound);
+          if (!hit) hit = index.closest_within(p, cap);
+        }
         double d = hit ? hit->distance : cap;
         prev = d;
         if (is_signed) {

@@ -202,15 +202,32 @@ inline double feature_sq_distance(const float* a, const float* b) {
   return s;
 }
 
+/// As feature_sq_distance, but returns early (a partial sum > bound) once the sum exceeds a
+/// positive bound. Accepted candidates therefore always carry the full sum.
+inline double feature_sq_distance_bounded(const float* a, const float* b, double bound) {
+  if (!(bound > 0.0)) return feature_sq_distance(a, b);
+  double s = 0.0;
+  for (int block = 0; block < 3; ++block) {
+    for (int i = block * 11; i < block * 11 + 11; ++i) {
+      const double d = static_cast<double>(a[i]) - static_cast<double>(b[i]);
+      s += d * d;
+    }
+    if (s > bound) return s;
+  }
+  return s;
+}
+
 /// FLANN distance functor with the accumulation above (FLANN's own L2<float> sums in float,
 /// four bins at a time).
 struct FeatureL2 {
   using is_kdtree_distance = bool;
   using ElementType = float;
   using ResultType = double;
+  /// Stops early, returning a partial sum above `worst`, once the candidate cannot qualify
+  /// (the partial sums only grow, so the decision is the same as with the full sum).
   template <typename It1, typename It2>
-  ResultType operator()(It1 a, It2 b, std::size_t size, ResultType /*worst*/ = -1) const {
-    return feature_sq_distance(&a[0], &b[0]);
+  ResultType operator()(It1 a, It2 b, std::size_t size, ResultType worst = -1) const {
+    return feature_sq_distance_bounded(&a[0], &b[0], worst);
   }
   template <typename U, typename V>
   ResultType accum_dist(const U& a, const V& b, int) const {
@@ -376,13 +393,16 @@ class KdForest {
         if ((word & bit) || (checks >= max_checks && top.full())) return;
         word |= bit;
         ++checks;
-        top.add(feature_sq_distance(q.data(), data_[i].data()), i);
+        top.add(feature_sq_distance_bounded(q.data(), data_[i].data(), top.full() ? top.bound() : -1.0), i);
         return;
       }
       const double diff = static_cast<double>(q[nd.feat]) - static_cast<double>(nd.val);
       const std::int32_t best = diff < 0 ? nd.child1 : nd.child2;
       const std::int32_t other = diff < 0 ? nd.child2 : nd.child1;
       const double d = mindist + diff * diff;
+      // FLANN's pruning. d (the path's summed squared cuts) may exceed the true distance to the
+      // cell, so even an unlimited budget does not make this search exact; keeping every
+      // branch instead made large budgets 2-5x slower for no practical gain.
       if (d < top.bound() || !top.full()) branches.push({d, t, other});
       node = best;
     }
@@ -425,7 +445,7 @@ FeatureIndex::FeatureIndex(std::vector<Feature> features, std::vector<FeatureRef
   if (impl_->features.empty()) return;
   if (settings.exact) {
     flann::Matrix<float> m(impl_->features.front().data(), impl_->features.size(), kFeatureDim);
-    impl_->exact = std::make_unique<FlannExact>(m, flann::KDTreeSingleIndexParams(10, true));
+    impl_->exact = std::make_unique<FlannExact>(m, flann::KDTreeSingleIndexParams(32, true));
     impl_->exact->buildIndex();
   } else {
     impl_->forest = std::make_unique<KdForest>(impl_->features, settings.trees, settings.seed);

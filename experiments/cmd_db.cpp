@@ -51,7 +51,7 @@ void add_build_parameters(CLI::App* sub, DatabaseSettings& s, int& deflate) {
       ->check(positive)->capture_default_str();
   sub->add_option("--field-margin", s.field.coarse_margin, "Distance field: coarse grid margin around the object, m")
       ->check(CLI::NonNegativeNumber)->capture_default_str();
-  sub->add_option("--compress", deflate, "zlib level 0-9 for the stored arrays (0: none, fastest)")
+  sub->add_option("--compress", deflate, "zlib level 0-9 of the stored arrays (0: none, fastest to write and read)")
       ->check(CLI::Range(0, 9))->capture_default_str();
 }
 
@@ -81,7 +81,7 @@ struct BuildOptions {
   CommonOptions common;
   std::string manifest, meshes, out;
   DatabaseSettings settings;
-  int deflate = 0;
+  int deflate = io::DbWriteSettings{}.deflate;
 };
 
 int run_build(const BuildOptions& o) {

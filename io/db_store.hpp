@@ -28,7 +28,7 @@ constexpr std::int64_t kDbSchemaVersion = 1;
 constexpr const char* kDbFormatName = "touchstone-object-database";
 
 struct DbWriteSettings {
-  int deflate = 0;   ///< zlib level 0..9 for the large datasets (0: uncompressed, fastest)
+  int deflate = 1;   ///< zlib level 0..9 of the arrays (0: none; 1 makes the default database 3x smaller)
 };
 
 /// What a database records beside each object's data: the seed each object was built with.

@@ -271,6 +271,9 @@ TEST_CASE("Distance field survives the sparse round trip bit for bit and ignores
   CHECK(std::is_sorted(f1.ijk.begin(), f1.ijk.end()));
   CHECK(std::is_sorted(c1.ijk.begin(), c1.ijk.end()));
   CHECK(std::adjacent_find(f1.ijk.begin(), f1.ijk.end()) == f1.ijk.end());
+  const DistanceField via_index = DistanceField::build(MeshIndex(m), true, s);   // BVH overload
+  CHECK(via_index.fine_sparse().value == f1.value);
+  CHECK(via_index.coarse_sparse().value == c1.value);
 
   const DistanceField back = DistanceField::from_sparse(f1, c1, true, s.coarse_margin);
   CHECK(back.is_signed());
@@ -303,6 +306,12 @@ TEST_CASE("Distance field rejects bad input; an empty field answers +inf") {
   DistanceFieldSettings zero = s;
   zero.fine_voxel = 0;
   CHECK_THROWS_AS(DistanceField::build(box(Vec3(0.01, 0.01, 0.01)), true, zero), Error);
+  DistanceFieldSettings huge = s;
+  huge.coarse_voxel = 1e-4;   // a dense coarse box of ~(0.42 m / 0.1 mm)^3 voxels
+  CHECK_THROWS_AS(DistanceField::build(box(Vec3(0.01, 0.01, 0.01)), true, huge), Error);
+  huge = s;
+  huge.fine_voxel = 1e-6;
+  CHECK_THROWS_AS(DistanceField::build(box(Vec3(0.01, 0.01, 0.01)), true, huge), Error);
   SparseGrid g;
   g.voxel = 0.01;
   g.ijk.push_back({0, 0, 0});
