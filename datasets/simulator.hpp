@@ -54,7 +54,7 @@ struct NoiseSettings {
 NoiseSettings noise_profile(const std::string& name);
 
 struct GraspSettings {
-  double max_tilt_deg = 20.0;        ///< aimed pad's normal within this cone about -n
+  double max_tilt_deg = 5.0;         ///< aimed pad's normal within this cone about -n
   double aim_min_deg = 0.0;          ///< nominal joint angles of the aiming finger, range
   double aim_max_deg = 60.0;         ///< deg
   int max_attempts = 24;             ///< aims redrawn while the object blocks the approach

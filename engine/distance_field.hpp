@@ -2,6 +2,10 @@
 // thousands of hypotheses per step (Eq. 4 and 8). Two levels: a fine narrow band around the
 // surface and a coarse grid covering the object's box plus `coarse_margin` (beyond it every
 // point is at least coarse_margin from the surface, which Eq. 4 treats as an outlier anyway).
+// Voxel values are exact point-to-mesh distances (float) at voxel centres; queries interpolate
+// trilinearly (error <~ half a voxel where the distance has a kink: the surface of an unsigned
+// field, medial axes). The coarse level is a dense box, so coarse_sparse() lists every voxel of
+// it in (i, j, k) order and can be stored as origin + shape + values.
 #pragma once
 
 #include "engine/core.hpp"
@@ -37,6 +41,8 @@ class DistanceField {
   DistanceField& operator=(DistanceField&&) noexcept;
 
   /// Build from a mesh in the object frame. `is_signed`: negative inside (closed meshes only).
+  /// Deterministic: the same mesh and settings give the same grids for any thread count.
+  /// Throws ts::Error on bad settings, an empty or invalid mesh, or grids too large to hold.
   static DistanceField build(const Mesh& mesh, bool is_signed, const DistanceFieldSettings& s);
   /// Same, reusing the mesh's BVH (its exact distances fill the grids). Uses TBB inside.
   static DistanceField build(const MeshIndex& mesh, bool is_signed, const DistanceFieldSettings& s);

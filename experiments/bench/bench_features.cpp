@@ -169,6 +169,7 @@ int main(int argc, char** argv) {
         for (const int checks : {256, 1024, 4096, 16384, 65536}) {
           if (static_cast<std::size_t>(checks) < w / 4) continue;
           ts::FeatureIndexSettings s;
+          s.exact = false;
           s.trees = trees;
           s.checks = checks;
           const ts::FeatureIndex approx(feats, refs, s);
