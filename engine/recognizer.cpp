@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <numbers>
+#include <map>
 #include <set>
 
 namespace ts {
@@ -133,6 +134,7 @@ RecognizerSettings RecognizerSettings::scaled(double f) const {
   RecognizerSettings s = *this;
   s.dedupe_distance *= f;
   s.scene.query_voxel *= f;
+  if (s.scene.free_clearance > 0.0) s.scene.free_clearance *= f;
   s.ransac.min_spacing *= f;
   s.ransac.distance_tolerance *= f;
   s.ransac.size_slack *= f;
@@ -178,8 +180,10 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
 
   // The query in a local frame (Section 4.1.2 clouds; Section 4.3.1 normals and features).
   auto t0 = Clock::now();
-  const Scene scene = prepare_scene(contacts_world, free_world, db_.settings().fpfh, s_.scene,
-                                    s_.seed, step_u);
+  SceneSettings scs = s_.scene;
+  if (scs.free_clearance < 0.0)  // automatic: d_thresh of Eq. 8
+    scs.free_clearance = s_.evaluate.d_thresh > 0.0 ? s_.evaluate.d_thresh : 0.5 * s_.evaluate.res_free;
+  const Scene scene = prepare_scene(contacts_world, free_world, db_.settings().fpfh, scs, s_.seed, step_u);
   res.times.prepare_s = seconds_since(t0);
   res.contacts = scene.contacts.size();
   res.free_points = scene.free_space.size();
@@ -276,7 +280,8 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
                                   static_cast<std::size_t>(std::lround(s_.psi * double(n_p))));
       take(next, old, k_old, s_.dedupe, s_.dedupe_distance);
       const std::size_t k_new = n_p - next.size();
-      std::vector<Working> fresh = select(cands, s_.dedupe ? 2 * k_new : k_new);
+      const std::size_t pool = std::max(s_.refine_pool, s_.dedupe || s_.new_per_object > 0 ? 2 * k_new : k_new);
+      std::vector<Working> fresh = select(cands, pool);
       if (s_.refine_new) {
         t0 = Clock::now();
         refine_all(scene, db_, s_.icp, fresh);
@@ -285,6 +290,14 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
         evaluate_each(scene, db_, ev, fresh);
         res.times.evaluate_s += seconds_since(t0);
         std::sort(fresh.begin(), fresh.end(), better);
+      }
+      if (s_.new_per_object > 0) {
+        // Diversity: at most new_per_object new hypotheses of one object.
+        std::map<std::uint32_t, std::size_t> count;
+        std::vector<Working> capped;
+        for (const Working& h : fresh)
+          if (count[h.cand.object]++ < s_.new_per_object) capped.push_back(h);
+        fresh = std::move(capped);
       }
       take(next, fresh, n_p, s_.dedupe, s_.dedupe_distance);
       // Too few new ones: fill with the next-best old hypotheses.

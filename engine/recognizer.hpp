@@ -36,6 +36,11 @@ struct RecognizerSettings {
   double psi = 0.8;                 ///< share of evolved old hypotheses in resampling (0.8)
   bool refine_new = false;          ///< extension: ICP on the new RANSAC hypotheses chosen in
                                     ///< resampling before they join (bricpsf)
+  std::size_t refine_pool = 0;      ///< extension: best RANSAC candidates considered for the
+                                    ///< (1-Psi) n_p new ones (refined first with refine_new);
+                                    ///< 0: (1-Psi) n_p, or twice that with dedupe or a cap
+  std::size_t new_per_object = 0;   ///< extension: at most this many new hypotheses of one
+                                    ///< object per step (0: no cap)
   bool dedupe = false;              ///< extension: drop hypotheses that duplicate a better one
                                     ///< (same object, pose within dedupe_distance / 2 degrees)
   double dedupe_distance = 0.002;   ///< m
@@ -44,7 +49,7 @@ struct RecognizerSettings {
   std::uint64_t seed = 1;           ///< every random draw derives from (seed, step, task)
   std::vector<std::uint8_t> objects;  ///< objects the recognizer may answer (1 = yes), by
                                       ///< database index; empty: all
-  SceneSettings scene;
+  SceneSettings scene{.free_clearance = -1.0};  ///< free_clearance < 0: d_thresh (Eq. 8)
   RansacSettings ransac;
   IcpSettings icp;
   EvaluateSettings evaluate;

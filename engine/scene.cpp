@@ -145,6 +145,15 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
   if (n == 0) return sc;
   sc.tree = KdTree3(sc.contacts.points);
   sc.diameter = diameter_of(sc.contacts.points);
+  if (s.free_clearance > 0.0 && !sc.free_space.empty()) {
+    const double c2 = s.free_clearance * s.free_clearance;
+    std::vector<Vec3> kept;
+    kept.reserve(sc.free_space.size());
+    for (const Vec3& q : sc.free_space)
+      if (sc.tree.nearest(q).sq_distance >= c2) kept.push_back(q);
+    sc.dropped_free = sc.free_space.size() - kept.size();
+    sc.free_space = std::move(kept);
+  }
   {
     double r2 = 0.0;
     for (const Vec3& p : sc.contacts.points) r2 += p.squaredNorm();  // centroid is the origin

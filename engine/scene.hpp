@@ -17,6 +17,9 @@ struct SceneSettings {
                                      ///< centroid, in feature radii, above which a point is on
                                      ///< a patch boundary (Section 4.3.2, triplet sampling)
   int min_neighbours = 5;            ///< fewer neighbours within the feature radius: boundary
+  double free_clearance = 0.0;       ///< m; free points closer than this to a contact are
+                                     ///< dropped (a free cloud sampled at res_free has none
+                                     ///< nearer than res_free / 2; the recognizer sets d_thresh)
   double observability_eps = 0.01;   ///< eigenvalue ratio of the point-to-plane information
                                      ///< matrix below which a pose DOF counts as unobservable
 };
@@ -37,6 +40,7 @@ struct Scene {
   double rms_radius = 0.0;             ///< m, RMS distance of the contacts from their centroid
   int unobservable_dof = 6;            ///< pose DOF the contact geometry leaves unconstrained
   std::size_t dropped_non_finite = 0;  ///< input points ignored because not finite
+  std::size_t dropped_free = 0;        ///< free points dropped as too close to a contact
   double feature_radius = 0.0;         ///< m, FPFH radius the features were computed with
 
   bool has_free_space() const { return !free_space.empty(); }

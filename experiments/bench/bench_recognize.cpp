@@ -109,13 +109,17 @@ void set_param(RecognizerSettings& s, const std::string& kv) {
   else if (k == "icp_iterations") s.icp.max_iterations = static_cast<int>(v);
   else if (k == "icp_points") s.icp.max_points = static_cast<std::size_t>(v);
   else if (k == "icp_trim") s.icp.trim_fraction = v;
-  else if (k == "icp_point_to_point") s.icp.metric = v != 0 ? IcpMetric::point_to_point : IcpMetric::point_to_plane;
+  else if (k == "icp_metric") s.icp.metric = v == 0 ? IcpMetric::point_to_point : v == 1 ? IcpMetric::point_to_plane : IcpMetric::field;
   else if (k == "refine_new") s.refine_new = v != 0;
   else if (k == "dedupe") s.dedupe = v != 0;
   else if (k == "free_inside_penalty") s.evaluate.free_inside_penalty = v != 0;
   else if (k == "index_exact") s.index.exact = v != 0;
   else if (k == "index_checks") s.index.checks = static_cast<int>(v);
   else if (k == "min_spacing") s.ransac.min_spacing = v;
+  else if (k == "d_thresh") s.evaluate.d_thresh = v;
+  else if (k == "refine_pool") s.refine_pool = static_cast<std::size_t>(v);
+  else if (k == "new_per_object") s.new_per_object = static_cast<std::size_t>(v);
+  else if (k == "psi") s.psi = v;
   else throw Error("unknown parameter", {}, k);
 }
 
@@ -160,7 +164,9 @@ int main(int argc, char** argv) {
                 "normal_tol %.1f deg, ICP %s (%d it, %zu pts)\n",
                 rs.n_p, rs.psi, rs.ransac.triplets, rs.ransac.registrations, rs.ransac.prune_w,
                 rs.evaluate.d_outlier, rs.evaluate.lambda, rs.evaluate.res_free, rs.ransac.normal_tolerance_deg,
-                rs.icp.metric == IcpMetric::point_to_plane ? "point-to-plane" : "point-to-point",
+                rs.icp.metric == IcpMetric::field            ? "distance-field"
+                : rs.icp.metric == IcpMetric::point_to_plane ? "point-to-plane"
+                                                             : "point-to-point",
                 rs.icp.max_iterations, rs.icp.max_points);
     const double s_obj_max = db.settings().max_extent;
 

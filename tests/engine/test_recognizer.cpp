@@ -207,3 +207,23 @@ TEST_CASE("Exact early rejection: the selected top k equal a full evaluation's")
   }
   }
 }
+
+TEST_CASE("Free points closer than d_thresh to a contact are dropped (they cannot be free)") {
+  auto src = test::make_source();
+  Database db(src);
+  const Pose T = test::random_pose(14, Vec3(0, 0, 0));
+  const PointCloud c = test::touch(src->fines[4], T, 5, 2);
+  std::vector<Vec3> free;
+  for (std::size_t i = 0; i < c.size(); i += 3) free.push_back(c.points[i] + Vec3(0.005, 0, 0));  // 5 mm off
+  free.push_back(c.points[0] + Vec3(0.5, 0, 0));                                                   // far away
+  SceneSettings s;
+  s.free_clearance = 0.02;
+  const Scene sc = prepare_scene(c, free, db.settings().fpfh, s, 1, 1);
+  CHECK(sc.free_space.size() == 1);
+  CHECK(sc.dropped_free == free.size() - 1);
+  s.free_clearance = 0.0;
+  CHECK(prepare_scene(c, free, db.settings().fpfh, s, 1, 1).free_space.size() == free.size());
+  // The recognizer applies d_thresh = res_free / 2 by default.
+  Recognizer rec(db, fast());
+  CHECK(rec.step(c, free).free_points == 1);
+}
