@@ -44,8 +44,19 @@ bool plane_step(const std::vector<Vec3>& y, const std::vector<Vec3>& z, const st
   H.diagonal().array() += mu;
   const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(H);
   if (ldlt.info() != Eigen::Success) return false;
-  const Eigen::Matrix<double, 6, 1> x = -ldlt.solve(g);
+  Eigen::Matrix<double, 6, 1> x = -ldlt.solve(g);
   if (!x.allFinite()) return false;
+  // Trust region: the linearization holds for small motions only; far from the optimum (a
+  // wrong object, few contacts) an unlimited step can turn by 90 degrees or jump away. Limit a
+  // step to 0.1 rad and to a fifth of the contacts' spread (the whole step scaled alike).
+  double spread2 = 0.0;
+  for (const Vec3& p : y) spread2 += (p - c).squaredNorm();
+  const double spread = std::sqrt(spread2 / static_cast<double>(m));
+  const double rot = x.head<3>().norm(), trans = x.tail<3>().norm();
+  double scale = 1.0;
+  if (rot > 0.1) scale = std::min(scale, 0.1 / rot);
+  if (spread > 0.0 && trans > 0.2 * spread) scale = std::min(scale, 0.2 * spread / trans);
+  x *= scale;
   const Vec3 omega = x.head<3>(), v = x.tail<3>();
   const double angle = omega.norm();
   Mat3 R = Mat3::Identity();
@@ -91,6 +102,8 @@ IcpResult icp(const Scene& scene, const ObjectGeometry& geo, const Pose& T_init,
   dst.reserve(m);
   nrm.reserve(m);
   Pose T = T_init;
+  double prev_rms = 0.0;
+  int stalled = 0;
   for (int it = 0; it < s.max_iterations; ++it) {
     const Pose T_os = T.inverse();
     if (use_field) {
@@ -182,6 +195,17 @@ IcpResult icp(const Scene& scene, const ObjectGeometry& geo, const Pose& T_init,
       res.converged = true;
       break;
     }
+    // Stalled: the fit has not improved its RMS by min_improvement for two iterations (noisy
+    // contacts make the last fraction of a millimetre jitter instead of converging).
+    if (prev_rms > 0.0 && res.rms > prev_rms * (1.0 - s.min_improvement)) {
+      if (++stalled >= 2) {
+        res.converged = true;
+        break;
+      }
+    } else {
+      stalled = 0;
+    }
+    prev_rms = res.rms;
   }
   res.T_scene_object = T;
   return res;

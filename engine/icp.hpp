@@ -23,7 +23,9 @@ struct IcpSettings {
                                        ///< point_to_plane when the object has no field)
   int max_iterations = 15;            ///< upper bound on iterations
   double min_translation = 1e-4;      ///< m; converged when an update moves less than this ...
-  double min_rotation_deg = 0.01;     ///< ... and turns less than this (degrees)
+  double min_rotation_deg = 0.01;     ///< ... and turns less than this (degrees), or when
+  double min_improvement = 0.001;     ///< ... the RMS improved by less than this fraction in
+                                      ///< two successive iterations
   double max_correspondence = 0.0;    ///< m; pairs farther apart are ignored (0: keep all)
   double trim_fraction = 1.0;         ///< trimmed ICP: fit the closest share of pairs (1: all)
   double gradient_step = 0.0005;      ///< m, finite-difference step of the field metric

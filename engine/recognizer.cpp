@@ -130,6 +130,18 @@ std::optional<Method> parse_method(std::string_view name) {
   return std::nullopt;
 }
 
+RecognizerSettings RecognizerSettings::paper() { return RecognizerSettings{}; }
+
+RecognizerSettings RecognizerSettings::improved() {
+  RecognizerSettings s;
+  s.evaluate.free_inside_penalty = true;
+  s.dedupe = true;
+  s.refine_new = true;
+  s.refine_pool = 60;
+  s.new_per_object = 5;
+  return s;
+}
+
 RecognizerSettings RecognizerSettings::scaled(double f) const {
   RecognizerSettings s = *this;
   s.dedupe_distance *= f;

@@ -30,6 +30,7 @@ struct RecognizeOptions {
   CommonOptions common;
   std::string db, log, cloud, out, ground_truth, object;
   std::string method = "bricpsf";
+  std::string preset = "paper";      ///< paper | improved: the defaults the flags start from
   int steps = 0;                     ///< 0: every grasp of the log
   RecognizerSettings rs;             ///< method parameters (defaults: the paper's)
   double contact_voxel = 0.002;      ///< m, voxel filter of the cumulative contact cloud
@@ -109,6 +110,9 @@ std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& 
           {"icp_max_correspondence", s.icp.max_correspondence},
           {"icp_max_points", double(s.icp.max_points)},
           {"refine_new", s.refine_new ? 1.0 : 0.0},
+          {"refine_pool", double(s.refine_pool)},
+          {"new_per_object", double(s.new_per_object)},
+          {"normal_tolerance_deg", s.ransac.normal_tolerance_deg},
           {"dedupe", s.dedupe ? 1.0 : 0.0},
           {"index_exact", s.index.exact ? 1.0 : 0.0},
           {"index_checks", double(s.index.checks)},
@@ -116,7 +120,7 @@ std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& 
 }
 
 int run_recognize(const RecognizeOptions& o) {
-  RecognizerSettings rs = o.rs;
+  RecognizerSettings rs = o.rs;  // (the improved preset was applied before the flags)
   rs.method = *parse_method(o.method);
   rs.seed = o.common.seed;
 
@@ -325,6 +329,11 @@ void register_recognize(CLI::App& app) {
       ->check(CLI::ExistingFile);
   sub->add_option("--object", o->object, "Name of the touched object (ground truth), if known");
 
+  sub->add_option("--preset", o->preset,
+                  "paper: the paper's method (default); improved: with Touchstone's extensions "
+                  "(free space inside objects, duplicate removal, ICP on new hypotheses, "
+                  "diversity); the flags below apply on top")
+      ->check(CLI::IsMember({"paper", "improved"}));
   RecognizerSettings& s = o->rs;
   auto* g = "Method parameters (defaults: the paper's)";
   sub->add_option("--n-p", s.n_p, "BRICPSF hypotheses n_p")->group(g)->check(CLI::Range(1, 1000000));
@@ -335,7 +344,7 @@ void register_recognize(CLI::App& app) {
   sub->add_option("--d-outlier", s.evaluate.d_outlier, "Outlier distance of Eq. 4 (m)")->group(g)->check(CLI::PositiveNumber);
   sub->add_option("--lambda", s.evaluate.lambda, "Free-space weight of Eq. 9")->group(g)->check(CLI::NonNegativeNumber);
   sub->add_option("--res-free", s.evaluate.res_free, "Free-space resolution (m); d_thresh = res_free/2")->group(g)->check(CLI::PositiveNumber);
-  sub->add_flag("--free-inside-penalty", s.evaluate.free_inside_penalty,
+  auto* inside = sub->add_flag("--free-inside-penalty{true},--no-free-inside-penalty{false}", s.evaluate.free_inside_penalty,
                 "Extension: free space inside a closed object costs the full penalty")->group(g);
   sub->add_option("--icp-iterations", s.icp.max_iterations, "ICP iteration cap")->group(g)->check(CLI::Range(0, 100000));
   sub->add_option("--icp-trim", s.icp.trim_fraction, "Trimmed ICP: share of closest pairs fitted")->group(g)->check(CLI::Range(0.1, 1.0));
@@ -343,13 +352,33 @@ void register_recognize(CLI::App& app) {
   sub->add_option("--icp-points", s.icp.max_points, "Contacts used by ICP (0: all)")->group(g);
   sub->add_option("--distance-tolerance", s.ransac.distance_tolerance, "Triplet registration distance tolerance (m)")->group(g)->check(CLI::PositiveNumber);
   sub->add_option("--min-spacing", s.ransac.min_spacing, "Minimum triplet spacing (m, 0: the feature radius)")->group(g)->check(CLI::NonNegativeNumber);
-  sub->add_flag("--refine-new", s.refine_new, "Extension: ICP on new RANSAC hypotheses before they join")->group(g);
-  sub->add_flag("--dedupe", s.dedupe, "Extension: drop duplicate hypotheses")->group(g);
+  auto* refine = sub->add_flag("--refine-new{true},--no-refine-new{false}", s.refine_new,
+                               "Extension: ICP on new RANSAC hypotheses before they join")->group(g);
+  auto* pool = sub->add_option("--refine-pool", s.refine_pool,
+                               "Extension: best RANSAC candidates considered (and refined) for the new hypotheses")
+                   ->group(g);
+  auto* per_object = sub->add_option("--new-per-object", s.new_per_object,
+                                     "Extension: at most this many new hypotheses per object and step (0: no cap)")
+                         ->group(g);
+  auto* dedupe = sub->add_flag("--dedupe{true},--no-dedupe{false}", s.dedupe, "Extension: drop duplicate hypotheses")->group(g);
+  sub->add_option("--normal-tolerance", s.ransac.normal_tolerance_deg,
+                  "Extension: registered pairs agree in normal angles within this (deg, 0: off)")
+      ->group(g)
+      ->check(CLI::Range(0.0, 90.0));
   sub->add_flag("--exact-features", s.index.exact, "Exact feature search (slower)")->group(g);
   sub->add_option("--feature-checks", s.index.checks, "Approximate feature search: leaves visited")->group(g)->check(CLI::Range(1, 1 << 30));
   sub->add_option("--contact-voxel", o->contact_voxel, "Voxel filter of the cumulative contacts (m)")->group(g)->check(CLI::PositiveNumber);
   add_common(sub, o->common);
-  sub->callback([o] {
+  sub->callback([o, inside, dedupe, refine, pool, per_object] {
+    // --preset improved: the extensions, except where a flag says otherwise
+    if (o->preset == "improved") {
+      const RecognizerSettings imp = RecognizerSettings::improved();
+      if (inside->count() == 0) o->rs.evaluate.free_inside_penalty = imp.evaluate.free_inside_penalty;
+      if (dedupe->count() == 0) o->rs.dedupe = imp.dedupe;
+      if (refine->count() == 0) o->rs.refine_new = imp.refine_new;
+      if (pool->count() == 0) o->rs.refine_pool = imp.refine_pool;
+      if (per_object->count() == 0) o->rs.new_per_object = imp.new_per_object;
+    }
     if (o->log.empty() && o->cloud.empty())
       throw CLI::RequiredError("--log or --cloud");
     run_command(o->common, [o] { return run_recognize(*o); });

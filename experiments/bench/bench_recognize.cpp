@@ -10,7 +10,7 @@
 //
 //   build/bench/bench_recognize --db DB.h5 [--grasps 20] [--speed-logs 6] [--seeds 3]
 //       [--noise underwater] [--method bricpsf] [--objects N] [--skip-speed] [--skip-accuracy]
-//       [--set key=value ...]   (recognizer parameters as in `touchstone recognize`)
+//       [--preset paper|improved] [--set key=value ...]   (recognizer parameters; --preset first)
 //
 // Prints the machine, thread counts, parameters and every figure.
 #include "datasets/simulator.hpp"
@@ -147,6 +147,11 @@ int main(int argc, char** argv) {
       else if (a == "--skip-speed") speed = false;
       else if (a == "--skip-accuracy") accuracy = false;
       else if (a == "--set") set_param(rs, next());
+      else if (a == "--preset") {
+        const std::string p = next();
+        if (p == "improved") rs = RecognizerSettings::improved();
+        else if (p != "paper") throw Error("unknown preset", {}, p);
+      }
       else throw Error("unknown argument (see the header of bench_recognize.cpp)", {}, a);
     }
     if (db_path.empty()) throw Error("--db DB.h5 is required");
