@@ -28,6 +28,7 @@ struct EvaluateSettings {
   bool free_space = true;             ///< Eq. 6 (contact x free space); false: Eq. 5 only
   double lambda = 0.02;               ///< Eq. 9 weight of free space (paper: 0.02)
   double res_free = 0.04;             ///< m, free-space resolution; d_thresh = res_free / 2
+  double d_thresh = 0.0;              ///< m, Eq. 8 threshold if > 0 (overrides res_free / 2)
   bool free_inside_penalty = false;   ///< extension: a free point inside a closed object
                                       ///< (signed field < 0) costs e = 1 however deep
   bool use_distance_field = true;     ///< false: nearest fine-cloud point (paper's k-d tree)
@@ -154,7 +155,7 @@ Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const 
   // Free-space term (Eq. 8, 9): points farther than d_thresh from the object's box cost 0 and
   // need no distance.
   if (s.free_space && scene.has_free_space() && s.lambda > 0.0) {
-    const double d_thresh = 0.5 * s.res_free;
+    const double d_thresh = s.d_thresh > 0.0 ? s.d_thresh : 0.5 * s.res_free;
     const Eigen::Array3d lim = half_extent.array() + d_thresh;
     const Pose I = Pose::Identity();
     const std::size_t Q = scene.free_space.size();

@@ -64,7 +64,8 @@ IcpResult icp(const Scene& scene, const ObjectGeometry& geo, const Pose& T_init,
   res.T_scene_object = T_init;
   const std::size_t C = scene.ordered.size();
   const std::size_t m = s.max_points == 0 ? C : std::min(C, s.max_points);
-  const bool plane = s.metric == IcpMetric::point_to_plane && geo.fine.has_normals();
+  const bool use_field = s.metric == IcpMetric::field && !geo.field.empty();
+  const bool plane = use_field || (s.metric != IcpMetric::point_to_point && geo.fine.has_normals());
   if (m < 3 || geo.tree.size() < 3 || !T_init.matrix().allFinite()) return res;
   res.valid = true;
   const double gate2 = s.max_correspondence > 0.0 ? s.max_correspondence * s.max_correspondence
@@ -75,15 +76,50 @@ IcpResult icp(const Scene& scene, const ObjectGeometry& geo, const Pose& T_init,
 
   std::vector<Pair> pairs(m);
   std::vector<Vec3> src, dst, nrm;
+  // Field metric: per contact the moved point y, its distance d and gradient direction n.
+  std::vector<Vec3> probe, ys, ns;
+  std::vector<double> dist;
+  const double h = s.gradient_step;
+  const double far = geo.field.empty() ? 0.0 : geo.field.coarse_margin();
+  if (use_field) {
+    probe.resize(4 * m);
+    dist.resize(4 * m);
+    ys.resize(m);
+    ns.resize(m);
+  }
   src.reserve(m);
   dst.reserve(m);
   nrm.reserve(m);
   Pose T = T_init;
   for (int it = 0; it < s.max_iterations; ++it) {
     const Pose T_os = T.inverse();
-    for (std::size_t i = 0; i < m; ++i) {
-      const Neighbour nb = geo.tree.nearest(T_os * scene.ordered[i]);
-      pairs[i] = {nb.sq_distance, static_cast<std::uint32_t>(i), nb.index};
+    if (use_field) {
+      for (std::size_t i = 0; i < m; ++i) {
+        const Vec3 y = T_os * scene.ordered[i];
+        ys[i] = y;
+        Vec3* q = &probe[4 * i];
+        q[0] = y;
+        for (int a = 0; a < 3; ++a) {
+          q[1 + a] = y;
+          q[1 + a][a] += h;
+        }
+      }
+      geo.field.distances(probe.data(), probe.size(), Pose::Identity(), dist.data());
+      for (std::size_t i = 0; i < m; ++i) {
+        const double* d = &dist[4 * i];
+        const Vec3 g((d[1] - d[0]) / h, (d[2] - d[0]) / h, (d[3] - d[0]) / h);
+        const double gn = g.norm();
+        const bool usable = std::abs(d[0]) < far && gn > 0.5 && g.allFinite();
+        ns[i] = usable ? Vec3(g / gn) : Vec3::Zero();
+        // pairs[i].d2: squared distance; unusable contacts sort last and are never fitted
+        pairs[i] = {usable ? d[0] * d[0] : std::numeric_limits<double>::infinity(),
+                    static_cast<std::uint32_t>(i), 0};
+      }
+    } else {
+      for (std::size_t i = 0; i < m; ++i) {
+        const Neighbour nb = geo.tree.nearest(T_os * scene.ordered[i]);
+        pairs[i] = {nb.sq_distance, static_cast<std::uint32_t>(i), nb.index};
+      }
     }
     std::size_t keep = m;
     if (trim < 1.0) {
@@ -101,8 +137,17 @@ IcpResult icp(const Scene& scene, const ObjectGeometry& geo, const Pose& T_init,
     double sq = 0.0;
     for (std::size_t j = 0; j < keep; ++j) {
       const Pair& p = pairs[j];
-      if (p.d2 > gate2) continue;
+      if (p.d2 > gate2 || !std::isfinite(p.d2)) continue;
       sq += p.d2;
+      if (use_field) {
+        // closest-point estimate z = y - d n, so that n . (y - z) = d (signed distance)
+        const std::uint32_t i = p.contact;
+        const double d = dist[4 * i];
+        src.push_back(ys[i]);
+        nrm.push_back(ns[i]);
+        dst.push_back(ys[i] - d * ns[i]);
+        continue;
+      }
       if (plane) {
         src.push_back(T_os * scene.ordered[p.contact]);  // contact in the object frame
         nrm.push_back(geo.fine.normals[p.model]);

@@ -11,16 +11,23 @@
 
 namespace ts {
 
-enum class IcpMetric { point_to_point, point_to_plane };
+enum class IcpMetric {
+  point_to_point,   ///< nearest fine-cloud point (k-d tree), Kabsch: the paper's ICP
+  point_to_plane,   ///< nearest fine-cloud point and its normal (k-d tree), Gauss-Newton
+  field             ///< the object's distance field: residual d(y), normal = grad d (forward
+                    ///< differences), Gauss-Newton; O(1) per contact, no tree search
+};
 
 struct IcpSettings {
-  IcpMetric metric = IcpMetric::point_to_plane;  ///< point_to_point: the paper's ICP
-  int max_iterations = 30;            ///< upper bound on iterations
-  double min_translation = 1e-5;      ///< m; converged when an update moves less than this ...
-  double min_rotation_deg = 1e-3;     ///< ... and turns less than this (degrees)
+  IcpMetric metric = IcpMetric::field;  ///< point_to_point: the paper's ICP (falls back to
+                                       ///< point_to_plane when the object has no field)
+  int max_iterations = 15;            ///< upper bound on iterations
+  double min_translation = 1e-4;      ///< m; converged when an update moves less than this ...
+  double min_rotation_deg = 0.01;     ///< ... and turns less than this (degrees)
   double max_correspondence = 0.0;    ///< m; pairs farther apart are ignored (0: keep all)
   double trim_fraction = 1.0;         ///< trimmed ICP: fit the closest share of pairs (1: all)
-  std::size_t max_points = 256;       ///< contacts used, a fixed prefix of the scene's
+  double gradient_step = 0.0005;      ///< m, finite-difference step of the field metric
+  std::size_t max_points = 128;       ///< contacts used, a fixed prefix of the scene's
                                       ///< evaluation order (0: all)
 };
 

@@ -32,6 +32,7 @@ struct Pruned {
 /// Pruned features of one triplet point, grouped by object (ascending), nearest first within.
 struct PrunedSet {
   std::vector<Pruned> items;
+  std::vector<float> x, y, z;    ///< the items' coarse points (object frame), for fast scans
   std::vector<std::array<std::uint32_t, 3>> ranges;  ///< (object, begin, end)
 
   std::pair<std::uint32_t, std::uint32_t> range_of(std::uint32_t object) const {
@@ -41,6 +42,18 @@ struct PrunedSet {
     return {(*it)[1], (*it)[2]};
   }
 };
+
+/// in[j - b] = 1 when the squared distance of item j to c lies in [lo, hi] (vectorized scan).
+__attribute__((target_clones("avx2", "default")))
+void shell_mask(const float* __restrict x, const float* __restrict y, const float* __restrict z,
+                std::uint32_t n, float cx, float cy, float cz, float lo, float hi,
+                std::uint8_t* __restrict in) {
+  for (std::uint32_t j = 0; j < n; ++j) {
+    const float dx = x[j] - cx, dy = y[j] - cy, dz = z[j] - cz;
+    const float d2 = dx * dx + dy * dy + dz * dz;
+    in[j] = static_cast<std::uint8_t>((d2 >= lo) & (d2 <= hi));
+  }
+}
 
 /// Sign-free angles of a point pair with normals: |n_a . n_b|, |n_a . u|, |n_b . u| (u the unit
 /// chord), as cosines. Invariant to rigid motions and to flipped normals.
@@ -63,16 +76,16 @@ struct Triplet {
   PairSignature s12, s13, s23;
   double d12 = 0, d13 = 0, d23 = 0;
   std::array<PrunedSet, 3> pruned;
+  std::vector<std::uint32_t> first;   ///< items of pruned[0] whose object is in all three sets
   bool from_boundary = false;   ///< drawn from all points, the interior gave no valid triplet
 };
 
-PrunedSet prune(const FeatureIndex& index, const Feature& f, std::size_t w,
+PrunedSet prune(const Database& db, const FeatureSearch& search, const std::vector<Neighbour>& nn,
                 const std::vector<std::uint8_t>& allowed) {
   PrunedSet set;
-  const std::vector<Neighbour> nn = index.knn(f, w);
   set.items.reserve(nn.size());
   for (const Neighbour& nb : nn) {
-    const FeatureRef& r = index.ref(nb.index);
+    const FeatureRef& r = search.ref(nb.index);
     if (r.object < allowed.size() && allowed[r.object]) set.items.push_back({r.object, r.point});
   }
   // Group by object, keeping the nearest-first order inside each group.
@@ -84,13 +97,25 @@ PrunedSet prune(const FeatureIndex& index, const Feature& f, std::size_t w,
     set.ranges.push_back({set.items[i].object, i, j});
     i = j;
   }
+  const std::size_t n = set.items.size();
+  set.x.resize(n);
+  set.y.resize(n);
+  set.z.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3& p = db.features(set.items[i].object).coarse.points[set.items[i].point];
+    set.x[i] = static_cast<float>(p.x());
+    set.y[i] = static_cast<float>(p.y());
+    set.z[i] = static_cast<float>(p.z());
+  }
   return set;
 }
 
 std::optional<Candidate> register_once(const Triplet& t, const Database& db,
                                        const RansacSettings& s, Rng& rng,
                                        std::vector<std::uint32_t>& buf2,
-                                       std::vector<std::uint32_t>& buf3) {
+                                       std::vector<std::uint32_t>& buf3,
+                                       std::vector<std::uint8_t>& mask,
+                                       std::vector<std::uint8_t>& mask2) {
   const PrunedSet& F1 = t.pruned[0];
   const PrunedSet& F2 = t.pruned[1];
   const PrunedSet& F3 = t.pruned[2];
@@ -98,20 +123,29 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
   const double tol = s.distance_tolerance;
   const bool use_normals = s.normal_tolerance_deg > 0.0;
   const double ntol = std::sin(std::min(90.0, s.normal_tolerance_deg) * std::numbers::pi / 180.0);
+  if (t.first.empty()) return std::nullopt;
   for (int attempt = 0; attempt < s.registration_attempts; ++attempt) {
-    const Pruned& a = F1.items[rng.index(F1.items.size())];
+    const Pruned& a = F1.items[t.first[rng.index(t.first.size())]];
     const PointCloud& coarse = db.features(a.object).coarse;
     const std::vector<Vec3>& pts = coarse.points;
     const bool normals = use_normals && coarse.has_normals();
     const Vec3& q1 = pts[a.point];
     // Second point: same object, distance to the first matching the input's (and, as an
-    // extension, the same angles between normals and chord).
+    // extension, the same angles between normals and chord). Squared distances against a
+    // squared window, vectorized over the object's pruned items.
+    auto window = [&](double d) {
+      const double lo = std::max(0.0, d - tol), hi = d + tol;
+      return std::pair(static_cast<float>(lo * lo), static_cast<float>(hi * hi));
+    };
+    const auto [lo12, hi12] = window(t.d12);
     const auto [b2, e2] = F2.range_of(a.object);
+    mask.resize(std::max(e2 - b2, 1u));
+    shell_mask(&F2.x[b2], &F2.y[b2], &F2.z[b2], e2 - b2, float(q1.x()), float(q1.y()), float(q1.z()),
+               lo12, hi12, mask.data());
     buf2.clear();
     for (std::uint32_t j = b2; j < e2; ++j) {
+      if (!mask[j - b2]) continue;
       const std::uint32_t k = F2.items[j].point;
-      const double d = (pts[k] - q1).norm();
-      if (std::abs(d - t.d12) > tol) continue;
       if (normals && !similar(signature(q1, coarse.normals[a.point], pts[k], coarse.normals[k]), t.s12, ntol))
         continue;
       buf2.push_back(k);
@@ -119,12 +153,20 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
     if (buf2.empty()) continue;
     const std::uint32_t k2 = buf2[rng.index(buf2.size())];
     const Vec3& q2 = pts[k2];
+    const auto [lo13, hi13] = window(t.d13);
+    const auto [lo23, hi23] = window(t.d23);
     const auto [b3, e3] = F3.range_of(a.object);
+    mask.resize(std::max(e3 - b3, 1u));
+    mask2.resize(std::max(e3 - b3, 1u));
+    shell_mask(&F3.x[b3], &F3.y[b3], &F3.z[b3], e3 - b3, float(q1.x()), float(q1.y()), float(q1.z()),
+               lo13, hi13, mask.data());
+    shell_mask(&F3.x[b3], &F3.y[b3], &F3.z[b3], e3 - b3, float(q2.x()), float(q2.y()), float(q2.z()),
+               lo23, hi23, mask2.data());
     buf3.clear();
     for (std::uint32_t j = b3; j < e3; ++j) {
+      if (!(mask[j - b3] & mask2[j - b3])) continue;
       const std::uint32_t k = F3.items[j].point;
       const Vec3& q = pts[k];
-      if (std::abs((q - q1).norm() - t.d13) > tol || std::abs((q - q2).norm() - t.d23) > tol) continue;
       if (normals &&
           (!similar(signature(q1, coarse.normals[a.point], q, coarse.normals[k]), t.s13, ntol) ||
            !similar(signature(q2, coarse.normals[k2], q, coarse.normals[k]), t.s23, ntol)))
@@ -169,8 +211,28 @@ FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings&
   return FeatureIndex(std::move(features), std::move(refs), settings);
 }
 
+std::size_t FeatureSearch::size() const {
+  return table ? table->size() : index ? index->size() : 0;
+}
+
+const FeatureRef& FeatureSearch::ref(std::size_t i) const {
+  return table ? table->ref(i) : index->ref(i);
+}
+
+std::vector<std::vector<Neighbour>> FeatureSearch::knn(const std::vector<Feature>& queries,
+                                                       std::size_t w) const {
+  if (table) return table->knn(queries, w);
+  std::vector<std::vector<Neighbour>> out(queries.size());
+  if (!index) return out;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t q = r.begin(); q != r.end(); ++q) out[q] = index->knn(queries[q], w);
+                    });
+  return out;
+}
+
 std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
-                                         const FeatureIndex& index,
+                                         const FeatureSearch& search,
                                          const std::vector<std::uint8_t>& allowed,
                                          const RansacSettings& s, std::uint64_t seed,
                                          std::uint64_t step, RansacStats* stats) {
@@ -187,7 +249,7 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
     valid.push_back(i);
     if (scene.interior[i]) interior.push_back(i);
   }
-  if (valid.size() < 3 || N == 0 || R == 0 || index.size() == 0 || st.objects_allowed == 0) {
+  if (valid.size() < 3 || N == 0 || R == 0 || search.size() == 0 || st.objects_allowed == 0) {
     if (stats) *stats = st;
     return out;
   }
@@ -224,11 +286,36 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
         t.d13 = d13;
         t.d23 = d23;
       }
-      if (!t.valid) continue;
-      for (int j = 0; j < 3; ++j)
-        t.pruned[j] = prune(index, scene.features[t.point[j]], s.prune_w, allowed);
     }
   });
+  // Feature-based database pruning: the W nearest database features of every triplet point,
+  // all queries of the step in one batch.
+  std::vector<Feature> queries;
+  for (const Triplet& t : trip)
+    if (t.valid)
+      for (int j = 0; j < 3; ++j) queries.push_back(scene.features[t.point[j]]);
+  const auto nearest = search.knn(queries, s.prune_w);
+  {
+    std::vector<std::array<std::size_t, 2>> jobs;  // (triplet, first query)
+    std::size_t q = 0;
+    for (std::size_t i = 0; i < trip.size(); ++i)
+      if (trip[i].valid) {
+        jobs.push_back({i, q});
+        q += 3;
+      }
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
+      for (std::size_t k = r.begin(); k != r.end(); ++k) {
+        Triplet& t = trip[jobs[k][0]];
+        for (int j = 0; j < 3; ++j) t.pruned[j] = prune(db, search, nearest[jobs[k][1] + j], allowed);
+        // Registration draws its first feature among objects that all three sets reach.
+        for (std::uint32_t i = 0; i < t.pruned[0].items.size(); ++i) {
+          const std::uint32_t o = t.pruned[0].items[i].object;
+          const auto r2 = t.pruned[1].range_of(o), r3 = t.pruned[2].range_of(o);
+          if (r2.second > r2.first && r3.second > r3.first) t.first.push_back(i);
+        }
+      }
+    });
+  }
   st.time_prune_s = seconds_since(t0);
   for (const Triplet& t : trip) {
     st.triplets += t.valid;
@@ -244,11 +331,12 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, slots, 16),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       std::vector<std::uint32_t> buf2, buf3;
+                      std::vector<std::uint8_t> mask, mask2;
                       for (std::size_t k = r.begin(); k != r.end(); ++k) {
                         const std::size_t i = k / static_cast<std::size_t>(R);
                         if (!trip[i].valid) continue;
                         Rng rng(seed, step, kTagRegistration, k);
-                        cand[k] = register_once(trip[i], db, s, rng, buf2, buf3);
+                        cand[k] = register_once(trip[i], db, s, rng, buf2, buf3, mask, mask2);
                         if (cand[k]) cand[k]->slot = static_cast<std::uint32_t>(k);
                       }
                     });

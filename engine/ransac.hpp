@@ -11,6 +11,7 @@
 
 #include "engine/database.hpp"
 #include "engine/evaluate.hpp"
+#include "engine/feature_table.hpp"
 #include "engine/scene.hpp"
 #include "engine/search.hpp"
 
@@ -20,6 +21,8 @@ struct RansacSettings {
   int triplets = 15;                  ///< N, triplets sampled from the input (paper: 15)
   int registrations = 200;            ///< R, registrations per triplet (paper: 200)
   std::size_t prune_w = 3000;         ///< W, nearest database features per point (paper: 3000)
+  bool feature_table = true;          ///< W-nearest search: exact batched brute force
+                                      ///< (FeatureTable); false: the FeatureIndex
   double min_spacing = 0.0;           ///< m between triplet points; 0: the FPFH feature radius.
                                       ///< Capped at 0.3 x the contact cloud's diameter
   double distance_tolerance = 0.006;  ///< m, allowed |d_db - d_input| of each point pair
@@ -53,9 +56,21 @@ std::vector<std::uint8_t> objects_spanning(const Scene& scene, const Database& d
 FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings& settings,
                                  const std::vector<std::uint8_t>& objects = {});
 
+/// KT_db,cum^feat: the W-nearest database features of query features, from a FeatureTable
+/// (exact, batched) when set, else from a FeatureIndex.
+struct FeatureSearch {
+  std::shared_ptr<const FeatureTable> table;
+  std::shared_ptr<const FeatureIndex> index;
+
+  std::size_t size() const;
+  const FeatureRef& ref(std::size_t i) const;
+  /// Per query, the w nearest (sorted by distance, then row). Parallel.
+  std::vector<std::vector<Neighbour>> knn(const std::vector<Feature>& queries, std::size_t w) const;
+};
+
 /// N x R registrations; the valid ones, in slot order (slot = triplet * R + registration).
 std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
-                                         const FeatureIndex& index,
+                                         const FeatureSearch& search,
                                          const std::vector<std::uint8_t>& allowed,
                                          const RansacSettings& settings, std::uint64_t seed,
                                          std::uint64_t step, RansacStats* stats = nullptr);

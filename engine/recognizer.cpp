@@ -138,6 +138,7 @@ RecognizerSettings RecognizerSettings::scaled(double f) const {
   s.ransac.size_slack *= f;
   s.icp.min_translation *= f;
   s.icp.max_correspondence *= f;
+  s.icp.gradient_step *= f;
   s.evaluate.d_outlier *= f;
   s.evaluate.res_free *= f;
   return s;
@@ -145,12 +146,16 @@ RecognizerSettings RecognizerSettings::scaled(double f) const {
 
 Recognizer::Recognizer(const Database& db, std::shared_ptr<const FeatureIndex> index,
                        RecognizerSettings settings)
-    : db_(db), index_(std::move(index)), s_(std::move(settings)) {
+    : db_(db), s_(std::move(settings)) {
   if (!s_.objects.empty() && s_.objects.size() != db_.size())
     throw Error("object mask has " + std::to_string(s_.objects.size()) + " entries, the database " +
                 std::to_string(db_.size()) + " objects", {}, "objects");
-  if (!index_)
-    index_ = std::make_shared<FeatureIndex>(build_feature_index(db_, s_.index, s_.objects));
+  if (s_.ransac.feature_table) {
+    search_.table = FeatureTable::shared(db_, s_.objects);
+  } else {
+    search_.index = index ? std::move(index)
+                          : std::make_shared<FeatureIndex>(build_feature_index(db_, s_.index, s_.objects));
+  }
   if (!(s_.psi >= 0.0 && s_.psi <= 1.0)) throw Error("psi must be in [0, 1]", {}, "psi");
   if (s_.n_p == 0) throw Error("n_p must be positive", {}, "n_p");
 }
@@ -196,7 +201,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
     for (std::size_t o = 0; o < allowed.size(); ++o) allowed[o] = allowed[o] && s_.objects[o];
   RansacStats rs;
   const std::vector<Candidate> cands =
-      ransac_candidates(scene, db_, *index_, allowed, s_.ransac, s_.seed, step_u, &rs);
+      ransac_candidates(scene, db_, search_, allowed, s_.ransac, s_.seed, step_u, &rs);
   res.times.prune_s = rs.time_prune_s;
   res.times.register_s = rs.time_register_s;
   res.candidates = cands.size();

@@ -95,11 +95,12 @@ struct StepResult {
 
 class Recognizer {
  public:
-  /// `index` may be shared between recognizers over the same database; build it with
-  /// build_feature_index(db, settings.index, settings.objects).
+  /// The W-nearest feature search: with settings.ransac.feature_table (default) the exact
+  /// batched FeatureTable, shared by every recognizer over the same database and object mask
+  /// (FeatureTable::shared); otherwise `index`, which may be shared between recognizers (build
+  /// it with build_feature_index(db, settings.index, settings.objects)) or is built here.
   Recognizer(const Database& db, std::shared_ptr<const FeatureIndex> index,
              RecognizerSettings settings);
-  /// Builds the feature index itself.
   Recognizer(const Database& db, RecognizerSettings settings);
 
   /// One exploration step with the cumulative clouds (world frame). Free space may be empty.
@@ -112,7 +113,7 @@ class Recognizer {
 
  private:
   const Database& db_;
-  std::shared_ptr<const FeatureIndex> index_;
+  FeatureSearch search_;
   RecognizerSettings s_;
   int step_ = 0;
   std::vector<Hypothesis> state_;   ///< S_t, world poses, best first

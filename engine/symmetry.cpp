@@ -277,16 +277,19 @@ SymmetryGroup find_symmetries(const std::vector<Vec3>& points, const KdTree3& tr
   Eigen::SelfAdjointEigenSolver<Mat3> es(cov);
   const Vec3 ev = es.eigenvalues();          // ascending
   const Mat3 E = es.eigenvectors();
+  // Alike variances decide the candidate families. Sampled surfaces are not uniform (scans,
+  // voxel grids), so "alike" is generous: a superset family only costs search time, while a
+  // too strict test would miss symmetries (a hexagonal bar's in-plane variances can differ by
+  // 10 % in its fine cloud).
   auto equal = [&](int i, int j) {
     return std::abs(ev[i] - ev[j]) <= s.eigen_equal_rel * std::max(ev[i], ev[j]);
   };
   const bool e01 = equal(0, 1), e12 = equal(1, 2), e02 = equal(0, 2);
-  const int pairs = int(e01) + int(e12) + int(e02);
-
+  const int pairs = e02 ? 3 : int(e01) + int(e12);
   if (pairs == 0) {
     for (int k = 0; k < 3; ++k) try_candidate(ck, g.rotations, axis_rotation(E.col(k), kPi));
   } else if (pairs == 1) {
-    const int unique = e01 ? 2 : (e12 ? 0 : 1);
+    const int unique = e01 ? 2 : 0;
     const Vec3 axis = E.col(unique).normalized();
     if (search_axis(ck, s, axis, g.rotations)) {
       g.kind = SymmetryGroup::Kind::axial;

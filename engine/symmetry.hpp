@@ -27,7 +27,7 @@ struct SymmetrySettings {
   double tolerance_rel = 0.01;     ///< of the bounding-box diagonal
   double inlier_fraction = 0.95;   ///< of sample points within tolerance for a symmetry
   std::size_t sample_points = 400; ///< points of the model used for the checks
-  double eigen_equal_rel = 0.08;   ///< principal variances this close (relative) count as equal
+  double eigen_equal_rel = 0.3;    ///< principal variances this close (relative) count as alike
   double continuous_fraction = 0.9;///< share of test rotations that must pass for a continuum
   int angle_steps = 360;           ///< test angles about an axis (1 degree)
   std::uint64_t seed = 1;          ///< random test rotations (sphere test)

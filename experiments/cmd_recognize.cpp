@@ -1,7 +1,359 @@
+// `touchstone recognize`: recognize and localize the touched object, step by step, from a
+// tactile log (or from a plain contact cloud as a single step without free space).
 #include "experiments/cli_common.hpp"
+
+#include "engine/free_cloud.hpp"
+#include "engine/fusion.hpp"
+#include "engine/pose_error.hpp"
+#include "engine/recognizer.hpp"
+#include "engine/symmetry.hpp"
+#include "io/cloud_io.hpp"
+#include "io/db_store.hpp"
+#include "io/log_store.hpp"
+#include "io/result_store.hpp"
+
+#include <Eigen/SVD>
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
 
 namespace ts::cli {
 
-void register_recognize(CLI::App& app) { (void)app; }
+namespace {
+
+struct RecognizeOptions {
+  CommonOptions common;
+  std::string db, log, cloud, out, ground_truth, object;
+  std::string method = "bricpsf";
+  int steps = 0;                     ///< 0: every grasp of the log
+  RecognizerSettings rs;             ///< method parameters (defaults: the paper's)
+  double contact_voxel = 0.002;      ///< m, voxel filter of the cumulative contact cloud
+};
+
+/// A 4x4 row-major object -> world matrix from a text file (whitespace or comma separated).
+Pose read_ground_truth(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw Error("cannot open the ground-truth file", path);
+  std::vector<double> v;
+  std::string line;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.erase(hash);
+    for (char& c : line)
+      if (c == ',' || c == ';' || c == '[' || c == ']') c = ' ';
+    std::istringstream ls(line);
+    std::string tok;
+    while (ls >> tok) {
+      char* end = nullptr;
+      const double x = std::strtod(tok.c_str(), &end);
+      if (end == tok.c_str() || *end != '\0' || !std::isfinite(x))
+        throw Error("not a finite number: '" + tok + "'", path, "line " + std::to_string(lineno));
+      v.push_back(x);
+    }
+  }
+  if (v.size() != 16)
+    throw Error("expected 16 numbers (a 4x4 row-major matrix), found " + std::to_string(v.size()),
+                path);
+  Eigen::Matrix4d M;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) M(r, c) = v[static_cast<std::size_t>(4 * r + c)];
+  if ((M.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).norm() > 1e-6)
+    throw Error("the last row must be 0 0 0 1", path, "line 4");
+  const Mat3 R = M.topLeftCorner<3, 3>();
+  if ((R.transpose() * R - Mat3::Identity()).norm() > 1e-3 || R.determinant() < 0.0)
+    throw Error("the upper-left 3x3 block is not a rotation", path);
+  Eigen::JacobiSVD<Mat3> svd(R, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Pose T = Pose::Identity();
+  T.linear() = svd.matrixU() * svd.matrixV().transpose();  // nearest rotation
+  T.translation() = M.topRightCorner<3, 1>();
+  return T;
+}
+
+nlohmann::ordered_json pose_json(const Pose& T) {
+  Eigen::Quaterniond q(T.linear());
+  q.normalize();
+  if (q.w() < 0) q.coeffs() = -q.coeffs();
+  const Vec3 t = T.translation();
+  return {{"t", {t.x(), t.y(), t.z()}}, {"q", {q.w(), q.x(), q.y(), q.z()}}};
+}
+
+nlohmann::ordered_json number_or_null(const std::optional<double>& x) {
+  if (!x || !std::isfinite(*x)) return nullptr;
+  return *x;
+}
+
+std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& s,
+                                                     double contact_voxel) {
+  return {{"n_p", double(s.n_p)},
+          {"psi", s.psi},
+          {"N", double(s.ransac.triplets)},
+          {"R", double(s.ransac.registrations)},
+          {"W", double(s.ransac.prune_w)},
+          {"min_spacing", s.ransac.min_spacing},
+          {"distance_tolerance", s.ransac.distance_tolerance},
+          {"min_sv_ratio", s.ransac.min_sv_ratio},
+          {"size_slack", s.ransac.size_slack},
+          {"d_outlier", s.evaluate.d_outlier},
+          {"lambda", s.evaluate.lambda},
+          {"res_free", s.evaluate.res_free},
+          {"free_inside_penalty", s.evaluate.free_inside_penalty ? 1.0 : 0.0},
+          {"icp_iterations", double(s.icp.max_iterations)},
+          {"icp_trim", s.icp.trim_fraction},
+          {"icp_max_correspondence", s.icp.max_correspondence},
+          {"icp_max_points", double(s.icp.max_points)},
+          {"refine_new", s.refine_new ? 1.0 : 0.0},
+          {"dedupe", s.dedupe ? 1.0 : 0.0},
+          {"index_exact", s.index.exact ? 1.0 : 0.0},
+          {"index_checks", double(s.index.checks)},
+          {"contact_voxel", contact_voxel}};
+}
+
+int run_recognize(const RecognizeOptions& o) {
+  RecognizerSettings rs = o.rs;
+  rs.method = *parse_method(o.method);
+  rs.seed = o.common.seed;
+
+  auto source = std::make_shared<io::DbReader>(o.db);
+  Database db(source);
+  if (db.size() == 0) throw Error("the database has no objects", o.db, "/objects");
+  double largest = 0.0;
+  for (std::size_t i = 0; i < db.size(); ++i) largest = std::max(largest, db.info(i).extent.norm());
+
+  // The input: a tactile log (K steps) or one contact cloud.
+  std::optional<TactileLog> log;
+  PointCloud single;
+  std::optional<Pose> truth_pose;
+  std::optional<std::size_t> truth_object;
+  std::string truth_name;
+  int K = 1;
+  if (!o.log.empty()) {
+    log = io::read_log(o.log);
+    if (log->grasps.empty()) throw Error("the log has no grasps", o.log, "/grasps");
+    const int n = static_cast<int>(log->grasps.size());
+    if (o.steps > n)
+      throw Error("--steps " + std::to_string(o.steps) + " exceeds the log's " + std::to_string(n) +
+                      " grasps", o.log, "--steps");
+    K = o.steps > 0 ? o.steps : n;
+    if (log->truth) truth_pose = log->truth->object_pose;
+    truth_name = log->object;
+    if (!truth_name.empty()) {
+      const std::size_t i = db.find(truth_name);
+      if (i == db.size())
+        throw Error("the log's object '" + truth_name + "' is not in the database " + o.db, o.log,
+                    "/object");
+      truth_object = i;
+    }
+  } else {
+    single = io::read_cloud(o.cloud);
+    if (o.steps > 1) throw Error("a contact cloud is one step", o.cloud, "--steps");
+  }
+  if (!o.ground_truth.empty()) truth_pose = read_ground_truth(o.ground_truth);
+  if (!o.object.empty()) {
+    const std::size_t i = db.find(o.object);
+    if (i == db.size()) throw Error("no object '" + o.object + "' in the database", o.db, "--object");
+    truth_object = i;
+    truth_name = o.object;
+  }
+
+  Recognizer rec(db, rs);
+  SymmetryCache symmetries;
+  const SymmetryGroup* sym = nullptr;
+  if (truth_object && truth_pose) sym = &symmetries.get(db, *truth_object);
+
+  ExplorationSettings es;
+  es.contact_voxel = o.contact_voxel;
+  es.free.res_free = rs.evaluate.res_free;
+  es.free.s_obj_max = db.settings().max_extent;
+  std::optional<Exploration> ex;
+  if (log) ex.emplace(*log, es);
+  const bool with_free = rs.method == Method::bricpsf || rs.method == Method::ransac_icp_fs;
+  const std::string input = log ? o.log : o.cloud;
+
+  std::vector<io::ResultStep> stored;
+  std::vector<double> fusion_time;
+  std::vector<StepResult> results;
+  const bool progress = stderr_is_terminal() && !o.common.json;
+  for (int k = 1; k <= K; ++k) {
+    PointCloud contacts;
+    std::vector<Vec3> free;
+    const auto t0 = std::chrono::steady_clock::now();
+    if (ex) {
+      ex->advance_to(static_cast<std::size_t>(k));
+      contacts = ex->contact_cloud();
+      if (with_free)
+        free = full_free_cloud(ex->grid(), free_space_box(ex->raw_contacts(), es.free.s_obj_max),
+                               es.free.res_free);
+    } else {
+      contacts = single;
+    }
+    fusion_time.push_back(
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    StepResult r = rec.step(contacts, free);
+    // Units sanity check: contacts far wider than any object mean the log and the database
+    // disagree (e.g. millimetres against metres).
+    if (r.contacts > 0) {
+      Eigen::AlignedBox3d box;
+      for (const Vec3& p : contacts.points) box.extend(p);
+      const double span = box.diagonal().norm();
+      if (span > 4.0 * largest + 0.5)
+        throw Error("the contacts span " + std::to_string(span) + " m but the largest database object " +
+                        std::to_string(largest) + " m: do the log and the database use the same units?",
+                    input, log ? "/grasps" : "points");
+    }
+    stored.push_back(io::to_result_step(r, truth_object, truth_pose, sym));
+    results.push_back(std::move(r));
+    if (progress) std::fprintf(stderr, "\rstep %d/%d", k, K);
+  }
+  if (progress) std::fprintf(stderr, "\n");
+
+  if (!o.out.empty()) {
+    io::ResultHeader h;
+    h.method = std::string(method_name(rs.method));
+    h.seed = rs.seed;
+    h.database = o.db;
+    h.input = input;
+    h.input_kind = log ? "log" : "cloud";
+    for (std::size_t i = 0; i < db.size(); ++i) h.objects.push_back(db.info(i).name);
+    h.truth_object = truth_name;
+    h.truth_pose = truth_pose;
+    h.params = params_of(rs, o.contact_voxel);
+    io::write_result(o.out, h, stored);
+  }
+
+  if (o.common.json) {
+    nlohmann::ordered_json j;
+    j["method"] = std::string(method_name(rs.method));
+    j["steps"] = nlohmann::ordered_json::array();
+    for (std::size_t k = 0; k < results.size(); ++k) {
+      const StepResult& r = results[k];
+      const io::ResultStep& s = stored[k];
+      nlohmann::ordered_json st;
+      st["step"] = r.step;
+      st["object"] = r.valid ? nlohmann::ordered_json(db.info(r.best.object).name) : nullptr;
+      st["weight"] = r.valid ? nlohmann::ordered_json(r.best.weight) : nullptr;
+      st["posterior"] = r.valid ? nlohmann::ordered_json(r.posterior) : nullptr;
+      st["pose"] = r.valid ? pose_json(r.best.pose) : nullptr;
+      const auto e = s.error;
+      st["position_error_m"] = number_or_null(e ? std::optional(e->position_m) : std::nullopt);
+      st["orientation_error_deg"] = number_or_null(e ? std::optional(e->orientation_deg) : std::nullopt);
+      st["symmetric_orientation_error_deg"] =
+          number_or_null(e ? std::optional(e->symmetric_orientation_deg) : std::nullopt);
+      st["time_s"] = r.times.total_s;
+      // extensions
+      st["correct"] = s.correct ? nlohmann::ordered_json(*s.correct) : nullptr;
+      st["symmetric_position_error_m"] =
+          number_or_null(e ? std::optional(e->symmetric_position_m) : std::nullopt);
+      st["log_weight"] = r.valid ? nlohmann::ordered_json(r.best.log_weight) : nullptr;
+      st["contacts"] = r.contacts;
+      st["free_points"] = r.free_points;
+      st["unobservable_dof"] = r.unobservable_dof;
+      st["pose_ambiguous"] = r.pose_ambiguous;
+      st["candidates"] = r.candidates;
+      st["hypotheses"] = r.hypotheses.size();
+      st["stages_s"] = {{"fusion", fusion_time[k]},     {"prepare", r.times.prepare_s},
+                        {"prune", r.times.prune_s},     {"register", r.times.register_s},
+                        {"icp", r.times.icp_s},         {"evaluate", r.times.evaluate_s}};
+      j["steps"].push_back(std::move(st));
+    }
+    j["database"] = o.db;
+    j["input"] = input;
+    j["truth_object"] = truth_name.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(truth_name);
+    j["seed"] = rs.seed;
+    j["threads"] = thread_count(o.common);
+    j["machine"] = machine_description();
+    nlohmann::ordered_json p;
+    for (const auto& [name, value] : params_of(rs, o.contact_voxel)) p[name] = value;
+    j["params"] = p;
+    std::cout << j.dump(2) << '\n';
+  } else {
+    std::cout << "method " << method_name(rs.method) << ", " << db.size() << " objects, input "
+              << input << (truth_name.empty() ? "" : " (object " + truth_name + ")") << '\n';
+    std::printf("%5s  %-24s %9s %9s %10s %9s %9s %8s\n", "step", "object", "weight", "posterior",
+                "pos_err_m", "ori_deg", "sym_deg", "time_s");
+    for (std::size_t k = 0; k < results.size(); ++k) {
+      const StepResult& r = results[k];
+      const auto& e = stored[k].error;
+      auto num = [](bool have, double x, const char* fmt) {
+        char buf[32];
+        if (!have || !std::isfinite(x)) return std::string("-");
+        std::snprintf(buf, sizeof buf, fmt, x);
+        return std::string(buf);
+      };
+      std::string name = r.valid ? db.info(r.best.object).name : "(none)";
+      if (r.valid && r.pose_ambiguous) name += " ?";
+      std::printf("%5d  %-24s %9s %9s %10s %9s %9s %8.3f\n", r.step, name.c_str(),
+                  num(r.valid, r.best.weight, "%.4f").c_str(), num(r.valid, r.posterior, "%.3f").c_str(),
+                  num(e.has_value(), e ? e->position_m : 0, "%.4f").c_str(),
+                  num(e.has_value(), e ? e->orientation_deg : 0, "%.1f").c_str(),
+                  num(e.has_value(), e ? e->symmetric_orientation_deg : 0, "%.1f").c_str(),
+                  r.times.total_s);
+    }
+    if (!results.empty() && results.back().pose_ambiguous)
+      std::cout << "? the contacts leave " << results.back().unobservable_dof
+                << " pose DOF unobservable (e.g. a single flat patch): the pose is not reliable\n";
+    if (!o.out.empty()) std::cout << "wrote " << o.out << '\n';
+  }
+  return 0;
+}
+
+}  // namespace
+
+void register_recognize(CLI::App& app) {
+  auto o = std::make_shared<RecognizeOptions>();
+  auto* sub = app.add_subcommand(
+      "recognize", "Recognize the touched object and its 6-DOF pose, step by step");
+  sub->add_option("--db", o->db, "Object database (HDF5)")->required()->check(CLI::ExistingFile);
+  auto* log = sub->add_option("--log", o->log, "Tactile log (HDF5)")->check(CLI::ExistingFile);
+  auto* cloud = sub->add_option("--cloud", o->cloud,
+                                "A plain contact cloud (.ply/.pcd), recognized as one step without "
+                                "free space")->check(CLI::ExistingFile);
+  log->excludes(cloud);
+  sub->add_option("--method", o->method, "bricpsf | batch-ransac | ransac-icp | ransac-icp-fs")
+      ->check(CLI::IsMember({"bricpsf", "batch-ransac", "ransac-icp", "ransac-icp-fs"}));
+  sub->add_option("--steps", o->steps, "Steps (grasps) to process (default: all)")
+      ->check(CLI::Range(1, 1 << 30));
+  sub->add_option("--out", o->out, "Write every step's hypotheses to RESULT.h5");
+  sub->add_option("--ground-truth", o->ground_truth,
+                  "Text file with the true 4x4 row-major object->world matrix")
+      ->check(CLI::ExistingFile);
+  sub->add_option("--object", o->object, "Name of the touched object (ground truth), if known");
+
+  RecognizerSettings& s = o->rs;
+  auto* g = "Method parameters (defaults: the paper's)";
+  sub->add_option("--n-p", s.n_p, "BRICPSF hypotheses n_p")->group(g)->check(CLI::Range(1, 1000000));
+  sub->add_option("--psi", s.psi, "Share of evolved hypotheses kept (Psi)")->group(g)->check(CLI::Range(0.0, 1.0));
+  sub->add_option("-N,--triplets", s.ransac.triplets, "Batch RANSAC triplets N")->group(g)->check(CLI::Range(1, 1000000));
+  sub->add_option("-R,--registrations", s.ransac.registrations, "Registrations per triplet R")->group(g)->check(CLI::Range(1, 1000000));
+  sub->add_option("-W,--prune", s.ransac.prune_w, "Nearest database features per triplet point W")->group(g)->check(CLI::Range(1, 100000000));
+  sub->add_option("--d-outlier", s.evaluate.d_outlier, "Outlier distance of Eq. 4 (m)")->group(g)->check(CLI::PositiveNumber);
+  sub->add_option("--lambda", s.evaluate.lambda, "Free-space weight of Eq. 9")->group(g)->check(CLI::NonNegativeNumber);
+  sub->add_option("--res-free", s.evaluate.res_free, "Free-space resolution (m); d_thresh = res_free/2")->group(g)->check(CLI::PositiveNumber);
+  sub->add_flag("--free-inside-penalty", s.evaluate.free_inside_penalty,
+                "Extension: free space inside a closed object costs the full penalty")->group(g);
+  sub->add_option("--icp-iterations", s.icp.max_iterations, "ICP iteration cap")->group(g)->check(CLI::Range(0, 100000));
+  sub->add_option("--icp-trim", s.icp.trim_fraction, "Trimmed ICP: share of closest pairs fitted")->group(g)->check(CLI::Range(0.1, 1.0));
+  sub->add_option("--icp-max-correspondence", s.icp.max_correspondence, "ICP pair distance gate (m, 0: none)")->group(g)->check(CLI::NonNegativeNumber);
+  sub->add_option("--icp-points", s.icp.max_points, "Contacts used by ICP (0: all)")->group(g);
+  sub->add_option("--distance-tolerance", s.ransac.distance_tolerance, "Triplet registration distance tolerance (m)")->group(g)->check(CLI::PositiveNumber);
+  sub->add_option("--min-spacing", s.ransac.min_spacing, "Minimum triplet spacing (m, 0: the feature radius)")->group(g)->check(CLI::NonNegativeNumber);
+  sub->add_flag("--refine-new", s.refine_new, "Extension: ICP on new RANSAC hypotheses before they join")->group(g);
+  sub->add_flag("--dedupe", s.dedupe, "Extension: drop duplicate hypotheses")->group(g);
+  sub->add_flag("--exact-features", s.index.exact, "Exact feature search (slower)")->group(g);
+  sub->add_option("--feature-checks", s.index.checks, "Approximate feature search: leaves visited")->group(g)->check(CLI::Range(1, 1 << 30));
+  sub->add_option("--contact-voxel", o->contact_voxel, "Voxel filter of the cumulative contacts (m)")->group(g)->check(CLI::PositiveNumber);
+  add_common(sub, o->common);
+  sub->callback([o] {
+    if (o->log.empty() && o->cloud.empty())
+      throw CLI::RequiredError("--log or --cloud");
+    run_command(o->common, [o] { return run_recognize(*o); });
+  });
+}
 
 }  // namespace ts::cli

@@ -297,6 +297,16 @@ void print_objects(const J& per_object, std::ostream& out) {
 
 }  // namespace
 
+/// "@20", or "@K" when the runs have fewer than 20 steps (the summary's step-20 column).
+static std::string step20_label(const J& report) {
+  std::size_t steps = 20;
+  for (const auto& v : report["variants"])
+    if (!v["per_step"].empty()) steps = std::min<std::size_t>(20, v["per_step"].size());
+  std::string s(1, '@');
+  s += std::to_string(steps);
+  return s;
+}
+
 void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
   const J& cfg = report["config"];
   const J& st = report["store"];
@@ -327,7 +337,8 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
   std::size_t width = 7;
   for (const auto& v : report["variants"]) width = std::max(width, v["label"].get<std::string>().size());
   out << "  " << std::left << std::setw(static_cast<int>(width)) << "variant" << std::right
-      << "  runs   rate  @20   pos med  sym-ori  time/step  p95     pareto\n";
+      << "  runs   rate  " << std::left << std::setw(4) << step20_label(report) << std::right
+      << "  pos med  sym-ori  time/step  p95     pareto\n";
   auto on_front = [&](const std::string& label, const char* key) {
     for (const auto& l : report["pareto"][key])
       if (l == label) return true;

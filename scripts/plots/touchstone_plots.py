@@ -120,6 +120,7 @@ def plot_errors(report, out, written):
     ]
     many = len(series(report)) > 1
     for ax, key, scale, ylabel, bound in specs:
+        peak = 0.0  # of the lines (not the bands, which are wide for few runs)
         for i, (label, rows) in enumerate(series(report)):
             x = steps_of(rows)
             c = COLORS[i % len(COLORS)]
@@ -127,6 +128,7 @@ def plot_errors(report, out, written):
             lo, hi = band(rows, key + "_mean_bounded_ci95", scale)
             med = column(rows, key + "_median", scale)
             ax.fill_between(x, lo, hi, color=c, alpha=0.18, linewidth=0)
+            peak = np.nanmax([peak, np.nanmax(mean, initial=0.0), np.nanmax(med, initial=0.0)])
             ax.plot(x, mean, color=c, label=(label if many else "bounded mean, 95 % CI"))
             ax.plot(x, med, color=c, linestyle="--", linewidth=1.0,
                     label=(None if many else "median"))
@@ -139,8 +141,7 @@ def plot_errors(report, out, written):
                 ha="left", va="bottom", fontsize=6.5, color="0.4")
         ax.set_xlabel("exploration step (grasps)")
         ax.set_ylabel(ylabel)
-        top = max(bound, np.nanmax([ax.get_ylim()[1], bound]))
-        ax.set_ylim(0, top * 1.45)
+        ax.set_ylim(0, max(bound * 1.45, peak * 1.1))
         ax.set_xlim(left=0.5)
     axes[0].set_title("position (runs with the right object)")
     axes[1].set_title("orientation, symmetry-aware")

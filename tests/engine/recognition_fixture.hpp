@@ -125,8 +125,8 @@ inline PointCloud sample_surface(const Mesh& m, double voxel, std::uint64_t seed
   return out;
 }
 
-/// An object source over hand-built objects. No distance fields (the evaluation then uses the
-/// fine cloud's k-d tree, as in the paper) unless `fields` holds them.
+/// An object source over hand-built objects, with signed distance fields (use_fields = false:
+/// none, the evaluation then uses the fine cloud's k-d tree as in the paper).
 class TestSource final : public ObjectSource {
  public:
   std::vector<ObjectInfo> infos;
@@ -134,7 +134,8 @@ class TestSource final : public ObjectSource {
   std::vector<PointCloud> fines;
   std::vector<Mesh> meshes;
   DatabaseSettings db_settings;
-  std::function<DistanceField(std::size_t)> field_fn;
+  std::vector<SparseGrid> field_fine, field_coarse;   ///< distance fields (empty: none)
+  bool use_fields = true;
 
   std::size_t size() const override { return infos.size(); }
   const ObjectInfo& info(std::size_t i) const override { return infos.at(i); }
@@ -142,14 +143,15 @@ class TestSource final : public ObjectSource {
   ObjectFeatures load_features(std::size_t i) const override { return feats.at(i); }
   PointCloud load_fine(std::size_t i) const override { return fines.at(i); }
   DistanceField load_field(std::size_t i) const override {
-    return field_fn ? field_fn(i) : DistanceField();
+    if (!use_fields || field_fine.size() <= i) return DistanceField();
+    return DistanceField::from_sparse(field_fine[i], field_coarse[i], true, db_settings.field.coarse_margin);
   }
 
   void add(const std::string& name, const Mesh& mesh, std::uint64_t seed) {
     const double s = scale_;
     ObjectInfo info;
     info.name = name;
-    PointCloud fine = sample_surface(mesh, 0.0015 * s, seed);
+    PointCloud fine = sample_surface(mesh, 0.002 * s, seed);
     PointCloud coarse = sample_surface(mesh, 0.005 * s, seed + 1000);
     Eigen::AlignedBox3d box;
     for (const Vec3& v : mesh.vertices) box.extend(v);
@@ -162,6 +164,9 @@ class TestSource final : public ObjectSource {
     ObjectFeatures of;
     of.coarse = coarse;
     of.features = fr.features;
+    const DistanceField field = DistanceField::build(mesh, true, db_settings.field);
+    field_fine.push_back(field.fine_sparse());
+    field_coarse.push_back(field.coarse_sparse());
     infos.push_back(info);
     feats.push_back(std::move(of));
     fines.push_back(std::move(fine));
@@ -172,6 +177,9 @@ class TestSource final : public ObjectSource {
     db_settings.fpfh.normal_radius = 0.007 * scale;
     db_settings.fpfh.feature_radius = 0.012 * scale;
     db_settings.max_extent = 0.2 * scale;
+    db_settings.field.fine_voxel = 0.002 * scale;
+    db_settings.field.coarse_voxel = 0.01 * scale;
+    db_settings.field.coarse_margin = 0.2 * scale;
   }
 
  private:

@@ -34,7 +34,7 @@ TEST_CASE("ICP converges from a perturbed pose to the truth (both metrics)") {
   IcpCase c;
   const Scene sc = c.scene(12);
   const ObjectGeometry& geo = c.db.geometry(c.obj);
-  for (IcpMetric metric : {IcpMetric::point_to_point, IcpMetric::point_to_plane}) {
+  for (IcpMetric metric : {IcpMetric::point_to_point, IcpMetric::point_to_plane, IcpMetric::field}) {
     IcpSettings s;
     s.metric = metric;
     s.max_iterations = 100;
@@ -49,7 +49,9 @@ TEST_CASE("ICP converges from a perturbed pose to the truth (both metrics)") {
       CHECK(e.orientation_deg < 0.5);
       iterations += r.iterations;
     }
-    MESSAGE((metric == IcpMetric::point_to_plane ? "point-to-plane" : "point-to-point")
+    MESSAGE((metric == IcpMetric::point_to_plane ? "point-to-plane"
+             : metric == IcpMetric::field        ? "distance field"
+                                                 : "point-to-point")
             << ": mean iterations " << iterations / 5.0);
   }
 }

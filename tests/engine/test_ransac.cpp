@@ -23,7 +23,7 @@ RansacSettings quick() {
 struct Fixture {
   std::shared_ptr<test::TestSource> src = test::make_source();
   Database db{src};
-  FeatureIndex index = build_feature_index(db, {.exact = true});
+  FeatureSearch index{FeatureTable::shared(db), nullptr};
   Scene scene(std::size_t obj, const Pose& T, int patches, std::uint64_t seed = 3) {
     return prepare_scene(test::touch(src->fines[obj], T, patches, seed), {}, db.settings().fpfh, {}, 1, 1);
   }
@@ -121,4 +121,73 @@ TEST_CASE("Batch RANSAC: every candidate is a proper rigid transform") {
     CHECK(R.determinant() == doctest::Approx(1.0).epsilon(1e-9));
     CHECK((R * R.transpose() - Mat3::Identity()).norm() < 1e-9);
   }
+}
+
+TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any thread count") {
+  // Random FPFH-like features in 3 objects; queries perturbed copies of some rows.
+  auto src = std::make_shared<test::TestSource>();
+  Rng rng(4);
+  for (int o = 0; o < 3; ++o) {
+    ObjectInfo info;
+    info.name = "o";
+    info.name += std::to_string(o);  // (GCC 12 warns falsely on "o" + to_string: -Wrestrict)
+    ObjectFeatures f;
+    for (int i = 0; i < 3000 + 500 * o; ++i) {
+      Feature x;
+      for (auto& v : x) v = static_cast<float>(rng.uniform(0, 10));
+      if (i % 7 == 0 && i > 0) x = f.features[static_cast<std::size_t>(i - 1)];  // exact ties
+      f.features.push_back(x);
+      f.coarse.points.push_back(Vec3::Zero());
+    }
+    src->infos.push_back(info);
+    src->feats.push_back(f);
+    src->fines.emplace_back();
+  }
+  Database db(src);
+  std::vector<Feature> queries;
+  std::size_t total = 0;
+  for (std::uint32_t o = 0; o < 3; ++o) total += db.features(o).features.size();
+  for (int q = 0; q < 20; ++q) {
+    Feature x = db.features(static_cast<std::size_t>(q % 3)).features[static_cast<std::size_t>(q * 37)];
+    for (auto& v : x) v += static_cast<float>(rng.uniform(-0.5, 0.5));
+    queries.push_back(x);
+  }
+  const FeatureTable table(db);
+  REQUIRE(table.size() == total);
+  // Every (object, point) appears once among the table's rows.
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> rows;  // table row -> (object, point)
+  for (std::size_t r = 0; r < table.size(); ++r) rows.emplace_back(table.ref(r).object, table.ref(r).point);
+  {
+    auto sorted = rows;
+    std::sort(sorted.begin(), sorted.end());
+    CHECK(std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end());
+  }
+  for (std::size_t w : {1u, 50u, 700u, 20000u}) {
+    std::vector<std::vector<Neighbour>> one, two;
+    tbb::task_arena a1(1), a2(2);
+    a1.execute([&] { one = table.knn(queries, w); });
+    a2.execute([&] { two = table.knn(queries, w); });
+    for (std::size_t q = 0; q < queries.size(); ++q) {
+      std::vector<std::pair<float, std::uint32_t>> oracle;
+      for (std::uint32_t r = 0; r < rows.size(); ++r) {
+        const Feature& f = db.features(rows[r].first).features[rows[r].second];
+        float d = 0.0f;
+        for (int k = 0; k < kFeatureDim; ++k) {
+          const float e = f[k] - queries[q][k];
+          d += e * e;
+        }
+        oracle.emplace_back(d, r);
+      }
+      std::sort(oracle.begin(), oracle.end());
+      const std::size_t k = std::min(w, rows.size());
+      REQUIRE(one[q].size() == k);
+      for (std::size_t i = 0; i < k; ++i) {
+        CHECK(one[q][i].index == oracle[i].second);
+        CHECK(one[q][i].sq_distance == static_cast<double>(oracle[i].first));
+        CHECK(two[q][i].index == one[q][i].index);
+      }
+      CHECK(table.ref(one[q][0].index).object == rows[one[q][0].index].first);
+    }
+  }
+  CHECK(FeatureTable::shared(db).get() == FeatureTable::shared(db).get());
 }

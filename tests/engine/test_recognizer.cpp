@@ -57,7 +57,7 @@ std::vector<StepResult> explore(Recognizer& rec, std::size_t obj, const Pose& T,
 TEST_CASE("BRICPSF recognizes asymmetric and symmetric objects and localizes them") {
   auto src = test::make_source();
   Database db(src);
-  auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
+  std::shared_ptr<const FeatureIndex> index;  // the shared FeatureTable is used
   SymmetryCache symmetries;
   for (std::size_t obj : {1u, 3u, 4u}) {  // nut (D5), hexbar (D6), wedge (none)
     Recognizer rec(db, index, fast());
@@ -102,7 +102,7 @@ TEST_CASE("Recognizer invariants: state size, posterior, objects kept for life")
 TEST_CASE("Every method runs through the same path; the batch methods ignore free space") {
   auto src = test::make_source();
   Database db(src);
-  auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
+  std::shared_ptr<const FeatureIndex> index;  // the shared FeatureTable is used
   const Pose T = test::random_pose(6, Vec3(0.1, 0.1, 0.1));
   const PointCloud c = test::touch(src->fines[1], T, 6, 8);
   std::vector<Vec3> free;  // a shell of free space just outside the true surface
@@ -110,7 +110,9 @@ TEST_CASE("Every method runs through the same path; the batch methods ignore fre
   for (int i = 0; i < 300; ++i) free.push_back(T * (src->fines[1].points[rng.index(src->fines[1].size())] +
                                                     0.03 * src->fines[1].normals[0]));
   for (Method m : {Method::batch_ransac, Method::ransac_icp, Method::ransac_icp_fs, Method::bricpsf}) {
-    Recognizer a(db, index, fast(m)), b(db, index, fast(m));
+    RecognizerSettings s = fast(m);
+    s.ransac.registrations = 30;
+    Recognizer a(db, index, s), b(db, index, s);
     const StepResult ra = a.step(c, {}), rb = b.step(c, free);
     INFO(method_name(m));
     CHECK(ra.valid);
@@ -126,17 +128,19 @@ TEST_CASE("Every method runs through the same path; the batch methods ignore fre
 TEST_CASE("Same seed, 1 or 2 threads: bitwise identical poses and weights") {
   auto src = test::make_source();
   Database db(src);
-  auto index = std::make_shared<FeatureIndex>(build_feature_index(db, fast().index));
+  std::shared_ptr<const FeatureIndex> index;  // the shared FeatureTable is used
   const Pose T = test::random_pose(9, Vec3(1, 2, 3));
   for (Method m : {Method::bricpsf, Method::ransac_icp}) {
+    RecognizerSettings s = fast(m);
+    if (m == Method::ransac_icp) s.ransac.registrations = 30;  // ICP on every candidate
     std::vector<StepResult> one, two;
     tbb::task_arena a1(1), a2(2);
     a1.execute([&] {
-      Recognizer rec(db, index, fast(m));
+      Recognizer rec(db, index, s);
       one = explore(rec, 0, T, 3, 4, 0.001, 0.0003);
     });
     a2.execute([&] {
-      Recognizer rec(db, index, fast(m));
+      Recognizer rec(db, index, s);
       two = explore(rec, 0, T, 3, 4, 0.001, 0.0003);
     });
     REQUIRE(one.size() == two.size());
@@ -173,7 +177,7 @@ TEST_CASE("Geometry is loaded only for objects a hypothesis reaches") {
 TEST_CASE("Exact early rejection: the selected top k equal a full evaluation's") {
   auto src = test::make_source();
   Database db(src);
-  const FeatureIndex index = build_feature_index(db, fast().index);
+  const FeatureSearch index{FeatureTable::shared(db), nullptr};
   const Pose T = test::random_pose(13, Vec3(0, 0, 0));
   std::vector<Vec3> free;
   Rng rng(1);

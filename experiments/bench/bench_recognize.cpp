@@ -1,0 +1,288 @@
+// Benchmark of the recognizer (Section 4.3-4.4) on a database file with simulated tactile logs:
+//
+//   speed     BRICPSF (or --method) through `grasps` steps of a few logs, with 1 and with 2
+//             threads: the median time of the last step (cumulative cloud after `grasps`
+//             grasps) and of every step, a per-stage breakdown, and the 1 -> 2 thread speed-up.
+//             Results with 1 and 2 threads must be identical (checked).
+//   accuracy  every object x `seeds` logs (noise profile `noise`): the share of logs whose last
+//             step names the right object with a position error below 1 cm (also symmetric
+//             orientation error statistics).
+//
+//   build/bench/bench_recognize --db DB.h5 [--grasps 20] [--speed-logs 6] [--seeds 3]
+//       [--noise underwater] [--method bricpsf] [--objects N] [--skip-speed] [--skip-accuracy]
+//       [--set key=value ...]   (recognizer parameters as in `touchstone recognize`)
+//
+// Prints the machine, thread counts, parameters and every figure.
+#include "datasets/simulator.hpp"
+#include "engine/free_cloud.hpp"
+#include "engine/fusion.hpp"
+#include "engine/pose_error.hpp"
+#include "engine/recognizer.hpp"
+#include "engine/symmetry.hpp"
+#include "experiments/cli_common.hpp"
+#include "io/db_store.hpp"
+
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <iostream>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace ts;
+
+double cpu_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const std::size_t i = std::min(v.size() - 1, static_cast<std::size_t>(q * double(v.size() - 1) + 0.5));
+  return v[i];
+}
+
+struct Log {
+  std::size_t object;
+  TactileLog log;
+};
+
+/// The clouds of every step of a log (fusion is not part of the recognizer's timing).
+struct Steps {
+  std::vector<PointCloud> contacts;
+  std::vector<std::vector<Vec3>> free;
+};
+
+Steps clouds_of(const TactileLog& log, std::size_t grasps, double s_obj_max, double res_free) {
+  ExplorationSettings es;
+  es.free.s_obj_max = s_obj_max;
+  es.free.res_free = res_free;
+  Exploration ex(log, es);
+  Steps s;
+  for (std::size_t k = 1; k <= grasps; ++k) {
+    ex.advance_to(k);
+    s.contacts.push_back(ex.contact_cloud());
+    s.free.push_back(full_free_cloud(ex.grid(), free_space_box(ex.raw_contacts(), s_obj_max), res_free));
+  }
+  return s;
+}
+
+Log simulate(const io::DbReader& db, std::size_t object, std::size_t grasps, const std::string& noise,
+             std::uint64_t seed) {
+  datasets::SimulatorSettings ss;
+  ss.grasps = grasps;
+  ss.noise = datasets::noise_profile(noise);
+  ss.seed = seed;
+  datasets::Simulator sim(db.load_mesh(object), db.info(object).name, Gripper(), ss);
+  return {object, sim.run().log};
+}
+
+void set_param(RecognizerSettings& s, const std::string& kv) {
+  const auto eq = kv.find('=');
+  if (eq == std::string::npos) throw Error("--set expects key=value", {}, kv);
+  const std::string k = kv.substr(0, eq);
+  const double v = std::stod(kv.substr(eq + 1));
+  if (k == "n_p") s.n_p = static_cast<std::size_t>(v);
+  else if (k == "psi") s.psi = v;
+  else if (k == "N") s.ransac.triplets = static_cast<int>(v);
+  else if (k == "R") s.ransac.registrations = static_cast<int>(v);
+  else if (k == "W") s.ransac.prune_w = static_cast<std::size_t>(v);
+  else if (k == "d_outlier") s.evaluate.d_outlier = v;
+  else if (k == "lambda") s.evaluate.lambda = v;
+  else if (k == "res_free") s.evaluate.res_free = v;
+  else if (k == "normal_tolerance_deg") s.ransac.normal_tolerance_deg = v;
+  else if (k == "distance_tolerance") s.ransac.distance_tolerance = v;
+  else if (k == "icp_iterations") s.icp.max_iterations = static_cast<int>(v);
+  else if (k == "icp_points") s.icp.max_points = static_cast<std::size_t>(v);
+  else if (k == "icp_trim") s.icp.trim_fraction = v;
+  else if (k == "icp_point_to_point") s.icp.metric = v != 0 ? IcpMetric::point_to_point : IcpMetric::point_to_plane;
+  else if (k == "refine_new") s.refine_new = v != 0;
+  else if (k == "dedupe") s.dedupe = v != 0;
+  else if (k == "free_inside_penalty") s.evaluate.free_inside_penalty = v != 0;
+  else if (k == "index_exact") s.index.exact = v != 0;
+  else if (k == "index_checks") s.index.checks = static_cast<int>(v);
+  else if (k == "min_spacing") s.ransac.min_spacing = v;
+  else throw Error("unknown parameter", {}, k);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    std::string db_path, noise = "underwater", method = "bricpsf";
+    std::size_t grasps = 20, speed_logs = 6, seeds = 3, objects = 0;
+    bool speed = true, accuracy = true;
+    RecognizerSettings rs;
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      auto next = [&]() -> std::string {
+        if (i + 1 >= argc) throw Error("missing value", {}, a);
+        return argv[++i];
+      };
+      if (a == "--db") db_path = next();
+      else if (a == "--grasps") grasps = std::stoul(next());
+      else if (a == "--speed-logs") speed_logs = std::stoul(next());
+      else if (a == "--seeds") seeds = std::stoul(next());
+      else if (a == "--noise") noise = next();
+      else if (a == "--method") method = next();
+      else if (a == "--objects") objects = std::stoul(next());
+      else if (a == "--skip-speed") speed = false;
+      else if (a == "--skip-accuracy") accuracy = false;
+      else if (a == "--set") set_param(rs, next());
+      else throw Error("unknown argument (see the header of bench_recognize.cpp)", {}, a);
+    }
+    if (db_path.empty()) throw Error("--db DB.h5 is required");
+    const auto m = parse_method(method);
+    if (!m) throw Error("unknown method", {}, method);
+    rs.method = *m;
+
+    auto reader = std::make_shared<io::DbReader>(db_path);
+    Database db(reader);
+    const std::size_t n_obj = objects > 0 ? std::min(objects, db.size()) : db.size();
+    std::printf("bench_recognize: %s\nmachine: %s\ndatabase: %s (%zu objects), method %s, %zu grasps, noise %s\n",
+                "recognizer speed and accuracy", cli::machine_description().c_str(), db_path.c_str(),
+                db.size(), method.c_str(), grasps, noise.c_str());
+    std::printf("parameters: n_p %zu, psi %.2f, N %d, R %d, W %zu, d_outlier %.3f, lambda %.3f, res_free %.3f, "
+                "normal_tol %.1f deg, ICP %s (%d it, %zu pts)\n",
+                rs.n_p, rs.psi, rs.ransac.triplets, rs.ransac.registrations, rs.ransac.prune_w,
+                rs.evaluate.d_outlier, rs.evaluate.lambda, rs.evaluate.res_free, rs.ransac.normal_tolerance_deg,
+                rs.icp.metric == IcpMetric::point_to_plane ? "point-to-plane" : "point-to-point",
+                rs.icp.max_iterations, rs.icp.max_points);
+    const double s_obj_max = db.settings().max_extent;
+
+    auto t0 = std::chrono::steady_clock::now();
+    std::shared_ptr<const FeatureIndex> index;
+    std::shared_ptr<const FeatureTable> table;
+    if (rs.ransac.feature_table) {
+      table = FeatureTable::shared(db, rs.objects);
+    } else {
+      index = std::make_shared<FeatureIndex>(build_feature_index(db, rs.index, rs.objects));
+    }
+    std::printf("feature search: %s, %zu features, built in %.2f s\n",
+                table ? "exact batched table" : "FeatureIndex", table ? table->size() : index->size(),
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+
+    if (speed) {
+      // A few logs spread over the database; every step run with 1 and with 2 threads.
+      std::vector<Log> logs;
+      std::vector<Steps> steps;
+      tbb::task_arena sim_arena(2);
+      for (std::size_t i = 0; i < speed_logs; ++i) {
+        const std::size_t obj = (i * 7 + 3) % n_obj;
+        sim_arena.execute([&] {
+          logs.push_back(simulate(*reader, obj, grasps, noise, 1000 + i));
+          steps.push_back(clouds_of(logs.back().log, grasps, s_obj_max, rs.evaluate.res_free));
+        });
+      }
+      std::map<int, std::vector<double>> last, all, cpu_last;
+      std::map<int, std::vector<StageTimes>> stages;
+      std::map<int, std::vector<StepResult>> finals;
+      for (int threads : {1, 2}) {
+        tbb::task_arena arena(threads);
+        arena.execute([&] {
+          for (std::size_t i = 0; i < logs.size(); ++i) {
+            Recognizer rec(db, index, rs);
+            StepResult r;
+            for (std::size_t k = 0; k < grasps; ++k) {
+              const double c0 = cpu_seconds();
+              r = rec.step(steps[i].contacts[k], steps[i].free[k]);
+              if (k + 1 == grasps) cpu_last[threads].push_back(cpu_seconds() - c0);
+              all[threads].push_back(r.times.total_s);
+            }
+            last[threads].push_back(r.times.total_s);
+            stages[threads].push_back(r.times);
+            finals[threads].push_back(r);
+          }
+        });
+      }
+      bool same = true;
+      for (std::size_t i = 0; i < logs.size(); ++i) {
+        const auto &a = finals[1][i], &b = finals[2][i];
+        same = same && a.hypotheses.size() == b.hypotheses.size();
+        for (std::size_t j = 0; same && j < a.hypotheses.size(); ++j)
+          same = a.hypotheses[j].pose.matrix() == b.hypotheses[j].pose.matrix() &&
+                 a.hypotheses[j].log_weight == b.hypotheses[j].log_weight;
+      }
+      for (int threads : {1, 2}) {
+        std::vector<double> pre, pr, re, ic, ev;
+        for (const StageTimes& t : stages[threads]) {
+          pre.push_back(t.prepare_s);
+          pr.push_back(t.prune_s);
+          re.push_back(t.register_s);
+          ic.push_back(t.icp_s);
+          ev.push_back(t.evaluate_s);
+        }
+        std::printf("threads %d: step %zu median %.1f ms (p90 %.1f ms, cpu %.1f ms); all steps median %.1f ms; stages at step %zu "
+                    "(median ms): prepare %.1f, prune %.1f, register %.1f, icp %.1f, evaluate %.1f\n",
+                    threads, grasps, 1e3 * median(last[threads]), 1e3 * percentile(last[threads], 0.9),
+                    1e3 * median(cpu_last[threads]),
+                    1e3 * median(all[threads]), grasps, 1e3 * median(pre), 1e3 * median(pr), 1e3 * median(re),
+                    1e3 * median(ic), 1e3 * median(ev));
+      }
+      std::printf("speed-up 1 -> 2 threads: %.2fx at step %zu, %.2fx over all steps; identical results: %s\n",
+                  median(last[1]) / median(last[2]), grasps, median(all[1]) / median(all[2]), same ? "yes" : "NO");
+    }
+
+    if (accuracy) {
+      SymmetryCache symmetries;
+      std::size_t right = 0, right_1cm = 0, total = 0;
+      std::vector<double> pos, sym_ori;
+      std::vector<std::string> failures;
+      double time_total = 0.0;
+      for (std::size_t obj = 0; obj < n_obj; ++obj) {
+        for (std::size_t seed = 1; seed <= seeds; ++seed) {
+          const Log log = simulate(*reader, obj, grasps, noise, seed);
+          const Steps st = clouds_of(log.log, grasps, s_obj_max, rs.evaluate.res_free);
+          Recognizer rec(db, index, rs);
+          StepResult r;
+          for (std::size_t k = 0; k < grasps; ++k) {
+            r = rec.step(st.contacts[k], st.free[k]);
+            time_total += r.times.total_s;
+          }
+          ++total;
+          const Pose truth = log.log.truth->object_pose;
+          const bool ok = r.valid && r.best.object == obj;
+          std::string line = db.info(obj).name + " seed " + std::to_string(seed) + ": ";
+          if (ok) {
+            ++right;
+            const PoseError e = pose_error(r.best.pose, truth, &symmetries.get(db, obj));
+            pos.push_back(e.symmetric_position_m);
+            sym_ori.push_back(e.symmetric_orientation_deg);
+            if (e.position_m < 0.01 || e.symmetric_position_m < 0.01) ++right_1cm;
+            else failures.push_back(line + "position error " + std::to_string(e.position_m) + " m");
+          } else {
+            failures.push_back(line + "recognized " + (r.valid ? db.info(r.best.object).name : "nothing") +
+                               " (posterior " + std::to_string(r.posterior) + ")");
+          }
+          std::fprintf(stderr, "\r%zu/%zu logs", total, n_obj * seeds);
+        }
+      }
+      std::fprintf(stderr, "\n");
+      std::printf("accuracy (%zu logs, %s, step %zu): right object %.1f %%, right object and position error < 1 cm "
+                  "%.1f %%; over right objects: position error median %.4f m, symmetric orientation error "
+                  "median %.2f deg (p90 %.2f deg); mean step time %.1f ms\n",
+                  total, noise.c_str(), grasps, 100.0 * double(right) / double(total),
+                  100.0 * double(right_1cm) / double(total), median(pos), median(sym_ori),
+                  percentile(sym_ori, 0.9), 1e3 * time_total / double(total * grasps));
+      for (const std::string& f : failures) std::printf("  miss: %s\n", f.c_str());
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_recognize: error: %s\n", e.what());
+    return 1;
+  }
+}
