@@ -20,14 +20,16 @@
 // box), and that lower bound is returned.
 //
 // Determinism: meshToVolume runs in a single-thread task arena, so its output cannot depend on
-// how TBB splits the work; the exact values are computed per voxel into their own slots and
-// written serially. Same mesh and settings => same grids and bytes for any thread count.
+// how TBB splits the work (meanwhile the coarse distances use the other threads); the exact
+// values are computed per voxel into their own slots and written serially. Same mesh and
+// settings => same grids and bytes for any thread count.
 #include "engine/distance_field.hpp"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/MeshToVolume.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -188,6 +190,47 @@ Eigen::AlignedBox3d checked_bounds(const Mesh& mesh, const DistanceFieldSettings
 
 }  // namespace
 
+namespace {
+
+/// Unsigned distances of the coarse box's voxel centres, column by column along k, each voxel
+/// in its own slot: exact up to `cap`, `cap` beyond. Two bounds from the previous voxel of the
+/// column (distance 1 voxel away) keep the BVH work small: its closest point bounds d(p) from
+/// above (usually tightly: deep inside a sphere the BVH otherwise visits most triangles), and
+/// d(prev) - voxel bounds it from below, which skips runs of voxels beyond the cap (searched
+/// up to cap + 4 voxels to learn how far beyond they are).
+void coarse_distances(const MeshIndex& index, const Eigen::AlignedBox3d& bbox, const openvdb::Coord& cmin,
+                      std::size_t ny, std::size_t nz, double cv, double cap, std::vector<float>& dense) {
+  const double reach = cap + 4.0 * cv;
+  const std::size_t columns = dense.size() / nz;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns), [&](const auto& range) {
+    for (std::size_t ij = range.begin(); ij != range.end(); ++ij) {
+      const int i = cmin.x() + static_cast<int>(ij / ny), j = cmin.y() + static_cast<int>(ij % ny);
+      std::optional<Vec3> last;   // closest surface point of the previous voxel
+      double lower = 0.0;         // lower bound on the distance of the current voxel
+      for (std::size_t kk = 0; kk < nz; ++kk) {
+        const Vec3 p = Vec3(i, j, cmin.z() + static_cast<int>(kk)) * cv;
+        double d;                   // exact, or a lower bound when >= cap
+        std::optional<Vec3> found;
+        if (lower < cap && bbox.squaredExteriorDistance(p) < cap * cap) {
+          std::optional<ClosestPoint> hit;
+          const double bound = last ? (p - *last).norm() * (1.0 + 1e-9) + 1e-12 : reach;
+          if (bound < reach) hit = index.closest_within(p, bound);
+          if (!hit) hit = index.closest_within(p, reach);
+          d = hit ? hit->distance : reach;
+          if (hit) found = hit->point;
+        } else {
+          d = std::max(lower, cap);   // d(p) >= lower, and >= dist(p, bbox) >= cap
+        }
+        last = found;
+        dense[ij * nz + kk] = static_cast<float>(std::min(d, cap));
+        lower = d - cv * (1.0 + 1e-9);
+      }
+    }
+  });
+}
+
+}  // namespace
+
 DistanceField DistanceField::build(const Mesh& mesh, bool is_signed, const DistanceFieldSettings& s) {
   checked_bounds(mesh, s);
   return build(MeshIndex(mesh), is_signed, s);
@@ -211,10 +254,31 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
   im.fine_voxel = s.fine_voxel;
   im.coarse_voxel = s.coarse_voxel;
 
-  // Fine level: band topology and inside/outside from meshToVolume, values exact.
-  const double fv = s.fine_voxel;
-  im.fine = run_mesh_to_volume(mesh, fv, static_cast<float>(s.fine_band_voxels),
-                               static_cast<float>(s.fine_band_voxels), is_signed);
+  // Coarse box: dense, every point of bbox + margin having its 8 corners inside.
+  const double fv = s.fine_voxel, cv = s.coarse_voxel;
+  const Vec3 lo = (bbox.min().array() - s.coarse_margin) / cv;
+  const Vec3 hi = (bbox.max().array() + s.coarse_margin) / cv;
+  const openvdb::Coord cmin(static_cast<int>(std::floor(lo.x())), static_cast<int>(std::floor(lo.y())),
+                            static_cast<int>(std::floor(lo.z())));
+  const openvdb::Coord cmax(static_cast<int>(std::ceil(hi.x())), static_cast<int>(std::ceil(hi.y())),
+                            static_cast<int>(std::ceil(hi.z())));
+  const openvdb::Coord dim = cmax - cmin + openvdb::Coord(1);
+  const std::size_t nx = static_cast<std::size_t>(dim.x()), ny = static_cast<std::size_t>(dim.y()),
+                    nz = static_cast<std::size_t>(dim.z());
+  // Farther than `cap` from the surface a voxel holds `cap`, a lower bound on its distance.
+  const double cap = s.coarse_margin + 2.0 * cv;
+  std::vector<float> dense(nx * ny * nz);
+
+  // The serial meshToVolume run (fine band topology and inside/outside) and the coarse
+  // unsigned distances (parallel, on whatever threads the first leaves free) side by side.
+  tbb::parallel_invoke(
+      [&] {
+        im.fine = run_mesh_to_volume(mesh, fv, static_cast<float>(s.fine_band_voxels),
+                                     static_cast<float>(s.fine_band_voxels), is_signed);
+      },
+      [&] { coarse_distances(index, bbox, cmin, ny, nz, cv, cap, dense); });
+
+  // Fine level values: exact.
   {
     std::vector<openvdb::Coord> coords;
     std::vector<float> values;
@@ -242,48 +306,21 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
     for (std::size_t n = 0; n < coords.size(); ++n) acc.setValueOnly(coords[n], values[n]);
   }
 
-  // Coarse level: dense over the box, every point of bbox + margin having its 8 corners inside.
-  const double cv = s.coarse_voxel;
-  const Vec3 lo = (bbox.min().array() - s.coarse_margin) / cv;
-  const Vec3 hi = (bbox.max().array() + s.coarse_margin) / cv;
-  const openvdb::Coord cmin(static_cast<int>(std::floor(lo.x())), static_cast<int>(std::floor(lo.y())),
-                            static_cast<int>(std::floor(lo.z())));
-  const openvdb::Coord cmax(static_cast<int>(std::ceil(hi.x())), static_cast<int>(std::ceil(hi.y())),
-                            static_cast<int>(std::ceil(hi.z())));
-  const openvdb::Coord dim = cmax - cmin + openvdb::Coord(1);
-  const std::size_t nx = static_cast<std::size_t>(dim.x()), ny = static_cast<std::size_t>(dim.y()),
-                    nz = static_cast<std::size_t>(dim.z());
-  // Farther than `cap` from the surface a voxel holds `cap`, a lower bound on its distance.
-  const double cap = s.coarse_margin + 2.0 * cv;
-  std::vector<float> dense(nx * ny * nz);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nx * ny), [&](const auto& range) {
-    auto fine_acc = im.fine->getConstUnsafeAccessor();
-    for (std::size_t ij = range.begin(); ij != range.end(); ++ij) {
-      const int i = cmin.x() + static_cast<int>(ij / ny), j = cmin.y() + static_cast<int>(ij % ny);
-      double prev = cap;   // distance of the previous voxel of this column
-      for (std::size_t kk = 0; kk < nz; ++kk) {
-        const int k = cmin.z() + static_cast<int>(kk);
-        const Vec3 p = Vec3(i, j, k) * cv;
-        // Triangle inequality: d(p) <= d(previous voxel) + cv, a tight bound for the BVH.
-        const double bound = prev + cv * (1.0 + 1e-9) + 1e-12;
-        std::optional<ClosestPoint> hit;
-        if (bbox.squaredExteriorDistance(p) < cap * cap) {   // else d >= dist(p, bbox) >= cap
-          if (bound < cap) hit = index.closest_within(p, bound);
-          if (!hit) hit = index.closest_within(p, cap);
-        }
-        double d = hit ? hit->distance : cap;
-        prev = d;
-        if (is_signed) {
-          // Inside/outside from the fine level: band values, or the sign of the inactive
-          // interior/exterior tiles (meshToVolume's flood fill) away from the surface.
+  // Coarse signs: inside/outside from the fine level (band values, or the sign of the inactive
+  // interior/exterior tiles of meshToVolume's flood fill away from the surface).
+  if (is_signed) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nx * ny), [&](const auto& range) {
+      auto fine_acc = im.fine->getConstUnsafeAccessor();
+      for (std::size_t ij = range.begin(); ij != range.end(); ++ij)
+        for (std::size_t kk = 0; kk < nz; ++kk) {
+          const Vec3 p = Vec3(cmin.x() + static_cast<int>(ij / ny), cmin.y() + static_cast<int>(ij % ny),
+                              cmin.z() + static_cast<int>(kk)) * cv;
           const openvdb::Coord f(static_cast<int>(std::lround(p.x() / fv)), static_cast<int>(std::lround(p.y() / fv)),
                                  static_cast<int>(std::lround(p.z() / fv)));
-          if (fine_acc.getValue(f) < 0.0f) d = -d;
+          if (fine_acc.getValue(f) < 0.0f) dense[ij * nz + kk] = -dense[ij * nz + kk];
         }
-        dense[ij * nz + kk] = static_cast<float>(d);
-      }
-    }
-  });
+    });
+  }
   im.coarse = Grid::create(static_cast<float>(cap));
   im.coarse->setTransform(openvdb::math::Transform::createLinearTransform(cv));
   {

@@ -103,7 +103,7 @@ int run_build(const BuildOptions& o) {
   const auto& t = report.times;
   const int threads = thread_count(o.common);
   std::cerr << "built " << report.names.size() << " objects into " << o.out << " in " << fixed(t.wall_s, 2) << " s ("
-            << threads << " threads; " << machine_description() << ")\n"
+            << threads << (threads == 1 ? " thread; " : " threads; ") << machine_description() << ")\n"
             << "  per stage, seconds (import/scan/features/field summed over objects):\n"
             << "    read archives " << fixed(t.read_s, 2) << "\n"
             << "    import        " << fixed(t.import_s, 2) << "\n"

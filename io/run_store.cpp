@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
+#include <thread>
 #include <map>
 #include <tuple>
 
@@ -340,6 +342,21 @@ std::vector<T> gather(const std::vector<T>& column, std::size_t width, const std
   return out;
 }
 
+/// Open a store, retrying for a while when the file is momentarily locked by another process
+/// (HDF5 locks files: `touchstone report` reading a store while the experiment appends to it).
+/// Missing and foreign files fail at once.
+h5::File open_store(const std::filesystem::path& path, h5::File::Access access) {
+  for (int attempt = 0;; ++attempt) {
+    try {
+      return h5::File::open(path, access);
+    } catch (const Error& e) {
+      const std::string what = e.what();
+      if (attempt >= 100 || what.find("lock") == std::string::npos) throw;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50 + 10 * attempt));
+    }
+  }
+}
+
 }  // namespace
 
 void RunStore::create(const std::filesystem::path& path, const RunStoreHeader& header) {
@@ -357,12 +374,12 @@ void RunStore::create(const std::filesystem::path& path, const RunStoreHeader& h
 }
 
 RunStoreHeader RunStore::read_header(const std::filesystem::path& path) {
-  h5::File f = h5::File::open(path, h5::File::Access::read);
+  h5::File f = open_store(path, h5::File::Access::read);
   return parse_header(f);
 }
 
 RunStoreContents RunStore::read(const std::filesystem::path& path) {
-  h5::File f = h5::File::open(path, h5::File::Access::read);
+  h5::File f = open_store(path, h5::File::Access::read);
   RunStoreContents c;
   c.header = parse_header(f);
   c.runs = read_runs(f, c.header);
@@ -372,7 +389,7 @@ RunStoreContents RunStore::read(const std::filesystem::path& path) {
 
 void RunStore::append(const std::filesystem::path& path, const std::vector<RunRecord>& runs) {
   if (runs.empty()) return;
-  h5::File f = h5::File::open(path, h5::File::Access::read_write);
+  h5::File f = open_store(path, h5::File::Access::read_write);
   const RunStoreHeader h = parse_header(f);
   for (const RunRecord& r : runs)
     if (r.variant < 0 || static_cast<std::size_t>(r.variant) >= h.variant_labels.size() ||
@@ -395,7 +412,7 @@ void RunStore::compact(const std::filesystem::path& path, bool complete) {
     std::vector<std::vector<double>> dbls;
   } c;
   {
-    h5::File f = h5::File::open(path, h5::File::Access::read);
+    h5::File f = open_store(path, h5::File::Access::read);
     h = parse_header(f);
     const std::vector<RunRecord> runs = read_runs(f, h, &rows);  // validates, picks the rows
     h5::Group rg = f.root().open_group("runs");

@@ -209,6 +209,18 @@ TEST_CASE("FeatureIndex exact mode matches brute force, ties included") {
       for (auto& v : query) v += static_cast<float>(rng.normal());
     for (std::size_t w : {1u, 10u, 100u, 3000u, 5000u}) check_same(index.knn(query, w), brute_features(feats, query, w));
   }
+  // FLANN's search is const with per-call state only: parallel queries equal serial ones.
+  std::vector<Feature> queries(64);
+  for (auto& q : queries) {
+    q = feats[rng.index(feats.size())];
+    for (auto& v : q) v += static_cast<float>(rng.normal());
+  }
+  std::vector<std::vector<Neighbour>> par(queries.size());
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    tbb::parallel_for(std::size_t(0), queries.size(), [&](std::size_t i) { par[i] = index.knn(queries[i], 200); });
+  });
+  for (std::size_t i = 0; i < queries.size(); ++i) check_same(par[i], brute_features(feats, queries[i], 200));
 }
 
 TEST_CASE("FeatureIndex ties: among identical features the smaller indices win") {

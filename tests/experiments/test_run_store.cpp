@@ -5,6 +5,13 @@
 
 #include <doctest/doctest.h>
 
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <thread>
+
 using namespace ts;
 using namespace ts::io;
 
@@ -200,4 +207,30 @@ TEST_CASE("Compaction is idempotent: stored values never round-trip") {
   RunStore::compact(b, true);
   RunStore::compact(b, true);
   CHECK(test::read_bytes(a) == test::read_bytes(b));
+}
+
+TEST_CASE("An append waits while another process holds the store's HDF5 lock") {
+  // `touchstone report` (here: h5py) reading the store at the moment the experiment appends.
+  test::TempDir dir("runstore");
+  const auto path = dir / "run.h5";
+  RunStore::create(path, header());
+  const auto ready = dir / "locked";
+  const std::string script = "import h5py, time, pathlib\nf = h5py.File('" + path.string() +
+                             "', 'r+')\npathlib.Path('" + ready.string() +
+                             "').touch()\ntime.sleep(1.5)\nf.close()\n";
+  std::vector<std::string> args{"/usr/bin/python3", "-c", script};
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  REQUIRE(posix_spawn(&pid, argv[0], nullptr, nullptr, argv.data(), environ) == 0);
+  for (int i = 0; i < 200 && !std::filesystem::exists(ready); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(25));
+  REQUIRE(std::filesystem::exists(ready));
+  CHECK_NOTHROW(RunStore::append(path, {record(0, 0, 0)}));
+  int status = 0;
+  waitpid(pid, &status, 0);
+  CHECK(WIFEXITED(status));
+  CHECK(WEXITSTATUS(status) == 0);
+  CHECK(RunStore::read(path).runs.size() == 1);
 }
