@@ -14,6 +14,7 @@ namespace {
 
 constexpr int kDim = kFeatureDim;
 constexpr std::size_t kBlock = 128;          ///< rows per block (dims-major inside a block)
+constexpr std::uint32_t kPadding = 0xffffffffu;  ///< object of a padding row
 
 struct Item {
   float d;
@@ -42,6 +43,8 @@ struct FeatureTable::Impl {
   std::vector<float> blocks;        ///< nblocks x kDim x kBlock, padding rows far away
   std::vector<float> lo, hi;        ///< nblocks x kDim: bounding box of each block's rows
   std::size_t rows = 0;
+  std::size_t features = 0;         ///< rows that hold a feature (rows minus padding)
+  std::vector<std::uint32_t> object_blocks;  ///< first block of each object present (+ end)
   std::size_t nblocks() const { return (rows + kBlock - 1) / kBlock; }
   const float* block(std::size_t b) const { return blocks.data() + b * kDim * kBlock; }
 };
@@ -86,30 +89,42 @@ void kd_order(const std::vector<const Feature*>& f, std::vector<std::uint32_t>& 
 FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& objects)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
+  // Each object's rows in k-d leaf order, starting on a block boundary (padding rows between
+  // objects), so that a block belongs to one object: knn_per_object searches an object's blocks
+  // best-first like knn searches all of them.
   std::vector<FeatureRef> refs;
   std::vector<const Feature*> feats;
   for (std::size_t o = 0; o < db.size(); ++o) {
     if (!objects.empty() && (o >= objects.size() || !objects[o])) continue;
     const auto& fs = db.features(o).features;
-    for (std::size_t i = 0; i < fs.size(); ++i) {
-      refs.push_back({static_cast<std::uint32_t>(o), static_cast<std::uint32_t>(i)});
-      feats.push_back(&fs[i]);
+    if (fs.empty()) continue;
+    std::vector<const Feature*> of(fs.size());
+    std::vector<std::uint32_t> idx(fs.size());
+    for (std::size_t i = 0; i < fs.size(); ++i) of[i] = &fs[i], idx[i] = static_cast<std::uint32_t>(i);
+    kd_order(of, idx, 0, idx.size());
+    m.object_blocks.push_back(static_cast<std::uint32_t>(refs.size() / kBlock));
+    for (std::uint32_t i : idx) {
+      refs.push_back({static_cast<std::uint32_t>(o), i});
+      feats.push_back(of[i]);
     }
+    while (refs.size() % kBlock != 0) {
+      refs.push_back({kPadding, kPadding});
+      feats.push_back(nullptr);
+    }
+    m.features += fs.size();
   }
+  m.object_blocks.push_back(static_cast<std::uint32_t>(refs.size() / kBlock));
   if (refs.size() >= std::numeric_limits<std::uint32_t>::max())
     throw Error("FeatureTable: too many features");
   m.rows = refs.size();
-  std::vector<std::uint32_t> idx(m.rows);
-  for (std::uint32_t i = 0; i < m.rows; ++i) idx[i] = i;
-  kd_order(feats, idx, 0, m.rows);
   const std::size_t nb = m.nblocks();
-  m.refs.resize(m.rows);
+  m.refs = std::move(refs);
   m.blocks.assign(nb * kDim * kBlock, 1e18f);  // padding never wins
   m.lo.assign(nb * kDim, std::numeric_limits<float>::infinity());
   m.hi.assign(nb * kDim, -std::numeric_limits<float>::infinity());
   for (std::size_t r = 0; r < m.rows; ++r) {
-    m.refs[r] = refs[idx[r]];
-    const Feature& f = *feats[idx[r]];
+    if (!feats[r]) continue;
+    const Feature& f = *feats[r];
     const std::size_t b = r / kBlock;
     float* blk = m.blocks.data() + b * kDim * kBlock;
     for (int d = 0; d < kDim; ++d) {
@@ -121,59 +136,91 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
 }
 
 std::size_t FeatureTable::size() const { return impl_->rows; }
+std::size_t FeatureTable::features() const { return impl_->features; }
 const FeatureRef& FeatureTable::ref(std::size_t i) const { return impl_->refs.at(i); }
+
+namespace {
+
+/// The w nearest feature rows among blocks [b0, b1) to query qv, appended to `out` sorted by
+/// (distance, row). Best-first over the blocks by the lower bound (distance to the block's
+/// bounding box); stops when the bound exceeds the w-th distance found so far. Exact: a skipped
+/// block's rows are all farther than w rows already found.
+void search_blocks(const FeatureTable::Impl& m, const float* qv, std::size_t b0, std::size_t b1,
+                   std::size_t w, std::vector<std::pair<float, std::uint32_t>>& order,
+                   std::vector<Item>& cand, std::vector<Neighbour>& out) {
+  order.clear();
+  for (std::size_t b = b0; b < b1; ++b) {
+    // squared distance from q to the block's bounding box, slightly shrunk (a float row
+    // distance is never below it)
+    double s2 = 0.0;
+    for (int k = 0; k < kDim; ++k) {
+      const double x = qv[k], l = m.lo[b * kDim + k], h = m.hi[b * kDim + k];
+      const double e = x < l ? l - x : (x > h ? x - h : 0.0);
+      s2 += e * e;
+    }
+    order.push_back({static_cast<float>(s2 * (1.0 - 1e-5)), static_cast<std::uint32_t>(b)});
+  }
+  std::sort(order.begin(), order.end());
+  cand.clear();
+  float tau = std::numeric_limits<float>::infinity();
+  float d[kBlock];
+  for (const auto& [lb, b] : order) {
+    if (lb > tau) break;
+    block_distances(m.block(b), qv, d);
+    const std::size_t base = std::size_t{b} * kBlock;
+    for (std::size_t i = 0; i < kBlock; ++i)
+      if (d[i] <= tau && m.refs[base + i].object != kPadding)
+        cand.push_back({d[i], static_cast<std::uint32_t>(base + i)});
+    if (cand.size() >= 2 * w) {
+      std::nth_element(cand.begin(), cand.begin() + static_cast<std::ptrdiff_t>(w - 1), cand.end(), before);
+      cand.resize(w);
+      tau = cand[w - 1].d;
+      for (const Item& x : cand) tau = std::max(tau, x.d);
+    }
+  }
+  if (cand.size() > w) {
+    std::nth_element(cand.begin(), cand.begin() + static_cast<std::ptrdiff_t>(w - 1), cand.end(), before);
+    cand.resize(w);
+  }
+  std::sort(cand.begin(), cand.end(), before);
+  for (const Item& x : cand) out.push_back({x.row, static_cast<double>(x.d)});
+}
+
+}  // namespace
 
 std::vector<std::vector<Neighbour>> FeatureTable::knn(const std::vector<Feature>& queries,
                                                       std::size_t w) const {
   const Impl& m = *impl_;
   const std::size_t Q = queries.size();
   std::vector<std::vector<Neighbour>> out(Q);
-  if (Q == 0 || w == 0 || m.rows == 0) return out;
-  w = std::min(w, m.rows);
-  const std::size_t nb = m.nblocks();
-  // Best-first over blocks, per query: blocks in increasing order of the lower bound (distance
-  // to the block's bounding box); stop when the bound exceeds the w-th distance found so far.
-  // Exact: a skipped block's rows are all farther than w rows already found.
+  if (Q == 0 || w == 0 || m.features == 0) return out;
+  w = std::min(w, m.features);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, Q, 1), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::pair<float, std::uint32_t>> order(nb);
+    std::vector<std::pair<float, std::uint32_t>> order;
     std::vector<Item> cand;
-    float d[kBlock];
     for (std::size_t q = range.begin(); q != range.end(); ++q) {
-      const float* qv = queries[q].data();
-      for (std::size_t b = 0; b < nb; ++b) {
-        // squared distance from q to the block's bounding box, slightly shrunk (a float
-        // row distance is never below it)
-        double s2 = 0.0;
-        for (int k = 0; k < kDim; ++k) {
-          const double x = qv[k], l = m.lo[b * kDim + k], h = m.hi[b * kDim + k];
-          const double e = x < l ? l - x : (x > h ? x - h : 0.0);
-          s2 += e * e;
-        }
-        order[b] = {static_cast<float>(s2 * (1.0 - 1e-5)), static_cast<std::uint32_t>(b)};
-      }
-      std::sort(order.begin(), order.end());
-      cand.clear();
-      float tau = std::numeric_limits<float>::infinity();
-      for (const auto& [lb, b] : order) {
-        if (lb > tau) break;
-        block_distances(m.block(b), qv, d);
-        const std::size_t base = std::size_t{b} * kBlock;
-        for (std::size_t i = 0; i < kBlock; ++i)
-          if (d[i] <= tau && base + i < m.rows) cand.push_back({d[i], static_cast<std::uint32_t>(base + i)});
-        if (cand.size() >= 2 * w) {
-          std::nth_element(cand.begin(), cand.begin() + static_cast<std::ptrdiff_t>(w - 1), cand.end(), before);
-          cand.resize(w);
-          tau = cand[w - 1].d;
-          for (const Item& x : cand) tau = std::max(tau, x.d);
-        }
-      }
-      if (cand.size() > w) {
-        std::nth_element(cand.begin(), cand.begin() + static_cast<std::ptrdiff_t>(w - 1), cand.end(), before);
-        cand.resize(w);
-      }
-      std::sort(cand.begin(), cand.end(), before);
-      out[q].reserve(cand.size());
-      for (const Item& x : cand) out[q].push_back({x.row, static_cast<double>(x.d)});
+      out[q].reserve(w);
+      search_blocks(m, queries[q].data(), 0, m.nblocks(), w, order, cand, out[q]);
+    }
+  });
+  return out;
+}
+
+std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vector<Feature>& queries,
+                                                                 std::size_t w) const {
+  const Impl& m = *impl_;
+  const std::size_t Q = queries.size();
+  std::vector<std::vector<Neighbour>> out(Q);
+  if (Q == 0 || w == 0 || m.features == 0) return out;
+  const std::size_t groups = m.object_blocks.size() - 1;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, Q, 1), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<std::pair<float, std::uint32_t>> order;
+    std::vector<Item> cand;
+    for (std::size_t q = range.begin(); q != range.end(); ++q) {
+      out[q].reserve(w * groups);
+      for (std::size_t g = 0; g < groups; ++g)
+        search_blocks(m, queries[q].data(), m.object_blocks[g], m.object_blocks[g + 1], w, order,
+                      cand, out[q]);
     }
   });
   return out;

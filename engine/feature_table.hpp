@@ -22,18 +22,26 @@ class FeatureTable {
   FeatureTable(FeatureTable&&) noexcept;
   FeatureTable& operator=(FeatureTable&&) noexcept;
 
-  std::size_t size() const;
+  std::size_t size() const;        ///< rows, padding between objects included (ref() of a
+                                   ///< padding row has object 0xffffffff)
+  std::size_t features() const;    ///< rows that hold a feature
   const FeatureRef& ref(std::size_t i) const;
   /// For each query, the w nearest rows by squared L2 distance (accumulated in float over the
   /// 33 bins in order), sorted by (distance, row). Exact. Parallel (TBB) over queries.
   std::vector<std::vector<Neighbour>> knn(const std::vector<Feature>& queries, std::size_t w) const;
+  /// For each query, the w nearest rows of EVERY object (exact; each object's rows sorted by
+  /// (distance, row), objects ascending). Flat patches match thousands of near-identical
+  /// features of box-like objects; a global W then starves the other objects, this does not.
+  std::vector<std::vector<Neighbour>> knn_per_object(const std::vector<Feature>& queries,
+                                                     std::size_t w) const;
 
   /// One table per (database, object mask), shared while someone holds it.
   static std::shared_ptr<const FeatureTable> shared(const Database& db,
                                                     const std::vector<std::uint8_t>& objects = {});
 
+ struct Impl;
+
  private:
-  struct Impl;
   std::unique_ptr<Impl> impl_;
 };
 

@@ -212,7 +212,13 @@ FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings&
 }
 
 std::size_t FeatureSearch::size() const {
-  return table ? table->size() : index ? index->size() : 0;
+  return table ? table->features() : index ? index->size() : 0;
+}
+
+std::vector<std::vector<Neighbour>> FeatureSearch::knn_per_object(const std::vector<Feature>& queries,
+                                                                  std::size_t w) const {
+  if (!table) throw Error("per-object feature pruning needs the exact feature table", {}, "prune_per_object");
+  return table->knn_per_object(queries, w);
 }
 
 const FeatureRef& FeatureSearch::ref(std::size_t i) const {
@@ -294,7 +300,8 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   for (const Triplet& t : trip)
     if (t.valid)
       for (int j = 0; j < 3; ++j) queries.push_back(scene.features[t.point[j]]);
-  const auto nearest = search.knn(queries, s.prune_w);
+  const auto nearest = s.prune_per_object > 0 ? search.knn_per_object(queries, s.prune_per_object)
+                                               : search.knn(queries, s.prune_w);
   {
     std::vector<std::array<std::size_t, 2>> jobs;  // (triplet, first query)
     std::size_t q = 0;

@@ -21,6 +21,9 @@ struct RansacSettings {
   int triplets = 15;                  ///< N, triplets sampled from the input (paper: 15)
   int registrations = 200;            ///< R, registrations per triplet (paper: 200)
   std::size_t prune_w = 3000;         ///< W, nearest database features per point (paper: 3000)
+  std::size_t prune_per_object = 0;   ///< extension: the W_obj nearest features of EVERY
+                                      ///< allowed object instead of the W nearest overall
+                                      ///< (0: the paper's global W); needs feature_table
   bool feature_table = true;          ///< W-nearest search: exact batched brute force
                                       ///< (FeatureTable); false: the FeatureIndex
   double min_spacing = 0.0;           ///< m between triplet points; 0: the FPFH feature radius.
@@ -66,6 +69,9 @@ struct FeatureSearch {
   const FeatureRef& ref(std::size_t i) const;
   /// Per query, the w nearest (sorted by distance, then row). Parallel.
   std::vector<std::vector<Neighbour>> knn(const std::vector<Feature>& queries, std::size_t w) const;
+  /// Per query, the w nearest of every object (FeatureTable::knn_per_object; table only).
+  std::vector<std::vector<Neighbour>> knn_per_object(const std::vector<Feature>& queries,
+                                                     std::size_t w) const;
 };
 
 /// N x R registrations; the valid ones, in slot order (slot = triplet * R + registration).

@@ -139,6 +139,7 @@ RecognizerSettings RecognizerSettings::improved() {
   s.refine_new = true;
   s.refine_pool = 60;
   s.new_per_object = 5;
+  s.ransac.prune_per_object = 200;
   return s;
 }
 

@@ -23,7 +23,7 @@ using experiments::ExperimentConfig;
 struct ExperimentOptions {
   CommonOptions common;
   std::string db, config_file, out, plots;
-  std::string objects, runs, steps, pool, method, noise, sensors, schedule;
+  std::string objects, runs, steps, pool, method, preset, noise, sensors, schedule;
   std::vector<std::string> set;   ///< KEY=VALUE, any configuration key
   bool resume = false;
   bool seed_given = false;
@@ -86,6 +86,7 @@ ExperimentConfig build_config(const ExperimentOptions& o) {
   flag(o.steps, "steps");
   flag(o.pool, "pool");
   flag(o.method, "method");
+  flag(o.preset, "preset");
   flag(o.noise, "noise");
   flag(o.sensors, "sensors");
   flag(o.schedule, "schedule");
@@ -219,6 +220,8 @@ void register_experiment(CLI::App& app) {
   e->add_option("--steps", eo->steps, "Exploration steps (grasps) per run (default 40)");
   e->add_option("--pool", eo->pool, "Simulated grasps per object that runs draw from (default 50)");
   e->add_option("--method", eo->method, "bricpsf | batch-ransac | ransac-icp | ransac-icp-fs");
+  e->add_option("--preset", eo->preset,
+                "improved (default): Touchstone's extensions; paper: the paper's parameters exactly");
   e->add_option("--noise", eo->noise, "ideal | underwater | deepsea");
   e->add_option("--sensors", eo->sensors, "Tactile pads: 1 (the paper's) or 6");
   e->add_option("--schedule", eo->schedule,

@@ -30,7 +30,7 @@ struct RecognizeOptions {
   CommonOptions common;
   std::string db, log, cloud, out, ground_truth, object;
   std::string method = "bricpsf";
-  std::string preset = "paper";      ///< paper | improved: the defaults the flags start from
+  std::string preset = "improved";   ///< improved | paper: the defaults the flags start from
   int steps = 0;                     ///< 0: every grasp of the log
   RecognizerSettings rs;             ///< method parameters (defaults: the paper's)
   double contact_voxel = 0.002;      ///< m, voxel filter of the cumulative contact cloud
@@ -97,6 +97,7 @@ std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& 
           {"N", double(s.ransac.triplets)},
           {"R", double(s.ransac.registrations)},
           {"W", double(s.ransac.prune_w)},
+          {"W_per_object", double(s.ransac.prune_per_object)},
           {"min_spacing", s.ransac.min_spacing},
           {"distance_tolerance", s.ransac.distance_tolerance},
           {"min_sv_ratio", s.ransac.min_sv_ratio},
@@ -234,6 +235,7 @@ int run_recognize(const RecognizeOptions& o) {
   if (o.common.json) {
     nlohmann::ordered_json j;
     j["method"] = std::string(method_name(rs.method));
+    j["preset"] = o.preset;
     j["steps"] = nlohmann::ordered_json::array();
     for (std::size_t k = 0; k < results.size(); ++k) {
       const StepResult& r = results[k];
@@ -330,17 +332,21 @@ void register_recognize(CLI::App& app) {
   sub->add_option("--object", o->object, "Name of the touched object (ground truth), if known");
 
   sub->add_option("--preset", o->preset,
-                  "paper: the paper's method (default); improved: with Touchstone's extensions "
-                  "(free space inside objects, duplicate removal, ICP on new hypotheses, "
-                  "diversity); the flags below apply on top")
+                  "improved (default): Touchstone's extensions (per-object feature pruning, free "
+                  "space inside objects, duplicate removal, ICP on new hypotheses, diversity); "
+                  "paper: the paper's method exactly. The flags below apply on top")
       ->check(CLI::IsMember({"paper", "improved"}));
   RecognizerSettings& s = o->rs;
-  auto* g = "Method parameters (defaults: the paper's)";
+  auto* g = "Method parameters (defaults: the preset's; the paper's unless marked Extension)";
   sub->add_option("--n-p", s.n_p, "BRICPSF hypotheses n_p")->group(g)->check(CLI::Range(1, 1000000));
   sub->add_option("--psi", s.psi, "Share of evolved hypotheses kept (Psi)")->group(g)->check(CLI::Range(0.0, 1.0));
   sub->add_option("-N,--triplets", s.ransac.triplets, "Batch RANSAC triplets N")->group(g)->check(CLI::Range(1, 1000000));
   sub->add_option("-R,--registrations", s.ransac.registrations, "Registrations per triplet R")->group(g)->check(CLI::Range(1, 1000000));
   sub->add_option("-W,--prune", s.ransac.prune_w, "Nearest database features per triplet point W")->group(g)->check(CLI::Range(1, 100000000));
+  auto* per_object_w = sub->add_option("--prune-per-object", s.ransac.prune_per_object,
+                                       "Extension: nearest features of every object per triplet point (0: the global W)")
+                           ->group(g)
+                           ->check(CLI::Range(0, 100000000));
   sub->add_option("--d-outlier", s.evaluate.d_outlier, "Outlier distance of Eq. 4 (m)")->group(g)->check(CLI::PositiveNumber);
   sub->add_option("--lambda", s.evaluate.lambda, "Free-space weight of Eq. 9")->group(g)->check(CLI::NonNegativeNumber);
   sub->add_option("--res-free", s.evaluate.res_free, "Free-space resolution (m); d_thresh = res_free/2")->group(g)->check(CLI::PositiveNumber);
@@ -369,7 +375,7 @@ void register_recognize(CLI::App& app) {
   sub->add_option("--feature-checks", s.index.checks, "Approximate feature search: leaves visited")->group(g)->check(CLI::Range(1, 1 << 30));
   sub->add_option("--contact-voxel", o->contact_voxel, "Voxel filter of the cumulative contacts (m)")->group(g)->check(CLI::PositiveNumber);
   add_common(sub, o->common);
-  sub->callback([o, inside, dedupe, refine, pool, per_object] {
+  sub->callback([o, inside, dedupe, refine, pool, per_object, per_object_w] {
     // --preset improved: the extensions, except where a flag says otherwise
     if (o->preset == "improved") {
       const RecognizerSettings imp = RecognizerSettings::improved();
@@ -378,6 +384,7 @@ void register_recognize(CLI::App& app) {
       if (refine->count() == 0) o->rs.refine_new = imp.refine_new;
       if (pool->count() == 0) o->rs.refine_pool = imp.refine_pool;
       if (per_object->count() == 0) o->rs.new_per_object = imp.new_per_object;
+      if (per_object_w->count() == 0) o->rs.ransac.prune_per_object = imp.ransac.prune_per_object;
     }
     if (o->log.empty() && o->cloud.empty())
       throw CLI::RequiredError("--log or --cloud");

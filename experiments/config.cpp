@@ -140,6 +140,9 @@ const std::vector<KeyDef>& key_defs() {
           c.method = choice(in, {"bricpsf", "batch-ransac", "ransac-icp", "ransac-icp-fs"}, x);
         },
         [](auto& c) { return J(c.method); });
+    add("preset", true,
+        [](auto& c, auto& in, auto& x) { c.preset = choice(in, {"improved", "paper"}, x); },
+        [](auto& c) { return J(c.preset); });
     add("noise", true,
         [](auto& c, auto& in, auto& x) { c.noise = choice(in, {"ideal", "underwater", "deepsea"}, x); },
         [](auto& c) { return J(c.noise); });
@@ -199,6 +202,9 @@ const std::vector<KeyDef>& key_defs() {
     add("ransac.prune", true,
         [](auto& c, auto& in, auto& x) { c.params.prune = int_at_least(in, 1, x); },
         [](auto& c) { return opt(c.params.prune); });
+    add("ransac.prune_per_object", true,
+        [](auto& c, auto& in, auto& x) { c.params.prune_per_object = int_at_least(in, 0, x); },
+        [](auto& c) { return opt(c.params.prune_per_object); });
     add("ransac.d_outlier_m", true,
         [=](auto& c, auto& in, auto& x) { c.params.d_outlier_m = number_in(in, 1e-6, 100, x); },
         [](auto& c) { return opt(c.params.d_outlier_m); });

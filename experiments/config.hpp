@@ -12,12 +12,16 @@
 //   steps              int >= 1            exploration steps (grasps) per run (paper: 40)
 //   pool               int >= steps        simulated grasps per object (Section 5.1: >= 50)
 //   method             bricpsf | batch-ransac | ransac-icp | ransac-icp-fs
+//   preset             improved (default) | paper: the defaults of the method parameters
+//                      (paper: Section 4-5 exactly; improved: Touchstone's extensions, see
+//                      RecognizerSettings::improved)
 //   noise              ideal | underwater | deepsea
 //   noise.arm_position_sigma_m, noise.arm_rotation_sigma_deg, noise.sensel_noise,
 //   noise.force_noise, noise.contact_sigma_m     overrides of the profile (>= 0)
 //   sensors            1 | 6
 //   seed               unsigned integer
 //   ransac.triplets (N), ransac.registrations (R), ransac.samples ("NxR"), ransac.prune (W),
+//   ransac.prune_per_object (W per object, 0: the global W),
 //   ransac.d_outlier_m, bricpsf.hypotheses (n_p), bricpsf.psi, bricpsf.lambda,
 //   icp.iterations     method parameters; unset means the recognizer's default
 //   schedule           runs | steps        parallel over runs (throughput) or inside each step
@@ -52,6 +56,7 @@ struct MethodParams {
   std::optional<int> triplets;          ///< N, input triplets per Batch RANSAC
   std::optional<int> registrations;     ///< R, registrations per triplet
   std::optional<int> prune;             ///< W, nearest database features per triplet point
+  std::optional<int> prune_per_object;  ///< W_obj, nearest features of every object (0: off)
   std::optional<double> d_outlier_m;    ///< m, Eq. 4
   std::optional<int> hypotheses;        ///< n_p, BRICPSF hypotheses
   std::optional<double> psi;            ///< Ψ, share of evolved hypotheses kept
@@ -74,6 +79,7 @@ struct ExperimentConfig {
   int steps = 40;
   int pool = 50;
   std::string method = "bricpsf";
+  std::string preset = "improved";      ///< paper | improved: the defaults the params start from
   std::string noise = "underwater";
   NoiseOverrides noise_params;
   int sensors = 1;

@@ -135,7 +135,7 @@ std::string pool_key(const datasets::SimulatorSettings& s) {
 }
 
 RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
-  RecognizerSettings s;
+  RecognizerSettings s = c.preset == "paper" ? RecognizerSettings::paper() : RecognizerSettings::improved();
   const auto method = parse_method(c.method);
   if (!method) throw Error("unknown method '" + c.method + "'", {}, "method");
   s.method = *method;
@@ -143,6 +143,7 @@ RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
   if (p.triplets) s.ransac.triplets = *p.triplets;
   if (p.registrations) s.ransac.registrations = *p.registrations;
   if (p.prune) s.ransac.prune_w = static_cast<std::size_t>(*p.prune);
+  if (p.prune_per_object) s.ransac.prune_per_object = static_cast<std::size_t>(*p.prune_per_object);
   if (p.d_outlier_m) s.evaluate.d_outlier = *p.d_outlier_m;
   if (p.hypotheses) s.n_p = static_cast<std::size_t>(*p.hypotheses);
   if (p.psi) s.psi = *p.psi;

@@ -101,6 +101,7 @@ void set_param(RecognizerSettings& s, const std::string& kv) {
   else if (k == "N") s.ransac.triplets = static_cast<int>(v);
   else if (k == "R") s.ransac.registrations = static_cast<int>(v);
   else if (k == "W") s.ransac.prune_w = static_cast<std::size_t>(v);
+  else if (k == "W_obj") s.ransac.prune_per_object = static_cast<std::size_t>(v);
   else if (k == "d_outlier") s.evaluate.d_outlier = v;
   else if (k == "lambda") s.evaluate.lambda = v;
   else if (k == "res_free") s.evaluate.res_free = v;
@@ -184,7 +185,7 @@ int main(int argc, char** argv) {
       index = std::make_shared<FeatureIndex>(build_feature_index(db, rs.index, rs.objects));
     }
     std::printf("feature search: %s, %zu features, built in %.2f s\n",
-                table ? "exact batched table" : "FeatureIndex", table ? table->size() : index->size(),
+                table ? "exact batched table" : "FeatureIndex", table ? table->features() : index->size(),
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 
     if (speed) {

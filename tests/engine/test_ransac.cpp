@@ -153,15 +153,31 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     queries.push_back(x);
   }
   const FeatureTable table(db);
-  REQUIRE(table.size() == total);
-  // Every (object, point) appears once among the table's rows.
+  REQUIRE(table.features() == total);
+  REQUIRE(table.size() >= total);
+  // Every (object, point) appears once among the table's rows (the rest is padding).
   std::vector<std::pair<std::uint32_t, std::uint32_t>> rows;  // table row -> (object, point)
-  for (std::size_t r = 0; r < table.size(); ++r) rows.emplace_back(table.ref(r).object, table.ref(r).point);
+  std::vector<std::uint32_t> real;                            // rows that hold a feature
+  for (std::size_t r = 0; r < table.size(); ++r) {
+    rows.emplace_back(table.ref(r).object, table.ref(r).point);
+    if (table.ref(r).object != 0xffffffffu) real.push_back(static_cast<std::uint32_t>(r));
+  }
+  REQUIRE(real.size() == total);
   {
-    auto sorted = rows;
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> sorted;
+    for (std::uint32_t r : real) sorted.push_back(rows[r]);
     std::sort(sorted.begin(), sorted.end());
     CHECK(std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end());
   }
+  auto distance_of = [&](std::uint32_t r, const Feature& q) {
+    const Feature& f = db.features(rows[r].first).features[rows[r].second];
+    float d = 0.0f;
+    for (int k = 0; k < kFeatureDim; ++k) {
+      const float e = f[k] - q[k];
+      d += e * e;
+    }
+    return d;
+  };
   for (std::size_t w : {1u, 50u, 700u, 20000u}) {
     std::vector<std::vector<Neighbour>> one, two;
     tbb::task_arena a1(1), a2(2);
@@ -169,17 +185,9 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     a2.execute([&] { two = table.knn(queries, w); });
     for (std::size_t q = 0; q < queries.size(); ++q) {
       std::vector<std::pair<float, std::uint32_t>> oracle;
-      for (std::uint32_t r = 0; r < rows.size(); ++r) {
-        const Feature& f = db.features(rows[r].first).features[rows[r].second];
-        float d = 0.0f;
-        for (int k = 0; k < kFeatureDim; ++k) {
-          const float e = f[k] - queries[q][k];
-          d += e * e;
-        }
-        oracle.emplace_back(d, r);
-      }
+      for (std::uint32_t r : real) oracle.emplace_back(distance_of(r, queries[q]), r);
       std::sort(oracle.begin(), oracle.end());
-      const std::size_t k = std::min(w, rows.size());
+      const std::size_t k = std::min(w, real.size());
       REQUIRE(one[q].size() == k);
       for (std::size_t i = 0; i < k; ++i) {
         CHECK(one[q][i].index == oracle[i].second);
@@ -187,6 +195,31 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
         CHECK(two[q][i].index == one[q][i].index);
       }
       CHECK(table.ref(one[q][0].index).object == rows[one[q][0].index].first);
+    }
+  }
+  // Per object: the w nearest of each object, objects ascending, the same for any thread count.
+  for (std::size_t w : {1u, 64u, 3200u}) {
+    std::vector<std::vector<Neighbour>> one, two;
+    tbb::task_arena a1(1), a2(2);
+    a1.execute([&] { one = table.knn_per_object(queries, w); });
+    a2.execute([&] { two = table.knn_per_object(queries, w); });
+    for (std::size_t q = 0; q < queries.size(); ++q) {
+      std::vector<Neighbour> expect;
+      for (std::uint32_t o = 0; o < 3; ++o) {
+        std::vector<std::pair<float, std::uint32_t>> oracle;
+        for (std::uint32_t r : real)
+          if (rows[r].first == o) oracle.emplace_back(distance_of(r, queries[q]), r);
+        std::sort(oracle.begin(), oracle.end());
+        for (std::size_t i = 0; i < std::min(w, oracle.size()); ++i)
+          expect.push_back({oracle[i].second, static_cast<double>(oracle[i].first)});
+      }
+      REQUIRE(one[q].size() == expect.size());
+      REQUIRE(two[q].size() == expect.size());
+      for (std::size_t i = 0; i < expect.size(); ++i) {
+        CHECK(one[q][i].index == expect[i].index);
+        CHECK(one[q][i].sq_distance == expect[i].sq_distance);
+        CHECK(two[q][i].index == one[q][i].index);
+      }
     }
   }
   CHECK(FeatureTable::shared(db).get() == FeatureTable::shared(db).get());

@@ -121,6 +121,8 @@ TEST_CASE("Impossible values and unknown keys name the key") {
   CHECK(load_error("runs = 2.5\n").second == "runs");
   CHECK(load_error("runs = many\n").second == "runs");
   CHECK(load_error("method = magic\n").second == "method");
+  CHECK(load_error("preset = papr\n").second == "preset");
+  CHECK(load_error("[ransac]\nprune_per_object = -1\n").second == "ransac.prune_per_object");
   CHECK(load_error("noise = shallow\n").second == "noise");
   CHECK(load_error("sensors = 3\n").second == "sensors");
   CHECK(load_error("seed = -1\n").second == "seed");
@@ -156,6 +158,11 @@ TEST_CASE("Flags use the same setter as files") {
   set_key(c, "ransac.samples", {"50x500"});
   CHECK(*c.params.triplets == 50);
   CHECK(*c.params.registrations == 500);
+  CHECK(c.preset == "improved");  // the default: Touchstone's extensions
+  set_key(c, "preset", {"paper"});
+  CHECK(c.preset == "paper");
+  set_key(c, "ransac.prune_per_object", {"0"});
+  CHECK(*c.params.prune_per_object == 0);
   try {
     set_key(c, "runs", {"-1"});
     FAIL("no error");
