@@ -47,10 +47,28 @@ struct OccupancyGrid::Impl {
   double cube_res = 0.0;
   std::unordered_map<Key, std::int32_t, KeyHash> cubes;
 
+  std::int64_t cube_voxels = 0;  ///< cube_res / voxel when an integer (exact keys), else 0
+
+  static std::int64_t floor_div(std::int64_t a, std::int64_t b) {
+    return a >= 0 ? a / b : -((-a + b - 1) / b);
+  }
   Key cube_of(const openvdb::Coord& c) const {
-    return {static_cast<std::int64_t>(std::floor(c.x() * voxel / cube_res)),
-            static_cast<std::int64_t>(std::floor(c.y() * voxel / cube_res)),
-            static_cast<std::int64_t>(std::floor(c.z() * voxel / cube_res))};
+    if (cube_voxels > 0)
+      return {floor_div(c.x(), cube_voxels), floor_div(c.y(), cube_voxels), floor_div(c.z(), cube_voxels)};
+    return {static_cast<std::int64_t>(std::floor(c.x() * voxel / cube_res + 1e-9)),
+            static_cast<std::int64_t>(std::floor(c.y() * voxel / cube_res + 1e-9)),
+            static_cast<std::int64_t>(std::floor(c.z() * voxel / cube_res + 1e-9))};
+  }
+  /// Per-cube free counts for cubes of size res, built once and then kept current.
+  void ensure_cubes(double res) {
+    if (cube_res == res) return;
+    cube_res = res;
+    const double ratio = res / voxel;
+    const auto n = static_cast<std::int64_t>(std::lround(ratio));
+    cube_voxels = n >= 1 && std::abs(ratio - static_cast<double>(n)) < 1e-6 ? n : 0;
+    cubes.clear();
+    for (auto it = grid->cbeginValueOn(); it; ++it)
+      if (*it == kFree) ++cubes[cube_of(it.getCoord())];
   }
   void changed(const openvdb::Coord& c, std::int32_t before, std::int32_t after) {
     if (cube_res <= 0.0 || (before == kFree) == (after == kFree)) return;
@@ -222,12 +240,7 @@ std::vector<Vec3> OccupancyGrid::free_cloud(const Eigen::AlignedBox3d& box, doub
   if (box.isEmpty() || !(res > 0.0)) return {};
   Impl& m = *impl_;
   const double v = m.voxel;
-  if (m.cube_res != res) {  // (re)build the per-cube counts once; updates keep them current
-    m.cube_res = res;
-    m.cubes.clear();
-    for (auto it = m.grid->cbeginValueOn(); it; ++it)
-      if (*it == kFree) ++m.cubes[m.cube_of(it.getCoord())];
-  }
+  m.ensure_cubes(res);  // (re)build the per-cube counts once; updates keep them current
   std::vector<Key> keys;
   keys.reserve(m.cubes.size());
   for (const auto& [k, n] : m.cubes) keys.push_back(k);
@@ -264,6 +277,25 @@ std::vector<Vec3> OccupancyGrid::free_cloud(const Eigen::AlignedBox3d& box, doub
           for (int l = i0.z(); l <= i1.z(); ++l) consider(openvdb::Coord(i, j, l));
     }
     if (found) out.push_back(m.origin + v * Vec3(best.x(), best.y(), best.z()));
+  }
+  return out;
+}
+
+std::vector<Vec3> OccupancyGrid::full_free_cloud(const Eigen::AlignedBox3d& box, double res) const {
+  std::vector<Vec3> out;
+  if (box.isEmpty() || !(res > 0.0)) return out;
+  Impl& m = *impl_;
+  m.ensure_cubes(res);
+  // A cube is full when it holds as many free voxel centres as it holds voxel centres.
+  const auto per_axis = std::max<std::int64_t>(1, std::lround(res / m.voxel));
+  const std::int64_t full = per_axis * per_axis * per_axis;
+  std::vector<Key> keys;
+  for (const auto& [k, n] : m.cubes)
+    if (n >= full) keys.push_back(k);
+  std::sort(keys.begin(), keys.end());
+  for (const Key& k : keys) {
+    const Vec3 centre = m.origin + res * Vec3(double(k[0]) + 0.5, double(k[1]) + 0.5, double(k[2]) + 0.5);
+    if (box.contains(centre)) out.push_back(centre);
   }
   return out;
 }

@@ -66,6 +66,14 @@ class OccupancyGrid {
   /// with a given `res` and then kept current by every update, so this call is not
   /// thread-safe (the other const queries are).
   std::vector<Vec3> free_cloud(const Eigen::AlignedBox3d& box, double res) const;
+  /// The recognizer's PC^free (Section 4.1.2, Eq. 8): the centre of every cube of size `res`
+  /// (aligned to the grid origin) whose voxels are ALL free, when the centre lies in `box`;
+  /// ordered by cube key. What sampling an octree's free leaves at res gives: such a centre is
+  /// at least res / 2 per axis from anything not known free, so d_thresh = res / 2 never
+  /// penalizes the true object. Same cost and caching (not thread-safe) as free_cloud; equal
+  /// to the brute-force full_free_cloud (engine/free_cloud.hpp). `res` should be a multiple
+  /// of the voxel.
+  std::vector<Vec3> full_free_cloud(const Eigen::AlignedBox3d& box, double res) const;
 
  private:
   struct Impl;

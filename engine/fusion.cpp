@@ -147,7 +147,7 @@ PointCloud Exploration::contact_cloud() const {
 
 PointCloud Exploration::free_cloud() const {
   PointCloud out;
-  out.points = grid_.free_cloud(free_space_box(raw_, settings_.free.s_obj_max), settings_.free.res_free);
+  out.points = grid_.full_free_cloud(free_space_box(raw_, settings_.free.s_obj_max), settings_.free.res_free);
   return out;
 }
 

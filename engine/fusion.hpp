@@ -108,7 +108,9 @@ class Exploration {
   const std::vector<std::size_t>& contacts_per_grasp() const { return per_grasp_; }
   const OccupancyGrid& grid() const { return grid_; }
   PointCloud contact_cloud() const;   ///< voxel-filtered PC_cum^cont
-  PointCloud free_cloud() const;      ///< PC^free in B around the current contacts
+  PointCloud free_cloud() const;      ///< PC^free in B around the current contacts: centres of
+                                      ///< the res_free cubes that are entirely free
+                                      ///< (OccupancyGrid::full_free_cloud)
 
  private:
   const TactileLog& log_;

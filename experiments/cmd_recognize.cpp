@@ -193,8 +193,7 @@ int run_recognize(const RecognizeOptions& o) {
       ex->advance_to(static_cast<std::size_t>(k));
       contacts = ex->contact_cloud();
       if (with_free)
-        free = full_free_cloud(ex->grid(), free_space_box(ex->raw_contacts(), es.free.s_obj_max),
-                               es.free.res_free);
+        free = ex->free_cloud().points;
     } else {
       contacts = single;
     }

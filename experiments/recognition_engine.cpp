@@ -346,7 +346,10 @@ class RecognitionEngine final : public RunEngine {
     RecognizerSettings rs = v.recognizer;
     rs.seed = Rng(config_.seed, kRecognizerStream, name_hash(name), static_cast<std::uint64_t>(task.run)).next();
     Recognizer recognizer(*group.database, group.index, rs);
-    Exploration exploration(log);
+    ExplorationSettings es;  // as `touchstone recognize`: B from the database's largest object
+    es.free.res_free = rs.evaluate.res_free;
+    es.free.s_obj_max = group.database->settings().max_extent;
+    Exploration exploration(log, es);
     const auto run_start = Clock::now();
     for (int k = 1; k <= v.config.steps; ++k) {
       if (stop && stop->load()) return std::nullopt;

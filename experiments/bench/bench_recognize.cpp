@@ -76,7 +76,7 @@ Steps clouds_of(const TactileLog& log, std::size_t grasps, double s_obj_max, dou
   for (std::size_t k = 1; k <= grasps; ++k) {
     ex.advance_to(k);
     s.contacts.push_back(ex.contact_cloud());
-    s.free.push_back(full_free_cloud(ex.grid(), free_space_box(ex.raw_contacts(), s_obj_max), res_free));
+    s.free.push_back(ex.free_cloud().points);
   }
   return s;
 }

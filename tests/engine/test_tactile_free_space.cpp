@@ -1,5 +1,6 @@
 // Occupancy grid and free-space cloud (Section 4.1.2, Eq. 3) against brute force, far from the
 // origin too, and the swept volume of the gripper.
+#include "engine/free_cloud.hpp"
 #include "engine/free_space.hpp"
 
 #include <doctest/doctest.h>
@@ -127,6 +128,35 @@ TEST_CASE("free-space cloud: one real free voxel centre per res_free cube, insid
         REQUIRE((qi * 0.004 - centre).norm() >= d - 1e-12);
     }
   }
+}
+
+TEST_CASE("full free cloud: the centres of entirely free cubes, equal to brute force after updates") {
+  const Vec3 origin(-3e4, 2e4, 7.5);  // far from the world origin, as in dive logs
+  OccupancyGrid grid(0.004, origin);
+  Pose T = Pose::Identity();
+  T.translation() = origin;
+  // A rotated slab: many cubes entirely free, many partly free along its faces.
+  Pose R = T;
+  R.linear() = Eigen::AngleAxisd(0.4, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  grid.mark_free_box(R, Vec3(-0.15, -0.12, -0.06), Vec3(0.15, 0.12, 0.07));
+  const Eigen::AlignedBox3d B(origin - Vec3::Constant(0.2), origin + Vec3(0.2, 0.1, 0.2));
+  const auto fast = grid.full_free_cloud(B, 0.04);
+  const auto oracle = full_free_cloud(grid, B, 0.04);
+  REQUIRE(oracle.size() > 10);
+  CHECK(fast == oracle);
+  CHECK(fast.size() < grid.free_cloud(B, 0.04).size());  // partly free cubes are left out
+  for (const Vec3& c : fast) {  // the corner voxels of each cube (centres at +0 and +0.036) are free
+    CHECK(B.contains(c));
+    for (double dx : {-0.02, 0.016})
+      for (double dy : {-0.02, 0.016})
+        for (double dz : {-0.02, 0.016}) CHECK(grid.state(c + Vec3(dx, dy, dz)) == Occupancy::free);
+  }
+  // Occupying a voxel empties its cube; the cached counts follow updates.
+  grid.mark_occupied(fast.front() + Vec3(0.01, -0.01, 0.005));
+  const auto after = grid.full_free_cloud(B, 0.04);
+  CHECK(after.size() + 1 == fast.size());
+  CHECK(after == full_free_cloud(grid, B, 0.04));
+  CHECK(grid.full_free_cloud(Eigen::AlignedBox3d(), 0.04).empty());
 }
 
 TEST_CASE("swept volume: the links along the closing path, no voxel elsewhere") {
