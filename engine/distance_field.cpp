@@ -122,9 +122,24 @@ inline bool trilinear(const Accessor& acc, const Vec3& x, double& out) {
   const openvdb::Coord c0(static_cast<int>(fx), static_cast<int>(fy), static_cast<int>(fz));
   const double tx = x.x() - fx, ty = x.y() - fy, tz = x.z() - fz;
   float v[8];
-  for (int n = 0; n < 8; ++n) {
-    const openvdb::Coord c = c0.offsetBy(n & 1, (n >> 1) & 1, (n >> 2) & 1);
-    if (!acc.probeValue(c, v[n])) return false;
+  using Leaf = Grid::TreeType::LeafNodeType;
+  static_assert(Leaf::DIM == 8, "leaf offsets below assume 8^3 leaves");
+  const Leaf* leaf = acc.probeConstLeaf(c0);
+  if (leaf && (c0.x() & 7) != 7 && (c0.y() & 7) != 7 && (c0.z() & 7) != 7) {
+    // All 8 corners in one leaf (the common case): read them directly, offsets x*64 + y*8 + z.
+    const openvdb::Index o0 = Leaf::coordToOffset(c0);
+    const auto& mask = leaf->getValueMask();
+    const float* data = leaf->buffer().data();
+    for (int n = 0; n < 8; ++n) {
+      const openvdb::Index o = o0 + ((n & 1) << 6) + (((n >> 1) & 1) << 3) + ((n >> 2) & 1);
+      if (!mask.isOn(o)) return false;
+      v[n] = data[o];
+    }
+  } else {
+    for (int n = 0; n < 8; ++n) {
+      const openvdb::Coord c = c0.offsetBy(n & 1, (n >> 1) & 1, (n >> 2) & 1);
+      if (!acc.probeValue(c, v[n])) return false;
+    }
   }
   const double x00 = v[0] + tx * (v[1] - v[0]);
   const double x10 = v[2] + tx * (v[3] - v[2]);

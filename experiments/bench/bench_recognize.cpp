@@ -10,7 +10,8 @@
 //
 //   build/bench/bench_recognize --db DB.h5 [--grasps 20] [--speed-logs 6] [--seeds 3]
 //       [--noise underwater] [--method bricpsf] [--objects N] [--skip-speed] [--skip-accuracy]
-//       [--preset paper|improved] [--set key=value ...]   (recognizer parameters; --preset first)
+//       [--preset improved|paper] [--set key=value ...]   (recognizer parameters, default the
+//       improved preset as `touchstone recognize`; --preset first)
 //
 // Prints the machine, thread counts, parameters and every figure.
 #include "datasets/simulator.hpp"
@@ -131,7 +132,7 @@ int main(int argc, char** argv) {
     std::string db_path, noise = "underwater", method = "bricpsf";
     std::size_t grasps = 20, speed_logs = 6, seeds = 3, objects = 0;
     bool speed = true, accuracy = true;
-    RecognizerSettings rs;
+    RecognizerSettings rs = RecognizerSettings::improved();
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
       auto next = [&]() -> std::string {
@@ -151,7 +152,8 @@ int main(int argc, char** argv) {
       else if (a == "--preset") {
         const std::string p = next();
         if (p == "improved") rs = RecognizerSettings::improved();
-        else if (p != "paper") throw Error("unknown preset", {}, p);
+        else if (p == "paper") rs = RecognizerSettings::paper();
+        else throw Error("unknown preset", {}, p);
       }
       else throw Error("unknown argument (see the header of bench_recognize.cpp)", {}, a);
     }
@@ -166,9 +168,12 @@ int main(int argc, char** argv) {
     std::printf("bench_recognize: %s\nmachine: %s\ndatabase: %s (%zu objects), method %s, %zu grasps, noise %s\n",
                 "recognizer speed and accuracy", cli::machine_description().c_str(), db_path.c_str(),
                 db.size(), method.c_str(), grasps, noise.c_str());
-    std::printf("parameters: n_p %zu, psi %.2f, N %d, R %d, W %zu, d_outlier %.3f, lambda %.3f, res_free %.3f, "
+    std::printf("parameters: n_p %zu, psi %.2f, N %d, R %d, W %zu, W per object %zu, refine_new %d (pool %zu, "
+                "%zu per object), dedupe %d, free inside %d, d_outlier %.3f, lambda %.3f, res_free %.3f, "
                 "normal_tol %.1f deg, ICP %s (%d it, %zu pts)\n",
                 rs.n_p, rs.psi, rs.ransac.triplets, rs.ransac.registrations, rs.ransac.prune_w,
+                rs.ransac.prune_per_object, int(rs.refine_new), rs.refine_pool, rs.new_per_object,
+                int(rs.dedupe), int(rs.evaluate.free_inside_penalty),
                 rs.evaluate.d_outlier, rs.evaluate.lambda, rs.evaluate.res_free, rs.ransac.normal_tolerance_deg,
                 rs.icp.metric == IcpMetric::field            ? "distance-field"
                 : rs.icp.metric == IcpMetric::point_to_plane ? "point-to-plane"
