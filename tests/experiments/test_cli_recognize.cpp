@@ -122,6 +122,31 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
   CHECK(res.steps.back().hypotheses.size() <= 20);
   CHECK(res.header.objects.size() == 6);
 
+  auto param = [](const io::ResultData& r, const std::string& name) {
+    for (const auto& [k, v] : r.header.params)
+      if (k == name) return v;
+    FAIL("no parameter " << name);
+    return -1.0;
+  };
+  CHECK(ja["preset"] == "improved");  // the default
+  CHECK(param(res, "W_per_object") == 200.0);
+  CHECK(param(res, "refine_new") == 1.0);
+
+  SUBCASE("--preset paper, and a flag on top of a preset") {
+    const Run p = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --preset paper --out rp.h5" + kFast);
+    REQUIRE_MESSAGE(p.code == 0, p.err);
+    CHECK(nlohmann::json::parse(p.out)["preset"] == "paper");
+    const io::ResultData rp = io::read_result(dir / "rp.h5");
+    CHECK(param(rp, "W_per_object") == 0.0);
+    CHECK(param(rp, "refine_new") == 0.0);
+    CHECK(param(rp, "dedupe") == 0.0);
+    const Run q = touchstone(dir, "recognize --db db.h5 --log log.h5 --steps 1 --prune-per-object 50 --no-dedupe --out rq.h5" + kFast);
+    REQUIRE_MESSAGE(q.code == 0, q.err);
+    const io::ResultData rq = io::read_result(dir / "rq.h5");
+    CHECK(param(rq, "W_per_object") == 50.0);
+    CHECK(param(rq, "dedupe") == 0.0);
+    CHECK(param(rq, "refine_new") == 1.0);
+  }
   SUBCASE("--steps and --method") {
     const Run c = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --method batch-ransac" + kFast);
     REQUIRE_MESSAGE(c.code == 0, c.err);
