@@ -1,7 +1,9 @@
 // touchstone: recognize and localize a known object in 6 DOF from touch alone.
 #include "experiments/cli_common.hpp"
+#include "io/atomic_file.hpp"
 
 int main(int argc, char** argv) {
+  ts::io::remove_temporaries_on_interrupt();  // Ctrl-C leaves no <out>.tmp-<pid> behind
   CLI::App app{"touchstone: tactile object recognition and 6-DOF localization"};
   app.require_subcommand(1);
   app.set_help_all_flag("--help-all", "Help for every subcommand");

@@ -2,9 +2,60 @@
 
 #include "engine/core.hpp"
 
+#include <atomic>
+#include <csignal>
+#include <cstring>
+#include <mutex>
 #include <unistd.h>
 
 namespace ts::io {
+
+namespace {
+
+// Temporary files in progress, for the SIGINT/SIGTERM handler: fixed slots of C strings, so
+// that the handler only reads memory and calls unlink (both async-signal-safe).
+constexpr int kSlots = 32;
+constexpr std::size_t kPathMax = 4096;
+char g_paths[kSlots][kPathMax];
+std::atomic<bool> g_used[kSlots];
+std::mutex g_mutex;  // registration only (never taken in the handler)
+
+extern "C" void remove_temporaries_and_reraise(int sig) {
+  for (int i = 0; i < kSlots; ++i)
+    if (g_used[i].load()) ::unlink(g_paths[i]);
+  std::signal(sig, SIG_DFL);  // then die of the signal as if unhandled
+  std::raise(sig);
+}
+
+int register_temp(const std::filesystem::path& p) {
+  const std::string s = std::filesystem::absolute(p).string();
+  if (s.size() >= kPathMax) return -1;
+  std::lock_guard<std::mutex> lock(g_mutex);
+  for (int i = 0; i < kSlots; ++i)
+    if (!g_used[i].load()) {
+      std::memcpy(g_paths[i], s.c_str(), s.size() + 1);
+      g_used[i].store(true);
+      return i;
+    }
+  return -1;  // more than kSlots outputs at once: the destructor still cleans up
+}
+
+void unregister_temp(int slot) {
+  if (slot < 0) return;
+  std::lock_guard<std::mutex> lock(g_mutex);
+  g_used[slot].store(false);
+}
+
+}  // namespace
+
+void remove_temporaries_on_interrupt() {
+  for (int sig : {SIGINT, SIGTERM}) {
+    struct sigaction sa {};
+    sa.sa_handler = remove_temporaries_and_reraise;
+    sigemptyset(&sa.sa_mask);
+    sigaction(sig, &sa, nullptr);
+  }
+}
 
 AtomicOutput::AtomicOutput(std::filesystem::path target) : target_(std::move(target)) {
   temp_ = target_;
@@ -12,9 +63,11 @@ AtomicOutput::AtomicOutput(std::filesystem::path target) : target_(std::move(tar
   const auto dir = target_.has_parent_path() ? target_.parent_path() : std::filesystem::path(".");
   if (!std::filesystem::is_directory(dir))
     throw Error("output directory does not exist", target_.string());
+  slot_ = register_temp(temp_);
 }
 
 AtomicOutput::~AtomicOutput() {
+  unregister_temp(slot_);
   if (!committed_) {
     std::error_code ec;
     std::filesystem::remove(temp_, ec);
@@ -26,6 +79,8 @@ void AtomicOutput::commit() {
   std::filesystem::rename(temp_, target_, ec);
   if (ec) throw Error("cannot move the finished output into place: " + ec.message(), target_.string());
   committed_ = true;
+  unregister_temp(slot_);
+  slot_ = -1;
 }
 
 }  // namespace ts::io

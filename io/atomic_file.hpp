@@ -1,11 +1,17 @@
 // Outputs are written under a temporary name beside the target and renamed when complete, so
-// a failure or a kill never leaves a half-written file under the real name.
+// a failure or a kill never leaves a half-written file under the real name. A program that calls
+// remove_temporaries_on_interrupt() (the touchstone command does) also removes the temporary
+// files in progress on Ctrl-C (SIGINT) or SIGTERM.
 #pragma once
 
 #include <filesystem>
 #include <string>
 
 namespace ts::io {
+
+/// Handle SIGINT and SIGTERM: unlink every AtomicOutput's temporary file in progress, then die
+/// of the signal as if unhandled. Async-signal-safe (fixed slots, unlink only).
+void remove_temporaries_on_interrupt();
 
 class AtomicOutput {
  public:
@@ -23,6 +29,7 @@ class AtomicOutput {
  private:
   std::filesystem::path target_, temp_;
   bool committed_ = false;
+  int slot_ = -1;   ///< registration for the signal handler
 };
 
 }  // namespace ts::io

@@ -6,6 +6,9 @@
 #include <doctest/doctest.h>
 
 #include <chrono>
+#include <csignal>
+#include <sys/wait.h>
+#include <unistd.h>
 #include <filesystem>
 #include <thread>
 
@@ -222,4 +225,28 @@ TEST_CASE("h5: concurrent readers are serialised and read the right data") {
     });
   for (auto& t : threads) t.join();
   CHECK(ok == std::vector<int>(8, 1));
+}
+
+TEST_CASE("atomic output: Ctrl-C (SIGINT) or SIGTERM removes the temporary file, the target stays") {
+  TempDir dir("h5");
+  ts::test::write_text(dir / "old.h5", "previous content");
+  for (int sig : {SIGINT, SIGTERM}) {
+    const pid_t child = ::fork();
+    REQUIRE(child >= 0);
+    if (child == 0) {  // the child writes into a temporary file and is interrupted half-way
+      ts::io::remove_temporaries_on_interrupt();  // as the touchstone command does
+      ts::io::AtomicOutput out(dir / "old.h5");
+      ts::test::write_text(out.temp_path(), "half-written");
+      std::raise(sig);
+      ::_exit(0);  // not reached: the signal ends the process
+    }
+    int status = 0;
+    REQUIRE(::waitpid(child, &status, 0) == child);
+    CHECK(WIFSIGNALED(status));
+    CHECK(WTERMSIG(status) == sig);
+    std::filesystem::path tmp = dir / "old.h5";
+    tmp += ".tmp-" + std::to_string(child);
+    CHECK_FALSE(std::filesystem::exists(tmp));
+    CHECK(ts::test::read_bytes(dir / "old.h5") == "previous content");
+  }
 }
