@@ -548,6 +548,7 @@ std::vector<std::string> Group::read_strings(const std::string& name) const {
   if (H5Tis_variable_str(type.get()) > 0) {
     Id mtype(H5Tcopy(H5T_C_S1));
     H5Tset_size(mtype.get(), H5T_VARIABLE);
+    H5Tset_cset(mtype.get(), H5Tget_cset(type.get()));  // h5py writes UTF-8, others ASCII
     std::vector<char*> ptrs(out.size(), nullptr);
     if (H5Dread(ds.get(), mtype.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, ptrs.data()) < 0)
       node_->fail(field, "cannot read the dataset");
@@ -557,6 +558,7 @@ std::vector<std::string> Group::read_strings(const std::string& name) const {
   } else {
     const std::size_t width = H5Tget_size(type.get());
     Id mtype = string_type(width);
+    H5Tset_cset(mtype.get(), H5Tget_cset(type.get()));
     std::vector<char> buffer(out.size() * width);
     if (H5Dread(ds.get(), mtype.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, buffer.data()) < 0)
       node_->fail(field, "cannot read the dataset");
@@ -737,6 +739,7 @@ std::string Group::string_attribute(const std::string& name) const {
   if (H5Tis_variable_str(type.get()) > 0) {
     Id mtype(H5Tcopy(H5T_C_S1));
     H5Tset_size(mtype.get(), H5T_VARIABLE);
+    H5Tset_cset(mtype.get(), H5Tget_cset(type.get()));  // h5py writes UTF-8, others ASCII
     char* p = nullptr;
     if (H5Aread(a.get(), mtype.get(), &p) < 0) node_->fail(field, "cannot read the attribute");
     std::string out = p ? p : "";
@@ -746,6 +749,7 @@ std::string Group::string_attribute(const std::string& name) const {
   }
   const std::size_t width = H5Tget_size(type.get());
   Id mtype = string_type(width);
+  H5Tset_cset(mtype.get(), H5Tget_cset(type.get()));
   std::vector<char> buffer(width);
   if (H5Aread(a.get(), mtype.get(), buffer.data()) < 0) node_->fail(field, "cannot read the attribute");
   return std::string(buffer.data(), strnlen(buffer.data(), width));

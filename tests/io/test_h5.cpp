@@ -4,6 +4,7 @@
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>
+#include <hdf5.h>
 
 #include <chrono>
 #include <csignal>
@@ -249,4 +250,40 @@ TEST_CASE("atomic output: Ctrl-C (SIGINT) or SIGTERM removes the temporary file,
     CHECK_FALSE(std::filesystem::exists(tmp));
     CHECK(ts::test::read_bytes(dir / "old.h5") == "previous content");
   }
+}
+
+TEST_CASE("h5: strings as h5py writes them (variable-length UTF-8) and ASCII fixed-width read back") {
+  TempDir dir("h5");
+  const auto path = dir / "py.h5";
+  {  // written with the C API the way h5py does: str -> variable-length UTF-8
+    const hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    REQUIRE(f >= 0);
+    const hid_t vl = H5Tcopy(H5T_C_S1);
+    H5Tset_size(vl, H5T_VARIABLE);
+    H5Tset_cset(vl, H5T_CSET_UTF8);
+    const char* names[] = {"bunny", "Stern-Öse", ""};
+    const hsize_t n = 3;
+    const hid_t space = H5Screate_simple(1, &n, nullptr);
+    const hid_t ds = H5Dcreate2(f, "names", vl, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    REQUIRE(H5Dwrite(ds, vl, H5S_ALL, H5S_ALL, H5P_DEFAULT, names) >= 0);
+    const hid_t scalar = H5Screate(H5S_SCALAR);
+    const char* noise = "underwater";
+    const hid_t a = H5Acreate2(f, "noise", vl, scalar, H5P_DEFAULT, H5P_DEFAULT);
+    REQUIRE(H5Awrite(a, vl, &noise) >= 0);
+    const hid_t ascii = H5Tcopy(H5T_C_S1);  // and a fixed-width ASCII one (other writers)
+    H5Tset_size(ascii, 8);
+    const hid_t b = H5Acreate2(f, "unit", ascii, scalar, H5P_DEFAULT, H5P_DEFAULT);
+    const char unit[8] = "metre";
+    REQUIRE(H5Awrite(b, ascii, unit) >= 0);
+    for (hid_t id : {a, b}) H5Aclose(id);
+    H5Dclose(ds);
+    for (hid_t id : {space, scalar}) H5Sclose(id);
+    for (hid_t id : {vl, ascii}) H5Tclose(id);
+    H5Fclose(f);
+  }
+  const auto file = h5::File::open(path);
+  const auto root = file.root();
+  CHECK(root.read_strings("names") == std::vector<std::string>{"bunny", "Stern-Öse", ""});
+  CHECK(root.string_attribute("noise") == "underwater");
+  CHECK(root.string_attribute("unit") == "metre");
 }
