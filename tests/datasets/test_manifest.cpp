@@ -1,5 +1,6 @@
 #include "datasets/manifest.hpp"
 #include "engine/core.hpp"
+#include "temp_dir.hpp"
 
 #include <doctest/doctest.h>
 
@@ -9,15 +10,20 @@
 namespace fs = std::filesystem;
 
 namespace {
-fs::path write_temp(const std::string& name, const std::string& text) {
-  const fs::path p = fs::temp_directory_path() / ("ts_test_" + name);
-  std::ofstream(p) << text;
-  return p;
-}
+/// Files of a test in their own directory, removed with it.
+struct Files {
+  ts::test::TempDir dir{"manifest"};
+  fs::path write(const std::string& name, const std::string& text) {
+    const fs::path p = dir / name;
+    std::ofstream(p) << text;
+    return p;
+  }
+};
 }  // namespace
 
 TEST_CASE("manifest lines resolve archive members relative to the manifest") {
-  const auto p = write_temp("m1.tsv",
+  Files f;
+  const auto p = f.write("m1.tsv",
                             "# comment\n"
                             "pkg\tcache/a.tar.gz:data/meshes/x.off\tx\n"
                             "\n"
@@ -33,15 +39,17 @@ TEST_CASE("manifest lines resolve archive members relative to the manifest") {
 }
 
 TEST_CASE("manifest errors name the file and the line") {
-  const auto short_line = write_temp("m2.tsv", "pkg\tonly-two\n");
+  Files f;
+  const auto short_line = f.write("m2.tsv", "pkg\tonly-two\n");
   CHECK_THROWS_WITH_AS(ts::datasets::read_manifest(short_line),
                        doctest::Contains("line 1"), ts::Error);
-  const auto dup = write_temp("m3.tsv", "a\tx.off\tsame\nb\ty.off\tsame\n");
+  const auto dup = f.write("m3.tsv", "a\tx.off\tsame\nb\ty.off\tsame\n");
   CHECK_THROWS_WITH_AS(ts::datasets::read_manifest(dup), doctest::Contains("duplicate"), ts::Error);
   CHECK_THROWS_AS(ts::datasets::read_manifest("/nonexistent/manifest.tsv"), ts::Error);
 }
 
 TEST_CASE("the shipped default manifest lists 45 distinct objects") {
+  Files f;
   const auto m = ts::datasets::read_manifest(fs::path(TS_SOURCE_DIR) / "datasets/dev45.tsv");
   CHECK(m.size() == 45);
 }
