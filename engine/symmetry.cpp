@@ -1,5 +1,8 @@
 #include "engine/symmetry.hpp"
 
+#include <array>
+#include <map>
+
 #include "engine/database.hpp"
 #include "engine/kabsch.hpp"
 
@@ -26,17 +29,53 @@ class Checker {
   Checker(const std::vector<Vec3>& points, const KdTree3& tree, const SymmetrySettings& s)
       : tree_(tree), s_(s) {
     const std::size_t n = points.size();
-    const Vec3 ref = points[0];
-    Vec3 acc = Vec3::Zero();
-    for (const Vec3& p : points) acc += p - ref;
-    centre_ = ref + acc / static_cast<double>(n);
+    Eigen::AlignedBox3d box;
+    for (const Vec3& p : points) box.extend(p);
+    diagonal_ = box.diagonal().norm();
+    // Density-independent centre and spread: one point (the mean) per occupied cell of a grid
+    // centred on the bounding box, with cells coarser than the sparsest sampling (1 % of the
+    // diagonal, or 1.5 x the 90th percentile of the nearest-neighbour distance). A scanner
+    // samples the faces it sees head-on densely and the rest sparsely; the plain centroid of
+    // such a cloud is millimetres off the body's centre, more than the tolerance, and every
+    // symmetry about it then fails.
+    {
+      std::vector<double> nn;
+      const std::size_t m = std::min<std::size_t>(n, 2000);
+      for (std::size_t i = 0; i < m; ++i) {
+        const auto k = tree_.knn(points[(i * n) / m], 2);
+        if (k.size() == 2) nn.push_back(std::sqrt(k[1].sq_distance));
+      }
+      double p90 = 0.0;
+      if (!nn.empty()) {
+        const std::size_t q = (nn.size() * 9) / 10;
+        std::nth_element(nn.begin(), nn.begin() + static_cast<std::ptrdiff_t>(q), nn.end());
+        p90 = nn[q];
+      }
+      const double cell = std::max({0.01 * diagonal_, 3.0 * p90, 1e-12});
+      const Vec3 mid = box.center();
+      std::map<std::array<std::int64_t, 3>, std::pair<Vec3, std::size_t>> cells;
+      for (const Vec3& p : points) {
+        const Vec3 l = ((p - mid) / cell).array().round();
+        auto& c = cells.try_emplace({static_cast<std::int64_t>(l.x()), static_cast<std::int64_t>(l.y()),
+                                     static_cast<std::int64_t>(l.z())},
+                                    Vec3::Zero(), std::size_t{0})
+                      .first->second;
+        c.first += p - mid;
+        ++c.second;
+      }
+      uniform_.reserve(cells.size());
+      Vec3 acc = Vec3::Zero();
+      for (const auto& [k, c] : cells) {  // ascending keys: a fixed summation order
+        const Vec3 mean = c.first / static_cast<double>(c.second);
+        uniform_.push_back(mid + mean);
+        acc += mean;
+      }
+      centre_ = mid + acc / static_cast<double>(uniform_.size());
+    }
     // A deterministic spread-out sample: stride over the points.
     const std::size_t m = std::min(n, s.sample_points);
     sample_.reserve(m);
     for (std::size_t i = 0; i < m; ++i) sample_.push_back(points[(i * n) / m] - centre_);
-    Eigen::AlignedBox3d box;
-    for (const Vec3& p : points) box.extend(p);
-    diagonal_ = box.diagonal().norm();
     // Point spacing: median distance to the nearest other point over the sample.
     std::vector<double> nn;
     for (const Vec3& x : sample_) {
@@ -52,6 +91,8 @@ class Checker {
   }
 
   const Vec3& centre() const { return centre_; }
+  /// One point per occupied grid cell (density-independent), for the principal axes.
+  const std::vector<Vec3>& uniform() const { return uniform_; }
   double tolerance() const { return tol_; }
   const std::vector<Vec3>& sample() const { return sample_; }
 
@@ -101,7 +142,7 @@ class Checker {
   const KdTree3& tree_;
   const SymmetrySettings& s_;
   Vec3 centre_ = Vec3::Zero();
-  std::vector<Vec3> sample_;
+  std::vector<Vec3> sample_, uniform_;
   double diagonal_ = 0.0;
   double tol_ = 0.0;
 };
@@ -272,8 +313,8 @@ SymmetryGroup find_symmetries(const std::vector<Vec3>& points, const KdTree3& tr
   if (!(g.tolerance > 0.0)) return g;  // all points coincide
 
   Mat3 cov = Mat3::Zero();
-  for (const Vec3& p : points) cov.noalias() += (p - g.centre) * (p - g.centre).transpose();
-  cov /= static_cast<double>(points.size());
+  for (const Vec3& p : ck.uniform()) cov.noalias() += (p - g.centre) * (p - g.centre).transpose();
+  cov /= static_cast<double>(ck.uniform().size());
   Eigen::SelfAdjointEigenSolver<Mat3> es(cov);
   const Vec3 ev = es.eigenvalues();          // ascending
   const Mat3 E = es.eigenvectors();

@@ -130,6 +130,21 @@ TEST_CASE("Symmetry: a cube has the 24 rotations of the octahedral group") {
   for (const Vec3& a : {Vec3(1, 1, 0), Vec3(1, -1, 0), Vec3(1, 0, 1), Vec3(1, 0, -1), Vec3(0, 1, 1), Vec3(0, 1, -1)})
     ideal.push_back(rot(a, kPi));
   check_same_group(g.rotations, ideal, 1.5);
+
+  SUBCASE("sampled unevenly, as a scanner does: the same group about the true centre") {
+    // Faces seen head-on (x > 0, y > 0) keep every point, the others one in three: the plain
+    // centroid moves ~1 cm towards the dense edge, far beyond the tolerance.
+    std::vector<Vec3> uneven;
+    for (std::size_t i = 0; i < pts.size(); ++i)
+      if (pts[i].x() > 0.0499 || pts[i].y() > 0.0499 || i % 3 == 0) uneven.push_back(pts[i]);
+    Vec3 mean = Vec3::Zero();
+    for (const Vec3& p : uneven) mean += p;
+    mean /= static_cast<double>(uneven.size());
+    REQUIRE(mean.norm() > 0.01);
+    const SymmetryGroup u = find(uneven);
+    CHECK(u.centre.norm() < 0.001);
+    check_same_group(u.rotations, ideal, 1.5);
+  }
 }
 
 TEST_CASE("Symmetry: a pentagonal prism (nut) has D5 about its centroid, not its box centre") {
