@@ -71,6 +71,11 @@ class Checker {
         acc += mean;
       }
       centre_ = mid + acc / static_cast<double>(uniform_.size());
+      // An evenly sampled cloud: its plain centroid is the more precise estimate of the two.
+      Vec3 plain = Vec3::Zero();
+      for (const Vec3& p : points) plain += p - mid;
+      plain = mid + plain / static_cast<double>(n);
+      if ((plain - centre_).norm() < 0.005 * diagonal_) centre_ = plain;
     }
     // A deterministic spread-out sample: stride over the points.
     const std::size_t m = std::min(n, s.sample_points);
@@ -313,8 +318,8 @@ SymmetryGroup find_symmetries(const std::vector<Vec3>& points, const KdTree3& tr
   if (!(g.tolerance > 0.0)) return g;  // all points coincide
 
   Mat3 cov = Mat3::Zero();
-  for (const Vec3& p : ck.uniform()) cov.noalias() += (p - g.centre) * (p - g.centre).transpose();
-  cov /= static_cast<double>(ck.uniform().size());
+  for (const Vec3& p : points) cov.noalias() += (p - g.centre) * (p - g.centre).transpose();
+  cov /= static_cast<double>(points.size());
   Eigen::SelfAdjointEigenSolver<Mat3> es(cov);
   const Vec3 ev = es.eigenvalues();          // ascending
   const Mat3 E = es.eigenvectors();

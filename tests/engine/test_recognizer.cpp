@@ -69,6 +69,7 @@ TEST_CASE("BRICPSF recognizes asymmetric and symmetric objects and localizes the
     CHECK(last.best.object == obj);
     const PoseError e = pose_error(last.best.pose, T, &symmetries.get(db, obj));
     CHECK(e.symmetric_position_m < 0.003);
+    INFO("orientation " << e.orientation_deg << " group " << symmetries.get(db, obj).rotations.size() << " centre " << symmetries.get(db, obj).centre.transpose());
     CHECK(e.symmetric_orientation_deg < 3.0);
     CHECK(last.posterior > 0.5);
     for (const StepResult& r : steps) check_finite(r);
