@@ -188,42 +188,40 @@ void search_blocks(const FeatureTable::Impl& m, const float* qv, std::size_t b0,
 
 }  // namespace
 
-std::vector<std::vector<Neighbour>> FeatureTable::knn(const std::vector<Feature>& queries,
-                                                      std::size_t w) const {
-  const Impl& m = *impl_;
-  const std::size_t Q = queries.size();
-  std::vector<std::vector<Neighbour>> out(Q);
-  if (Q == 0 || w == 0 || m.features == 0) return out;
-  w = std::min(w, m.features);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, Q, 1), [&](const tbb::blocked_range<std::size_t>& range) {
+namespace {
+
+/// Per query, the w nearest rows within each block range, ranges in order. Parallel over queries.
+std::vector<std::vector<Neighbour>> search_ranges(
+    const FeatureTable::Impl& m, const std::vector<Feature>& queries, std::size_t w,
+    const std::vector<std::pair<std::size_t, std::size_t>>& ranges) {
+  std::vector<std::vector<Neighbour>> out(queries.size());
+  if (queries.empty() || w == 0 || m.features == 0) return out;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 1), [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<std::pair<float, std::uint32_t>> order;
     std::vector<Item> cand;
     for (std::size_t q = range.begin(); q != range.end(); ++q) {
-      out[q].reserve(w);
-      search_blocks(m, queries[q].data(), 0, m.nblocks(), w, order, cand, out[q]);
+      out[q].reserve(w * ranges.size());
+      for (const auto& [b0, b1] : ranges) search_blocks(m, queries[q].data(), b0, b1, w, order, cand, out[q]);
     }
   });
   return out;
 }
 
+}  // namespace
+
+std::vector<std::vector<Neighbour>> FeatureTable::knn(const std::vector<Feature>& queries,
+                                                      std::size_t w) const {
+  const Impl& m = *impl_;
+  return search_ranges(m, queries, std::min(w, m.features), {{0, m.nblocks()}});
+}
+
 std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vector<Feature>& queries,
                                                                  std::size_t w) const {
   const Impl& m = *impl_;
-  const std::size_t Q = queries.size();
-  std::vector<std::vector<Neighbour>> out(Q);
-  if (Q == 0 || w == 0 || m.features == 0) return out;
-  const std::size_t groups = m.object_blocks.size() - 1;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, Q, 1), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::pair<float, std::uint32_t>> order;
-    std::vector<Item> cand;
-    for (std::size_t q = range.begin(); q != range.end(); ++q) {
-      out[q].reserve(w * groups);
-      for (std::size_t g = 0; g < groups; ++g)
-        search_blocks(m, queries[q].data(), m.object_blocks[g], m.object_blocks[g + 1], w, order,
-                      cand, out[q]);
-    }
-  });
-  return out;
+  std::vector<std::pair<std::size_t, std::size_t>> ranges;
+  for (std::size_t g = 0; g + 1 < m.object_blocks.size(); ++g)
+    ranges.emplace_back(m.object_blocks[g], m.object_blocks[g + 1]);
+  return search_ranges(m, queries, w, ranges);
 }
 
 std::shared_ptr<const FeatureTable> FeatureTable::shared(const Database& db,

@@ -32,9 +32,9 @@ class Checker {
     Eigen::AlignedBox3d box;
     for (const Vec3& p : points) box.extend(p);
     diagonal_ = box.diagonal().norm();
-    // Density-independent centre and spread: one point (the mean) per occupied cell of a grid
+    // Density-independent centre: one point (the mean) per occupied cell of a grid
     // centred on the bounding box, with cells coarser than the sparsest sampling (1 % of the
-    // diagonal, or 1.5 x the 90th percentile of the nearest-neighbour distance). A scanner
+    // diagonal, or 3 x the 90th percentile of the nearest-neighbour distance). A scanner
     // samples the faces it sees head-on densely and the rest sparsely; the plain centroid of
     // such a cloud is millimetres off the body's centre, more than the tolerance, and every
     // symmetry about it then fails.
@@ -63,14 +63,9 @@ class Checker {
         c.first += p - mid;
         ++c.second;
       }
-      uniform_.reserve(cells.size());
       Vec3 acc = Vec3::Zero();
-      for (const auto& [k, c] : cells) {  // ascending keys: a fixed summation order
-        const Vec3 mean = c.first / static_cast<double>(c.second);
-        uniform_.push_back(mid + mean);
-        acc += mean;
-      }
-      centre_ = mid + acc / static_cast<double>(uniform_.size());
+      for (const auto& [k, c] : cells) acc += c.first / static_cast<double>(c.second);  // ascending keys
+      centre_ = mid + acc / static_cast<double>(cells.size());
       // An evenly sampled cloud: its plain centroid is the more precise estimate of the two.
       Vec3 plain = Vec3::Zero();
       for (const Vec3& p : points) plain += p - mid;
@@ -96,8 +91,6 @@ class Checker {
   }
 
   const Vec3& centre() const { return centre_; }
-  /// One point per occupied grid cell (density-independent), for the principal axes.
-  const std::vector<Vec3>& uniform() const { return uniform_; }
   double tolerance() const { return tol_; }
   const std::vector<Vec3>& sample() const { return sample_; }
 
@@ -147,7 +140,7 @@ class Checker {
   const KdTree3& tree_;
   const SymmetrySettings& s_;
   Vec3 centre_ = Vec3::Zero();
-  std::vector<Vec3> sample_, uniform_;
+  std::vector<Vec3> sample_;
   double diagonal_ = 0.0;
   double tol_ = 0.0;
 };

@@ -2,6 +2,7 @@
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
 #include "mesh_fixtures.hpp"
+#include "cli_run.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>
@@ -17,27 +18,8 @@ using ts::test::TempDir;
 
 namespace {
 
-struct Run {
-  int rc = -1;
-  std::string out, err;
-};
-
-/// Run `touchstone <args>` in `dir`; capture stdout, stderr and the exit code.
-Run touchstone(const TempDir& dir, const std::string& args) {
-  const fs::path err = dir / "stderr.txt";
-  const std::string cmd = "cd '" + dir.path().string() + "' && '" TS_BINARY_DIR "/touchstone' " + args + " 2>'" +
-                          err.string() + "'";
-  Run r;
-  FILE* p = popen(cmd.c_str(), "r");
-  REQUIRE(p != nullptr);
-  char buf[4096];
-  for (std::size_t n; (n = fread(buf, 1, sizeof buf, p)) > 0;) r.out.append(buf, n);
-  const int status = pclose(p);
-  r.rc = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.err = ts::test::read_bytes(err);
-  fs::remove(err);
-  return r;
-}
+using Run = ts::test::CliRun;
+using ts::test::touchstone;
 
 // Coarse parameters: the tests check plumbing, determinism and errors, not accuracy.
 const std::string kFast =
@@ -64,9 +46,9 @@ TEST_CASE("cli db: build is byte-identical for any --threads; info lists every o
   TempDir dir("cli");
   write_meshes(dir);
   const auto a = touchstone(dir, "db build --meshes meshes --out t1.h5 --threads 1" + kFast);
-  REQUIRE_MESSAGE(a.rc == 0, a.err);
+  REQUIRE_MESSAGE(a.code == 0, a.err);
   const auto b = touchstone(dir, "db build --meshes meshes --out t2.h5 --threads 2 --json" + kFast);
-  REQUIRE_MESSAGE(b.rc == 0, b.err);
+  REQUIRE_MESSAGE(b.code == 0, b.err);
   CHECK(ts::test::read_bytes(dir / "t1.h5") == ts::test::read_bytes(dir / "t2.h5"));
   CHECK(b.err.find("per stage") != std::string::npos);
   const auto built = nlohmann::json::parse(b.out);
@@ -74,7 +56,7 @@ TEST_CASE("cli db: build is byte-identical for any --threads; info lists every o
   CHECK(built["times_s"].contains("scan"));
 
   const auto info = touchstone(dir, "db info t1.h5 --json");
-  REQUIRE(info.rc == 0);
+  REQUIRE(info.code == 0);
   const auto j = nlohmann::json::parse(info.out);
   CHECK(j["schema_version"] == ts::io::kDbSchemaVersion);
   REQUIRE(j["objects"].size() == 3);
@@ -93,24 +75,24 @@ TEST_CASE("cli db: build is byte-identical for any --threads; info lists every o
   CHECK(j["params"]["seed"] == 1);
 
   const auto human = touchstone(dir, "db info t1.h5");
-  CHECK(human.rc == 0);
+  CHECK(human.code == 0);
   CHECK(human.out.find("3 objects") != std::string::npos);
   CHECK(human.out.find("bar") != std::string::npos);
 
   // A different seed gives a different database.
-  REQUIRE(touchstone(dir, "db build --meshes meshes --out t3.h5 --seed 2" + kFast).rc == 0);
+  REQUIRE(touchstone(dir, "db build --meshes meshes --out t3.h5 --seed 2" + kFast).code == 0);
   CHECK(ts::test::read_bytes(dir / "t1.h5") != ts::test::read_bytes(dir / "t3.h5"));
 }
 
 TEST_CASE("cli db: add builds the object as build would, and refuses duplicates without touching the file") {
   TempDir dir("cli");
   write_meshes(dir);
-  REQUIRE(touchstone(dir, "db build --meshes meshes --out all.h5" + kFast).rc == 0);
+  REQUIRE(touchstone(dir, "db build --meshes meshes --out all.h5" + kFast).code == 0);
   // A manifest with two of them, in another order.
   ts::test::write_text(dir / "two.tsv", "# two objects\ntest\tmeshes/box.off\tbox\ntest\tmeshes/bar.off\tbar\n");
-  REQUIRE(touchstone(dir, "db build --manifest two.tsv --out two.h5" + kFast).rc == 0);
+  REQUIRE(touchstone(dir, "db build --manifest two.tsv --out two.h5" + kFast).code == 0);
   const auto add = touchstone(dir, "db add two.h5 meshes/ball.off --threads 1");
-  REQUIRE_MESSAGE(add.rc == 0, add.err);
+  REQUIRE_MESSAGE(add.code == 0, add.err);
   {
     ts::io::DbReader all(dir / "all.h5"), two(dir / "two.h5");
     REQUIRE(two.size() == 3);
@@ -126,13 +108,13 @@ TEST_CASE("cli db: add builds the object as build would, and refuses duplicates 
   }
   const auto before = ts::test::read_bytes(dir / "two.h5");
   const auto dup = touchstone(dir, "db add two.h5 meshes/box.off");
-  CHECK(dup.rc == 1);
+  CHECK(dup.code == 1);
   CHECK(dup.err == "touchstone: error: object 'box' already exists in the database (two.h5)\n");
   const auto dup2 = touchstone(dir, "db add two.h5 meshes/ball.off --name bar");
-  CHECK(dup2.rc == 1);
+  CHECK(dup2.code == 1);
   CHECK(ts::test::read_bytes(dir / "two.h5") == before);
   const auto missing = touchstone(dir, "db add two.h5 meshes/none.off");
-  CHECK(missing.rc == 1);
+  CHECK(missing.code == 1);
   CHECK(missing.err.find("does not exist") != std::string::npos);
   CHECK(ts::test::read_bytes(dir / "two.h5") == before);
   CHECK_FALSE(leftovers(dir.path()));
@@ -141,9 +123,9 @@ TEST_CASE("cli db: add builds the object as build would, and refuses duplicates 
 TEST_CASE("cli db: export writes PLY and PCD clouds with normals") {
   TempDir dir("cli");
   write_meshes(dir);
-  REQUIRE(touchstone(dir, "db build --meshes meshes --out db.h5" + kFast).rc == 0);
-  REQUIRE(touchstone(dir, "db export db.h5 --object box --out box.ply").rc == 0);
-  REQUIRE(touchstone(dir, "db export db.h5 --object box --cloud coarse --out box.pcd --ascii").rc == 0);
+  REQUIRE(touchstone(dir, "db build --meshes meshes --out db.h5" + kFast).code == 0);
+  REQUIRE(touchstone(dir, "db export db.h5 --object box --out box.ply").code == 0);
+  REQUIRE(touchstone(dir, "db export db.h5 --object box --cloud coarse --out box.pcd --ascii").code == 0);
   ts::io::DbReader db(dir / "db.h5");
   const auto fine = ts::io::read_cloud(dir / "box.ply");
   CHECK(fine.size() == db.info(db.find("box")).fine_points);
@@ -152,7 +134,7 @@ TEST_CASE("cli db: export writes PLY and PCD clouds with normals") {
   CHECK(coarse.size() == db.info(db.find("box")).coarse_points);
   CHECK(coarse.has_normals());
   const auto none = touchstone(dir, "db export db.h5 --object nope --out n.ply");
-  CHECK(none.rc == 1);
+  CHECK(none.code == 1);
   CHECK(none.err.find("no object 'nope'") != std::string::npos);
   CHECK_FALSE(fs::exists(dir / "n.ply"));
 }
@@ -162,55 +144,55 @@ TEST_CASE("cli db: bad input gives one error line, exit 1, and no output file") 
   write_meshes(dir);
   ts::test::write_text(dir / "short.tsv", "test\tmeshes/box.off\n");
   auto r = touchstone(dir, "db build --manifest short.tsv --out x.h5");
-  CHECK(r.rc == 1);
+  CHECK(r.code == 1);
   CHECK(r.err == "touchstone: error: manifest line has 2 fields, expected source<TAB>path<TAB>name (short.tsv, line 1)\n");
 
   ts::test::write_text(dir / "missing.tsv", "test\tmeshes/box.off\tbox\ntest\tmeshes/gone.off\tgone\n");
   r = touchstone(dir, "db build --manifest missing.tsv --out x.h5");
-  CHECK(r.rc == 1);
+  CHECK(r.code == 1);
   CHECK(r.err.find("mesh file does not exist") != std::string::npos);
   CHECK(r.err.find("missing.tsv, line 2") != std::string::npos);
 
   ts::test::write_text(dir / "meshes/broken.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n");  // cut short
   r = touchstone(dir, "db build --meshes meshes --out x.h5" + kFast);
-  CHECK(r.rc == 1);
+  CHECK(r.code == 1);
   CHECK(r.err.find("broken.off") != std::string::npos);
   CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
   fs::remove(dir / "meshes/broken.off");
   CHECK_FALSE(fs::exists(dir / "x.h5"));
 
   // Corrupt, truncated and foreign files given to db info.
-  REQUIRE(touchstone(dir, "db build --meshes meshes --out good.h5" + kFast).rc == 0);
+  REQUIRE(touchstone(dir, "db build --meshes meshes --out good.h5" + kFast).code == 0);
   const auto good = ts::test::read_bytes(dir / "good.h5");
   std::string corrupt = good;
   for (std::size_t i = 8; i < 600; ++i) corrupt[i] = static_cast<char>(corrupt[i] ^ 0x3c);
   ts::test::write_text(dir / "corrupt.h5", corrupt);
   r = touchstone(dir, "db info corrupt.h5");
-  CHECK(r.rc == 1);
+  CHECK(r.code == 1);
   CHECK(r.err.rfind("touchstone: error: ", 0) == 0);
   CHECK(r.err.find("(corrupt.h5") != std::string::npos);
   ts::test::write_text(dir / "cut.h5", good.substr(0, good.size() / 2));
   r = touchstone(dir, "db info cut.h5");
-  CHECK(r.rc == 1);
+  CHECK(r.code == 1);
   CHECK(r.err.find("truncated") != std::string::npos);
   r = touchstone(dir, "db info missing.tsv");
-  CHECK(r.rc == 1);
+  CHECK(r.code == 1);
   CHECK(r.err == "touchstone: error: not an HDF5 file (missing.tsv)\n");
   r = touchstone(dir, "db info nothing.h5 --json");
-  CHECK(r.rc == 1);
+  CHECK(r.code == 1);
   CHECK(r.out.empty());
   CHECK_FALSE(leftovers(dir.path()));
 }
 
 TEST_CASE("cli db: usage errors exit 2") {
   TempDir dir("cli");
-  CHECK(touchstone(dir, "db build --meshes m --out x.h5 --frobnicate").rc == 2);
-  CHECK(touchstone(dir, "db build --out x.h5").rc == 2);                          // no source
-  CHECK(touchstone(dir, "db build --manifest a.tsv --meshes m --out x.h5").rc == 2);  // two sources
-  CHECK(touchstone(dir, "db build --meshes m").rc == 2);                           // no --out
-  CHECK(touchstone(dir, "db build --meshes m --out x.h5 --fine-spacing -1").rc == 2);
-  CHECK(touchstone(dir, "db info").rc == 2);
-  CHECK(touchstone(dir, "db export db.h5 --object a --out a.ply --cloud medium").rc == 2);
-  CHECK(touchstone(dir, "db").rc == 2);
-  CHECK(touchstone(dir, "db info --help").rc == 0);
+  CHECK(touchstone(dir, "db build --meshes m --out x.h5 --frobnicate").code == 2);
+  CHECK(touchstone(dir, "db build --out x.h5").code == 2);                          // no source
+  CHECK(touchstone(dir, "db build --manifest a.tsv --meshes m --out x.h5").code == 2);  // two sources
+  CHECK(touchstone(dir, "db build --meshes m").code == 2);                           // no --out
+  CHECK(touchstone(dir, "db build --meshes m --out x.h5 --fine-spacing -1").code == 2);
+  CHECK(touchstone(dir, "db info").code == 2);
+  CHECK(touchstone(dir, "db export db.h5 --object a --out a.ply --cloud medium").code == 2);
+  CHECK(touchstone(dir, "db").code == 2);
+  CHECK(touchstone(dir, "db info --help").code == 0);
 }

@@ -8,6 +8,7 @@
 #include "io/log_store.hpp"
 #include "io/result_store.hpp"
 #include "engine/recognition_fixture.hpp"
+#include "cli_run.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>
@@ -24,22 +25,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Run {
-  int code = -1;
-  std::string out, err;
-};
-
-Run touchstone(const test::TempDir& dir, const std::string& args) {
-  const auto out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string cmd = "cd '" + dir.path().string() + "' && '" TS_BINARY_DIR "/touchstone' " + args +
-                          " >'" + out.string() + "' 2>'" + err.string() + "'";
-  const int status = std::system(cmd.c_str());
-  Run r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = test::read_bytes(out);
-  r.err = test::read_bytes(err);
-  return r;
-}
+using Run = ts::test::CliRun;
+using ts::test::touchstone;
 
 /// The engine tests' six analytic shapes written as a database file.
 fs::path make_db(const test::TempDir& dir, const std::string& name = "db.h5",

@@ -4,6 +4,7 @@
 #include "io/db_store.hpp"
 #include "io/log_store.hpp"
 #include "mesh_fixtures.hpp"
+#include "cli_run.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>
@@ -15,21 +16,8 @@
 using namespace ts;
 
 namespace {
-struct Run {
-  int code = -1;
-  std::string out, err;
-};
-
-Run touchstone(const test::TempDir& dir, const std::string& args) {
-  const auto out = dir / "stdout.txt", err = dir / "stderr.txt";
-  const std::string cmd = std::string(TS_BINARY_DIR) + "/touchstone " + args + " >" + out.string() + " 2>" + err.string();
-  const int status = std::system(cmd.c_str());
-  Run r;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = test::read_bytes(out);
-  r.err = test::read_bytes(err);
-  return r;
-}
+using Run = ts::test::CliRun;
+using ts::test::touchstone;
 
 BuiltObject object(const std::string& name, Mesh mesh) {
   BuiltObject o;
