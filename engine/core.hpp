@@ -37,6 +37,23 @@ struct PointCloud {
   bool has_normals() const { return !normals.empty() && normals.size() == points.size(); }
 };
 
+/// Contacts grouped by the grasp that made them (each grasp's own contacts, in the order the
+/// grasps came): the points of grasp g are points[first[g]] .. points[first[g + 1] - 1]. A
+/// grasp's contacts share its arm pose error, which the evaluation can take out per grasp.
+struct GraspGroups {
+  std::vector<Vec3> points;
+  std::vector<std::uint32_t> first{0};  ///< grasps() + 1 offsets into points
+
+  std::size_t grasps() const { return first.empty() ? 0 : first.size() - 1; }
+  bool empty() const { return points.empty(); }
+  /// Append one grasp's points.
+  void add(const std::vector<Vec3>& grasp) {
+    if (first.empty()) first.push_back(0);
+    points.insert(points.end(), grasp.begin(), grasp.end());
+    first.push_back(static_cast<std::uint32_t>(points.size()));
+  }
+};
+
 /// The one exception type of Touchstone. Thrown at I/O and configuration boundaries; the core
 /// returns flagged results instead. what() reads "<message> (<file>, <field>)".
 class Error : public std::runtime_error {

@@ -115,7 +115,7 @@ Grid::Ptr from_sparse_grid(const SparseGrid& s, float background) {
 }
 
 /// Trilinear interpolation at index-space point x when all 8 corners are active.
-inline bool trilinear(const Accessor& acc, const Vec3& x, double& out) {
+inline bool trilinear(const Accessor& acc, const Vec3& x, double& out, Vec3* grad = nullptr) {
   const double fx = std::floor(x.x()), fy = std::floor(x.y()), fz = std::floor(x.z());
   constexpr double kLimit = 1e9;   // keep far points out of int32 index range
   if (!(std::abs(fx) < kLimit && std::abs(fy) < kLimit && std::abs(fz) < kLimit)) return false;
@@ -148,6 +148,14 @@ inline bool trilinear(const Accessor& acc, const Vec3& x, double& out) {
   const double y0 = x00 + ty * (x10 - x00);
   const double y1 = x01 + ty * (x11 - x01);
   out = y0 + tz * (y1 - y0);
+  if (grad) {
+    // The analytic gradient of the trilinear interpolant (per index unit).
+    const double dx00 = v[1] - v[0], dx10 = v[3] - v[2], dx01 = v[5] - v[4], dx11 = v[7] - v[6];
+    const double dx0 = dx00 + ty * (dx10 - dx00), dx1 = dx01 + ty * (dx11 - dx01);
+    (*grad)[0] = dx0 + tz * (dx1 - dx0);
+    (*grad)[1] = (x10 - x00) + tz * ((x11 - x01) - (x10 - x00));
+    (*grad)[2] = y1 - y0;
+  }
   return true;
 }
 
@@ -164,6 +172,22 @@ struct DistanceField::Impl {
     double d;
     if (trilinear(fa, p / fine_voxel, d)) return d;
     if (coarse_box.contains(p) && trilinear(ca, p / coarse_voxel, d)) return d;
+    if (!finite(p)) return std::numeric_limits<double>::infinity();
+    return std::sqrt(coarse_box.squaredExteriorDistance(p)) + coarse_margin;
+  }
+
+  /// As query(), with the gradient of the interpolant (zero where only a bound is known).
+  double query_gradient(const Accessor& fa, const Accessor& ca, const Vec3& p, Vec3& g) const {
+    double d;
+    if (trilinear(fa, p / fine_voxel, d, &g)) {
+      g /= fine_voxel;
+      return d;
+    }
+    if (coarse_box.contains(p) && trilinear(ca, p / coarse_voxel, d, &g)) {
+      g /= coarse_voxel;
+      return d;
+    }
+    g.setZero();
     if (!finite(p)) return std::numeric_limits<double>::infinity();
     return std::sqrt(coarse_box.squaredExteriorDistance(p)) + coarse_margin;
   }
@@ -401,6 +425,19 @@ void DistanceField::distances(const Vec3* pts, std::size_t n, const Pose& T_obje
   const Accessor fa = impl_->fine->getConstUnsafeAccessor();
   const Accessor ca = impl_->coarse->getConstUnsafeAccessor();
   for (std::size_t i = 0; i < n; ++i) out[i] = impl_->query(fa, ca, T_object_query * pts[i]);
+}
+
+void DistanceField::distances_gradients(const Vec3* pts, std::size_t n, const Pose& T_object_query,
+                                        double* out, Vec3* grad) const {
+  if (empty()) {
+    std::fill(out, out + n, std::numeric_limits<double>::infinity());
+    std::fill(grad, grad + n, Vec3::Zero());
+    return;
+  }
+  const Accessor fa = impl_->fine->getConstUnsafeAccessor();
+  const Accessor ca = impl_->coarse->getConstUnsafeAccessor();
+  for (std::size_t i = 0; i < n; ++i)
+    out[i] = impl_->query_gradient(fa, ca, T_object_query * pts[i], grad[i]);
 }
 
 }  // namespace ts

@@ -62,6 +62,12 @@ class DistanceField {
   double distance(const Vec3& p_object) const;
   /// Batch form: out[i] = distance(T_object_query * pts[i]); one accessor for the batch.
   void distances(const Vec3* pts, std::size_t n, const Pose& T_object_query, double* out) const;
+  /// Same, with grad[i] the gradient of the interpolated distance at T_object_query * pts[i],
+  /// in the object frame (per metre; the analytic derivative of the trilinear interpolant, so
+  /// it matches finite differences of distance() within a cell). Zero where distance() only
+  /// returns a lower bound.
+  void distances_gradients(const Vec3* pts, std::size_t n, const Pose& T_object_query,
+                           double* out, Vec3* grad) const;
 
  private:
   struct Impl;

@@ -20,9 +20,78 @@ Vec3 half_extent_of(const ObjectInfo& info) {
 
 }  // namespace
 
+GraspFit fit_grasp_offsets(const Scene& scene, const DistanceField& field, const Pose& T_so,
+                           const EvaluateSettings& s) {
+  GraspFit fit;
+  const GraspGroups& G = scene.grasps;
+  if (G.grasps() == 0 || field.empty() || !T_so.matrix().allFinite()) return fit;
+  const double sigma = s.grasp_offset_sigma;
+  const double rho = sigma > 0.0 ? std::pow(s.grasp_contact_sigma / sigma, 2) : 0.0;
+  const double max_offset = 3.0 * sigma;
+  // Contacts farther than this from the surface are outliers to the fit (not to the score).
+  const double gate = max_offset + 3.0 * s.grasp_contact_sigma;
+  const Pose T_os = T_so.inverse();
+  const Eigen::Matrix3d R_so = T_so.linear();
+  std::vector<double> d;
+  std::vector<Vec3> g, sub;
+  double off2 = 0.0;
+  fit.offsets.assign(G.grasps(), Vec3::Zero());
+  for (std::size_t k = 0; k < G.grasps(); ++k) {
+    const Vec3* p = G.points.data() + G.first[k];
+    const std::size_t m = G.first[k + 1] - G.first[k];
+    // The fit's subset: evenly spread over the grasp's list (pads, then sensels).
+    const std::size_t ms = std::min(m, std::max<std::size_t>(s.grasp_fit_points, 3));
+    sub.resize(ms);
+    for (std::size_t j = 0; j < ms; ++j) sub[j] = p[j * m / ms];
+    d.resize(m);
+    g.resize(ms);
+    Vec3 t = Vec3::Zero();
+    for (int it = 0; sigma > 0.0 && it < s.grasp_offset_iterations; ++it) {
+      // Distances of T_os (p + t) = T_os p + R_os t.
+      Pose T = T_os;
+      T.translation() += T_os.linear() * t;
+      field.distances_gradients(sub.data(), ms, T, d.data(), g.data());
+      Eigen::Matrix3d H = rho * Eigen::Matrix3d::Identity();
+      Vec3 b = -rho * t;
+      for (std::size_t i = 0; i < ms; ++i) {
+        const double gn = g[i].norm();
+        if (!(std::abs(d[i]) < gate) || !(gn > 0.5)) continue;
+        const Vec3 J = R_so * (g[i] / gn);
+        H.noalias() += J * J.transpose();
+        b -= J * d[i];
+      }
+      const Vec3 step = H.ldlt().solve(b);
+      if (!step.allFinite()) break;
+      t += step;
+      if (t.norm() > max_offset) t *= max_offset / t.norm();
+      if (step.norm() < 1e-3 * s.grasp_contact_sigma) break;
+    }
+    Pose T = T_os;
+    T.translation() += T_os.linear() * t;
+    field.distances(p, m, T, d.data());
+    for (std::size_t i = 0; i < m; ++i) fit.error_sum += detail::contact_error(d[i], s.d_outlier);
+    fit.contacts += m;
+    fit.offsets[k] = t;
+    off2 += t.squaredNorm();
+  }
+  fit.offset_rms = std::sqrt(off2 / static_cast<double>(G.grasps()));
+  return fit;
+}
+
 Evaluation evaluate(const Scene& scene, const ObjectGeometry& geo, const ObjectInfo& info,
                     const Pose& T_scene_object, const EvaluateSettings& s, double reject_below) {
   const Vec3 half = half_extent_of(info);
+  if (s.grasp_offset_sigma > 0.0 && scene.grasps.grasps() > 0 && !geo.field.empty() &&
+      s.use_distance_field) {
+    const GraspFit fit = fit_grasp_offsets(scene, geo.field, T_scene_object, s);
+    const ContactTerm term{fit.error_sum, fit.contacts};
+    auto by_field = [&](const Vec3* p, std::size_t n, const Pose& T, double* out) {
+      geo.field.distances(p, n, T, out);
+    };
+    Evaluation ev = evaluate_batched(scene, by_field, half, T_scene_object, s, reject_below, &term);
+    ev.grasp_offset_rms = fit.offset_rms;
+    return ev;
+  }
   auto by_tree = [&](const Vec3* p, std::size_t n, const Pose& T, double* out) {
     for (std::size_t i = 0; i < n; ++i)
       out[i] = std::sqrt(geo.tree.nearest(T * p[i]).sq_distance);

@@ -8,6 +8,14 @@
 // Distances come from the object's distance field (O(1) per point); the paper's k-d tree
 // nearest neighbour is available as an option. Without free-space data the free term is skipped.
 //
+// Extension, per-grasp offsets (grasp_offset_sigma > 0 and a scene with grasp groups): the arm
+// pose error moves all contacts of one grasp together, by millimetres, which Eq. 4 cannot tell
+// from a shape mismatch. Each grasp's contacts get the translation t_g that best fits them to
+// the object under the hypothesis (Gauss-Newton on the distance field, Gaussian prior of
+// grasp_offset_sigma per axis, |t_g| <= 3 sigma), and Eq. 4 is applied to the shifted contacts.
+// The true object then fits to the contact noise while a look-alike keeps its shape error. The
+// free-space term is unchanged.
+//
 // Early rejection, exact: the contact term only decreases as points are added, so after a
 // prefix of the scene's fixed evaluation order, -sum(e)/C bounds ln wt from above. A hypothesis
 // whose bound falls below a threshold that k fully evaluated hypotheses already reach cannot be
@@ -34,6 +42,14 @@ struct EvaluateSettings {
   bool use_distance_field = true;     ///< false: nearest fine-cloud point (paper's k-d tree)
   std::size_t prefix = 32;            ///< contacts in the first rejection test (and per chunk)
   std::size_t free_prefix = 128;      ///< free-space points in the first rejection test
+  double grasp_offset_sigma = 0.0;    ///< m, extension: prior sigma (per axis) of a per-grasp
+                                      ///< translation fitted before Eq. 4 (0: off; needs the
+                                      ///< scene's grasp groups and a distance field)
+  double grasp_contact_sigma = 0.001; ///< m, contact noise assumed by that fit: the prior
+                                      ///< weighs (contact / offset sigma)^2 against each contact
+  int grasp_offset_iterations = 2;    ///< Gauss-Newton iterations of that fit (at most)
+  std::size_t grasp_fit_points = 16;  ///< contacts per grasp the fit uses (evenly spread over
+                                      ///< the grasp's list; Eq. 4 then takes them all)
 };
 
 struct Evaluation {
@@ -42,6 +58,7 @@ struct Evaluation {
   double free_error = 0.0;            ///< sum of e_free over the evaluated free points
   std::uint32_t contacts = 0;         ///< contacts evaluated
   std::uint32_t free_points = 0;      ///< free points near enough to need a distance
+  double grasp_offset_rms = 0.0;      ///< m, RMS length of the per-grasp offsets (when fitted)
   bool complete = false;              ///< false: stopped early (log_weight is an upper bound)
 };
 
@@ -63,12 +80,29 @@ Evaluation evaluate(const Scene& scene, const ObjectGeometry& geometry, const Ob
                     const Pose& T_scene_object, const EvaluateSettings& settings,
                     double reject_below = -std::numeric_limits<double>::infinity());
 
+/// The contact term with per-grasp offsets (see above).
+struct GraspFit {
+  double error_sum = 0.0;             ///< sum of Eq. 4 over the shifted contacts
+  std::size_t contacts = 0;           ///< contacts of all grasps
+  double offset_rms = 0.0;            ///< m, RMS of |t_g| over the grasps
+  std::vector<Vec3> offsets;          ///< t_g per grasp, scene frame
+};
+GraspFit fit_grasp_offsets(const Scene& scene, const DistanceField& field, const Pose& T_scene_object,
+                           const EvaluateSettings& settings);
+
+/// A contact term computed beforehand (sum of Eq. 4 over n contacts).
+struct ContactTerm {
+  double sum = 0.0;
+  std::size_t n = 0;
+};
+
 /// The same over any batch distance function `fn(const Vec3* pts, std::size_t n,
 /// const Pose& T_object_pts, double* out)` giving signed (or unsigned) distances of T * pts[i].
 template <class BatchFn>
 Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const Vec3& half_extent,
                             const Pose& T_scene_object, const EvaluateSettings& settings,
-                            double reject_below = -std::numeric_limits<double>::infinity());
+                            double reject_below = -std::numeric_limits<double>::infinity(),
+                            const ContactTerm* contact_term = nullptr);
 
 /// The same, with any signed distance function of object-frame points (tests, oracles):
 /// `distance(p_object)` returns the signed distance to the surface (negative inside, or
@@ -119,10 +153,11 @@ inline double free_error(double d, double d_thresh, bool inside_penalty) {  // E
 template <class BatchFn>
 Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const Vec3& half_extent,
                             const Pose& T_scene_object, const EvaluateSettings& s,
-                            double reject_below) {
+                            double reject_below, const ContactTerm* given) {
   Evaluation ev;
-  const std::size_t C = scene.contacts.size();
-  if (C == 0 || scene.ordered.size() != C || !T_scene_object.matrix().allFinite()) return ev;
+  const std::size_t C = given ? given->n : scene.contacts.size();
+  if (C == 0 || (!given && scene.ordered.size() != C) || !T_scene_object.matrix().allFinite())
+    return ev;
   const Pose T_object_scene = T_scene_object.inverse();
   const double invC = 1.0 / static_cast<double>(C);
   constexpr std::size_t kMax = 64;
@@ -132,8 +167,8 @@ Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const 
   double buf[kMax];
 
   // Contact term (Eq. 4, 5/7), in the scene's fixed pseudo-random order.
-  double sum = 0.0;
-  std::size_t nc = 0;
+  double sum = given ? given->sum : 0.0;
+  std::size_t nc = given ? C : 0;
   const std::size_t c_limit = bound_only ? std::min(C, chunk) : C;
   while (nc < c_limit) {
     const std::size_t m = std::min(chunk, c_limit - nc);

@@ -145,6 +145,25 @@ PointCloud Exploration::contact_cloud() const {
   return out;
 }
 
+GraspGroups Exploration::grasp_groups() const {
+  GraspGroups out;
+  std::size_t base = 0;
+  PointCloud local;
+  for (const std::size_t n : per_grasp_) {
+    local.points.clear();
+    for (std::size_t i = base; i < base + n; ++i) local.points.push_back(raw_[i] - origin_);
+    base += n;
+    if (local.points.empty()) {
+      out.add({});
+      continue;
+    }
+    PointCloud f = voxel_filter(local, settings_.contact_voxel);
+    for (Vec3& p : f.points) p += origin_;
+    out.add(f.points);
+  }
+  return out;
+}
+
 PointCloud Exploration::free_cloud() const {
   PointCloud out;
   out.points = grid_.full_free_cloud(free_space_box(raw_, settings_.free.s_obj_max), settings_.free.res_free);
@@ -160,6 +179,7 @@ ExplorationClouds exploration_clouds(const TactileLog& log, std::size_t k,
   out.free = ex.free_cloud();
   out.raw_contacts = ex.raw_contacts().size();
   out.contacts_per_grasp = ex.contacts_per_grasp();
+  out.grasps = ex.grasp_groups();
   return out;
 }
 

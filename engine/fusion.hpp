@@ -94,6 +94,7 @@ struct ExplorationClouds {
   PointCloud free;               ///< PC^free inside B (Eq. 3), sampled at res_free
   std::size_t raw_contacts = 0;  ///< contacts before the voxel filter
   std::vector<std::size_t> contacts_per_grasp;
+  GraspGroups grasps;            ///< Exploration::grasp_groups()
 };
 
 /// Incremental exploration over a log (holds a reference: the log must outlive it).
@@ -111,6 +112,9 @@ class Exploration {
   PointCloud free_cloud() const;      ///< PC^free in B around the current contacts: centres of
                                       ///< the res_free cubes that are entirely free
                                       ///< (OccupancyGrid::full_free_cloud)
+  /// The contacts grouped by grasp, each grasp voxel-filtered on its own (contact_voxel):
+  /// what the evaluation needs to take out each grasp's arm pose error.
+  GraspGroups grasp_groups() const;
 
  private:
   const TactileLog& log_;

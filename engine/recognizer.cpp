@@ -140,6 +140,7 @@ RecognizerSettings RecognizerSettings::improved() {
   s.refine_pool = 60;
   s.new_per_object = 5;
   s.ransac.prune_per_object = 200;
+  s.evaluate.grasp_offset_sigma = 0.003;
   return s;
 }
 
@@ -156,6 +157,8 @@ RecognizerSettings RecognizerSettings::scaled(double f) const {
   s.icp.gradient_step *= f;
   s.evaluate.d_outlier *= f;
   s.evaluate.res_free *= f;
+  s.evaluate.grasp_offset_sigma *= f;
+  s.evaluate.grasp_contact_sigma *= f;
   return s;
 }
 
@@ -183,7 +186,8 @@ void Recognizer::reset() {
   state_.clear();
 }
 
-StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<Vec3>& free_world) {
+StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<Vec3>& free_world,
+                            const GraspGroups& grasps) {
   const auto t_start = Clock::now();
   ++step_;
   StepResult res;
@@ -196,7 +200,8 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   SceneSettings scs = s_.scene;
   if (scs.free_clearance < 0.0)  // automatic: d_thresh of Eq. 8
     scs.free_clearance = s_.evaluate.d_thresh > 0.0 ? s_.evaluate.d_thresh : 0.5 * s_.evaluate.res_free;
-  const Scene scene = prepare_scene(contacts_world, free_world, db_.settings().fpfh, scs, s_.seed, step_u);
+  Scene scene = prepare_scene(contacts_world, free_world, db_.settings().fpfh, scs, s_.seed, step_u);
+  if (s_.evaluate.grasp_offset_sigma > 0.0) set_grasps(scene, grasps);
   res.times.prepare_s = seconds_since(t0);
   res.contacts = scene.contacts.size();
   res.free_points = scene.free_space.size();
@@ -211,6 +216,11 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   const bool with_free = s_.method == Method::ransac_icp_fs || s_.method == Method::bricpsf;
   EvaluateSettings ev = s_.evaluate;
   ev.free_space = ev.free_space && with_free;
+  // Per-grasp offsets score refined hypotheses only: the raw RANSAC candidates are ranked by
+  // the plain Eq. 4 (thousands of them), which only chooses the ones to refine.
+  const bool grasp_fit = ev.grasp_offset_sigma > 0.0 && !scene.grasps.empty();
+  EvaluateSettings ev_raw = ev;
+  ev_raw.grasp_offset_sigma = 0.0;
 
   // Batch RANSAC hypothesis generation (Section 4.3.2), every method, every step.
   std::vector<std::uint8_t> allowed = objects_spanning(scene, db_, s_.ransac.size_slack);
@@ -228,9 +238,9 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   const std::size_t n_p = s_.n_p;
   std::vector<Working> next;
   SelectStats ss;
-  auto select = [&](const std::vector<Candidate>& c, std::size_t k) {
+  auto select = [&](const std::vector<Candidate>& c, std::size_t k, const EvaluateSettings& e) {
     const auto te = Clock::now();
-    const auto top = select_top(scene, db_, c, k, ev, &ss);
+    const auto top = select_top(scene, db_, c, k, e, &ss);
     res.times.evaluate_s += seconds_since(te);
     res.evaluated_full += ss.full;
     res.rejected_early += ss.rejected_prefix + ss.rejected_later;
@@ -239,7 +249,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
 
   switch (s_.method) {
     case Method::batch_ransac: {
-      take(next, select(cands, n_p), n_p, s_.dedupe, s_.dedupe_distance);
+      take(next, select(cands, n_p, ev_raw), n_p, s_.dedupe, s_.dedupe_distance);
       break;
     }
     case Method::ransac_icp:
@@ -248,7 +258,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
       std::vector<Candidate> pool = cands;
       if (s_.icp_top > 0.0 && s_.icp_top < 1.0) {
         const auto k = static_cast<std::size_t>(std::ceil(s_.icp_top * double(cands.size())));
-        std::vector<Working> pre = select(cands, std::max(k, n_p));
+        std::vector<Working> pre = select(cands, std::max(k, n_p), ev_raw);
         pool.clear();
         for (const Working& h : pre) pool.push_back(h.cand);
       }
@@ -259,7 +269,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
       res.times.icp_s += seconds_since(t0);
       std::vector<Candidate> refined(w.size());
       for (std::size_t i = 0; i < w.size(); ++i) refined[i] = w[i].cand;
-      std::vector<Working> top = select(refined, s_.dedupe ? 4 * n_p : n_p);
+      std::vector<Working> top = select(refined, s_.dedupe ? 4 * n_p : n_p, ev);
       // carry the ICP diagnostics over
       for (Working& h : top)
         for (const Working& x : w)
@@ -294,11 +304,13 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
       take(next, old, k_old, s_.dedupe, s_.dedupe_distance);
       const std::size_t k_new = n_p - next.size();
       const std::size_t pool = std::max(s_.refine_pool, s_.dedupe || s_.new_per_object > 0 ? 2 * k_new : k_new);
-      std::vector<Working> fresh = select(cands, pool);
-      if (s_.refine_new) {
-        t0 = Clock::now();
-        refine_all(scene, db_, s_.icp, fresh);
-        res.times.icp_s += seconds_since(t0);
+      std::vector<Working> fresh = select(cands, pool, ev_raw);
+      if (s_.refine_new || grasp_fit) {
+        if (s_.refine_new) {
+          t0 = Clock::now();
+          refine_all(scene, db_, s_.icp, fresh);
+          res.times.icp_s += seconds_since(t0);
+        }
         t0 = Clock::now();
         evaluate_each(scene, db_, ev, fresh);
         res.times.evaluate_s += seconds_since(t0);

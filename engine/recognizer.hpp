@@ -118,7 +118,10 @@ class Recognizer {
   Recognizer(const Database& db, RecognizerSettings settings);
 
   /// One exploration step with the cumulative clouds (world frame). Free space may be empty.
-  StepResult step(const PointCloud& contacts_world, const std::vector<Vec3>& free_world);
+  /// `grasps`: the same contacts grouped by grasp (Exploration::grasp_groups()), for the
+  /// per-grasp offsets of the evaluation (evaluate.grasp_offset_sigma); empty: not used.
+  StepResult step(const PointCloud& contacts_world, const std::vector<Vec3>& free_world,
+                  const GraspGroups& grasps = {});
   void reset();                     ///< forget the hypotheses; the next step is step 1
   int steps_done() const { return step_; }
   const std::vector<Hypothesis>& hypotheses() const { return state_; }

@@ -217,4 +217,15 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
   return sc;
 }
 
+void set_grasps(Scene& scene, const GraspGroups& in) {
+  scene.grasps = GraspGroups{};
+  std::vector<Vec3> g;
+  for (std::size_t k = 0; k < in.grasps(); ++k) {
+    g.clear();
+    for (std::uint32_t i = in.first[k]; i < in.first[k + 1] && i < in.points.size(); ++i)
+      if (finite(in.points[i])) g.push_back(in.points[i] - scene.origin);
+    if (!g.empty()) scene.grasps.add(g);
+  }
+}
+
 }  // namespace ts

@@ -42,6 +42,7 @@ struct Scene {
   std::size_t dropped_non_finite = 0;  ///< input points ignored because not finite
   std::size_t dropped_free = 0;        ///< free points dropped as too close to a contact
   double feature_radius = 0.0;         ///< m, FPFH radius the features were computed with
+  GraspGroups grasps;                  ///< local frame; the contacts grouped by grasp, or empty
 
   bool has_free_space() const { return !free_space.empty(); }
   /// T_world_object from T_scene_object and back.
@@ -56,6 +57,10 @@ struct Scene {
 Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& free_world,
                     const FpfhSettings& fpfh, const SceneSettings& settings, std::uint64_t seed,
                     std::uint64_t step);
+
+/// Attach the contacts grouped by grasp (world frame) to a scene, in its local frame;
+/// non-finite points are dropped and grasps left empty are removed.
+void set_grasps(Scene& scene, const GraspGroups& grasps_world);
 
 /// Number of pose DOF left unobservable by points with normals (eigenvalues of the 6x6
 /// point-to-plane information matrix below eps * largest; rotations scaled by the RMS radius).

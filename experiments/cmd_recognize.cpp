@@ -106,6 +106,7 @@ std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& 
           {"lambda", s.evaluate.lambda},
           {"res_free", s.evaluate.res_free},
           {"free_inside_penalty", s.evaluate.free_inside_penalty ? 1.0 : 0.0},
+          {"grasp_offset_sigma", s.evaluate.grasp_offset_sigma},
           {"icp_iterations", double(s.icp.max_iterations)},
           {"icp_trim", s.icp.trim_fraction},
           {"icp_max_correspondence", s.icp.max_correspondence},
@@ -188,18 +189,20 @@ int run_recognize(const RecognizeOptions& o) {
   for (int k = 1; k <= K; ++k) {
     PointCloud contacts;
     std::vector<Vec3> free;
+    GraspGroups grasps;
     const auto t0 = std::chrono::steady_clock::now();
     if (ex) {
       ex->advance_to(static_cast<std::size_t>(k));
       contacts = ex->contact_cloud();
       if (with_free)
         free = ex->free_cloud().points;
+      if (rs.evaluate.grasp_offset_sigma > 0.0) grasps = ex->grasp_groups();
     } else {
       contacts = single;
     }
     fusion_time.push_back(
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    StepResult r = rec.step(contacts, free);
+    StepResult r = rec.step(contacts, free, grasps);
     // Units sanity check: contacts far wider than any object mean the log and the database
     // disagree (e.g. millimetres against metres).
     if (r.contacts > 0) {
@@ -351,6 +354,11 @@ void register_recognize(CLI::App& app) {
   sub->add_option("--res-free", s.evaluate.res_free, "Free-space resolution (m); d_thresh = res_free/2")->group(g)->check(CLI::PositiveNumber);
   auto* inside = sub->add_flag("--free-inside-penalty{true},--no-free-inside-penalty{false}", s.evaluate.free_inside_penalty,
                 "Extension: free space inside a closed object costs the full penalty")->group(g);
+  auto* grasp_sigma = sub->add_option("--grasp-offset-sigma", s.evaluate.grasp_offset_sigma,
+                                      "Extension: arm position error per grasp (m, per axis); each grasp's contacts "
+                                      "may shift by a fitted offset before Eq. 4 (0: off; tactile logs only)")
+                          ->group(g)
+                          ->check(CLI::Range(0.0, 1.0));
   sub->add_option("--icp-iterations", s.icp.max_iterations, "ICP iteration cap")->group(g)->check(CLI::Range(0, 100000));
   sub->add_option("--icp-trim", s.icp.trim_fraction, "Trimmed ICP: share of closest pairs fitted")->group(g)->check(CLI::Range(0.1, 1.0));
   sub->add_option("--icp-max-correspondence", s.icp.max_correspondence, "ICP pair distance gate (m, 0: none)")->group(g)->check(CLI::NonNegativeNumber);
@@ -374,16 +382,23 @@ void register_recognize(CLI::App& app) {
   sub->add_option("--feature-checks", s.index.checks, "Approximate feature search: leaves visited")->group(g)->check(CLI::Range(1, 1 << 30));
   sub->add_option("--contact-voxel", o->contact_voxel, "Voxel filter of the cumulative contacts (m)")->group(g)->check(CLI::PositiveNumber);
   add_common(sub, o->common);
-  sub->callback([o, inside, dedupe, refine, pool, per_object, per_object_w] {
+  // The extensions' flags and how --preset improved sets each one a flag does not set.
+  using Apply = void (*)(RecognizerSettings&, const RecognizerSettings&);
+  const std::vector<std::pair<CLI::Option*, Apply>> extensions = {
+      {inside, [](RecognizerSettings& r, const RecognizerSettings& i) { r.evaluate.free_inside_penalty = i.evaluate.free_inside_penalty; }},
+      {dedupe, [](RecognizerSettings& r, const RecognizerSettings& i) { r.dedupe = i.dedupe; }},
+      {refine, [](RecognizerSettings& r, const RecognizerSettings& i) { r.refine_new = i.refine_new; }},
+      {pool, [](RecognizerSettings& r, const RecognizerSettings& i) { r.refine_pool = i.refine_pool; }},
+      {per_object, [](RecognizerSettings& r, const RecognizerSettings& i) { r.new_per_object = i.new_per_object; }},
+      {per_object_w, [](RecognizerSettings& r, const RecognizerSettings& i) { r.ransac.prune_per_object = i.ransac.prune_per_object; }},
+      {grasp_sigma, [](RecognizerSettings& r, const RecognizerSettings& i) { r.evaluate.grasp_offset_sigma = i.evaluate.grasp_offset_sigma; }},
+  };
+  sub->callback([o, extensions] {
     // --preset improved: the extensions, except where a flag says otherwise
     if (o->preset == "improved") {
       const RecognizerSettings imp = RecognizerSettings::improved();
-      if (inside->count() == 0) o->rs.evaluate.free_inside_penalty = imp.evaluate.free_inside_penalty;
-      if (dedupe->count() == 0) o->rs.dedupe = imp.dedupe;
-      if (refine->count() == 0) o->rs.refine_new = imp.refine_new;
-      if (pool->count() == 0) o->rs.refine_pool = imp.refine_pool;
-      if (per_object->count() == 0) o->rs.new_per_object = imp.new_per_object;
-      if (per_object_w->count() == 0) o->rs.ransac.prune_per_object = imp.ransac.prune_per_object;
+      for (const auto& [opt, apply] : extensions)
+        if (opt->count() == 0) apply(o->rs, imp);
     }
     if (o->log.empty() && o->cloud.empty())
       throw CLI::RequiredError("--log or --cloud");

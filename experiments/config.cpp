@@ -217,6 +217,9 @@ const std::vector<KeyDef>& key_defs() {
     add("bricpsf.lambda", true,
         [=](auto& c, auto& in, auto& x) { c.params.lambda = number_in(in, 0, inf, x); },
         [](auto& c) { return opt(c.params.lambda); });
+    add("evaluate.grasp_offset_sigma_m", true,
+        [=](auto& c, auto& in, auto& x) { c.params.grasp_offset_sigma_m = number_in(in, 0, 1, x); },
+        [](auto& c) { return opt(c.params.grasp_offset_sigma_m); });
     add("icp.iterations", true,
         [](auto& c, auto& in, auto& x) { c.params.icp_iterations = int_at_least(in, 0, x); },
         [](auto& c) { return opt(c.params.icp_iterations); });

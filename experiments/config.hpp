@@ -23,6 +23,7 @@
 //   ransac.triplets (N), ransac.registrations (R), ransac.samples ("NxR"), ransac.prune (W),
 //   ransac.prune_per_object (W per object, 0: the global W),
 //   ransac.d_outlier_m, bricpsf.hypotheses (n_p), bricpsf.psi, bricpsf.lambda,
+//   evaluate.grasp_offset_sigma_m (extension: per-grasp arm offsets, 0: off),
 //   icp.iterations     method parameters; unset means the recognizer's default
 //   schedule           runs | steps        parallel over runs (throughput) or inside each step
 //                                          (latency); never changes results
@@ -62,6 +63,7 @@ struct MethodParams {
   std::optional<double> psi;            ///< Ψ, share of evolved hypotheses kept
   std::optional<double> lambda;         ///< λ, free-space weight (Eq. 9)
   std::optional<int> icp_iterations;    ///< ICP iteration cap
+  std::optional<double> grasp_offset_sigma_m;  ///< m, per-grasp offset prior (0: off)
 };
 
 struct SweepAxis {

@@ -149,6 +149,7 @@ RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
   if (p.psi) s.psi = *p.psi;
   if (p.lambda) s.evaluate.lambda = *p.lambda;
   if (p.icp_iterations) s.icp.max_iterations = *p.icp_iterations;
+  if (p.grasp_offset_sigma_m) s.evaluate.grasp_offset_sigma = *p.grasp_offset_sigma_m;
   return s;
 }
 
@@ -357,9 +358,11 @@ class RecognitionEngine final : public RunEngine {
       exploration.advance_to(static_cast<std::size_t>(k));
       const PointCloud contacts = exploration.contact_cloud();
       const PointCloud free = exploration.free_cloud();
+      const GraspGroups grasps =
+          rs.evaluate.grasp_offset_sigma > 0.0 ? exploration.grasp_groups() : GraspGroups{};
       const double fusion_s = seconds_since(t0);
       const auto t1 = Clock::now();
-      const StepResult sr = recognizer.step(contacts, free.points);
+      const StepResult sr = recognizer.step(contacts, free.points, grasps);
       const double recognize_s = seconds_since(t1);
 
       io::RunStepRecord s;

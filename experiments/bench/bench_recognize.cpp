@@ -66,6 +66,7 @@ struct Log {
 struct Steps {
   std::vector<PointCloud> contacts;
   std::vector<std::vector<Vec3>> free;
+  std::vector<GraspGroups> grasps;
 };
 
 Steps clouds_of(const TactileLog& log, std::size_t grasps, double s_obj_max, double res_free) {
@@ -78,6 +79,7 @@ Steps clouds_of(const TactileLog& log, std::size_t grasps, double s_obj_max, dou
     ex.advance_to(k);
     s.contacts.push_back(ex.contact_cloud());
     s.free.push_back(ex.free_cloud().points);
+    s.grasps.push_back(ex.grasp_groups());
   }
   return s;
 }
@@ -105,6 +107,10 @@ void set_param(RecognizerSettings& s, const std::string& kv) {
   else if (k == "W_obj") s.ransac.prune_per_object = static_cast<std::size_t>(v);
   else if (k == "d_outlier") s.evaluate.d_outlier = v;
   else if (k == "lambda") s.evaluate.lambda = v;
+  else if (k == "grasp_offset_sigma") s.evaluate.grasp_offset_sigma = v;
+  else if (k == "grasp_contact_sigma") s.evaluate.grasp_contact_sigma = v;
+  else if (k == "grasp_iterations") s.evaluate.grasp_offset_iterations = static_cast<int>(v);
+  else if (k == "grasp_fit_points") s.evaluate.grasp_fit_points = static_cast<std::size_t>(v);
   else if (k == "res_free") s.evaluate.res_free = v;
   else if (k == "normal_tolerance_deg") s.ransac.normal_tolerance_deg = v;
   else if (k == "distance_tolerance") s.ransac.distance_tolerance = v;
@@ -216,7 +222,7 @@ int main(int argc, char** argv) {
             StepResult r;
             for (std::size_t k = 0; k < grasps; ++k) {
               const double c0 = cpu_seconds();
-              r = rec.step(steps[i].contacts[k], steps[i].free[k]);
+              r = rec.step(steps[i].contacts[k], steps[i].free[k], steps[i].grasps[k]);
               if (k + 1 == grasps) cpu_last[threads].push_back(cpu_seconds() - c0);
               all[threads].push_back(r.times.total_s);
             }
@@ -267,7 +273,7 @@ int main(int argc, char** argv) {
           Recognizer rec(db, index, rs);
           StepResult r;
           for (std::size_t k = 0; k < grasps; ++k) {
-            r = rec.step(st.contacts[k], st.free[k]);
+            r = rec.step(st.contacts[k], st.free[k], st.grasps[k]);
             time_total += r.times.total_s;
           }
           ++total;

@@ -324,3 +324,48 @@ TEST_CASE("Distance field rejects bad input; an empty field answers +inf") {
   empty.distances(pts, 2, Pose::Identity(), out);
   CHECK(std::isinf(out[0]));
 }
+
+TEST_CASE("Distance field gradient is the derivative of its own interpolant") {
+  DistanceFieldSettings s;
+  const DistanceField df = DistanceField::build(icosphere(0.05, 3), true, s);
+  Rng rng(11);
+  int fine = 0, coarse = 0;
+  for (int n = 0; n < 400; ++n) {
+    // Points near the surface (fine level) and farther out (coarse level).
+    const Vec3 dir = Vec3(rng.normal(), rng.normal(), rng.normal()).normalized();
+    const double r = n % 2 ? 0.05 + rng.uniform(-0.004, 0.004) : rng.uniform(0.07, 0.2);
+    const Vec3 p = r * dir;
+    double d = 0.0;
+    Vec3 g;
+    df.distances_gradients(&p, 1, Pose::Identity(), &d, &g);
+    CHECK(d == df.distance(p));
+    // Central differences with a step far below a voxel: equal unless a cell border lies
+    // between, where the interpolant has a kink; such samples are skipped.
+    const double h = 1e-6;
+    Vec3 fd;
+    bool kink = false;
+    for (int a = 0; a < 3; ++a) {
+      Vec3 e = Vec3::Zero();
+      e[a] = h;
+      const double up = (df.distance(p + e) - d) / h, down = (d - df.distance(p - e)) / h;
+      kink = kink || std::abs(up - down) > 1e-3;
+      fd[a] = 0.5 * (up + down);
+    }
+    if (kink || !fd.allFinite()) continue;
+    const bool near = std::abs(r - 0.05) < 0.005;
+    (near ? fine : coarse) += 1;
+    CHECK((g - fd).norm() < 1e-4);
+    // A distance field's gradient has unit length up to interpolation error, pointing outward.
+    CHECK(g.norm() == doctest::Approx(1.0).epsilon(0.1));
+    CHECK(g.dot(dir) > 0.9);
+  }
+  CHECK(fine > 150);
+  CHECK(coarse > 150);
+  // Far outside the coarse grid only a bound is known: no gradient.
+  const Vec3 far(3.0, 0.0, 0.0);
+  double d;
+  Vec3 g;
+  df.distances_gradients(&far, 1, Pose::Identity(), &d, &g);
+  CHECK(d >= s.coarse_margin);
+  CHECK(g == Vec3::Zero());
+}

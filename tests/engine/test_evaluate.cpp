@@ -1,8 +1,12 @@
 #include "engine/evaluate.hpp"
 
+#include "engine/distance_field.hpp"
+#include "tests/engine/mesh_shapes.hpp"
+
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <numbers>
 #include <numeric>
 
 using namespace ts;
@@ -173,4 +177,159 @@ TEST_CASE("Evaluation never returns NaN") {
   const Evaluation e = evaluate_with(one, sphere_distance, kHalf, bad, {});
   CHECK_FALSE(std::isnan(e.log_weight));
   CHECK_FALSE(e.complete);
+}
+
+namespace {
+
+/// Geometry with only a distance field (all that the grasp-offset evaluation reads).
+ObjectGeometry field_geometry(const Mesh& m) {
+  ObjectGeometry g;
+  g.field = DistanceField::build(m, true, DistanceFieldSettings{});
+  return g;
+}
+
+/// Contacts of `grasps` grasps on a sphere of radius kR: each grasp touches three spots (pads)
+/// around a random direction, and the whole grasp is shifted by its own offset (the arm error).
+struct Grasped {
+  std::vector<Vec3> all;
+  GraspGroups groups;
+  std::vector<Vec3> offsets;
+};
+Grasped grasp_sphere(int grasps, double sigma, std::uint64_t seed) {
+  Rng rng(seed);
+  Grasped out;
+  for (int g = 0; g < grasps; ++g) {
+    const Vec3 axis = Vec3(rng.normal(), rng.normal(), rng.normal()).normalized();
+    const Vec3 u = axis.unitOrthogonal(), v = axis.cross(u);
+    const Vec3 t = sigma * Vec3(rng.normal(), rng.normal(), rng.normal());
+    std::vector<Vec3> pts;
+    for (int pad = 0; pad < 3; ++pad) {
+      const double a = 2.0 * std::numbers::pi * pad / 3.0;
+      const Vec3 c = (axis * 0.3 + std::cos(a) * u + std::sin(a) * v).normalized();
+      const Vec3 cu = c.unitOrthogonal(), cv = c.cross(cu);
+      for (int i = -3; i <= 3; ++i)
+        for (int j = -3; j <= 3; ++j)
+          pts.push_back(kR * (c + 0.04 * (i * cu + j * cv)).normalized() + t);
+    }
+    out.all.insert(out.all.end(), pts.begin(), pts.end());
+    out.groups.add(pts);
+    out.offsets.push_back(t);
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("Per-grasp offsets: recovered on a shape that observes them, and undone in Eq. 4") {
+  // A box: a grasp on three faces around a corner observes its whole translation.
+  const ObjectGeometry box = field_geometry(test::make_box(Vec3(0.04, 0.03, 0.02), 4));
+  ObjectInfo info;
+  info.extent = Vec3(0.08, 0.06, 0.04);
+  Rng rng(5);
+  std::vector<Vec3> all, truth;
+  GraspGroups groups;
+  const Vec3 half(0.04, 0.03, 0.02);
+  for (int g = 0; g < 8; ++g) {
+    const Vec3 sign(g & 1 ? 1 : -1, g & 2 ? 1 : -1, g & 4 ? 1 : -1);
+    const Vec3 t = 0.003 * Vec3(rng.normal(), rng.normal(), rng.normal());
+    std::vector<Vec3> pts;
+    for (int face = 0; face < 3; ++face)
+      for (int i = 1; i <= 5; ++i)
+        for (int j = 1; j <= 5; ++j) {
+          Vec3 p = sign.cwiseProduct(half);        // the corner
+          const int a = (face + 1) % 3, b = (face + 2) % 3;
+          p[a] -= sign[a] * 0.003 * i;             // into the face
+          p[b] -= sign[b] * 0.003 * j;
+          pts.push_back(p + t);
+        }
+    all.insert(all.end(), pts.begin(), pts.end());
+    groups.add(pts);
+    truth.push_back(t);
+  }
+  Scene sc = make_scene(all);
+  sc.grasps = groups;
+  EvaluateSettings s;
+  s.grasp_offset_sigma = 0.003;
+  // The defaults (2 iterations on 16 contacts) leave up to ~1 mm of a 2 sigma offset; run the
+  // Gauss-Newton on every contact to convergence here to check what it converges to (the prior
+  // then shrinks an offset by ~0.5 %).
+  const EvaluateSettings defaults = s;
+  s.grasp_offset_iterations = 8;
+  s.grasp_fit_points = 1000;
+  const GraspFit fit = fit_grasp_offsets(sc, box.field, Pose::Identity(), s);
+  REQUIRE(fit.offsets.size() == 8);
+  CHECK(fit.contacts == all.size());
+  double rms = 0.0;
+  for (std::size_t g = 0; g < 8; ++g) {
+    CAPTURE(g);
+    // The offset is added to the contacts: it undoes the grasp's shift.
+    if (truth[g].norm() < 3 * s.grasp_offset_sigma) CHECK((fit.offsets[g] + truth[g]).norm() < 1e-4);
+    rms += fit.offsets[g].squaredNorm();
+  }
+  CHECK(fit.offset_rms == doctest::Approx(std::sqrt(rms / 8)));
+  CHECK(fit.error_sum / double(fit.contacts) < 1e-6);
+
+  // In the evaluation: the shifted contacts score like unshifted ones; off, Eq. 4 sees mm.
+  const Evaluation with = evaluate(sc, box, info, Pose::Identity(), s);
+  EvaluateSettings off = s;
+  off.grasp_offset_sigma = 0.0;
+  const Evaluation without = evaluate(sc, box, info, Pose::Identity(), off);
+  CHECK(with.complete);
+  CHECK(with.contacts == all.size());
+  CHECK(with.contact_error < 1e-6);
+  CHECK(without.contact_error > 50 * with.contact_error);
+  CHECK(with.grasp_offset_rms == doctest::Approx(fit.offset_rms));
+  CHECK(evaluate(sc, box, info, Pose::Identity(), defaults).contact_error < 0.05 * without.contact_error);
+  // No grasp groups: exactly the plain evaluation.
+  const Scene plain = make_scene(all);
+  CHECK(evaluate(plain, box, info, Pose::Identity(), s).log_weight == without.log_weight);
+}
+
+TEST_CASE("Per-grasp offsets: a single flat patch keeps its unobservable offsets at zero") {
+  const ObjectGeometry box = field_geometry(test::make_box(Vec3(0.04, 0.04, 0.04), 4));
+  std::vector<Vec3> pts;
+  for (int i = -4; i <= 4; ++i)
+    for (int j = -4; j <= 4; ++j) pts.push_back(Vec3(0.003 * i + 0.002, 0.003 * j - 0.001, 0.04 + 0.002));
+  Scene sc = make_scene(pts);
+  sc.grasps.add(pts);
+  EvaluateSettings s;
+  s.grasp_offset_sigma = 0.003;
+  const GraspFit fit = fit_grasp_offsets(sc, box.field, Pose::Identity(), s);
+  REQUIRE(fit.offsets.size() == 1);
+  CHECK(fit.offsets[0].z() == doctest::Approx(-0.002).epsilon(0.01));
+  CHECK(std::abs(fit.offsets[0].x()) < 1e-9);
+  CHECK(std::abs(fit.offsets[0].y()) < 1e-9);
+  // Farther than 3 sigma: the offset stops at 3 sigma and the rest stays an error.
+  for (Vec3& p : sc.grasps.points) p.z() += 0.01;
+  const GraspFit far = fit_grasp_offsets(sc, box.field, Pose::Identity(), s);
+  CHECK(far.offsets[0].norm() <= 3 * s.grasp_offset_sigma + 1e-12);
+}
+
+TEST_CASE("Per-grasp offsets separate a sphere from a faceted look-alike that plain Eq. 4 prefers") {
+  const ObjectGeometry sphere = field_geometry(test::make_sphere(kR, 4));
+  // An icosahedron subdivided once, scaled so that its faces cut the sphere: it fits the
+  // shifted contacts about as well as the sphere does without offsets.
+  const ObjectGeometry facets = field_geometry(test::make_sphere(kR * 1.03, 1));
+  ObjectInfo info;
+  info.extent = Vec3(2 * kR, 2 * kR, 2 * kR);
+  const Grasped g = grasp_sphere(12, 0.003, 21);
+  Scene sc = make_scene(g.all);
+  sc.grasps = g.groups;
+  EvaluateSettings on;
+  on.grasp_offset_sigma = 0.003;
+  EvaluateSettings off = on;
+  off.grasp_offset_sigma = 0.0;
+  const Evaluation sphere_on = evaluate(sc, sphere, info, Pose::Identity(), on);
+  const Evaluation facets_on = evaluate(sc, facets, info, Pose::Identity(), on);
+  const Evaluation sphere_off = evaluate(sc, sphere, info, Pose::Identity(), off);
+  const Evaluation facets_off = evaluate(sc, facets, info, Pose::Identity(), off);
+  MESSAGE("contact error x1e6: sphere " << sphere_off.contact_error * 1e6 << " -> " << sphere_on.contact_error * 1e6
+          << ", facets " << facets_off.contact_error * 1e6 << " -> " << facets_on.contact_error * 1e6);
+  // Offsets take the arm error out of the truth, not the shape error out of the look-alike.
+  CHECK(sphere_on.contact_error < 0.05 * sphere_off.contact_error);
+  CHECK(facets_on.contact_error > 10 * sphere_on.contact_error);
+  CHECK(sphere_on.log_weight > facets_on.log_weight);
+  CHECK(sphere_on.grasp_offset_rms == doctest::Approx(std::sqrt([&] {
+          double s2 = 0; for (const Vec3& t : g.offsets) s2 += t.squaredNorm(); return s2 / 12; }()))
+                                          .epsilon(0.25));
 }

@@ -1,6 +1,7 @@
 // Contact fusion (Eq. 1-2, Section 4.1.2) on hand-built logs: exact contact points, the
 // cumulative voxel-filtered cloud, incremental = batch, zero-contact grasps, far coordinates.
 #include "engine/fusion.hpp"
+#include "engine/cloud.hpp"
 
 #include <doctest/doctest.h>
 
@@ -100,6 +101,35 @@ TEST_CASE("exploration: incremental equals batch; a contact-less grasp adds free
   }
   // Contacts are occupied voxels.
   for (const Vec3& p : ex4.raw_contacts()) CHECK(ex4.grid().state(p) == Occupancy::occupied);
+}
+
+TEST_CASE("exploration: grasp groups hold each grasp's own voxel-filtered contacts") {
+  const TactileLog log = hand_log(Vec3(3e4, -1e4, 500.0), 4);
+  ExplorationSettings es;
+  es.contact_voxel = 0.011;  // coarser than the 5 mm sensels: the filter merges within a grasp
+  Exploration ex(log, es);
+  ex.advance_to(4);
+  const GraspGroups g = ex.grasp_groups();
+  REQUIRE(g.grasps() == 4);
+  CHECK(g.first.back() == g.points.size());
+  std::size_t base = 0;
+  for (std::size_t k = 0; k < 4; ++k) {
+    CAPTURE(k);
+    // The oracle: that grasp's contacts alone through the same filter.
+    const GraspContacts c = grasp_contacts(log, k);
+    PointCloud own;
+    for (const Vec3& p : c.points) own.points.push_back(p - ex.origin());
+    std::vector<Vec3> expect;
+    if (!own.empty())
+      for (const Vec3& p : voxel_filter(own, es.contact_voxel).points) expect.push_back(p + ex.origin());
+    const std::vector<Vec3> got(g.points.begin() + g.first[k], g.points.begin() + g.first[k + 1]);
+    CHECK(got == expect);
+    CHECK(got.size() <= ex.contacts_per_grasp()[k]);
+    base += c.points.size();
+  }
+  CHECK(base == ex.raw_contacts().size());
+  CHECK(g.grasps() == exploration_clouds(log, 4, es).grasps.grasps());
+  CHECK(g.points.size() < ex.raw_contacts().size());  // the filter merged something
 }
 
 TEST_CASE("validate names the bad field") {
