@@ -118,6 +118,7 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
   CHECK(ja["preset"] == "improved");  // the default
   CHECK(param(res, "W_per_object") == 200.0);
   CHECK(param(res, "refine_new") == 1.0);
+  CHECK(param(res, "grasp_offset_sigma") == 0.003);
 
   SUBCASE("--preset paper, and a flag on top of a preset") {
     const Run p = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --preset paper --out rp.h5" + kFast);
@@ -127,11 +128,14 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
     CHECK(param(rp, "W_per_object") == 0.0);
     CHECK(param(rp, "refine_new") == 0.0);
     CHECK(param(rp, "dedupe") == 0.0);
-    const Run q = touchstone(dir, "recognize --db db.h5 --log log.h5 --steps 1 --prune-per-object 50 --no-dedupe --out rq.h5" + kFast);
+    CHECK(param(rp, "grasp_offset_sigma") == 0.0);
+    const Run q = touchstone(dir, "recognize --db db.h5 --log log.h5 --steps 1 --prune-per-object 50 --no-dedupe "
+                                  "--grasp-offset-sigma 0.005 --out rq.h5" + kFast);
     REQUIRE_MESSAGE(q.code == 0, q.err);
     const io::ResultData rq = io::read_result(dir / "rq.h5");
     CHECK(param(rq, "W_per_object") == 50.0);
     CHECK(param(rq, "dedupe") == 0.0);
+    CHECK(param(rq, "grasp_offset_sigma") == 0.005);
     CHECK(param(rq, "refine_new") == 1.0);
   }
   SUBCASE("--steps and --method") {

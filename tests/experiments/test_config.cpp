@@ -123,6 +123,7 @@ TEST_CASE("Impossible values and unknown keys name the key") {
   CHECK(load_error("method = magic\n").second == "method");
   CHECK(load_error("preset = papr\n").second == "preset");
   CHECK(load_error("[ransac]\nprune_per_object = -1\n").second == "ransac.prune_per_object");
+  CHECK(load_error("[evaluate]\ngrasp_offset_sigma_m = -0.001\n").second == "evaluate.grasp_offset_sigma_m");
   CHECK(load_error("noise = shallow\n").second == "noise");
   CHECK(load_error("sensors = 3\n").second == "sensors");
   CHECK(load_error("seed = -1\n").second == "seed");
@@ -163,6 +164,8 @@ TEST_CASE("Flags use the same setter as files") {
   CHECK(c.preset == "paper");
   set_key(c, "ransac.prune_per_object", {"0"});
   CHECK(*c.params.prune_per_object == 0);
+  set_key(c, "evaluate.grasp_offset_sigma_m", {"0.004"});
+  CHECK(*c.params.grasp_offset_sigma_m == 0.004);
   try {
     set_key(c, "runs", {"-1"});
     FAIL("no error");
