@@ -81,17 +81,6 @@ GraspFit fit_grasp_offsets(const Scene& scene, const DistanceField& field, const
 Evaluation evaluate(const Scene& scene, const ObjectGeometry& geo, const ObjectInfo& info,
                     const Pose& T_scene_object, const EvaluateSettings& s, double reject_below) {
   const Vec3 half = half_extent_of(info);
-  if (s.grasp_offset_sigma > 0.0 && scene.grasps.grasps() > 0 && !geo.field.empty() &&
-      s.use_distance_field) {
-    const GraspFit fit = fit_grasp_offsets(scene, geo.field, T_scene_object, s);
-    const ContactTerm term{fit.error_sum, fit.contacts};
-    auto by_field = [&](const Vec3* p, std::size_t n, const Pose& T, double* out) {
-      geo.field.distances(p, n, T, out);
-    };
-    Evaluation ev = evaluate_batched(scene, by_field, half, T_scene_object, s, reject_below, &term);
-    ev.grasp_offset_rms = fit.offset_rms;
-    return ev;
-  }
   auto by_tree = [&](const Vec3* p, std::size_t n, const Pose& T, double* out) {
     for (std::size_t i = 0; i < n; ++i)
       out[i] = std::sqrt(geo.tree.nearest(T * p[i]).sq_distance);
@@ -108,6 +97,13 @@ Evaluation evaluate(const Scene& scene, const ObjectGeometry& geo, const ObjectI
       for (std::size_t i = 0; i < n; ++i)
         if (std::abs(out[i]) >= margin) out[i] = std::sqrt(geo.tree.nearest(T * p[i]).sq_distance);
   };
+  if (s.grasp_offset_sigma > 0.0 && scene.grasps.grasps() > 0) {  // needs the field's gradient
+    const GraspFit fit = fit_grasp_offsets(scene, geo.field, T_scene_object, s);
+    const ContactTerm term{fit.error_sum, fit.contacts};
+    Evaluation ev = evaluate_batched(scene, by_field, half, T_scene_object, s, reject_below, &term);
+    ev.grasp_offset_rms = fit.offset_rms;
+    return ev;
+  }
   return evaluate_batched(scene, by_field, half, T_scene_object, s, reject_below);
 }
 

@@ -132,35 +132,24 @@ void Exploration::advance_to(std::size_t k) {
     for (const Vec3& p : c.points) grid_.mark_occupied(p);
     raw_.insert(raw_.end(), c.points.begin(), c.points.end());
     per_grasp_.push_back(c.points.size());
+    groups_.add(voxel_filtered(c.points));  // a grasp's contacts never change: filtered once
   }
 }
 
-PointCloud Exploration::contact_cloud() const {
+std::vector<Vec3> Exploration::voxel_filtered(const std::vector<Vec3>& world) const {
   // Voxel filter in the local frame, then back to world coordinates.
+  if (world.empty()) return {};
   PointCloud local;
-  local.points.reserve(raw_.size());
-  for (const Vec3& p : raw_) local.points.push_back(p - origin_);
-  PointCloud out = voxel_filter(local, settings_.contact_voxel);
-  for (Vec3& p : out.points) p += origin_;
+  local.points.reserve(world.size());
+  for (const Vec3& p : world) local.points.push_back(p - origin_);
+  std::vector<Vec3> out = voxel_filter(local, settings_.contact_voxel).points;
+  for (Vec3& p : out) p += origin_;
   return out;
 }
 
-GraspGroups Exploration::grasp_groups() const {
-  GraspGroups out;
-  std::size_t base = 0;
-  PointCloud local;
-  for (const std::size_t n : per_grasp_) {
-    local.points.clear();
-    for (std::size_t i = base; i < base + n; ++i) local.points.push_back(raw_[i] - origin_);
-    base += n;
-    if (local.points.empty()) {
-      out.add({});
-      continue;
-    }
-    PointCloud f = voxel_filter(local, settings_.contact_voxel);
-    for (Vec3& p : f.points) p += origin_;
-    out.add(f.points);
-  }
+PointCloud Exploration::contact_cloud() const {
+  PointCloud out;
+  out.points = voxel_filtered(raw_);
   return out;
 }
 

@@ -114,7 +114,7 @@ class Exploration {
                                       ///< (OccupancyGrid::full_free_cloud)
   /// The contacts grouped by grasp, each grasp voxel-filtered on its own (contact_voxel):
   /// what the evaluation needs to take out each grasp's arm pose error.
-  GraspGroups grasp_groups() const;
+  const GraspGroups& grasp_groups() const { return groups_; }
 
  private:
   const TactileLog& log_;
@@ -124,6 +124,9 @@ class Exploration {
   std::size_t steps_ = 0;
   std::vector<Vec3> raw_;
   std::vector<std::size_t> per_grasp_;
+  GraspGroups groups_;
+
+  std::vector<Vec3> voxel_filtered(const std::vector<Vec3>& world) const;
 };
 
 /// Clouds after the first k grasps (the recognizer's entry point).

@@ -305,12 +305,12 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
       const std::size_t k_new = n_p - next.size();
       const std::size_t pool = std::max(s_.refine_pool, s_.dedupe || s_.new_per_object > 0 ? 2 * k_new : k_new);
       std::vector<Working> fresh = select(cands, pool, ev_raw);
-      if (s_.refine_new || grasp_fit) {
-        if (s_.refine_new) {
-          t0 = Clock::now();
-          refine_all(scene, db_, s_.icp, fresh);
-          res.times.icp_s += seconds_since(t0);
-        }
+      if (s_.refine_new) {
+        t0 = Clock::now();
+        refine_all(scene, db_, s_.icp, fresh);
+        res.times.icp_s += seconds_since(t0);
+      }
+      if (s_.refine_new || grasp_fit) {  // refined, or the offsets re-score them: evaluate again
         t0 = Clock::now();
         evaluate_each(scene, db_, ev, fresh);
         res.times.evaluate_s += seconds_since(t0);

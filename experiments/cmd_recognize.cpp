@@ -196,7 +196,7 @@ int run_recognize(const RecognizeOptions& o) {
       contacts = ex->contact_cloud();
       if (with_free)
         free = ex->free_cloud().points;
-      if (rs.evaluate.grasp_offset_sigma > 0.0) grasps = ex->grasp_groups();
+      grasps = ex->grasp_groups();  // unused when the offsets are off
     } else {
       contacts = single;
     }

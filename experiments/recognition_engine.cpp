@@ -358,8 +358,7 @@ class RecognitionEngine final : public RunEngine {
       exploration.advance_to(static_cast<std::size_t>(k));
       const PointCloud contacts = exploration.contact_cloud();
       const PointCloud free = exploration.free_cloud();
-      const GraspGroups grasps =
-          rs.evaluate.grasp_offset_sigma > 0.0 ? exploration.grasp_groups() : GraspGroups{};
+      const GraspGroups& grasps = exploration.grasp_groups();  // unused when the offsets are off
       const double fusion_s = seconds_since(t0);
       const auto t1 = Clock::now();
       const StepResult sr = recognizer.step(contacts, free.points, grasps);

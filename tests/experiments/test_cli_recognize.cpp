@@ -19,6 +19,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <map>
 
 using namespace ts;
 namespace fs = std::filesystem;
@@ -109,34 +110,30 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
   CHECK(res.steps.back().hypotheses.size() <= 20);
   CHECK(res.header.objects.size() == 6);
 
-  auto param = [](const io::ResultData& r, const std::string& name) {
-    for (const auto& [k, v] : r.header.params)
-      if (k == name) return v;
-    FAIL("no parameter " << name);
-    return -1.0;
+  // The result file's parameters that the presets and flags decide.
+  auto check_params = [](const io::ResultData& r, std::map<std::string, double> expect) {
+    for (const auto& [k, v] : r.header.params) {
+      const auto it = expect.find(k);
+      if (it == expect.end()) continue;
+      CHECK_MESSAGE(v == it->second, k);
+      expect.erase(it);
+    }
+    CHECK_MESSAGE(expect.empty(), "missing parameters");
   };
   CHECK(ja["preset"] == "improved");  // the default
-  CHECK(param(res, "W_per_object") == 200.0);
-  CHECK(param(res, "refine_new") == 1.0);
-  CHECK(param(res, "grasp_offset_sigma") == 0.003);
+  check_params(res, {{"W_per_object", 200.0}, {"refine_new", 1.0}, {"grasp_offset_sigma", 0.003}});
 
   SUBCASE("--preset paper, and a flag on top of a preset") {
     const Run p = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --preset paper --out rp.h5" + kFast);
     REQUIRE_MESSAGE(p.code == 0, p.err);
     CHECK(nlohmann::json::parse(p.out)["preset"] == "paper");
-    const io::ResultData rp = io::read_result(dir / "rp.h5");
-    CHECK(param(rp, "W_per_object") == 0.0);
-    CHECK(param(rp, "refine_new") == 0.0);
-    CHECK(param(rp, "dedupe") == 0.0);
-    CHECK(param(rp, "grasp_offset_sigma") == 0.0);
+    check_params(io::read_result(dir / "rp.h5"),
+                 {{"W_per_object", 0.0}, {"refine_new", 0.0}, {"dedupe", 0.0}, {"grasp_offset_sigma", 0.0}});
     const Run q = touchstone(dir, "recognize --db db.h5 --log log.h5 --steps 1 --prune-per-object 50 --no-dedupe "
                                   "--grasp-offset-sigma 0.005 --out rq.h5" + kFast);
     REQUIRE_MESSAGE(q.code == 0, q.err);
-    const io::ResultData rq = io::read_result(dir / "rq.h5");
-    CHECK(param(rq, "W_per_object") == 50.0);
-    CHECK(param(rq, "dedupe") == 0.0);
-    CHECK(param(rq, "grasp_offset_sigma") == 0.005);
-    CHECK(param(rq, "refine_new") == 1.0);
+    check_params(io::read_result(dir / "rq.h5"),
+                 {{"W_per_object", 50.0}, {"dedupe", 0.0}, {"grasp_offset_sigma", 0.005}, {"refine_new", 1.0}});
   }
   SUBCASE("--steps and --method") {
     const Run c = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --method batch-ransac" + kFast);
