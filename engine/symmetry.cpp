@@ -161,17 +161,21 @@ std::vector<int> run_peaks(const std::vector<double>& score) {
   for (int i = 0; i < n; ++i)
     if (score[i] < 0.0) { first_fail = i; break; }
   if (first_fail < 0) return peaks;  // everything passes: a continuum, handled by the caller
-  int best = -1;
+  // Each run's peak is the middle of its top plateau: with 1-degree test angles, a run's top
+  // score (all sample points within tolerance) is often flat over several degrees, and its
+  // first angle would start the refinement needlessly far from the symmetry.
+  int best = -1, last_best = -1;
   for (int k = 1; k <= n; ++k) {
     const int i = (first_fail + k) % n;
     if (score[i] >= 0.0) {
-      if (best < 0 || score[i] > score[best]) best = i;
+      if (best < 0 || score[i] > score[best]) best = last_best = i;
+      else if (score[i] == score[best] && last_best == (i + n - 1) % n) last_best = i;
     } else if (best >= 0) {
-      peaks.push_back(best);
-      best = -1;
+      peaks.push_back((best + ((last_best - best + n) % n) / 2) % n);
+      best = last_best = -1;
     }
   }
-  if (best >= 0) peaks.push_back(best);
+  if (best >= 0) peaks.push_back((best + ((last_best - best + n) % n) / 2) % n);
   std::sort(peaks.begin(), peaks.end());
   return peaks;
 }
@@ -188,7 +192,10 @@ bool search_axis(const Checker& ck, const SymmetrySettings& s, const Vec3& axis,
                  std::vector<Mat3>& group) {
   const int steps = std::max(8, s.angle_steps);
   std::vector<double> score(static_cast<std::size_t>(steps), -1.0);
-  score[0] = 1.0;  // identity
+  // Identity: above any fraction, so it is the peak of its run and the angles next to it that
+  // pass only because they move the surface by less than the tolerance (a thin bar turned a few
+  // degrees about its axis) are never taken for a symmetry.
+  score[0] = 2.0;
   int passed = 0;
   for (int m = 1; m < steps; ++m) {
     const Mat3 R = axis_rotation(axis, 2.0 * kPi * m / steps);

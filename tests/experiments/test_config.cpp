@@ -1,5 +1,6 @@
 // Experiment configuration: files, flags, sweeps and clear errors that name the key.
 #include "experiments/config.hpp"
+#include "datasets/manifest.hpp"
 
 #include <doctest/doctest.h>
 
@@ -227,6 +228,11 @@ TEST_CASE("Canonical JSON and the first result-determining difference") {
 
 TEST_CASE("Every study configuration of experiments/studies parses") {
   const fs::path dir = fs::path(TS_SOURCE_DIR) / "experiments" / "studies";
+  // Their objects must be in the default database (the manifest it is built from).
+  std::vector<std::string> dev45;
+  for (const auto& m : datasets::read_manifest(fs::path(TS_SOURCE_DIR) / "datasets" / "dev45.tsv"))
+    dev45.push_back(m.name);
+  REQUIRE(dev45.size() == 45);
   std::size_t n = 0;
   for (const auto& e : fs::directory_iterator(dir)) {
     if (e.path().extension() != ".toml") continue;
@@ -235,7 +241,12 @@ TEST_CASE("Every study configuration of experiments/studies parses") {
     ExperimentConfig c;
     load_config_file(c, e.path());
     CHECK_FALSE(c.name.empty());
+    CHECK_NOTHROW(validate(c, e.path().string()));
     CHECK(expand_variants(c).size() >= 1);
+    if (e.path().filename() == "study7_db450.toml") continue;   // its database is db450.h5
+    const ResolvedObjects r = resolve_objects(c, dev45);
+    CHECK_FALSE(r.explored.empty());
+    if (c.objects.empty()) CHECK(r.explored.size() == 45);
   }
   CHECK(n >= 10);
 }
