@@ -165,17 +165,18 @@ std::vector<int> run_peaks(const std::vector<double>& score) {
   // score (all sample points within tolerance) is often flat over several degrees, and its
   // first angle would start the refinement needlessly far from the symmetry.
   int best = -1, last_best = -1;
+  auto plateau_middle = [&] { return (best + ((last_best - best + n) % n) / 2) % n; };
   for (int k = 1; k <= n; ++k) {
     const int i = (first_fail + k) % n;
     if (score[i] >= 0.0) {
       if (best < 0 || score[i] > score[best]) best = last_best = i;
       else if (score[i] == score[best] && last_best == (i + n - 1) % n) last_best = i;
     } else if (best >= 0) {
-      peaks.push_back((best + ((last_best - best + n) % n) / 2) % n);
+      peaks.push_back(plateau_middle());
       best = last_best = -1;
     }
   }
-  if (best >= 0) peaks.push_back((best + ((last_best - best + n) % n) / 2) % n);
+  if (best >= 0) peaks.push_back(plateau_middle());
   std::sort(peaks.begin(), peaks.end());
   return peaks;
 }
