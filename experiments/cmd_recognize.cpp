@@ -1,5 +1,7 @@
 // `touchstone recognize`: recognize and localize the touched object, step by step, from a
-// tactile log (or from a plain contact cloud as a single step without free space).
+// tactile log (or from a plain contact cloud as a single step without free space). Several
+// logs or clouds (or a folder of clouds) are recognized in parallel in one process, sharing
+// the loaded database; each input gets its own recognizer with the seed it would have alone.
 #include "experiments/cli_common.hpp"
 
 #include "engine/free_cloud.hpp"
@@ -15,20 +17,35 @@
 #include <Eigen/SVD>
 #include <nlohmann/json.hpp>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
+#include <mutex>
+#include <set>
 #include <sstream>
 
 namespace ts::cli {
 
 namespace {
 
+namespace fs = std::filesystem;
+
 struct RecognizeOptions {
   CommonOptions common;
-  std::string db, log, cloud, out, ground_truth, object;
+  std::string db, out, ground_truth, object;
+  std::vector<std::string> logs, clouds;  ///< --log files; --cloud files or folders
+  bool batch = false;                ///< several inputs (or a folder): per-input output
   std::string method = "bricpsf";
   std::string preset = "improved";   ///< improved | paper: the defaults the flags start from
   int steps = 0;                     ///< 0: every grasp of the log
@@ -121,71 +138,87 @@ std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& 
           {"contact_voxel", contact_voxel}};
 }
 
-int run_recognize(const RecognizeOptions& o) {
-  RecognizerSettings rs = o.rs;  // (the improved preset was applied before the flags)
-  rs.method = *parse_method(o.method);
-  rs.seed = o.common.seed;
+/// One input of the command: a tactile log or a contact cloud.
+struct Input {
+  std::string path;
+  bool is_log = true;
+};
 
-  auto source = std::make_shared<io::DbReader>(o.db);
-  Database db(source);
-  if (db.size() == 0) throw Error("the database has no objects", o.db, "/objects");
-  double largest = 0.0;
-  for (std::size_t i = 0; i < db.size(); ++i) largest = std::max(largest, db.info(i).extent.norm());
+/// What every input shares: the options, the settings and the one loaded database.
+struct Context {
+  const RecognizeOptions& o;
+  RecognizerSettings rs;
+  const Database& db;
+  double largest = 0.0;          ///< m, diagonal of the largest database object
+  SymmetryCache& symmetries;     ///< thread-safe
+};
+
+/// One input's outcome.
+struct InputRun {
+  Input in;
+  std::string truth_name;
+  std::optional<Pose> truth_pose;
+  std::vector<StepResult> results;
+  std::vector<io::ResultStep> stored;
+  std::vector<double> fusion_time;
+  std::string written;           ///< the result file written ("" : none)
+  std::string error;             ///< several inputs: why this one failed ("" : it did not)
+};
+
+/// The whole recognition of one input with its own recognizer (the context's seed), the result
+/// file written to `out` when not empty. Throws ts::Error naming the input on bad input.
+InputRun recognize_one(const Context& c, const Input& in, const std::string& out, bool progress) {
+  const RecognizeOptions& o = c.o;
+  const Database& db = c.db;
+  InputRun run;
+  run.in = in;
 
   // The input: a tactile log (K steps) or one contact cloud.
   std::optional<TactileLog> log;
   PointCloud single;
-  std::optional<Pose> truth_pose;
   std::optional<std::size_t> truth_object;
-  std::string truth_name;
   int K = 1;
-  if (!o.log.empty()) {
-    log = io::read_log(o.log);
-    if (log->grasps.empty()) throw Error("the log has no grasps", o.log, "/grasps");
+  if (in.is_log) {
+    log = io::read_log(in.path);
+    if (log->grasps.empty()) throw Error("the log has no grasps", in.path, "/grasps");
     const int n = static_cast<int>(log->grasps.size());
     if (o.steps > n)
       throw Error("--steps " + std::to_string(o.steps) + " exceeds the log's " + std::to_string(n) +
-                      " grasps", o.log, "--steps");
+                      " grasps", in.path, "--steps");
     K = o.steps > 0 ? o.steps : n;
-    if (log->truth) truth_pose = log->truth->object_pose;
-    truth_name = log->object;
-    if (!truth_name.empty()) {
-      const std::size_t i = db.find(truth_name);
+    if (log->truth) run.truth_pose = log->truth->object_pose;
+    run.truth_name = log->object;
+    if (!run.truth_name.empty()) {
+      const std::size_t i = db.find(run.truth_name);
       if (i == db.size())
-        throw Error("the log's object '" + truth_name + "' is not in the database " + o.db, o.log,
+        throw Error("the log's object '" + run.truth_name + "' is not in the database " + o.db, in.path,
                     "/object");
       truth_object = i;
     }
   } else {
-    single = io::read_cloud(o.cloud);
-    if (o.steps > 1) throw Error("a contact cloud is one step", o.cloud, "--steps");
+    single = io::read_cloud(in.path);
+    if (o.steps > 1) throw Error("a contact cloud is one step", in.path, "--steps");
   }
-  if (!o.ground_truth.empty()) truth_pose = read_ground_truth(o.ground_truth);
+  if (!o.ground_truth.empty()) run.truth_pose = read_ground_truth(o.ground_truth);
   if (!o.object.empty()) {
     const std::size_t i = db.find(o.object);
     if (i == db.size()) throw Error("no object '" + o.object + "' in the database", o.db, "--object");
     truth_object = i;
-    truth_name = o.object;
+    run.truth_name = o.object;
   }
 
-  Recognizer rec(db, rs);
-  SymmetryCache symmetries;
+  Recognizer rec(db, c.rs);
   const SymmetryGroup* sym = nullptr;
-  if (truth_object && truth_pose) sym = &symmetries.get(db, *truth_object);
+  if (truth_object && run.truth_pose) sym = &c.symmetries.get(db, *truth_object);
 
   ExplorationSettings es;
   es.contact_voxel = o.contact_voxel;
-  es.free.res_free = rs.evaluate.res_free;
+  es.free.res_free = c.rs.evaluate.res_free;
   es.free.s_obj_max = db.settings().max_extent;
   std::optional<Exploration> ex;
   if (log) ex.emplace(*log, es);
-  const bool with_free = rs.method == Method::bricpsf || rs.method == Method::ransac_icp_fs;
-  const std::string input = log ? o.log : o.cloud;
+  const bool with_free = c.rs.method == Method::bricpsf || c.rs.method == Method::ransac_icp_fs;
 
-  std::vector<io::ResultStep> stored;
-  std::vector<double> fusion_time;
-  std::vector<StepResult> results;
-  const bool progress = stderr_is_terminal() && !o.common.json;
   for (int k = 1; k <= K; ++k) {
     PointCloud contacts;
     std::vector<Vec3> free;
@@ -200,7 +233,7 @@ int run_recognize(const RecognizeOptions& o) {
     } else {
       contacts = single;
     }
-    fusion_time.push_back(
+    run.fusion_time.push_back(
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     StepResult r = rec.step(contacts, free, grasps);
     // Units sanity check: contacts far wider than any object mean the log and the database
@@ -209,104 +242,277 @@ int run_recognize(const RecognizeOptions& o) {
       Eigen::AlignedBox3d box;
       for (const Vec3& p : contacts.points) box.extend(p);
       const double span = box.diagonal().norm();
-      if (span > 4.0 * largest + 0.5)
+      if (span > 4.0 * c.largest + 0.5)
         throw Error("the contacts span " + std::to_string(span) + " m but the largest database object " +
-                        std::to_string(largest) + " m: do the log and the database use the same units?",
-                    input, log ? "/grasps" : "points");
+                        std::to_string(c.largest) + " m: do the log and the database use the same units?",
+                    in.path, log ? "/grasps" : "points");
     }
-    stored.push_back(io::to_result_step(r, truth_object, truth_pose, sym));
-    results.push_back(std::move(r));
+    run.stored.push_back(io::to_result_step(r, truth_object, run.truth_pose, sym));
+    run.results.push_back(std::move(r));
     if (progress) std::fprintf(stderr, "\rstep %d/%d", k, K);
   }
   if (progress) std::fprintf(stderr, "\n");
 
-  if (!o.out.empty()) {
+  if (!out.empty()) {
     io::ResultHeader h;
-    h.method = std::string(method_name(rs.method));
-    h.seed = rs.seed;
+    h.method = std::string(method_name(c.rs.method));
+    h.seed = c.rs.seed;
     h.database = o.db;
-    h.input = input;
+    h.input = in.path;
     h.input_kind = log ? "log" : "cloud";
     for (std::size_t i = 0; i < db.size(); ++i) h.objects.push_back(db.info(i).name);
-    h.truth_object = truth_name;
-    h.truth_pose = truth_pose;
-    h.params = params_of(rs, o.contact_voxel);
-    io::write_result(o.out, h, stored);
+    h.truth_object = run.truth_name;
+    h.truth_pose = run.truth_pose;
+    h.params = params_of(c.rs, o.contact_voxel);
+    io::write_result(out, h, run.stored);
+    run.written = out;
   }
+  return run;
+}
 
+nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
+  nlohmann::ordered_json steps = nlohmann::ordered_json::array();
+  for (std::size_t k = 0; k < run.results.size(); ++k) {
+    const StepResult& r = run.results[k];
+    const io::ResultStep& s = run.stored[k];
+    nlohmann::ordered_json st;
+    st["step"] = r.step;
+    st["object"] = r.valid ? nlohmann::ordered_json(c.db.info(r.best.object).name) : nullptr;
+    st["weight"] = r.valid ? nlohmann::ordered_json(r.best.weight) : nullptr;
+    st["posterior"] = r.valid ? nlohmann::ordered_json(r.posterior) : nullptr;
+    st["pose"] = r.valid ? pose_json(r.best.pose) : nullptr;
+    const auto e = s.error;
+    st["position_error_m"] = number_or_null(e ? std::optional(e->position_m) : std::nullopt);
+    st["orientation_error_deg"] = number_or_null(e ? std::optional(e->orientation_deg) : std::nullopt);
+    st["symmetric_orientation_error_deg"] =
+        number_or_null(e ? std::optional(e->symmetric_orientation_deg) : std::nullopt);
+    st["time_s"] = r.times.total_s;
+    // extensions
+    st["correct"] = s.correct ? nlohmann::ordered_json(*s.correct) : nullptr;
+    st["symmetric_position_error_m"] =
+        number_or_null(e ? std::optional(e->symmetric_position_m) : std::nullopt);
+    st["log_weight"] = r.valid ? nlohmann::ordered_json(r.best.log_weight) : nullptr;
+    st["contacts"] = r.contacts;
+    st["free_points"] = r.free_points;
+    st["unobservable_dof"] = r.unobservable_dof;
+    st["pose_ambiguous"] = r.pose_ambiguous;
+    st["candidates"] = r.candidates;
+    st["hypotheses"] = r.hypotheses.size();
+    st["stages_s"] = {{"fusion", run.fusion_time[k]}, {"prepare", r.times.prepare_s},
+                      {"prune", r.times.prune_s},     {"register", r.times.register_s},
+                      {"icp", r.times.icp_s},         {"evaluate", r.times.evaluate_s}};
+    steps.push_back(std::move(st));
+  }
+  return steps;
+}
+
+/// One input's JSON object: method, preset, steps (or error), [database,] input, truth_object.
+nlohmann::ordered_json input_json(const Context& c, const InputRun& run, bool with_database) {
+  nlohmann::ordered_json j;
+  j["method"] = std::string(method_name(c.rs.method));
+  j["preset"] = c.o.preset;
+  if (run.error.empty())
+    j["steps"] = steps_json(c, run);
+  else
+    j["error"] = run.error;
+  if (with_database) j["database"] = c.o.db;
+  j["input"] = run.in.path;
+  j["truth_object"] = run.truth_name.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(run.truth_name);
+  return j;
+}
+
+/// The fields every input shares: seed, threads, machine, params.
+void add_shared_json(nlohmann::ordered_json& j, const Context& c) {
+  j["seed"] = c.rs.seed;
+  j["threads"] = thread_count(c.o.common);
+  j["machine"] = machine_description();
+  nlohmann::ordered_json p;
+  for (const auto& [name, value] : params_of(c.rs, c.o.contact_voxel)) p[name] = value;
+  j["params"] = p;
+}
+
+std::string input_label(const InputRun& run) {
+  return "input " + run.in.path + (run.truth_name.empty() ? "" : " (object " + run.truth_name + ")");
+}
+
+/// One input's table (and notes) for people.
+void print_table(const Context& c, const InputRun& run) {
+  std::printf("%5s  %-24s %9s %9s %10s %9s %9s %8s\n", "step", "object", "weight", "posterior",
+              "pos_err_m", "ori_deg", "sym_deg", "time_s");
+  for (std::size_t k = 0; k < run.results.size(); ++k) {
+    const StepResult& r = run.results[k];
+    const auto& e = run.stored[k].error;
+    auto num = [](bool have, double x, const char* fmt) {
+      char buf[32];
+      if (!have || !std::isfinite(x)) return std::string("-");
+      std::snprintf(buf, sizeof buf, fmt, x);
+      return std::string(buf);
+    };
+    std::string name = r.valid ? c.db.info(r.best.object).name : "(none)";
+    if (r.valid && r.pose_ambiguous) name += " ?";
+    std::printf("%5d  %-24s %9s %9s %10s %9s %9s %8.3f\n", r.step, name.c_str(),
+                num(r.valid, r.best.weight, "%.4f").c_str(), num(r.valid, r.posterior, "%.3f").c_str(),
+                num(e.has_value(), e ? e->position_m : 0, "%.4f").c_str(),
+                num(e.has_value(), e ? e->orientation_deg : 0, "%.1f").c_str(),
+                num(e.has_value(), e ? e->symmetric_orientation_deg : 0, "%.1f").c_str(),
+                r.times.total_s);
+  }
+  if (!run.results.empty() && run.results.back().pose_ambiguous)
+    std::cout << "? the contacts leave " << run.results.back().unobservable_dof
+              << " pose DOF unobservable (e.g. a single flat patch): the pose is not reliable\n";
+  if (!run.written.empty()) std::cout << "wrote " << run.written << '\n';
+}
+
+std::string lowercase(std::string s) {
+  for (char& ch : s) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  return s;
+}
+
+/// The inputs in command-line order; a --cloud folder gives its .ply/.pcd files sorted by name.
+std::vector<Input> expand_inputs(const RecognizeOptions& o) {
+  std::vector<Input> inputs;
+  for (const std::string& p : o.logs) inputs.push_back({p, true});
+  for (const std::string& p : o.clouds) {
+    if (!fs::is_directory(p)) {
+      inputs.push_back({p, false});
+      continue;
+    }
+    std::vector<std::string> names;
+    for (const auto& entry : fs::directory_iterator(p)) {
+      const std::string ext = lowercase(entry.path().extension().string());
+      if (entry.is_regular_file() && (ext == ".ply" || ext == ".pcd"))
+        names.push_back(entry.path().filename().string());
+    }
+    if (names.empty()) throw Error("the folder holds no .ply or .pcd file", p, "--cloud");
+    std::sort(names.begin(), names.end());
+    for (const std::string& n : names) inputs.push_back({(fs::path(p) / n).string(), false});
+  }
+  return inputs;
+}
+
+/// Several inputs with --out DIR: each result is DIR/<stem>.h5. Refuse (before any work) two
+/// inputs with one stem, a result file that would replace an input, and an --out that is a file.
+std::vector<std::string> result_paths(const RecognizeOptions& o, const std::vector<Input>& inputs) {
+  std::vector<std::string> paths(inputs.size());
+  if (o.out.empty()) return paths;
+  if (fs::exists(o.out) && !fs::is_directory(o.out))
+    throw Error("with several inputs --out takes a folder (one <stem>.h5 per input), not a file", o.out,
+                "--out");
+  std::map<std::string, std::string> by_stem;
+  std::set<fs::path> input_files;
+  for (const Input& in : inputs) input_files.insert(fs::weakly_canonical(in.path));
+  for (std::size_t i = 0; i < inputs.size(); ++i) {
+    const std::string stem = fs::path(inputs[i].path).stem().string();
+    const fs::path target = fs::path(o.out) / (stem + ".h5");
+    const auto [it, fresh] = by_stem.emplace(stem, inputs[i].path);
+    if (!fresh)
+      throw Error("the inputs " + it->second + " and " + inputs[i].path + " share the name '" + stem +
+                      "': both results would be " + target.string() + " (nothing was done)", o.out, "--out");
+    if (input_files.count(fs::weakly_canonical(target)))
+      throw Error("the result " + target.string() + " would replace the input of that name (nothing was done)",
+                  o.out, "--out");
+    paths[i] = target.string();
+  }
+  return paths;
+}
+
+/// The error line of a failed input: names the file (ts::Error's own message does when it is
+/// about the input; otherwise the input is added).
+std::string input_error(const Input& in, const std::exception& e) {
+  const auto* te = dynamic_cast<const Error*>(&e);
+  if (te && te->file() == in.path) return e.what();
+  return std::string(e.what()) + " (input " + in.path + ")";
+}
+
+/// Several inputs in parallel (each with its own recognizer and the shared database); a
+/// failing input is reported and the others go on. Exit code 1 when any failed.
+int recognize_many(const Context& c, const std::vector<Input>& inputs,
+                   const std::vector<std::string>& outs) {
+  const RecognizeOptions& o = c.o;
+  if (!o.out.empty()) fs::create_directories(o.out);
+  std::vector<InputRun> runs(inputs.size());
+  const bool progress = stderr_is_terminal() && !o.common.json;
+  std::mutex progress_mutex;
+  std::size_t done = 0;
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, inputs.size(), 1),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+          // Isolated: a thread waiting inside one input's parallel work takes no other input.
+          tbb::this_task_arena::isolate([&] {
+            try {
+              runs[i] = recognize_one(c, inputs[i], outs[i], false);
+            } catch (const std::exception& e) {
+              runs[i] = InputRun{};
+              runs[i].in = inputs[i];
+              runs[i].error = input_error(inputs[i], e);
+            }
+          });
+          if (progress) {
+            std::lock_guard<std::mutex> lock(progress_mutex);
+            std::fprintf(stderr, "\rinputs %zu/%zu", ++done, inputs.size());
+          }
+        }
+      },
+      tbb::simple_partitioner());
+  if (progress) std::fprintf(stderr, "\n");
+
+  std::size_t failed = 0;
+  for (const InputRun& run : runs)
+    if (!run.error.empty()) {
+      std::cerr << "touchstone: error: " << run.error << '\n';
+      ++failed;
+    }
   if (o.common.json) {
     nlohmann::ordered_json j;
-    j["method"] = std::string(method_name(rs.method));
-    j["preset"] = o.preset;
-    j["steps"] = nlohmann::ordered_json::array();
-    for (std::size_t k = 0; k < results.size(); ++k) {
-      const StepResult& r = results[k];
-      const io::ResultStep& s = stored[k];
-      nlohmann::ordered_json st;
-      st["step"] = r.step;
-      st["object"] = r.valid ? nlohmann::ordered_json(db.info(r.best.object).name) : nullptr;
-      st["weight"] = r.valid ? nlohmann::ordered_json(r.best.weight) : nullptr;
-      st["posterior"] = r.valid ? nlohmann::ordered_json(r.posterior) : nullptr;
-      st["pose"] = r.valid ? pose_json(r.best.pose) : nullptr;
-      const auto e = s.error;
-      st["position_error_m"] = number_or_null(e ? std::optional(e->position_m) : std::nullopt);
-      st["orientation_error_deg"] = number_or_null(e ? std::optional(e->orientation_deg) : std::nullopt);
-      st["symmetric_orientation_error_deg"] =
-          number_or_null(e ? std::optional(e->symmetric_orientation_deg) : std::nullopt);
-      st["time_s"] = r.times.total_s;
-      // extensions
-      st["correct"] = s.correct ? nlohmann::ordered_json(*s.correct) : nullptr;
-      st["symmetric_position_error_m"] =
-          number_or_null(e ? std::optional(e->symmetric_position_m) : std::nullopt);
-      st["log_weight"] = r.valid ? nlohmann::ordered_json(r.best.log_weight) : nullptr;
-      st["contacts"] = r.contacts;
-      st["free_points"] = r.free_points;
-      st["unobservable_dof"] = r.unobservable_dof;
-      st["pose_ambiguous"] = r.pose_ambiguous;
-      st["candidates"] = r.candidates;
-      st["hypotheses"] = r.hypotheses.size();
-      st["stages_s"] = {{"fusion", fusion_time[k]},     {"prepare", r.times.prepare_s},
-                        {"prune", r.times.prune_s},     {"register", r.times.register_s},
-                        {"icp", r.times.icp_s},         {"evaluate", r.times.evaluate_s}};
-      j["steps"].push_back(std::move(st));
-    }
     j["database"] = o.db;
-    j["input"] = input;
-    j["truth_object"] = truth_name.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(truth_name);
-    j["seed"] = rs.seed;
-    j["threads"] = thread_count(o.common);
-    j["machine"] = machine_description();
-    nlohmann::ordered_json p;
-    for (const auto& [name, value] : params_of(rs, o.contact_voxel)) p[name] = value;
-    j["params"] = p;
+    add_shared_json(j, c);
+    j["inputs"] = nlohmann::ordered_json::array();
+    for (const InputRun& run : runs) j["inputs"].push_back(input_json(c, run, false));
     std::cout << j.dump(2) << '\n';
   } else {
-    std::cout << "method " << method_name(rs.method) << ", " << db.size() << " objects, input "
-              << input << (truth_name.empty() ? "" : " (object " + truth_name + ")") << '\n';
-    std::printf("%5s  %-24s %9s %9s %10s %9s %9s %8s\n", "step", "object", "weight", "posterior",
-                "pos_err_m", "ori_deg", "sym_deg", "time_s");
-    for (std::size_t k = 0; k < results.size(); ++k) {
-      const StepResult& r = results[k];
-      const auto& e = stored[k].error;
-      auto num = [](bool have, double x, const char* fmt) {
-        char buf[32];
-        if (!have || !std::isfinite(x)) return std::string("-");
-        std::snprintf(buf, sizeof buf, fmt, x);
-        return std::string(buf);
-      };
-      std::string name = r.valid ? db.info(r.best.object).name : "(none)";
-      if (r.valid && r.pose_ambiguous) name += " ?";
-      std::printf("%5d  %-24s %9s %9s %10s %9s %9s %8.3f\n", r.step, name.c_str(),
-                  num(r.valid, r.best.weight, "%.4f").c_str(), num(r.valid, r.posterior, "%.3f").c_str(),
-                  num(e.has_value(), e ? e->position_m : 0, "%.4f").c_str(),
-                  num(e.has_value(), e ? e->orientation_deg : 0, "%.1f").c_str(),
-                  num(e.has_value(), e ? e->symmetric_orientation_deg : 0, "%.1f").c_str(),
-                  r.times.total_s);
+    std::cout << "method " << method_name(c.rs.method) << ", " << c.db.size() << " objects, "
+              << inputs.size() << " inputs\n";
+    for (const InputRun& run : runs) {
+      std::cout << '\n' << input_label(run) << '\n';
+      if (run.error.empty())
+        print_table(c, run);
+      else
+        std::cout << "error: " << run.error << '\n';
     }
-    if (!results.empty() && results.back().pose_ambiguous)
-      std::cout << "? the contacts leave " << results.back().unobservable_dof
-                << " pose DOF unobservable (e.g. a single flat patch): the pose is not reliable\n";
-    if (!o.out.empty()) std::cout << "wrote " << o.out << '\n';
+    std::cout << '\n' << inputs.size() - failed << " of " << inputs.size() << " inputs recognized";
+    std::cout << (failed ? ", " + std::to_string(failed) + " failed (see the errors above)\n" : "\n");
+  }
+  return failed ? 1 : 0;
+}
+
+int run_recognize(const RecognizeOptions& o) {
+  const std::vector<Input> inputs = expand_inputs(o);
+  const bool many = o.batch;
+  const std::vector<std::string> outs = many ? result_paths(o, inputs) : std::vector<std::string>{o.out};
+
+  RecognizerSettings rs = o.rs;  // (the improved preset was applied before the flags)
+  rs.method = *parse_method(o.method);
+  rs.seed = o.common.seed;       // the same seed for every input, as if each ran alone
+
+  auto source = std::make_shared<io::DbReader>(o.db);
+  Database db(source);
+  if (db.size() == 0) throw Error("the database has no objects", o.db, "/objects");
+  double largest = 0.0;
+  for (std::size_t i = 0; i < db.size(); ++i) largest = std::max(largest, db.info(i).extent.norm());
+  SymmetryCache symmetries;
+  const Context c{o, rs, db, largest, symmetries};
+  if (many) return recognize_many(c, inputs, outs);
+
+  const InputRun run = recognize_one(c, inputs.front(), o.out, stderr_is_terminal() && !o.common.json);
+  if (o.common.json) {
+    nlohmann::ordered_json j = input_json(c, run, true);
+    add_shared_json(j, c);
+    std::cout << j.dump(2) << '\n';
+  } else {
+    std::cout << "method " << method_name(rs.method) << ", " << db.size() << " objects, "
+              << input_label(run) << '\n';
+    print_table(c, run);
   }
   return 0;
 }
@@ -318,16 +524,20 @@ void register_recognize(CLI::App& app) {
   auto* sub = app.add_subcommand(
       "recognize", "Recognize the touched object and its 6-DOF pose, step by step");
   sub->add_option("--db", o->db, "Object database (HDF5)")->required()->check(CLI::ExistingFile);
-  auto* log = sub->add_option("--log", o->log, "Tactile log (HDF5)")->check(CLI::ExistingFile);
-  auto* cloud = sub->add_option("--cloud", o->cloud,
-                                "A plain contact cloud (.ply/.pcd), recognized as one step without "
-                                "free space")->check(CLI::ExistingFile);
+  auto* log = sub->add_option("--log", o->logs, "Tactile log(s) (HDF5); several are recognized in parallel")
+                  ->check(CLI::ExistingFile);
+  auto* cloud = sub->add_option("--cloud", o->clouds,
+                                "Plain contact cloud(s) (.ply/.pcd), each recognized as one step without "
+                                "free space; a folder gives its .ply/.pcd files in name order")
+                    ->check(CLI::ExistingPath);
   log->excludes(cloud);
   sub->add_option("--method", o->method, "bricpsf | batch-ransac | ransac-icp | ransac-icp-fs")
       ->check(CLI::IsMember({"bricpsf", "batch-ransac", "ransac-icp", "ransac-icp-fs"}));
   sub->add_option("--steps", o->steps, "Steps (grasps) to process (default: all)")
       ->check(CLI::Range(1, 1 << 30));
-  sub->add_option("--out", o->out, "Write every step's hypotheses to RESULT.h5");
+  sub->add_option("--out", o->out,
+                  "Write every step's hypotheses to RESULT.h5 (several inputs: a folder, created if "
+                  "missing, with one <stem>.h5 per input)");
   sub->add_option("--ground-truth", o->ground_truth,
                   "Text file with the true 4x4 row-major object->world matrix")
       ->check(CLI::ExistingFile);
@@ -400,8 +610,14 @@ void register_recognize(CLI::App& app) {
       for (const auto& [opt, apply] : extensions)
         if (opt->count() == 0) apply(o->rs, imp);
     }
-    if (o->log.empty() && o->cloud.empty())
+    if (o->logs.empty() && o->clouds.empty())
       throw CLI::RequiredError("--log or --cloud");
+    o->batch = o->logs.size() + o->clouds.size() > 1 ||
+               std::any_of(o->clouds.begin(), o->clouds.end(), [](const std::string& p) { return fs::is_directory(p); });
+    for (const auto& [flag, value] : {std::pair{"--ground-truth", &o->ground_truth}, {"--object", &o->object}})
+      if (o->batch && !value->empty())
+        throw CLI::ValidationError(flag, "takes a single input; with several inputs each log carries its own "
+                                         "ground truth");
     run_command(o->common, [o] { return run_recognize(*o); });
   });
 }

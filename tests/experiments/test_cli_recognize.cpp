@@ -223,3 +223,229 @@ TEST_CASE("cli recognize: bad input gives one clear error and no output file") {
   CHECK(touchstone(dir, "recognize --db db.h5").code == 2);
   CHECK(touchstone(dir, "recognize --db db.h5 --log log.h5 --method nonsense").code == 2);
 }
+
+// ---- several inputs in one process ------------------------------------------------------------
+
+namespace {
+
+/// A recognize JSON object without the timings (which differ from run to run).
+nlohmann::json without_times(nlohmann::json j) {
+  for (auto& s : j["steps"]) {
+    s.erase("time_s");
+    s.erase("stages_s");
+  }
+  return j;
+}
+
+/// What a batch entry must equal: the per-input fields of a single-input run's JSON.
+nlohmann::json input_fields(const nlohmann::json& single) {
+  nlohmann::json j;
+  for (const char* key : {"method", "preset", "steps", "input", "truth_object"}) j[key] = single.at(key);
+  return without_times(j);
+}
+
+/// `recognize` on one input alone (the oracle of the batch tests); its JSON.
+nlohmann::json alone(const test::TempDir& dir, const std::string& args) {
+  const Run r = touchstone(dir, "recognize --json " + args + kFast);
+  REQUIRE_MESSAGE(r.code == 0, r.err);
+  return nlohmann::json::parse(r.out);
+}
+
+/// Each batch entry equals its input's run alone, in input order.
+void check_entries(const nlohmann::json& batch, const std::vector<nlohmann::json>& singles) {
+  REQUIRE(batch["inputs"].size() == singles.size());
+  for (std::size_t i = 0; i < singles.size(); ++i) {
+    INFO("input " << i << ": " << singles[i]["input"]);
+    CHECK(without_times(batch["inputs"][i]) == input_fields(singles[i]));
+  }
+  for (const char* key : {"database", "seed", "params"}) CHECK_MESSAGE(batch[key] == singles[0][key], key);
+}
+
+}  // namespace
+
+TEST_CASE("cli recognize, several logs: each input's steps and result file as alone, for any --threads") {
+  test::TempDir dir("cli_batch");
+  make_db(dir);
+  const std::vector<std::pair<std::string, std::string>> objects = {{"wedge", "4"}, {"nut", "2"}, {"box", "7"}};
+  std::string list;
+  std::vector<nlohmann::json> singles;
+  for (const auto& [object, seed] : objects) {
+    const Run sim = touchstone(dir, "simulate --db db.h5 --object " + object + " --grasps 3 --noise ideal --seed " +
+                                        seed + " --out " + object + ".h5");
+    REQUIRE_MESSAGE(sim.code == 0, sim.err);
+    list += " " + object + ".h5";
+    singles.push_back(alone(dir, "--db db.h5 --log " + object + ".h5 --threads 2 --out " + object + "_alone.h5"));
+    CHECK(singles.back()["steps"].size() == 3);
+  }
+  // the inputs differ, so a mix-up of inputs cannot pass unnoticed
+  CHECK(singles[0]["truth_object"] != singles[1]["truth_object"]);
+
+  const Run one = touchstone(dir, "recognize --db db.h5 --json --threads 1 --out r1 --log" + list + kFast);
+  REQUIRE_MESSAGE(one.code == 0, one.err);
+  const Run two = touchstone(dir, "recognize --db db.h5 --json --threads 2 --out r2 --log" + list + kFast);
+  REQUIRE_MESSAGE(two.code == 0, two.err);
+  const auto j1 = nlohmann::json::parse(one.out), j2 = nlohmann::json::parse(two.out);
+  CHECK(j1["threads"] == 1);
+  CHECK(j2["threads"] == 2);
+  check_entries(j1, singles);
+  check_entries(j2, singles);
+  for (const auto& [object, seed] : objects) {
+    INFO(object);
+    // the result files are byte for byte those of the runs alone (header, every hypothesis)
+    const std::string bytes = test::read_bytes(dir / (object + "_alone.h5"));
+    REQUIRE_FALSE(bytes.empty());
+    CHECK(test::read_bytes(dir / "r1" / (object + ".h5")) == bytes);
+    CHECK(test::read_bytes(dir / "r2" / (object + ".h5")) == bytes);
+  }
+  CHECK(std::distance(fs::directory_iterator(dir / "r1"), fs::directory_iterator{}) == 3);
+
+  SUBCASE("human output: each input's table in input order under its name") {
+    const Run h = touchstone(dir, "recognize --db db.h5 --log" + list + kFast);
+    REQUIRE_MESSAGE(h.code == 0, h.err);
+    const auto a = h.out.find("input wedge.h5 (object wedge)"), b = h.out.find("input nut.h5 (object nut)"),
+               c = h.out.find("input box.h5 (object box)");
+    CHECK(h.out.rfind("method bricpsf, 6 objects, 3 inputs\n", 0) == 0);
+    REQUIRE(a != std::string::npos);
+    REQUIRE(b != std::string::npos);
+    REQUIRE(c != std::string::npos);
+    CHECK(a < b);
+    CHECK(b < c);
+    CHECK(std::count(h.out.begin(), h.out.end(), '\n') >= 3 * 5);  // header + table of 3 steps each
+  }
+}
+
+TEST_CASE("cli recognize --cloud DIR/: every .ply/.pcd file of the folder, in name order") {
+  test::TempDir dir("cli_batch");
+  make_db(dir);
+  fs::create_directories(dir / "clouds");
+  // written out of name order; one more file that is no cloud
+  const std::vector<std::pair<std::string, std::string>> made = {
+      {"nut", "c.ply"}, {"wedge", "a.pcd"}, {"ball", "b.ply"}};
+  for (const auto& [object, file] : made) {
+    REQUIRE(touchstone(dir, "simulate --db db.h5 --object " + object + " --grasps 3 --noise ideal --out " + object + ".h5").code == 0);
+    REQUIRE(touchstone(dir, "log export " + object + ".h5 --out clouds/" + file).code == 0);
+  }
+  test::write_text(dir / "clouds" / "notes.txt", "not a cloud\n");
+
+  std::vector<nlohmann::json> singles;
+  for (const char* file : {"a.pcd", "b.ply", "c.ply"})
+    singles.push_back(alone(dir, "--db db.h5 --cloud clouds/" + std::string(file)));
+  const Run r = touchstone(dir, "recognize --db db.h5 --cloud clouds/ --json --threads 2" + kFast);
+  REQUIRE_MESSAGE(r.code == 0, r.err);
+  const auto j = nlohmann::json::parse(r.out);
+  REQUIRE(j["inputs"].size() == 3);
+  CHECK(j["inputs"][0]["input"] == "clouds/a.pcd");
+  CHECK(j["inputs"][1]["input"] == "clouds/b.ply");
+  CHECK(j["inputs"][2]["input"] == "clouds/c.ply");
+  check_entries(j, singles);
+
+  // a folder alone is several inputs even with one file in it (the output keeps one shape)
+  fs::create_directories(dir / "one");
+  fs::copy_file(dir / "clouds" / "b.ply", dir / "one" / "b.ply");
+  const Run o = touchstone(dir, "recognize --db db.h5 --cloud one --json" + kFast);
+  REQUIRE_MESSAGE(o.code == 0, o.err);
+  check_entries(nlohmann::json::parse(o.out), {alone(dir, "--db db.h5 --cloud one/b.ply")});
+  // an empty folder is an error
+  fs::create_directories(dir / "empty");
+  const Run e = touchstone(dir, "recognize --db db.h5 --cloud empty" + kFast);
+  CHECK(e.code == 1);
+  CHECK_MESSAGE(e.err.find("no .ply or .pcd file (empty, --cloud)") != std::string::npos, e.err);
+}
+
+TEST_CASE("cli recognize, several logs: broken inputs are reported, the others still recognized") {
+  test::TempDir dir("cli_batch");
+  make_db(dir);
+  make_db(dir, "small.h5", {"wedge"});
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object nut --grasps 3 --noise ideal --seed 2 --out nut.h5").code == 0);
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object box --grasps 3 --noise ideal --seed 3 --out box.h5").code == 0);
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 3 --noise ideal --out wedge.h5").code == 0);
+  test::write_text(dir / "junk.h5", "this is not an HDF5 file\n");
+  const std::string log = test::read_bytes(dir / "nut.h5");
+  test::write_text(dir / "cut.h5", log.substr(0, log.size() / 2));  // truncated
+
+  const std::vector<nlohmann::json> singles = {
+      alone(dir, "--db small.h5 --log nut.h5 --out nut_alone.h5"),
+      alone(dir, "--db small.h5 --log box.h5 --out box_alone.h5")};
+  // inputs: good, not HDF5, good, truncated, object not in the database
+  const Run r = touchstone(dir, "recognize --db small.h5 --log nut.h5 junk.h5 box.h5 cut.h5 wedge.h5 --json --out res" + kFast);
+  CHECK(r.code == 1);
+  const auto j = nlohmann::json::parse(r.out);  // the JSON is complete all the same
+  REQUIRE(j["inputs"].size() == 5);
+  CHECK(without_times(j["inputs"][0]) == input_fields(singles[0]));
+  CHECK(without_times(j["inputs"][2]) == input_fields(singles[1]));
+  const std::vector<std::pair<std::size_t, std::string>> broken = {
+      {1, "junk.h5"}, {3, "cut.h5"}, {4, "wedge.h5, /object"}};
+  for (const auto& [i, names] : broken) {
+    const auto& entry = j["inputs"][i];
+    INFO(entry.dump());
+    CHECK_FALSE(entry.contains("steps"));
+    REQUIRE(entry["error"].is_string());
+    CHECK(entry["error"].get<std::string>().find(names) != std::string::npos);
+  }
+  CHECK(j["inputs"][4]["error"].get<std::string>().find("is not in the database") != std::string::npos);
+  // stderr: one line per broken input, naming it, in input order
+  std::vector<std::string> lines;
+  for (std::size_t at = 0, nl; (nl = r.err.find('\n', at)) != std::string::npos; at = nl + 1)
+    lines.push_back(r.err.substr(at, nl - at));
+  REQUIRE(lines.size() == 3);
+  for (std::size_t k = 0; k < 3; ++k) {
+    INFO(lines[k]);
+    CHECK(lines[k].rfind("touchstone: error: ", 0) == 0);
+    CHECK(lines[k].find(broken[k].second) != std::string::npos);
+  }
+  // the results of the good inputs, as alone; nothing else (no partial or temporary files)
+  CHECK(test::read_bytes(dir / "res" / "nut.h5") == test::read_bytes(dir / "nut_alone.h5"));
+  CHECK(test::read_bytes(dir / "res" / "box.h5") == test::read_bytes(dir / "box_alone.h5"));
+  CHECK(std::distance(fs::directory_iterator(dir / "res"), fs::directory_iterator{}) == 2);
+}
+
+TEST_CASE("cli recognize, several inputs: refusals before any work") {
+  test::TempDir dir("cli_batch");
+  make_db(dir);
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object nut --grasps 2 --noise ideal --out a.h5").code == 0);
+  fs::create_directories(dir / "sub");
+  fs::copy_file(dir / "a.h5", dir / "sub" / "a.h5");
+  REQUIRE(touchstone(dir, "log export a.h5 --out a.ply").code == 0);
+  test::write_text(dir / "junk_db.h5", "not a database\n");  // any work would fail on it first
+
+  {  // two inputs with one stem and --out DIR
+    for (const std::string inputs : {"--log a.h5 sub/a.h5", "--cloud a.ply sub/../a.ply"}) {
+      const Run r = touchstone(dir, "recognize --db junk_db.h5 " + inputs + " --out res");
+      INFO(inputs);
+      CHECK(r.code == 1);
+      CHECK_MESSAGE(r.err.find("share the name 'a'") != std::string::npos, r.err);
+      CHECK(r.err.find("res, --out") != std::string::npos);
+      CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+      CHECK(r.out.empty());
+      CHECK_FALSE(fs::exists(dir / "res"));
+    }
+    // without --out the same stems are fine (the database error shows the work started)
+    const Run r = touchstone(dir, "recognize --db junk_db.h5 --log a.h5 sub/a.h5");
+    CHECK(r.code == 1);
+    CHECK(r.err.find("share the name") == std::string::npos);
+    CHECK(r.err.find("junk_db.h5") != std::string::npos);
+  }
+  {  // --out DIR that is a file, or that would replace an input
+    test::write_text(dir / "taken", "x");
+    const Run f = touchstone(dir, "recognize --db junk_db.h5 --log a.h5 sub/a.h5 --out taken");
+    CHECK(f.code == 1);
+    CHECK(f.err.find("takes a folder") != std::string::npos);
+    REQUIRE(touchstone(dir, "simulate --db db.h5 --object box --grasps 2 --noise ideal --out sub/b.h5").code == 0);
+    const std::string before = test::read_bytes(dir / "sub" / "b.h5");
+    const Run g = touchstone(dir, "recognize --db junk_db.h5 --log a.h5 sub/b.h5 --out sub");
+    CHECK(g.code == 1);
+    CHECK_MESSAGE(g.err.find("would replace the input") != std::string::npos, g.err);
+    CHECK(test::read_bytes(dir / "sub" / "b.h5") == before);
+  }
+  {  // --object and --ground-truth take a single input
+    test::write_text(dir / "T.txt", "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n");
+    for (const std::string args : {"--log a.h5 sub/a.h5 --object nut", "--cloud a.ply sub --ground-truth T.txt",
+                                   "--cloud sub --object nut"}) {
+      const Run r = touchstone(dir, "recognize --db junk_db.h5 " + args);
+      INFO(args);
+      CHECK(r.code == 2);  // a usage error
+      CHECK_MESSAGE(r.err.find("takes a single input") != std::string::npos, r.err);
+      CHECK(r.out.empty());
+    }
+  }
+}
