@@ -1,5 +1,7 @@
 #include "engine/database.hpp"
 
+#include <algorithm>
+
 namespace ts {
 
 MemorySource::MemorySource(std::vector<BuiltObject> objects, DatabaseSettings settings)
@@ -17,14 +19,29 @@ DistanceField MemorySource::load_field(std::size_t i) const {
 }
 
 struct Database::Slot {
-  std::once_flag features_once, geometry_once;
-  std::unique_ptr<ObjectFeatures> features;
-  std::unique_ptr<ObjectGeometry> geometry;
-  std::atomic<bool> geometry_ready{false};
+  std::once_flag keypoints_once;
+  std::unique_ptr<ObjectKeypoints> keypoints;
+  std::mutex mutex;                           ///< guards geometry, bytes (and loading)
+  GeometryRef geometry;
+  std::size_t bytes = 0;
+  std::atomic<std::uint64_t> last_use{0};
+  std::atomic<bool> resident{false};
 };
 
+struct Database::Cache {
+  std::atomic<std::uint64_t> clock{0};
+  std::atomic<std::size_t> bytes{0}, peak{0}, loads{0}, evictions{0}, resident{0};
+  std::atomic<std::size_t> budget{0};
+  std::mutex trim_mutex;
+};
+
+std::size_t memory_bytes(const ObjectGeometry& g) {
+  return g.fine.points.capacity() * sizeof(Vec3) + g.fine.normals.capacity() * sizeof(Vec3) +
+         g.tree.memory_bytes() + g.field.memory_bytes() + sizeof(ObjectGeometry);
+}
+
 Database::Database(std::shared_ptr<const ObjectSource> source)
-    : source_(std::move(source)), slots_(new Slot[source_->size()]) {}
+    : source_(std::move(source)), slots_(new Slot[source_->size()]), cache_(std::make_unique<Cache>()) {}
 
 Database::~Database() = default;
 
@@ -38,35 +55,85 @@ std::size_t Database::find(const std::string& name) const {
   return size();
 }
 
-const ObjectFeatures& Database::features(std::size_t i) const {
+const ObjectKeypoints& Database::keypoints(std::size_t i) const {
   Slot& s = slots_[i];
-  std::call_once(s.features_once, [&] {
-    s.features = std::make_unique<ObjectFeatures>(source_->load_features(i));
+  std::call_once(s.keypoints_once, [&] {
+    auto k = std::make_unique<ObjectKeypoints>();
+    k->coarse = source_->load_coarse(i);
+    k->tree = KdTree3(k->coarse.points);
+    s.keypoints = std::move(k);
   });
-  return *s.features;
+  return *s.keypoints;
 }
 
-const ObjectGeometry& Database::geometry(std::size_t i) const {
+ObjectFeatures Database::load_features(std::size_t i) const { return source_->load_features(i); }
+
+GeometryRef Database::geometry(std::size_t i) const {
   Slot& s = slots_[i];
-  std::call_once(s.geometry_once, [&] {
-    auto g = std::make_unique<ObjectGeometry>();
-    g->fine = source_->load_fine(i);
-    g->tree = KdTree3(g->fine.points);
-    g->field = source_->load_field(i);
-    s.geometry = std::move(g);
-    s.geometry_ready.store(true, std::memory_order_release);
-  });
-  return *s.geometry;
+  GeometryRef g;
+  bool loaded = false;
+  {
+    std::lock_guard<std::mutex> lock(s.mutex);
+    if (!s.geometry) {
+      auto fresh = std::make_shared<ObjectGeometry>();
+      fresh->fine = source_->load_fine(i);
+      fresh->tree = KdTree3(fresh->fine.points);
+      fresh->field = source_->load_field(i);
+      s.bytes = memory_bytes(*fresh);
+      s.geometry = std::move(fresh);
+      s.resident.store(true, std::memory_order_release);
+      const std::size_t now = cache_->bytes.fetch_add(s.bytes) + s.bytes;
+      std::size_t peak = cache_->peak.load();
+      while (now > peak && !cache_->peak.compare_exchange_weak(peak, now)) {}
+      cache_->loads.fetch_add(1);
+      cache_->resident.fetch_add(1);
+      loaded = true;
+    }
+    s.last_use.store(cache_->clock.fetch_add(1) + 1, std::memory_order_relaxed);
+    g = s.geometry;
+  }
+  if (loaded && cache_->budget.load() > 0 && cache_->bytes.load() > cache_->budget.load()) trim();
+  return g;
+}
+
+void Database::trim() const {
+  std::lock_guard<std::mutex> guard(cache_->trim_mutex);
+  const std::size_t budget = cache_->budget.load();
+  if (budget == 0) return;
+  std::vector<std::pair<std::uint64_t, std::size_t>> order;  // (last use, object)
+  for (std::size_t i = 0; i < size(); ++i)
+    if (slots_[i].resident.load(std::memory_order_acquire))
+      order.push_back({slots_[i].last_use.load(std::memory_order_relaxed), i});
+  std::sort(order.begin(), order.end());
+  for (const auto& [use, i] : order) {
+    if (cache_->bytes.load() <= budget) break;
+    Slot& s = slots_[i];
+    std::lock_guard<std::mutex> lock(s.mutex);
+    if (!s.geometry || s.geometry.use_count() > 1) continue;  // gone, or in use
+    s.geometry.reset();
+    s.resident.store(false, std::memory_order_release);
+    cache_->bytes.fetch_sub(s.bytes);
+    cache_->resident.fetch_sub(1);
+    cache_->evictions.fetch_add(1);
+    s.bytes = 0;
+  }
 }
 
 bool Database::geometry_loaded(std::size_t i) const {
-  return slots_[i].geometry_ready.load(std::memory_order_acquire);
+  return slots_[i].resident.load(std::memory_order_acquire);
 }
 
-std::size_t Database::geometry_loads() const {
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < size(); ++i) n += geometry_loaded(i) ? 1 : 0;
-  return n;
+std::size_t Database::geometry_loads() const { return cache_->loads.load(); }
+std::size_t Database::geometry_resident() const { return cache_->resident.load(); }
+std::size_t Database::geometry_evictions() const { return cache_->evictions.load(); }
+std::size_t Database::geometry_bytes() const { return cache_->bytes.load(); }
+std::size_t Database::geometry_peak_bytes() const { return cache_->peak.load(); }
+
+void Database::set_memory_budget(std::size_t bytes) {
+  cache_->budget.store(bytes);
+  if (bytes > 0 && cache_->bytes.load() > bytes) trim();
 }
+
+std::size_t Database::memory_budget() const { return cache_->budget.load(); }
 
 }  // namespace ts

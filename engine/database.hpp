@@ -10,6 +10,7 @@
 #include "engine/scanner.hpp"
 #include "engine/search.hpp"
 
+#include <algorithm>
 #include <atomic>
 #include <memory>
 #include <mutex>
@@ -40,6 +41,14 @@ struct ObjectInfo {
 struct ObjectFeatures {
   PointCloud coarse;               ///< object frame, with normals
   std::vector<Feature> features;   ///< one per coarse point
+};
+
+/// What Batch RANSAC and the shortlist read of an object, kept for every object once loaded:
+/// the coarse cloud (the feature keypoints, with normals) and a k-d tree over it. The features
+/// themselves live only in the search structure built from Database::load_features.
+struct ObjectKeypoints {
+  PointCloud coarse;               ///< object frame, with normals
+  KdTree3 tree;                    ///< over coarse.points
 };
 
 struct ObjectGeometry {
@@ -74,6 +83,8 @@ class ObjectSource {
   virtual const ObjectInfo& info(std::size_t i) const = 0;
   virtual const DatabaseSettings& settings() const = 0;
   virtual ObjectFeatures load_features(std::size_t i) const = 0;
+  /// The coarse cloud alone (default: load_features(i).coarse; a store may read less).
+  virtual PointCloud load_coarse(std::size_t i) const { return load_features(i).coarse; }
   virtual PointCloud load_fine(std::size_t i) const = 0;
   virtual DistanceField load_field(std::size_t i) const = 0;
 };
@@ -94,8 +105,17 @@ class MemorySource final : public ObjectSource {
   DatabaseSettings settings_;
 };
 
-/// Thread-safe lazy cache over a source. Each object's features and geometry are loaded at
-/// most once; counters let tests and reports check what a scene actually needed.
+/// An object's geometry, held while in use: the cache may evict its copy meanwhile, the holder's
+/// stays valid.
+using GeometryRef = std::shared_ptr<const ObjectGeometry>;
+
+/// Thread-safe lazy cache over a source. Each object's keypoints (coarse cloud and its k-d tree)
+/// are loaded at most once and kept; its geometry (fine cloud, k-d tree, distance field: the bulk of an object's memory) is
+/// loaded on demand and, under a memory budget, evicted least-recently-used when the resident
+/// geometry exceeds the budget. Objects in use (a GeometryRef held elsewhere) are never evicted,
+/// so the budget may be exceeded while a step needs more objects at once than it holds.
+/// Eviction changes no result, only what has to be loaded again. Counters let tests, reports and
+/// benchmarks check what a scene actually needed.
 class Database {
  public:
   explicit Database(std::shared_ptr<const ObjectSource> source);
@@ -106,16 +126,53 @@ class Database {
   const DatabaseSettings& settings() const;
   std::size_t find(const std::string& name) const;   ///< size() when absent
 
-  const ObjectFeatures& features(std::size_t i) const;
-  const ObjectGeometry& geometry(std::size_t i) const;
-  bool geometry_loaded(std::size_t i) const;
-  std::size_t geometry_loads() const;
+  /// Coarse cloud and k-d tree, loaded once and kept (a few hundred kB an object).
+  const ObjectKeypoints& keypoints(std::size_t i) const;
+  /// Features and coarse cloud read from the source, not cached (for building search
+  /// structures, which keep their own copy of the features).
+  ObjectFeatures load_features(std::size_t i) const;
+  GeometryRef geometry(std::size_t i) const;
+  bool geometry_loaded(std::size_t i) const;         ///< resident now
+  std::size_t geometry_loads() const;                ///< loads so far (reloads counted)
+  std::size_t geometry_resident() const;             ///< objects whose geometry is resident
+  std::size_t geometry_evictions() const;            ///< evictions so far
+  std::size_t geometry_bytes() const;                ///< resident geometry (estimated bytes)
+  std::size_t geometry_peak_bytes() const;           ///< largest geometry_bytes() so far
+
+  /// Resident geometry allowed (bytes, estimated from the loaded arrays and grids); 0: no limit
+  /// (the default). A smaller budget evicts at once what is not in use.
+  void set_memory_budget(std::size_t bytes);
+  std::size_t memory_budget() const;
 
  private:
   struct Slot;
+  struct Cache;
+  void trim() const;
   std::shared_ptr<const ObjectSource> source_;
   std::unique_ptr<Slot[]> slots_;
+  std::unique_ptr<Cache> cache_;
 };
+
+/// The geometry of a set of objects, loaded once (in ascending object order, on the calling
+/// thread) and held for a stage: its parallel loop reads it without touching the cache.
+class GeometryPins {
+ public:
+  template <class Range, class ObjectOf>
+  GeometryPins(const Database& db, const Range& items, ObjectOf object_of) : refs_(db.size()) {
+    std::vector<std::uint32_t> objects;
+    for (const auto& x : items) objects.push_back(static_cast<std::uint32_t>(object_of(x)));
+    std::sort(objects.begin(), objects.end());
+    objects.erase(std::unique(objects.begin(), objects.end()), objects.end());
+    for (std::uint32_t o : objects) refs_[o] = db.geometry(o);
+  }
+  const ObjectGeometry& operator[](std::size_t object) const { return *refs_[object]; }
+
+ private:
+  std::vector<GeometryRef> refs_;
+};
+
+/// Estimated bytes of one object's geometry (what the memory budget counts).
+std::size_t memory_bytes(const ObjectGeometry& g);
 
 /// Build one object from a mesh already in its object frame (see io/mesh_import for the
 /// frame): scan_mesh (settings.scan) gives the fine cloud; PCA normals (fpfh.normal_radius)

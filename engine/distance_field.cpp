@@ -405,6 +405,11 @@ SparseGrid DistanceField::coarse_sparse() const {
   return impl_->coarse ? to_sparse(*impl_->coarse, impl_->coarse_voxel) : SparseGrid{};
 }
 
+std::size_t DistanceField::memory_bytes() const {
+  if (!impl_) return 0;
+  return (impl_->fine ? impl_->fine->memUsage() : 0) + (impl_->coarse ? impl_->coarse->memUsage() : 0);
+}
+
 bool DistanceField::empty() const { return !impl_ || !impl_->coarse; }
 bool DistanceField::is_signed() const { return impl_->is_signed; }
 double DistanceField::coarse_margin() const { return impl_->coarse_margin; }

@@ -53,6 +53,7 @@ class DistanceField {
 
   bool empty() const;
   bool is_signed() const;
+  std::size_t memory_bytes() const;   ///< bytes held by both grids
   double coarse_margin() const;
   /// Signed distance (m; negative inside when is_signed()), trilinear from the fine level near
   /// the surface, else from the coarse level. Where the surface is farther than about

@@ -109,10 +109,8 @@ Evaluation evaluate(const Scene& scene, const ObjectGeometry& geo, const ObjectI
 
 namespace {
 
-void preload(const Database& db, const std::vector<Candidate>& cands) {
-  std::set<std::uint32_t> objects;
-  for (const Candidate& c : cands) objects.insert(c.object);
-  for (std::uint32_t o : objects) (void)db.geometry(o);  // ascending, one thread
+GeometryPins pin(const Database& db, const std::vector<Candidate>& cands) {
+  return GeometryPins(db, cands, [](const Candidate& c) { return c.object; });
 }
 
 template <class F>
@@ -128,11 +126,11 @@ void parallel_each(std::size_t n, F&& f) {
 std::vector<Evaluation> evaluate_all(const Scene& scene, const Database& db,
                                      const std::vector<Candidate>& cands,
                                      const EvaluateSettings& s) {
-  preload(db, cands);
+  const GeometryPins geometry = pin(db, cands);
   std::vector<Evaluation> out(cands.size());
   parallel_each(cands.size(), [&](std::size_t i) {
     const Candidate& c = cands[i];
-    out[i] = evaluate(scene, db.geometry(c.object), db.info(c.object), c.T_scene_object, s);
+    out[i] = evaluate(scene, geometry[c.object], db.info(c.object), c.T_scene_object, s);
   });
   return out;
 }
@@ -148,10 +146,10 @@ std::vector<ScoredCandidate> select_top(const Scene& scene, const Database& db,
     if (stats) *stats = st;
     return out;
   }
-  preload(db, cands);
+  const GeometryPins geometry = pin(db, cands);
   auto eval = [&](std::size_t i, double reject_below) {
     const Candidate& c = cands[i];
-    return evaluate(scene, db.geometry(c.object), db.info(c.object), c.T_scene_object, s,
+    return evaluate(scene, geometry[c.object], db.info(c.object), c.T_scene_object, s,
                     reject_below);
   };
   constexpr double kInf = std::numeric_limits<double>::infinity();

@@ -42,9 +42,11 @@ struct FeatureTable::Impl {
   std::vector<FeatureRef> refs;     ///< per table row (rows are in k-d leaf order)
   std::vector<float> blocks;        ///< nblocks x kDim x kBlock, padding rows far away
   std::vector<float> lo, hi;        ///< nblocks x kDim: bounding box of each block's rows
+  std::vector<float> centre;        ///< nblocks x kDim: mean of each block's rows
   std::size_t rows = 0;
   std::size_t features = 0;         ///< rows that hold a feature (rows minus padding)
   std::vector<std::uint32_t> object_blocks;  ///< first block of each object present (+ end)
+  std::vector<std::uint32_t> block_object;   ///< the object of each block
   std::size_t nblocks() const { return (rows + kBlock - 1) / kBlock; }
   const float* block(std::size_t b) const { return blocks.data() + b * kDim * kBlock; }
 };
@@ -91,48 +93,61 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
   Impl& m = *impl_;
   // Each object's rows in k-d leaf order, starting on a block boundary (padding rows between
   // objects), so that a block belongs to one object: knn_per_object searches an object's blocks
-  // best-first like knn searches all of them.
-  std::vector<FeatureRef> refs;
-  std::vector<const Feature*> feats;
+  // best-first like knn searches all of them. Objects are read one at a time (the table keeps
+  // the only copy of the features).
+  std::size_t expected = 0;  // blocks, from the summaries (a reservation, not trusted)
+  for (std::size_t o = 0; o < db.size(); ++o)
+    if (objects.empty() || (o < objects.size() && objects[o]))
+      expected += (std::min<std::size_t>(db.info(o).coarse_points, 1u << 24) + kBlock - 1) / kBlock;
+  expected = std::min<std::size_t>(expected, std::size_t{1} << 26);
+  m.blocks.reserve(expected * kDim * kBlock);
+  m.refs.reserve(expected * kBlock);
   for (std::size_t o = 0; o < db.size(); ++o) {
     if (!objects.empty() && (o >= objects.size() || !objects[o])) continue;
-    const auto& fs = db.features(o).features;
+    const std::vector<Feature> fs = db.load_features(o).features;
     if (fs.empty()) continue;
     std::vector<const Feature*> of(fs.size());
     std::vector<std::uint32_t> idx(fs.size());
     for (std::size_t i = 0; i < fs.size(); ++i) of[i] = &fs[i], idx[i] = static_cast<std::uint32_t>(i);
     kd_order(of, idx, 0, idx.size());
-    m.object_blocks.push_back(static_cast<std::uint32_t>(refs.size() / kBlock));
-    for (std::uint32_t i : idx) {
-      refs.push_back({static_cast<std::uint32_t>(o), i});
-      feats.push_back(of[i]);
+    const std::size_t b0 = m.refs.size() / kBlock, nb = (fs.size() + kBlock - 1) / kBlock;
+    if ((b0 + nb) * kBlock >= std::numeric_limits<std::uint32_t>::max())
+      throw Error("FeatureTable: too many features");
+    m.object_blocks.push_back(static_cast<std::uint32_t>(b0));
+    m.block_object.insert(m.block_object.end(), nb, static_cast<std::uint32_t>(o));
+    m.blocks.resize((b0 + nb) * kDim * kBlock, 1e18f);  // padding never wins
+    m.lo.resize((b0 + nb) * kDim, std::numeric_limits<float>::infinity());
+    m.hi.resize((b0 + nb) * kDim, -std::numeric_limits<float>::infinity());
+    m.centre.resize((b0 + nb) * kDim, 0.0f);
+    for (std::size_t k = 0; k < nb * kBlock; ++k) {
+      if (k >= idx.size()) {
+        m.refs.push_back({kPadding, kPadding});
+        continue;
+      }
+      m.refs.push_back({static_cast<std::uint32_t>(o), idx[k]});
+      const Feature& f = *of[idx[k]];
+      const std::size_t b = b0 + k / kBlock;
+      float* blk = m.blocks.data() + b * kDim * kBlock;
+      for (int d = 0; d < kDim; ++d) {
+        blk[static_cast<std::size_t>(d) * kBlock + k % kBlock] = f[d];
+        m.lo[b * kDim + d] = std::min(m.lo[b * kDim + d], f[d]);
+        m.hi[b * kDim + d] = std::max(m.hi[b * kDim + d], f[d]);
+      }
     }
-    while (refs.size() % kBlock != 0) {
-      refs.push_back({kPadding, kPadding});
-      feats.push_back(nullptr);
+    for (std::size_t j = 0; j < nb; ++j) {  // block means, summed in double in row order
+      const std::size_t b = b0 + j, rows = std::min(kBlock, fs.size() - j * kBlock);
+      for (int d = 0; d < kDim; ++d) {
+        double sum = 0.0;
+        for (std::size_t r = 0; r < rows; ++r) sum += m.blocks[b * kDim * kBlock + static_cast<std::size_t>(d) * kBlock + r];
+        m.centre[b * kDim + d] = static_cast<float>(sum / double(rows));
+      }
     }
     m.features += fs.size();
   }
-  m.object_blocks.push_back(static_cast<std::uint32_t>(refs.size() / kBlock));
-  if (refs.size() >= std::numeric_limits<std::uint32_t>::max())
-    throw Error("FeatureTable: too many features");
-  m.rows = refs.size();
-  const std::size_t nb = m.nblocks();
-  m.refs = std::move(refs);
-  m.blocks.assign(nb * kDim * kBlock, 1e18f);  // padding never wins
-  m.lo.assign(nb * kDim, std::numeric_limits<float>::infinity());
-  m.hi.assign(nb * kDim, -std::numeric_limits<float>::infinity());
-  for (std::size_t r = 0; r < m.rows; ++r) {
-    if (!feats[r]) continue;
-    const Feature& f = *feats[r];
-    const std::size_t b = r / kBlock;
-    float* blk = m.blocks.data() + b * kDim * kBlock;
-    for (int d = 0; d < kDim; ++d) {
-      blk[static_cast<std::size_t>(d) * kBlock + r % kBlock] = f[d];
-      m.lo[b * kDim + d] = std::min(m.lo[b * kDim + d], f[d]);
-      m.hi[b * kDim + d] = std::max(m.hi[b * kDim + d], f[d]);
-    }
-  }
+  m.object_blocks.push_back(static_cast<std::uint32_t>(m.refs.size() / kBlock));
+  m.rows = m.refs.size();
+  m.blocks.shrink_to_fit();
+  m.refs.shrink_to_fit();
 }
 
 std::size_t FeatureTable::size() const { return impl_->rows; }
@@ -141,31 +156,55 @@ const FeatureRef& FeatureTable::ref(std::size_t i) const { return impl_->refs.at
 
 namespace {
 
-/// The w nearest feature rows among blocks [b0, b1) to query qv, appended to `out` sorted by
-/// (distance, row). Best-first over the blocks by the lower bound (distance to the block's
-/// bounding box); stops when the bound exceeds the w-th distance found so far. Exact: a skipped
-/// block's rows are all farther than w rows already found.
-void search_blocks(const FeatureTable::Impl& m, const float* qv, std::size_t b0, std::size_t b1,
-                   std::size_t w, std::vector<std::pair<float, std::uint32_t>>& order,
+/// Squared distance from query qv to block b's bounding box, slightly shrunk (a float row
+/// distance is never below it).
+inline float block_bound(const FeatureTable::Impl& m, const float* qv, std::size_t b) {
+  double s2 = 0.0;
+  const float* lo = &m.lo[b * kDim];
+  const float* hi = &m.hi[b * kDim];
+  for (int k = 0; k < kDim; ++k) {
+    const double x = qv[k], l = lo[k], h = hi[k];
+    const double e = x < l ? l - x : (x > h ? x - h : 0.0);
+    s2 += e * e;
+  }
+  return static_cast<float>(s2 * (1.0 - 1e-5));
+}
+
+/// Squared distance from query qv to the mean of block b's rows.
+inline float centre_distance(const FeatureTable::Impl& m, const float* qv, std::size_t b) {
+  float s2 = 0.0f;
+  const float* c = &m.centre[b * kDim];
+  for (int k = 0; k < kDim; ++k) s2 += (qv[k] - c[k]) * (qv[k] - c[k]);
+  return s2;
+}
+
+/// The w nearest feature rows among the blocks `blocks` to query qv, appended to `out` sorted
+/// by (distance, row). Exact (max_blocks = 0): best-first over the blocks by the lower bound
+/// (distance to the block's bounding box); stops when the bound exceeds the w-th distance found
+/// so far, so a skipped block's rows are all farther than w rows already found. Approximate
+/// (max_blocks > 0): only the max_blocks blocks whose mean is nearest to the query are read
+/// (an inverted file whose cells are the k-d leaves), the rest are left out.
+template <class Blocks>
+void search_blocks(const FeatureTable::Impl& m, const float* qv, const Blocks& blocks,
+                   std::size_t w, std::size_t max_blocks,
+                   std::vector<std::pair<float, std::uint32_t>>& order,
                    std::vector<Item>& cand, std::vector<Neighbour>& out) {
   order.clear();
-  for (std::size_t b = b0; b < b1; ++b) {
-    // squared distance from q to the block's bounding box, slightly shrunk (a float row
-    // distance is never below it)
-    double s2 = 0.0;
-    for (int k = 0; k < kDim; ++k) {
-      const double x = qv[k], l = m.lo[b * kDim + k], h = m.hi[b * kDim + k];
-      const double e = x < l ? l - x : (x > h ? x - h : 0.0);
-      s2 += e * e;
+  if (max_blocks == 0) {
+    for (const std::size_t b : blocks) order.push_back({block_bound(m, qv, b), static_cast<std::uint32_t>(b)});
+    std::sort(order.begin(), order.end());
+  } else {
+    for (const std::size_t b : blocks) order.push_back({centre_distance(m, qv, b), static_cast<std::uint32_t>(b)});
+    if (order.size() > max_blocks) {
+      std::nth_element(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(max_blocks - 1), order.end());
+      order.resize(max_blocks);
     }
-    order.push_back({static_cast<float>(s2 * (1.0 - 1e-5)), static_cast<std::uint32_t>(b)});
   }
-  std::sort(order.begin(), order.end());
   cand.clear();
   float tau = std::numeric_limits<float>::infinity();
   float d[kBlock];
   for (const auto& [lb, b] : order) {
-    if (lb > tau) break;
+    if (max_blocks == 0 && lb > tau) break;
     block_distances(m.block(b), qv, d);
     const std::size_t base = std::size_t{b} * kBlock;
     for (std::size_t i = 0; i < kBlock; ++i)
@@ -186,22 +225,53 @@ void search_blocks(const FeatureTable::Impl& m, const float* qv, std::size_t b0,
   for (const Item& x : cand) out.push_back({x.row, static_cast<double>(x.d)});
 }
 
-}  // namespace
+/// A contiguous run of blocks, iterable as block indices.
+struct BlockRange {
+  std::size_t b0 = 0, b1 = 0;
+  struct It {
+    std::size_t b;
+    std::size_t operator*() const { return b; }
+    It& operator++() { return ++b, *this; }
+    bool operator!=(const It& o) const { return b != o.b; }
+  };
+  It begin() const { return {b0}; }
+  It end() const { return {b1}; }
+};
 
-namespace {
+/// The block ranges of the objects in the mask (every object's for an empty mask), in order.
+std::vector<BlockRange> object_ranges(const FeatureTable::Impl& m, const std::vector<std::uint8_t>& mask) {
+  std::vector<BlockRange> ranges;
+  for (std::size_t g = 0; g + 1 < m.object_blocks.size(); ++g) {
+    const std::uint32_t o = m.block_object[m.object_blocks[g]];
+    if (!mask.empty() && (o >= mask.size() || !mask[o])) continue;
+    ranges.push_back({m.object_blocks[g], m.object_blocks[g + 1]});
+  }
+  return ranges;
+}
 
-/// Per query, the w nearest rows within each block range, ranges in order. Parallel over queries.
-std::vector<std::vector<Neighbour>> search_ranges(
-    const FeatureTable::Impl& m, const std::vector<Feature>& queries, std::size_t w,
-    const std::vector<std::pair<std::size_t, std::size_t>>& ranges) {
+/// Per query, the w nearest rows: within each range in order (per_range), or over all the
+/// ranges' blocks together. Parallel over queries.
+std::vector<std::vector<Neighbour>> search_ranges(const FeatureTable::Impl& m,
+                                                  const std::vector<Feature>& queries, std::size_t w,
+                                                  const std::vector<BlockRange>& ranges, bool per_range,
+                                                  std::size_t max_blocks = 0) {
   std::vector<std::vector<Neighbour>> out(queries.size());
-  if (queries.empty() || w == 0 || m.features == 0) return out;
+  if (queries.empty() || w == 0 || m.features == 0 || ranges.empty()) return out;
+  std::vector<std::size_t> all;
+  if (!per_range)
+    for (const BlockRange& r : ranges)
+      for (std::size_t b : r) all.push_back(b);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 1), [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<std::pair<float, std::uint32_t>> order;
     std::vector<Item> cand;
     for (std::size_t q = range.begin(); q != range.end(); ++q) {
-      out[q].reserve(w * ranges.size());
-      for (const auto& [b0, b1] : ranges) search_blocks(m, queries[q].data(), b0, b1, w, order, cand, out[q]);
+      if (per_range) {
+        out[q].reserve(w * ranges.size());
+        for (const BlockRange& r : ranges) search_blocks(m, queries[q].data(), r, w, max_blocks, order, cand, out[q]);
+      } else {
+        out[q].reserve(w);
+        search_blocks(m, queries[q].data(), all, w, 0, order, cand, out[q]);
+      }
     }
   });
   return out;
@@ -212,16 +282,26 @@ std::vector<std::vector<Neighbour>> search_ranges(
 std::vector<std::vector<Neighbour>> FeatureTable::knn(const std::vector<Feature>& queries,
                                                       std::size_t w) const {
   const Impl& m = *impl_;
-  return search_ranges(m, queries, std::min(w, m.features), {{0, m.nblocks()}});
+  return search_ranges(m, queries, std::min(w, m.features), object_ranges(m, {}), false);
 }
 
 std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vector<Feature>& queries,
                                                                  std::size_t w) const {
+  return knn_per_object(queries, w, {});
+}
+
+std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vector<Feature>& queries,
+                                                                 std::size_t w,
+                                                                 const std::vector<std::uint8_t>& mask,
+                                                                 std::size_t max_blocks) const {
+  return search_ranges(*impl_, queries, w, object_ranges(*impl_, mask), true, max_blocks);
+}
+
+std::size_t FeatureTable::memory_bytes() const {
   const Impl& m = *impl_;
-  std::vector<std::pair<std::size_t, std::size_t>> ranges;
-  for (std::size_t g = 0; g + 1 < m.object_blocks.size(); ++g)
-    ranges.emplace_back(m.object_blocks[g], m.object_blocks[g + 1]);
-  return search_ranges(m, queries, w, ranges);
+  return m.blocks.size() * sizeof(float) + (m.lo.size() + m.hi.size() + m.centre.size()) * sizeof(float) +
+         m.refs.size() * sizeof(FeatureRef) +
+         (m.object_blocks.size() + m.block_object.size()) * sizeof(std::uint32_t);
 }
 
 std::shared_ptr<const FeatureTable> FeatureTable::shared(const Database& db,

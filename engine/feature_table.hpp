@@ -34,6 +34,16 @@ class FeatureTable {
   /// features of box-like objects; a global W then starves the other objects, this does not.
   std::vector<std::vector<Neighbour>> knn_per_object(const std::vector<Feature>& queries,
                                                      std::size_t w) const;
+  /// The same restricted to the objects with mask[object] != 0 (an empty mask: every object);
+  /// only the blocks of those objects are read. max_blocks > 0: approximate, each object's w
+  /// nearest among its max_blocks blocks whose mean is nearest to the query (an inverted file
+  /// whose cells are the k-d leaves of 128 rows); exact with 0.
+  std::vector<std::vector<Neighbour>> knn_per_object(const std::vector<Feature>& queries,
+                                                     std::size_t w,
+                                                     const std::vector<std::uint8_t>& mask,
+                                                     std::size_t max_blocks = 0) const;
+  /// Bytes held by the table (feature rows, bounds, references).
+  std::size_t memory_bytes() const;
 
   /// One table per (database, object mask), shared while someone holds it.
   static std::shared_ptr<const FeatureTable> shared(const Database& db,

@@ -88,9 +88,11 @@ PrunedSet prune(const Database& db, const FeatureSearch& search, const std::vect
     const FeatureRef& r = search.ref(nb.index);
     if (r.object < allowed.size() && allowed[r.object]) set.items.push_back({r.object, r.point});
   }
-  // Group by object, keeping the nearest-first order inside each group.
-  std::stable_sort(set.items.begin(), set.items.end(),
-                   [](const Pruned& a, const Pruned& b) { return a.object < b.object; });
+  // Group by object, keeping the nearest-first order inside each group (per-object pruning
+  // delivers them grouped already).
+  const auto by_object = [](const Pruned& a, const Pruned& b) { return a.object < b.object; };
+  if (!std::is_sorted(set.items.begin(), set.items.end(), by_object))
+    std::stable_sort(set.items.begin(), set.items.end(), by_object);
   for (std::uint32_t i = 0; i < set.items.size();) {
     std::uint32_t j = i;
     while (j < set.items.size() && set.items[j].object == set.items[i].object) ++j;
@@ -102,7 +104,7 @@ PrunedSet prune(const Database& db, const FeatureSearch& search, const std::vect
   set.y.resize(n);
   set.z.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
-    const Vec3& p = db.features(set.items[i].object).coarse.points[set.items[i].point];
+    const Vec3& p = db.keypoints(set.items[i].object).coarse.points[set.items[i].point];
     set.x[i] = static_cast<float>(p.x());
     set.y[i] = static_cast<float>(p.y());
     set.z[i] = static_cast<float>(p.z());
@@ -126,7 +128,7 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
   if (t.first.empty()) return std::nullopt;
   for (int attempt = 0; attempt < s.registration_attempts; ++attempt) {
     const Pruned& a = F1.items[t.first[rng.index(t.first.size())]];
-    const PointCloud& coarse = db.features(a.object).coarse;
+    const PointCloud& coarse = db.keypoints(a.object).coarse;
     const std::vector<Vec3>& pts = coarse.points;
     const bool normals = use_normals && coarse.has_normals();
     const Vec3& q1 = pts[a.point];
@@ -202,7 +204,7 @@ FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings&
   std::vector<FeatureRef> refs;
   for (std::size_t o = 0; o < db.size(); ++o) {
     if (!objects.empty() && (o >= objects.size() || !objects[o])) continue;
-    const ObjectFeatures& f = db.features(o);
+    const ObjectFeatures f = db.load_features(o);
     for (std::size_t i = 0; i < f.features.size(); ++i) {
       features.push_back(f.features[i]);
       refs.push_back({static_cast<std::uint32_t>(o), static_cast<std::uint32_t>(i)});
@@ -216,9 +218,11 @@ std::size_t FeatureSearch::size() const {
 }
 
 std::vector<std::vector<Neighbour>> FeatureSearch::knn_per_object(const std::vector<Feature>& queries,
-                                                                  std::size_t w) const {
+                                                                  std::size_t w,
+                                                                  const std::vector<std::uint8_t>& mask,
+                                                                  std::size_t max_blocks) const {
   if (!table) throw Error("per-object feature pruning needs the exact feature table", {}, "prune_per_object");
-  return table->knn_per_object(queries, w);
+  return table->knn_per_object(queries, w, mask, max_blocks);
 }
 
 const FeatureRef& FeatureSearch::ref(std::size_t i) const {
@@ -300,7 +304,7 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   for (const Triplet& t : trip)
     if (t.valid)
       for (int j = 0; j < 3; ++j) queries.push_back(scene.features[t.point[j]]);
-  const auto nearest = s.prune_per_object > 0 ? search.knn_per_object(queries, s.prune_per_object)
+  const auto nearest = s.prune_per_object > 0 ? search.knn_per_object(queries, s.prune_per_object, allowed, s.prune_blocks)
                                                : search.knn(queries, s.prune_w);
   {
     std::vector<std::array<std::size_t, 2>> jobs;  // (triplet, first query)

@@ -24,6 +24,10 @@ struct RansacSettings {
   std::size_t prune_per_object = 0;   ///< extension: the W_obj nearest features of EVERY
                                       ///< allowed object instead of the W nearest overall
                                       ///< (0: the paper's global W); needs feature_table
+  std::size_t prune_blocks = 0;       ///< extension: per-object pruning reads only each
+                                      ///< object's prune_blocks blocks of 128 features nearest
+                                      ///< to the query (approximate; 0: exact, every block
+                                      ///< that can hold one of the W_obj nearest)
   bool feature_table = true;          ///< W-nearest search: exact batched brute force
                                       ///< (FeatureTable); false: the FeatureIndex
   double min_spacing = 0.0;           ///< m between triplet points; 0: the FPFH feature radius.
@@ -69,12 +73,17 @@ struct FeatureSearch {
   const FeatureRef& ref(std::size_t i) const;
   /// Per query, the w nearest (sorted by distance, then row). Parallel.
   std::vector<std::vector<Neighbour>> knn(const std::vector<Feature>& queries, std::size_t w) const;
-  /// Per query, the w nearest of every object (FeatureTable::knn_per_object; table only).
+  /// Per query, the w nearest of every object of the mask (all: empty mask)
+  /// (FeatureTable::knn_per_object; table only).
   std::vector<std::vector<Neighbour>> knn_per_object(const std::vector<Feature>& queries,
-                                                     std::size_t w) const;
+                                                     std::size_t w,
+                                                     const std::vector<std::uint8_t>& mask = {},
+                                                     std::size_t max_blocks = 0) const;
 };
 
 /// N x R registrations; the valid ones, in slot order (slot = triplet * R + registration).
+/// Per-object pruning searches the allowed objects only; the paper's global W nearest are
+/// searched among all objects (KT_db,cum^feat) and then filtered.
 std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
                                          const FeatureSearch& search,
                                          const std::vector<std::uint8_t>& allowed,

@@ -45,19 +45,17 @@ bool better(const Working& a, const Working& b) {
   return a.cand.slot < b.cand.slot;
 }
 
-void preload(const Database& db, const std::vector<Working>& w) {
-  std::set<std::uint32_t> objects;
-  for (const Working& h : w) objects.insert(h.cand.object);
-  for (std::uint32_t o : objects) (void)db.geometry(o);
+GeometryPins pin(const Database& db, const std::vector<Working>& w) {
+  return GeometryPins(db, w, [](const Working& h) { return h.cand.object; });
 }
 
 /// ICP every hypothesis against its own object (Algorithm 1, line 4), in parallel.
 void refine_all(const Scene& scene, const Database& db, const IcpSettings& s,
                 std::vector<Working>& w) {
-  preload(db, w);
+  const GeometryPins geometry = pin(db, w);
   parallel_each(w.size(), [&](std::size_t i) {
     Working& h = w[i];
-    const IcpResult r = icp(scene, db.geometry(h.cand.object), h.cand.T_scene_object, s);
+    const IcpResult r = icp(scene, geometry[h.cand.object], h.cand.T_scene_object, s);
     if (r.valid) h.cand.T_scene_object = r.T_scene_object;
     h.icp_iterations = r.iterations;
     h.icp_converged = r.converged;
@@ -67,10 +65,10 @@ void refine_all(const Scene& scene, const Database& db, const IcpSettings& s,
 /// Complete evaluation of every hypothesis (Algorithm 1, line 5), in parallel.
 void evaluate_each(const Scene& scene, const Database& db, const EvaluateSettings& s,
                    std::vector<Working>& w) {
-  preload(db, w);
+  const GeometryPins geometry = pin(db, w);
   parallel_each(w.size(), [&](std::size_t i) {
     Working& h = w[i];
-    h.eval = evaluate(scene, db.geometry(h.cand.object), db.info(h.cand.object),
+    h.eval = evaluate(scene, geometry[h.cand.object], db.info(h.cand.object),
                       h.cand.T_scene_object, s);
   });
 }
@@ -227,12 +225,27 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   if (!s_.objects.empty())
     for (std::size_t o = 0; o < allowed.size(); ++o) allowed[o] = allowed[o] && s_.objects[o];
   RansacStats rs;
-  const std::vector<Candidate> cands =
+  std::vector<Candidate> cands =
       ransac_candidates(scene, db_, search_, allowed, s_.ransac, s_.seed, step_u, &rs);
+  // Extension for large databases: only the shortlisted objects' candidates go on (and the
+  // state's objects'), so only their geometry is loaded.
+  if (s_.shortlist.objects > 0) {
+    t0 = Clock::now();
+    std::vector<std::uint32_t> held;
+    for (const Hypothesis& h : state_) held.push_back(h.object);
+    const Shortlist sl = shortlist_objects(scene, db_, cands, held, s_.shortlist);
+    if (sl.active) {
+      std::erase_if(cands, [&](const Candidate& c) { return !sl.mask[c.object]; });
+      for (std::uint32_t o = 0; o < sl.mask.size(); ++o)
+        if (sl.mask[o]) res.shortlist.push_back(o);
+    }
+    res.times.shortlist_s = seconds_since(t0);
+  }
   res.times.prune_s = rs.time_prune_s;
   res.times.register_s = rs.time_register_s;
-  res.candidates = cands.size();
+  res.candidates = rs.registrations;
   res.objects_allowed = rs.objects_allowed;
+  res.objects_reached = rs.objects_reached;
   res.boundary_fallback = rs.boundary_fallback;
 
   const std::size_t n_p = s_.n_p;
@@ -365,6 +378,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
     res.posterior = res.posteriors[res.best.object];
   }
   res.geometry_loads = db_.geometry_loads();
+  res.geometry_resident = db_.geometry_resident();
   res.times.total_s = seconds_since(t_start);
   return res;
 }

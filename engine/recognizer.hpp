@@ -19,6 +19,7 @@
 #include "engine/icp.hpp"
 #include "engine/ransac.hpp"
 #include "engine/scene.hpp"
+#include "engine/shortlist.hpp"
 
 #include <memory>
 #include <optional>
@@ -49,6 +50,8 @@ struct RecognizerSettings {
   std::uint64_t seed = 1;           ///< every random draw derives from (seed, step, task)
   std::vector<std::uint8_t> objects;  ///< objects the recognizer may answer (1 = yes), by
                                       ///< database index; empty: all
+  ShortlistSettings shortlist;      ///< extension: objects whose candidates are evaluated in full
+                                    ///< per step (large databases)
   SceneSettings scene{.free_clearance = -1.0};  ///< free_clearance < 0: d_thresh (Eq. 8)
   RansacSettings ransac;
   IcpSettings icp;
@@ -81,6 +84,7 @@ struct Hypothesis {
 
 struct StageTimes {
   double prepare_s = 0.0;           ///< normals, FPFH, interior points of the contacts
+  double shortlist_s = 0.0;         ///< screening the candidates for the object shortlist
   double prune_s = 0.0;             ///< triplet sampling + W-nearest feature queries
   double register_s = 0.0;          ///< triplet registrations (Kabsch)
   double icp_s = 0.0;               ///< ICP of hypotheses
@@ -102,7 +106,11 @@ struct StepResult {
   std::size_t evaluated_full = 0;   ///< candidates evaluated completely
   std::size_t rejected_early = 0;   ///< candidates rejected by the exact bound
   std::size_t objects_allowed = 0;  ///< objects large enough to span the contacts
-  std::size_t geometry_loads = 0;   ///< objects whose geometry the database has loaded so far
+  std::size_t objects_reached = 0;  ///< objects with at least one RANSAC candidate
+  std::vector<std::uint32_t> shortlist;  ///< objects whose candidates went on, when a shortlist
+                                         ///< left some out (empty otherwise)
+  std::size_t geometry_loads = 0;   ///< geometry loads of the database so far (reloads counted)
+  std::size_t geometry_resident = 0;  ///< objects whose geometry is in memory after the step
   bool boundary_fallback = false;   ///< triplets had to use patch-boundary points
   StageTimes times;
 };

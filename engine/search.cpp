@@ -150,6 +150,14 @@ KdTree3::~KdTree3() = default;
 KdTree3::KdTree3(KdTree3&&) noexcept = default;
 KdTree3& KdTree3::operator=(KdTree3&&) noexcept = default;
 
+std::size_t KdTree3::memory_bytes() const {
+  if (!impl_) return 0;
+  const std::size_t n = impl_->points.capacity();
+  // points, the tree's index permutation, and about one node (~64 bytes) per 5 points (leaves
+  // of at most 10)
+  return n * sizeof(Vec3) + n * sizeof(std::uint32_t) + (n / 5 + 1) * 64;
+}
+
 std::size_t KdTree3::size() const { return impl_ ? impl_->points.size() : 0; }
 
 const std::vector<Vec3>& KdTree3::points() const {

@@ -26,6 +26,7 @@ class KdTree3 {
 
   std::size_t size() const;
   const std::vector<Vec3>& points() const;
+  std::size_t memory_bytes() const;   ///< points and tree nodes (estimate from their counts)
   /// Nearest point; sq_distance = +inf when the tree is empty.
   Neighbour nearest(const Vec3& q) const;
   /// k nearest, sorted by distance then index.

@@ -366,8 +366,8 @@ const SymmetryGroup& SymmetryCache::get(const Database& db, std::size_t object) 
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = groups_.find(object);
   if (it != groups_.end()) return *it->second;
-  const ObjectGeometry& geo = db.geometry(object);
-  auto g = std::make_unique<SymmetryGroup>(find_symmetries(geo.fine.points, geo.tree, settings_));
+  const GeometryRef geo = db.geometry(object);
+  auto g = std::make_unique<SymmetryGroup>(find_symmetries(geo->fine.points, geo->tree, settings_));
   return *groups_.emplace(object, std::move(g)).first->second;
 }
 

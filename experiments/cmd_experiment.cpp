@@ -23,7 +23,7 @@ using experiments::ExperimentConfig;
 struct ExperimentOptions {
   CommonOptions common;
   std::string db, config_file, out, plots;
-  std::string objects, runs, steps, pool, method, preset, noise, sensors, schedule;
+  std::string objects, runs, steps, pool, method, preset, noise, sensors, schedule, memory_budget;
   std::vector<std::string> set;   ///< KEY=VALUE, any configuration key
   bool resume = false;
   bool seed_given = false;
@@ -90,6 +90,7 @@ ExperimentConfig build_config(const ExperimentOptions& o) {
   flag(o.noise, "noise");
   flag(o.sensors, "sensors");
   flag(o.schedule, "schedule");
+  flag(o.memory_budget, "memory_budget_mb");
   if (o.seed_given) c.seed = o.common.seed;
   for (const std::string& kv : o.set) {
     const auto eq = kv.find('=');
@@ -227,6 +228,9 @@ void register_experiment(CLI::App& app) {
   e->add_option("--schedule", eo->schedule,
                 "runs: runs in parallel (throughput, default); steps: one run at a time, each "
                 "step on every thread (latency). Never changes results");
+  e->add_option("--memory-budget", eo->memory_budget,
+                "Resident object geometry in MB, loaded on demand and evicted least-recently-used "
+                "(default 768; 0: no limit). Never changes results");
   e->add_option("--set", eo->set,
                 "Any configuration key, KEY=VALUE (repeatable), e.g. --set ransac.samples=50x200 "
                 "or --set sweep.method=bricpsf,ransac-icp");

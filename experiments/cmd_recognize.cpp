@@ -51,6 +51,7 @@ struct RecognizeOptions {
   int steps = 0;                     ///< 0: every grasp of the log
   RecognizerSettings rs;             ///< method parameters (defaults: the paper's)
   double contact_voxel = 0.002;      ///< m, voxel filter of the cumulative contact cloud
+  std::optional<double> memory_budget_mb;  ///< resident object geometry; unset: the default
 };
 
 /// A 4x4 row-major object -> world matrix from a text file (whitespace or comma separated).
@@ -115,6 +116,8 @@ std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& 
           {"R", double(s.ransac.registrations)},
           {"W", double(s.ransac.prune_w)},
           {"W_per_object", double(s.ransac.prune_per_object)},
+          {"prune_blocks", double(s.ransac.prune_blocks)},
+          {"shortlist", double(s.shortlist.objects)},
           {"min_spacing", s.ransac.min_spacing},
           {"distance_tolerance", s.ransac.distance_tolerance},
           {"min_sv_ratio", s.ransac.min_sv_ratio},
@@ -298,8 +301,14 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     st["pose_ambiguous"] = r.pose_ambiguous;
     st["candidates"] = r.candidates;
     st["hypotheses"] = r.hypotheses.size();
+    st["objects_allowed"] = r.objects_allowed;
+    st["objects_reached"] = r.objects_reached;
+    st["objects_shortlisted"] = r.shortlist.empty() ? r.objects_reached : r.shortlist.size();
+    st["geometry_loads"] = r.geometry_loads;
+    st["geometry_resident"] = r.geometry_resident;
     st["stages_s"] = {{"fusion", run.fusion_time[k]}, {"prepare", r.times.prepare_s},
                       {"prune", r.times.prune_s},     {"register", r.times.register_s},
+                      {"shortlist", r.times.shortlist_s},
                       {"icp", r.times.icp_s},         {"evaluate", r.times.evaluate_s}};
     steps.push_back(std::move(st));
   }
@@ -498,6 +507,7 @@ int run_recognize(const RecognizeOptions& o) {
   auto source = std::make_shared<io::DbReader>(o.db);
   Database db(source);
   if (db.size() == 0) throw Error("the database has no objects", o.db, "/objects");
+  set_memory_budget(db, o.memory_budget_mb, o.db);
   double largest = 0.0;
   for (std::size_t i = 0; i < db.size(); ++i) largest = std::max(largest, db.info(i).extent.norm());
   SymmetryCache symmetries;
@@ -559,6 +569,20 @@ void register_recognize(CLI::App& app) {
                                        "Extension: nearest features of every object per triplet point (0: the global W)")
                            ->group(g)
                            ->check(CLI::Range(0, 100000000));
+  auto* prune_blocks = sub->add_option("--prune-blocks", s.ransac.prune_blocks,
+                                       "Extension: per-object pruning reads each object's B blocks of 128 features "
+                                       "nearest to the query (approximate; 0: exact)")
+                           ->group(g)
+                           ->check(CLI::Range(0, 1000000));
+  auto* shortlist = sub->add_option("--shortlist", s.shortlist.objects,
+                                    "Extension: objects whose RANSAC candidates go on to ICP and evaluation per "
+                                    "step, chosen by screening against the coarse clouds (0: all)")
+                        ->group(g)
+                        ->check(CLI::Range(0, 100000000));
+  sub->add_option("--memory-budget", o->memory_budget_mb,
+                  "Resident object geometry in MB, loaded on demand and evicted least-recently-used "
+                  "(default 768; 0: no limit). Never changes results")
+      ->check(CLI::NonNegativeNumber);
   sub->add_option("--d-outlier", s.evaluate.d_outlier, "Outlier distance of Eq. 4 (m)")->group(g)->check(CLI::PositiveNumber);
   sub->add_option("--lambda", s.evaluate.lambda, "Free-space weight of Eq. 9")->group(g)->check(CLI::NonNegativeNumber);
   sub->add_option("--res-free", s.evaluate.res_free, "Free-space resolution (m); d_thresh = res_free/2")->group(g)->check(CLI::PositiveNumber);
@@ -601,6 +625,8 @@ void register_recognize(CLI::App& app) {
       {pool, [](RecognizerSettings& r, const RecognizerSettings& i) { r.refine_pool = i.refine_pool; }},
       {per_object, [](RecognizerSettings& r, const RecognizerSettings& i) { r.new_per_object = i.new_per_object; }},
       {per_object_w, [](RecognizerSettings& r, const RecognizerSettings& i) { r.ransac.prune_per_object = i.ransac.prune_per_object; }},
+      {prune_blocks, [](RecognizerSettings& r, const RecognizerSettings& i) { r.ransac.prune_blocks = i.ransac.prune_blocks; }},
+      {shortlist, [](RecognizerSettings& r, const RecognizerSettings& i) { r.shortlist = i.shortlist; }},
       {grasp_sigma, [](RecognizerSettings& r, const RecognizerSettings& i) { r.evaluate.grasp_offset_sigma = i.evaluate.grasp_offset_sigma; }},
   };
   sub->callback([o, extensions] {

@@ -220,6 +220,12 @@ const std::vector<KeyDef>& key_defs() {
     add("evaluate.grasp_offset_sigma_m", true,
         [=](auto& c, auto& in, auto& x) { c.params.grasp_offset_sigma_m = number_in(in, 0, 1, x); },
         [](auto& c) { return opt(c.params.grasp_offset_sigma_m); });
+    add("shortlist.objects", true,
+        [](auto& c, auto& in, auto& x) { c.params.shortlist = int_at_least(in, 0, x); },
+        [](auto& c) { return opt(c.params.shortlist); });
+    add("memory_budget_mb", false,
+        [=](auto& c, auto& in, auto& x) { c.memory_budget_mb = number_in(in, 0, inf, x); },
+        [](auto& c) { return opt(c.memory_budget_mb); });
     add("icp.iterations", true,
         [](auto& c, auto& in, auto& x) { c.params.icp_iterations = int_at_least(in, 0, x); },
         [](auto& c) { return opt(c.params.icp_iterations); });

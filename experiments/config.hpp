@@ -24,7 +24,9 @@
 //   ransac.prune_per_object (W per object, 0: the global W),
 //   ransac.d_outlier_m, bricpsf.hypotheses (n_p), bricpsf.psi, bricpsf.lambda,
 //   evaluate.grasp_offset_sigma_m (extension: per-grasp arm offsets, 0: off),
+//   shortlist.objects (extension: objects whose candidates are evaluated per step, 0: all),
 //   icp.iterations     method parameters; unset means the recognizer's default
+//   memory_budget_mb   resident object geometry (MB, 0: no limit); default: the recognizer's
 //   schedule           runs | steps        parallel over runs (throughput) or inside each step
 //                                          (latency); never changes results
 //   sweep.<key> = [v1, v2, ...]            one variant per combination (cartesian product, the
@@ -64,6 +66,7 @@ struct MethodParams {
   std::optional<double> lambda;         ///< λ, free-space weight (Eq. 9)
   std::optional<int> icp_iterations;    ///< ICP iteration cap
   std::optional<double> grasp_offset_sigma_m;  ///< m, per-grasp offset prior (0: off)
+  std::optional<int> shortlist;         ///< objects whose candidates are evaluated per step (0: all)
 };
 
 struct SweepAxis {
@@ -88,6 +91,7 @@ struct ExperimentConfig {
   std::uint64_t seed = 1;
   MethodParams params;
   std::string schedule = "runs";
+  std::optional<double> memory_budget_mb;  ///< resident object geometry (MB); unset: the default
   std::vector<SweepAxis> sweep;
 };
 

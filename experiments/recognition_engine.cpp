@@ -48,6 +48,7 @@ class SubsetSource final : public ObjectSource {
   const ObjectInfo& info(std::size_t i) const override { return base_->info(objects_.at(i)); }
   const DatabaseSettings& settings() const override { return base_->settings(); }
   ObjectFeatures load_features(std::size_t i) const override { return base_->load_features(objects_.at(i)); }
+  PointCloud load_coarse(std::size_t i) const override { return base_->load_coarse(objects_.at(i)); }
   PointCloud load_fine(std::size_t i) const override { return base_->load_fine(objects_.at(i)); }
   DistanceField load_field(std::size_t i) const override { return base_->load_field(objects_.at(i)); }
 
@@ -150,6 +151,7 @@ RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
   if (p.lambda) s.evaluate.lambda = *p.lambda;
   if (p.icp_iterations) s.icp.max_iterations = *p.icp_iterations;
   if (p.grasp_offset_sigma_m) s.evaluate.grasp_offset_sigma = *p.grasp_offset_sigma_m;
+  if (p.shortlist) s.shortlist.objects = static_cast<std::size_t>(*p.shortlist);
   return s;
 }
 
@@ -197,6 +199,8 @@ class RecognitionEngine final : public RunEngine {
         else
           source = std::make_shared<SubsetSource>(reader_, objects);
         g.database = std::make_unique<Database>(source);
+        cli::set_memory_budget(*g.database, config.memory_budget_mb,
+                               db_.description.value("path", std::string("database")), "memory_budget_mb");
         groups_.push_back(std::move(g));
       }
       VariantData d;

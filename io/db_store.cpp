@@ -99,6 +99,16 @@ void write_vec3(h5::Group g, const std::string& name, const std::vector<Vec3>& v
   g.write(name, v.empty() ? nullptr : v.data()->data(), {v.size(), 3}, st);
 }
 
+std::vector<Vec3> read_vec3(const h5::Group& g, const std::string& name, std::size_t n);
+
+/// PREFIX/points and PREFIX/normals, n rows each.
+PointCloud read_cloud(const h5::Group& g, const std::string& prefix, std::size_t n) {
+  PointCloud out;
+  out.points = read_vec3(g, prefix + "/points", n);
+  out.normals = read_vec3(g, prefix + "/normals", n);
+  return out;
+}
+
 std::vector<Vec3> read_vec3(const h5::Group& g, const std::string& name, std::size_t n) {
   const auto raw = g.read<double>(name, {static_cast<std::int64_t>(n), 3});
   std::vector<Vec3> out(n);
@@ -417,8 +427,7 @@ ObjectFeatures DbReader::load_features(std::size_t i) const {
   const auto& g = impl_->group(i);
   const std::size_t n = impl_->infos[i].coarse_points;
   ObjectFeatures out;
-  out.coarse.points = read_vec3(g, "coarse/points", n);
-  out.coarse.normals = read_vec3(g, "coarse/normals", n);
+  out.coarse = load_coarse(i);
   const auto raw = g.read<float>("features", {static_cast<std::int64_t>(n), kFeatureDim});
   out.features.resize(n);
   for (std::size_t k = 0; k < n; ++k) {
@@ -430,14 +439,14 @@ ObjectFeatures DbReader::load_features(std::size_t i) const {
   return out;
 }
 
+PointCloud DbReader::load_coarse(std::size_t i) const {
+  std::lock_guard<std::recursive_mutex> lock(h5::mutex());
+  return read_cloud(impl_->group(i), "coarse", impl_->infos[i].coarse_points);
+}
+
 PointCloud DbReader::load_fine(std::size_t i) const {
   std::lock_guard<std::recursive_mutex> lock(h5::mutex());
-  const auto& g = impl_->group(i);
-  const std::size_t n = impl_->infos[i].fine_points;
-  PointCloud out;
-  out.points = read_vec3(g, "fine/points", n);
-  out.normals = read_vec3(g, "fine/normals", n);
-  return out;
+  return read_cloud(impl_->group(i), "fine", impl_->infos[i].fine_points);
 }
 
 DistanceField DbReader::load_field(std::size_t i) const {

@@ -64,6 +64,7 @@ class DbReader final : public ObjectSource {
   const ObjectInfo& info(std::size_t i) const override;
   const DatabaseSettings& settings() const override;
   ObjectFeatures load_features(std::size_t i) const override;
+  PointCloud load_coarse(std::size_t i) const override;
   PointCloud load_fine(std::size_t i) const override;
   DistanceField load_field(std::size_t i) const override;
 

@@ -5,6 +5,7 @@
 #pragma once
 
 #include "engine/database.hpp"
+#include "engine/recognizer.hpp"
 #include "engine/fpfh.hpp"
 #include "engine/search.hpp"
 
@@ -239,6 +240,20 @@ inline Pose random_pose(std::uint64_t seed, const Vec3& where) {
   T.linear() = rng.rotation().toRotationMatrix();
   T.translation() = where;
   return T;
+}
+
+/// The paper's structure with smaller numbers (unit tests must be fast).
+inline RecognizerSettings fast_settings(Method m = Method::bricpsf) {
+  RecognizerSettings s;
+  s.method = m;
+  s.n_p = 40;
+  s.ransac.triplets = 10;
+  s.ransac.registrations = 100;
+  s.ransac.prune_w = 1500;
+  s.ransac.normal_tolerance_deg = 15.0;
+  s.index.exact = true;
+  s.icp.max_points = 96;
+  return s;
 }
 
 }  // namespace ts::test

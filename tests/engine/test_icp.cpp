@@ -33,7 +33,8 @@ Pose perturbed(const Pose& T, double dist, double deg, std::uint64_t seed) {
 TEST_CASE("ICP converges from a perturbed pose to the truth (both metrics)") {
   IcpCase c;
   const Scene sc = c.scene(12);
-  const ObjectGeometry& geo = c.db.geometry(c.obj);
+  const GeometryRef pinned = c.db.geometry(c.obj);
+  const ObjectGeometry& geo = *pinned;
   for (IcpMetric metric : {IcpMetric::point_to_point, IcpMetric::point_to_plane, IcpMetric::field}) {
     IcpSettings s;
     s.metric = metric;
@@ -62,7 +63,8 @@ TEST_CASE("Trimmed ICP resists outlying contacts") {
   // Replace every 5th contact (in evaluation order) by an outlier 3 cm off the surface.
   Rng rng(9);
   for (std::size_t i = 0; i < sc.ordered.size(); i += 5) sc.ordered[i] += 0.03 * rng.unit_vector();
-  const ObjectGeometry& geo = c.db.geometry(c.obj);
+  const GeometryRef pinned = c.db.geometry(c.obj);
+  const ObjectGeometry& geo = *pinned;
   const Pose start = perturbed(sc.to_scene(c.truth), 0.003, 3.0, 7);
   IcpSettings plain;
   plain.max_iterations = 100;
@@ -77,7 +79,8 @@ TEST_CASE("Trimmed ICP resists outlying contacts") {
 
 TEST_CASE("ICP on degenerate input keeps the initial pose and says so") {
   IcpCase c;
-  const ObjectGeometry& geo = c.db.geometry(c.obj);
+  const GeometryRef pinned = c.db.geometry(c.obj);
+  const ObjectGeometry& geo = *pinned;
   Scene tiny = c.scene(1);
   tiny.ordered.resize(2);
   const Pose start = test::random_pose(3, Vec3(0, 0, 0));
@@ -93,7 +96,8 @@ TEST_CASE("ICP on degenerate input keeps the initial pose and says so") {
 TEST_CASE("ICP is deterministic") {
   IcpCase c;
   const Scene sc = c.scene(8, 0.0005);
-  const ObjectGeometry& geo = c.db.geometry(c.obj);
+  const GeometryRef pinned = c.db.geometry(c.obj);
+  const ObjectGeometry& geo = *pinned;
   const Pose start = perturbed(sc.to_scene(c.truth), 0.004, 4.0, 1);
   IcpSettings s;
   s.trim_fraction = 0.9;

@@ -146,9 +146,9 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
   Database db(src);
   std::vector<Feature> queries;
   std::size_t total = 0;
-  for (std::uint32_t o = 0; o < 3; ++o) total += db.features(o).features.size();
+  for (std::uint32_t o = 0; o < 3; ++o) total += db.load_features(o).features.size();
   for (int q = 0; q < 20; ++q) {
-    Feature x = db.features(static_cast<std::size_t>(q % 3)).features[static_cast<std::size_t>(q * 37)];
+    Feature x = db.load_features(static_cast<std::size_t>(q % 3)).features[static_cast<std::size_t>(q * 37)];
     for (auto& v : x) v += static_cast<float>(rng.uniform(-0.5, 0.5));
     queries.push_back(x);
   }
@@ -170,7 +170,7 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     CHECK(std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end());
   }
   auto distance_of = [&](std::uint32_t r, const Feature& q) {
-    const Feature& f = db.features(rows[r].first).features[rows[r].second];
+    const Feature f = db.load_features(rows[r].first).features[rows[r].second];
     float d = 0.0f;
     for (int k = 0; k < kFeatureDim; ++k) {
       const float e = f[k] - q[k];

@@ -14,19 +14,8 @@ using namespace ts;
 
 namespace {
 
-/// Paper structure, smaller numbers (unit tests must be fast).
-RecognizerSettings fast(Method m = Method::bricpsf) {
-  RecognizerSettings s;
-  s.method = m;
-  s.n_p = 40;
-  s.ransac.triplets = 10;
-  s.ransac.registrations = 100;
-  s.ransac.prune_w = 1500;
-  s.ransac.normal_tolerance_deg = 15.0;
-  s.index.exact = true;
-  s.icp.max_points = 96;
-  return s;
-}
+using test::fast_settings;
+auto fast = [](Method m = Method::bricpsf) { return fast_settings(m); };
 
 void check_finite(const StepResult& r) {
   CHECK(std::isfinite(r.best.log_weight) == r.valid);

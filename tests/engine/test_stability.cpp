@@ -14,17 +14,7 @@ using namespace ts;
 
 namespace {
 
-RecognizerSettings fast() {
-  RecognizerSettings s;
-  s.n_p = 40;
-  s.ransac.triplets = 10;
-  s.ransac.registrations = 100;
-  s.ransac.prune_w = 1500;
-  s.ransac.normal_tolerance_deg = 15.0;
-  s.index.exact = true;
-  s.icp.max_points = 96;
-  return s;
-}
+auto fast = [] { return test::fast_settings(); };
 
 void check_finite(const StepResult& r) {
   CHECK(r.best.pose.matrix().allFinite());

@@ -143,7 +143,7 @@ TEST_CASE("db store: write, read back everything, identical bytes") {
   ts::Database cache(std::make_shared<ts::io::DbReader>(dir / "a.h5"));
   CHECK(cache.find("cube") == 0);
   CHECK_FALSE(cache.geometry_loaded(1));
-  CHECK(cache.geometry(1).fine.points == objects[1].fine.points);
+  CHECK(cache.geometry(1)->fine.points == objects[1].fine.points);
   CHECK(cache.geometry_loads() == 1);
 }
 

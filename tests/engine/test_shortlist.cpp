@@ -1,0 +1,249 @@
+// Large-database machinery against oracles: the FeatureTable's masked per-object search
+// against brute force, the object shortlist's screening against the true pose, the Database's
+// memory budget (LRU eviction, pinned objects kept, reloads equal), and the recognizer with a
+// shortlist (right object, fewer objects loaded, same result for 1 and 2 threads).
+#include "engine/feature_table.hpp"
+#include "engine/recognizer.hpp"
+#include "engine/shortlist.hpp"
+#include "recognition_fixture.hpp"
+
+#include <doctest/doctest.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <map>
+#include <set>
+
+using namespace ts;
+
+namespace {
+
+/// Features only: objects of random features, some clustered (flat-like duplicates).
+class FeatureSource final : public ObjectSource {
+ public:
+  std::vector<ObjectInfo> infos;
+  std::vector<ObjectFeatures> feats;
+  DatabaseSettings db_settings;
+  std::size_t size() const override { return infos.size(); }
+  const ObjectInfo& info(std::size_t i) const override { return infos.at(i); }
+  const DatabaseSettings& settings() const override { return db_settings; }
+  ObjectFeatures load_features(std::size_t i) const override { return feats.at(i); }
+  PointCloud load_fine(std::size_t) const override { return {}; }
+  DistanceField load_field(std::size_t) const override { return {}; }
+};
+
+Feature random_feature(Rng& rng, const Feature* around = nullptr, float spread = 1.0f) {
+  Feature f{};
+  for (int d = 0; d < kFeatureDim; ++d)
+    f[d] = around ? (*around)[d] + spread * static_cast<float>(rng.uniform() - 0.5)
+                  : static_cast<float>(100.0 * rng.uniform());
+  return f;
+}
+
+std::shared_ptr<FeatureSource> feature_source() {
+  auto src = std::make_shared<FeatureSource>();
+  Rng rng(5, 0, 0, 0);
+  const std::size_t counts[] = {300, 40, 129, 1, 700, 256, 90, 500};
+  for (std::size_t o = 0; o < std::size(counts); ++o) {
+    ObjectInfo info;
+    info.name = "o" + std::to_string(o);
+    ObjectFeatures f;
+    const Feature centre = random_feature(rng);
+    for (std::size_t i = 0; i < counts[o]; ++i)  // odd objects: one tight cluster
+      f.features.push_back(o % 2 ? random_feature(rng, &centre, 2.0f) : random_feature(rng));
+    f.coarse.points.assign(counts[o], Vec3::Zero());
+    src->infos.push_back(info);
+    src->feats.push_back(std::move(f));
+  }
+  return src;
+}
+
+double sqf(const Feature& a, const Feature& b) {
+  double s = 0.0;
+  for (int i = 0; i < kFeatureDim; ++i) s += (double(a[i]) - double(b[i])) * (double(a[i]) - double(b[i]));
+  return s;
+}
+
+/// Per-object pruning, smaller numbers (unit tests must be fast).
+RecognizerSettings fast() {
+  RecognizerSettings s = test::fast_settings();
+  s.ransac.prune_per_object = 100;
+  return s;
+}
+
+}  // namespace
+
+TEST_CASE("FeatureTable: per-object search restricted to a mask equals brute force") {
+  auto src = feature_source();
+  Database db(src);
+  const FeatureTable table(db);
+  Rng rng(9, 0, 0, 0);
+  std::vector<Feature> queries;
+  for (int i = 0; i < 40; ++i) {
+    // near a random database feature (the realistic case), or anywhere
+    const auto& fs = src->feats[rng.index(src->size())].features;
+    queries.push_back(i % 4 ? random_feature(rng, &fs[rng.index(fs.size())], 6.0f) : random_feature(rng));
+  }
+  for (const std::vector<std::uint8_t>& mask :
+       {std::vector<std::uint8_t>{}, std::vector<std::uint8_t>{1, 0, 1, 1, 0, 1, 1, 0}}) {
+    const auto per = table.knn_per_object(queries, 7, mask);
+    for (std::size_t q = 0; q < queries.size(); ++q) {
+      std::map<std::uint32_t, std::vector<double>> by_object;
+      for (const Neighbour& n : per[q]) by_object[table.ref(n.index).object].push_back(n.sq_distance);
+      for (std::uint32_t o = 0; o < src->size(); ++o) {
+        const bool in = mask.empty() || mask[o];
+        CHECK(by_object.count(o) == (in ? 1u : 0u));
+        if (!in) continue;
+        std::vector<double> d;
+        for (const Feature& f : src->feats[o].features) d.push_back(sqf(queries[q], f));
+        std::sort(d.begin(), d.end());
+        const auto& mine = by_object[o];
+        REQUIRE(mine.size() == std::min<std::size_t>(7, d.size()));
+        for (std::size_t j = 0; j < mine.size(); ++j) CHECK(mine[j] == doctest::Approx(d[j]).epsilon(1e-5).scale(0));
+      }
+    }
+  }
+}
+
+TEST_CASE("Shortlist: screening ranks the true pose first; the state's objects are kept; off when small") {
+  auto src = test::make_source();
+  Database db(src);
+  ShortlistSettings s;
+  s.objects = 1;
+  for (std::size_t obj : {0u, 1u, 4u}) {  // box, nut, wedge
+    INFO("object " << db.info(obj).name);
+    const Pose T = test::random_pose(70 + obj, Vec3(0.1, 0.2, -0.3));
+    const PointCloud c = test::touch(src->fines[obj], T, 6, 3 + obj, 0.0, 0.0);
+    const Scene scene = prepare_scene(c, {}, db.settings().fpfh, SceneSettings{}, 1, 1);
+    // candidates: the truth, the truth moved, and every other object at the true pose
+    std::vector<Candidate> cands;
+    Candidate truth;
+    truth.object = static_cast<std::uint32_t>(obj);
+    truth.T_scene_object = scene.to_scene(T);
+    cands.push_back(truth);
+    Candidate moved = truth;
+    moved.T_scene_object.translation() += Vec3(0.02, 0.02, 0.02);  // off every face by 2 cm
+    cands.push_back(moved);
+    for (std::uint32_t o = 0; o < db.size(); ++o)
+      if (o != obj) {
+        Candidate other = truth;
+        other.object = o;
+        cands.push_back(other);
+      }
+    const std::vector<double> score = screen_candidates(scene, db, cands, s);
+    // the contacts lie on the surface: only the coarse sampling's curvature error remains
+    CHECK(score[0] < 0.05);
+    CHECK(score[1] > 0.5);
+    for (std::size_t i = 2; i < cands.size(); ++i) CHECK(score[i] > score[0]);
+    const Shortlist sl = shortlist_objects(scene, db, cands, {}, s);
+    REQUIRE(sl.active);
+    CHECK(sl.kept == 1);
+    CHECK(sl.mask[obj] == 1);
+    CHECK(sl.ranked.front() == obj);
+    CHECK(sl.best[obj] == score[0]);
+    CHECK(sl.ranked.size() == db.size());
+    // an object held by the state goes on whatever its score
+    const std::uint32_t last = sl.ranked.back();
+    const Shortlist held = shortlist_objects(scene, db, cands, {last}, s);
+    CHECK(held.mask[last] == 1);
+    CHECK(held.kept == 2);
+    // as many objects as have candidates: nothing left out
+    ShortlistSettings all = s;
+    all.objects = db.size();
+    const Shortlist off = shortlist_objects(scene, db, cands, {}, all);
+    CHECK_FALSE(off.active);
+    CHECK(off.kept == db.size());
+  }
+  // no geometry was needed
+  for (std::size_t o = 0; o < db.size(); ++o) CHECK_FALSE(db.geometry_loaded(o));
+}
+
+TEST_CASE("Database memory budget: least recently used geometry evicted, pinned kept, reloads equal") {
+  auto src = test::make_source();
+  Database db(src);
+  std::vector<std::size_t> bytes;
+  for (std::size_t o = 0; o < 3; ++o) bytes.push_back(memory_bytes(*db.geometry(o)));
+  CHECK(db.geometry_bytes() == bytes[0] + bytes[1] + bytes[2]);
+  CHECK(db.geometry_resident() == 3);
+  for (std::size_t b : bytes) CHECK(b > src->fines[0].size() * sizeof(Vec3));  // at least the cloud
+  // Budget for the two most recently used (1, 2): object 0 goes.
+  db.set_memory_budget(bytes[1] + bytes[2]);
+  CHECK_FALSE(db.geometry_loaded(0));
+  CHECK(db.geometry_loaded(1));
+  CHECK(db.geometry_loaded(2));
+  CHECK(db.geometry_evictions() == 1);
+  // Touch 1, load 3: the least recently used is now 2.
+  (void)db.geometry(1);
+  const GeometryRef pinned = db.geometry(1);
+  const GeometryRef g3 = db.geometry(3);
+  CHECK(db.geometry_loaded(3));
+  CHECK_FALSE(db.geometry_loaded(2));
+  CHECK(db.geometry_loaded(1));
+  // Everything pinned survives a budget of one byte; the reference stays valid.
+  const std::size_t loads = db.geometry_loads();
+  db.set_memory_budget(1);
+  CHECK(db.geometry_loaded(1));
+  CHECK(db.geometry_loaded(3));
+  CHECK(pinned->fine.points == src->fines[1].points);
+  // A reload equals the original.
+  const GeometryRef again = db.geometry(0);
+  CHECK(db.geometry_loads() == loads + 1);
+  CHECK(again->fine.points == src->fines[0].points);
+  CHECK(std::abs(again->field.distance(src->fines[0].points[0])) < 0.002);
+  CHECK(db.geometry_peak_bytes() >= db.geometry_bytes());
+  // No budget: nothing is evicted any more.
+  db.set_memory_budget(0);
+  for (std::size_t o = 0; o < db.size(); ++o) (void)db.geometry(o);
+  CHECK(db.geometry_resident() == db.size());
+}
+
+TEST_CASE("Recognizer with a shortlist: right object, fewer objects loaded, same for any thread count") {
+  // 6 objects, 2 shortlisted per step (and the state's): the right object still wins.
+  auto src = test::make_source();
+  for (std::size_t obj : {1u, 4u}) {  // nut, wedge
+    INFO("object " << src->infos[obj].name);
+    const Pose T = test::random_pose(90 + obj, Vec3(-0.2, 0.1, 0.3));
+    auto run = [&](int threads, std::size_t shortlist) {
+      Database db(src);
+      RecognizerSettings s = fast();
+      s.shortlist.objects = shortlist;
+      Recognizer rec(db, s);
+      tbb::task_arena arena(threads);
+      std::vector<StepResult> out;
+      for (int k = 1; k <= 6; ++k) {
+        const PointCloud c = test::touch(src->fines[obj], T, k, 21 + obj, 0.0005, 0.0002);
+        out.push_back(arena.execute([&] { return rec.step(c, {}); }));
+      }
+      return std::pair(out, db.geometry_loads());
+    };
+    const auto [with, loads_with] = run(2, 2);
+    const auto [with1, loads_with1] = run(1, 2);
+    const auto [without, loads_without] = run(2, 0);
+    REQUIRE(with.back().valid);
+    CHECK(with.back().best.object == obj);
+    CHECK(without.back().best.object == obj);
+    CHECK(loads_with < loads_without);
+    std::set<std::uint32_t> held;  // the state's objects before each step
+    for (const StepResult& r : with) {
+      if (!r.shortlist.empty()) {  // active: the 2 best screened and the state's objects
+        CHECK(r.shortlist.size() <= 2 + held.size());
+        for (std::uint32_t o : held) CHECK(std::find(r.shortlist.begin(), r.shortlist.end(), o) != r.shortlist.end());
+      }
+      held.clear();
+      for (const Hypothesis& h : r.hypotheses) {
+        held.insert(h.object);
+        CHECK((r.shortlist.empty() || std::find(r.shortlist.begin(), r.shortlist.end(), h.object) != r.shortlist.end() ||
+               h.born < r.step));  // new hypotheses only of shortlisted objects
+      }
+    }
+    CHECK(std::count_if(with.begin(), with.end(), [](const StepResult& r) { return !r.shortlist.empty(); }) > 0);
+    for (std::size_t k = 0; k < with.size(); ++k) {
+      CHECK(with[k].shortlist == with1[k].shortlist);
+      REQUIRE(with[k].hypotheses.size() == with1[k].hypotheses.size());
+      for (std::size_t i = 0; i < with[k].hypotheses.size(); ++i) {
+        CHECK(with[k].hypotheses[i].object == with1[k].hypotheses[i].object);
+        CHECK(with[k].hypotheses[i].pose.matrix() == with1[k].hypotheses[i].pose.matrix());
+      }
+    }
+  }
+}
