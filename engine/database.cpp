@@ -1,6 +1,12 @@
 #include "engine/database.hpp"
 
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include <algorithm>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 
 namespace ts {
 
@@ -58,10 +64,12 @@ std::size_t Database::find(const std::string& name) const {
 const ObjectKeypoints& Database::keypoints(std::size_t i) const {
   Slot& s = slots_[i];
   std::call_once(s.keypoints_once, [&] {
-    auto k = std::make_unique<ObjectKeypoints>();
-    k->coarse = source_->load_coarse(i);
-    k->tree = KdTree3(k->coarse.points);
-    s.keypoints = std::move(k);
+    tbb::this_task_arena::isolate([&] {
+      auto k = std::make_unique<ObjectKeypoints>();
+      k->coarse = source_->load_coarse(i);
+      k->tree = KdTree3(k->coarse.points);
+      s.keypoints = std::move(k);
+    });
   });
   return *s.keypoints;
 }
@@ -75,10 +83,15 @@ GeometryRef Database::geometry(std::size_t i) const {
   {
     std::lock_guard<std::mutex> lock(s.mutex);
     if (!s.geometry) {
-      auto fresh = std::make_shared<ObjectGeometry>();
-      fresh->fine = source_->load_fine(i);
-      fresh->tree = KdTree3(fresh->fine.points);
-      fresh->field = source_->load_field(i);
+      // Isolated: a thread waiting inside the load (OpenVDB and the tree use TBB) must not pick
+      // up another task that could ask for this object and block on this slot.
+      auto fresh = tbb::this_task_arena::isolate([&] {
+        auto g = std::make_shared<ObjectGeometry>();
+        g->fine = source_->load_fine(i);
+        g->tree = KdTree3(g->fine.points);
+        g->field = source_->load_field(i);
+        return g;
+      });
       s.bytes = memory_bytes(*fresh);
       s.geometry = std::move(fresh);
       s.resident.store(true, std::memory_order_release);
@@ -97,14 +110,15 @@ GeometryRef Database::geometry(std::size_t i) const {
 }
 
 void Database::trim() const {
-  std::lock_guard<std::mutex> guard(cache_->trim_mutex);
   const std::size_t budget = cache_->budget.load();
-  if (budget == 0) return;
+  if (budget == 0 || cache_->bytes.load() <= budget) return;
+  std::lock_guard<std::mutex> guard(cache_->trim_mutex);
   std::vector<std::pair<std::uint64_t, std::size_t>> order;  // (last use, object)
   for (std::size_t i = 0; i < size(); ++i)
     if (slots_[i].resident.load(std::memory_order_acquire))
       order.push_back({slots_[i].last_use.load(std::memory_order_relaxed), i});
   std::sort(order.begin(), order.end());
+  std::size_t evicted = 0;
   for (const auto& [use, i] : order) {
     if (cache_->bytes.load() <= budget) break;
     Slot& s = slots_[i];
@@ -116,7 +130,13 @@ void Database::trim() const {
     cache_->resident.fetch_sub(1);
     cache_->evictions.fetch_add(1);
     s.bytes = 0;
+    ++evicted;
   }
+#ifdef __GLIBC__
+  // Evicted grids are many small blocks; hand the freed pages back so that resident memory
+  // follows the budget.
+  if (evicted > 0) malloc_trim(0);
+#endif
 }
 
 bool Database::geometry_loaded(std::size_t i) const {
@@ -135,5 +155,14 @@ void Database::set_memory_budget(std::size_t bytes) {
 }
 
 std::size_t Database::memory_budget() const { return cache_->budget.load(); }
+
+void GeometryPins::load(const Database& db, const std::vector<std::uint32_t>& objects) {
+  std::vector<std::uint32_t> missing;
+  for (std::uint32_t o : objects) {
+    if (db.geometry_loaded(o)) refs_[o] = db.geometry(o);
+    else missing.push_back(o);
+  }
+  tbb::parallel_for(std::size_t{0}, missing.size(), [&](std::size_t k) { refs_[missing[k]] = db.geometry(missing[k]); });
+}
 
 }  // namespace ts

@@ -143,18 +143,21 @@ class Database {
   /// (the default). A smaller budget evicts at once what is not in use.
   void set_memory_budget(std::size_t bytes);
   std::size_t memory_budget() const;
+  /// Evict least-recently-used geometry not in use until the budget holds (the recognizer
+  /// calls it after each step; loads call it too).
+  void trim() const;
 
  private:
   struct Slot;
   struct Cache;
-  void trim() const;
   std::shared_ptr<const ObjectSource> source_;
   std::unique_ptr<Slot[]> slots_;
   std::unique_ptr<Cache> cache_;
 };
 
-/// The geometry of a set of objects, loaded once (in ascending object order, on the calling
-/// thread) and held for a stage: its parallel loop reads it without touching the cache.
+/// The geometry of a set of objects, loaded once (those not resident in parallel: the file
+/// reads take turns, building the trees and grids overlaps) and held for a stage: its parallel
+/// loop reads it without touching the cache.
 class GeometryPins {
  public:
   template <class Range, class ObjectOf>
@@ -163,11 +166,12 @@ class GeometryPins {
     for (const auto& x : items) objects.push_back(static_cast<std::uint32_t>(object_of(x)));
     std::sort(objects.begin(), objects.end());
     objects.erase(std::unique(objects.begin(), objects.end()), objects.end());
-    for (std::uint32_t o : objects) refs_[o] = db.geometry(o);
+    load(db, objects);
   }
   const ObjectGeometry& operator[](std::size_t object) const { return *refs_[object]; }
 
  private:
+  void load(const Database& db, const std::vector<std::uint32_t>& objects);
   std::vector<GeometryRef> refs_;
 };
 

@@ -69,7 +69,11 @@ GraspFit fit_grasp_offsets(const Scene& scene, const DistanceField& field, const
     Pose T = T_os;
     T.translation() += T_os.linear() * t;
     field.distances(p, m, T, d.data());
-    for (std::size_t i = 0; i < m; ++i) fit.error_sum += detail::contact_error(d[i], s.d_outlier);
+    const double clamp2 = 9.0 * s.grasp_contact_sigma * s.grasp_contact_sigma;
+    for (std::size_t i = 0; i < m; ++i) {
+      fit.error_sum += detail::contact_error(d[i], s.d_outlier);
+      fit.clamped_sq_sum += std::min(d[i] * d[i], clamp2);
+    }
     fit.contacts += m;
     fit.offsets[k] = t;
     off2 += t.squaredNorm();

@@ -86,6 +86,8 @@ struct GraspFit {
   std::size_t contacts = 0;           ///< contacts of all grasps
   double offset_rms = 0.0;            ///< m, RMS of |t_g| over the grasps
   std::vector<Vec3> offsets;          ///< t_g per grasp, scene frame
+  double clamped_sq_sum = 0.0;        ///< m^2, sum over the shifted contacts of
+                                      ///< min(d^2, (3 grasp_contact_sigma)^2)
 };
 GraspFit fit_grasp_offsets(const Scene& scene, const DistanceField& field, const Pose& T_scene_object,
                            const EvaluateSettings& settings);

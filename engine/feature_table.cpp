@@ -287,7 +287,7 @@ std::vector<std::vector<Neighbour>> FeatureTable::knn(const std::vector<Feature>
 
 std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vector<Feature>& queries,
                                                                  std::size_t w) const {
-  return knn_per_object(queries, w, {});
+  return knn_per_object(queries, w, std::vector<std::uint8_t>{});
 }
 
 std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vector<Feature>& queries,
@@ -295,6 +295,23 @@ std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vect
                                                                  const std::vector<std::uint8_t>& mask,
                                                                  std::size_t max_blocks) const {
   return search_ranges(*impl_, queries, w, object_ranges(*impl_, mask), true, max_blocks);
+}
+
+std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(
+    const std::vector<Feature>& queries, std::size_t w,
+    const std::vector<std::vector<std::uint8_t>>& masks, std::size_t max_blocks) const {
+  const Impl& m = *impl_;
+  if (masks.size() != queries.size()) throw Error("FeatureTable: one mask per query expected");
+  std::vector<std::vector<Neighbour>> out(queries.size());
+  if (w == 0 || m.features == 0) return out;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 1), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<std::pair<float, std::uint32_t>> order;
+    std::vector<Item> cand;
+    for (std::size_t q = range.begin(); q != range.end(); ++q)
+      for (const BlockRange& r : object_ranges(m, masks[q]))
+        search_blocks(m, queries[q].data(), r, w, max_blocks, order, cand, out[q]);
+  });
+  return out;
 }
 
 std::size_t FeatureTable::memory_bytes() const {

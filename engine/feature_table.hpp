@@ -42,6 +42,11 @@ class FeatureTable {
                                                      std::size_t w,
                                                      const std::vector<std::uint8_t>& mask,
                                                      std::size_t max_blocks = 0) const;
+  /// The same with a mask per query (masks[q] for queries[q]; an empty mask: every object).
+  std::vector<std::vector<Neighbour>> knn_per_object(const std::vector<Feature>& queries,
+                                                     std::size_t w,
+                                                     const std::vector<std::vector<std::uint8_t>>& masks,
+                                                     std::size_t max_blocks = 0) const;
   /// Bytes held by the table (feature rows, bounds, references).
   std::size_t memory_bytes() const;
 

@@ -17,6 +17,7 @@ namespace {
 
 constexpr std::uint64_t kTagTriplet = 0x7121;
 constexpr std::uint64_t kTagRegistration = 0x7e61;
+constexpr std::uint64_t kTagObjects = 0x0b1e;
 
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t0) {
@@ -219,10 +220,10 @@ std::size_t FeatureSearch::size() const {
 
 std::vector<std::vector<Neighbour>> FeatureSearch::knn_per_object(const std::vector<Feature>& queries,
                                                                   std::size_t w,
-                                                                  const std::vector<std::uint8_t>& mask,
+                                                                  const std::vector<std::vector<std::uint8_t>>& masks,
                                                                   std::size_t max_blocks) const {
   if (!table) throw Error("per-object feature pruning needs the exact feature table", {}, "prune_per_object");
-  return table->knn_per_object(queries, w, mask, max_blocks);
+  return table->knn_per_object(queries, w, masks, max_blocks);
 }
 
 const FeatureRef& FeatureSearch::ref(std::size_t i) const {
@@ -301,10 +302,27 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   // Feature-based database pruning: the W nearest database features of every triplet point,
   // all queries of the step in one batch.
   std::vector<Feature> queries;
-  for (const Triplet& t : trip)
-    if (t.valid)
-      for (int j = 0; j < 3; ++j) queries.push_back(scene.features[t.point[j]]);
-  const auto nearest = s.prune_per_object > 0 ? search.knn_per_object(queries, s.prune_per_object, allowed, s.prune_blocks)
+  std::vector<std::vector<std::uint8_t>> masks;  // per-object pruning: the objects searched
+  std::vector<std::uint32_t> allowed_list;
+  for (std::uint32_t o = 0; o < allowed.size(); ++o)
+    if (allowed[o]) allowed_list.push_back(o);
+  const bool draw = s.object_draws > 0 && allowed_list.size() > s.object_draws;
+  for (std::size_t i = 0; i < trip.size(); ++i) {
+    const Triplet& t = trip[i];
+    if (!t.valid) continue;
+    std::vector<std::uint8_t> mask = allowed;
+    if (draw) {  // the objects this triplet's draws reach
+      mask.assign(allowed.size(), 0);
+      Rng rng(seed, step, kTagObjects, i);
+      for (std::size_t d = 0; d < s.object_draws; ++d) mask[allowed_list[rng.index(allowed_list.size())]] = 1;
+    }
+    st.objects_searched += static_cast<std::size_t>(std::count(mask.begin(), mask.end(), 1));
+    for (int j = 0; j < 3; ++j) {
+      queries.push_back(scene.features[t.point[j]]);
+      masks.push_back(mask);
+    }
+  }
+  const auto nearest = s.prune_per_object > 0 ? search.knn_per_object(queries, s.prune_per_object, masks, s.prune_blocks)
                                                : search.knn(queries, s.prune_w);
   {
     std::vector<std::array<std::size_t, 2>> jobs;  // (triplet, first query)

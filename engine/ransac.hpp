@@ -24,6 +24,12 @@ struct RansacSettings {
   std::size_t prune_per_object = 0;   ///< extension: the W_obj nearest features of EVERY
                                       ///< allowed object instead of the W nearest overall
                                       ///< (0: the paper's global W); needs feature_table
+  std::size_t object_draws = 0;       ///< extension, large databases: with per-object pruning,
+                                      ///< each triplet searches only the objects drawn by this
+                                      ///< many uniform draws among the allowed objects (all of
+                                      ///< them when there are no more allowed objects than
+                                      ///< draws; 0: always all). Bounds the pruning of a step
+                                      ///< by N x object_draws objects, whatever the database
   std::size_t prune_blocks = 0;       ///< extension: per-object pruning reads only each
                                       ///< object's prune_blocks blocks of 128 features nearest
                                       ///< to the query (approximate; 0: exact, every block
@@ -50,6 +56,7 @@ struct RansacStats {
   std::size_t registrations = 0;          ///< valid registrations (candidates)
   std::size_t objects_allowed = 0;        ///< objects large enough to span the contacts
   std::size_t objects_reached = 0;        ///< objects with at least one candidate
+  std::size_t objects_searched = 0;       ///< (triplet, object) pairs whose features were searched
   bool boundary_fallback = false;         ///< too few interior points: boundary points used
   double time_prune_s = 0.0;              ///< triplet sampling and feature pruning
   double time_register_s = 0.0;           ///< triplet registration
@@ -77,7 +84,7 @@ struct FeatureSearch {
   /// (FeatureTable::knn_per_object; table only).
   std::vector<std::vector<Neighbour>> knn_per_object(const std::vector<Feature>& queries,
                                                      std::size_t w,
-                                                     const std::vector<std::uint8_t>& mask = {},
+                                                     const std::vector<std::vector<std::uint8_t>>& masks,
                                                      std::size_t max_blocks = 0) const;
 };
 

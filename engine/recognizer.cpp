@@ -139,6 +139,12 @@ RecognizerSettings RecognizerSettings::improved() {
   s.new_per_object = 5;
   s.ransac.prune_per_object = 200;
   s.evaluate.grasp_offset_sigma = 0.003;
+  // Large databases: each triplet searches the objects of 200 draws, at most 48 objects'
+  // candidates go on per step (inactive up to 48 objects), near-ties between the leading
+  // objects are re-decided by the near-twin verification.
+  s.ransac.object_draws = 200;
+  s.shortlist.objects = 48;
+  s.twins.rivals = 5;
   return s;
 }
 
@@ -157,6 +163,9 @@ RecognizerSettings RecognizerSettings::scaled(double f) const {
   s.evaluate.res_free *= f;
   s.evaluate.grasp_offset_sigma *= f;
   s.evaluate.grasp_contact_sigma *= f;
+  s.shortlist.outlier_distance *= f;
+  s.twins.contact_sigma *= f;
+  s.twins.offset_sigma *= f;
   return s;
 }
 
@@ -199,7 +208,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   if (scs.free_clearance < 0.0)  // automatic: d_thresh of Eq. 8
     scs.free_clearance = s_.evaluate.d_thresh > 0.0 ? s_.evaluate.d_thresh : 0.5 * s_.evaluate.res_free;
   Scene scene = prepare_scene(contacts_world, free_world, db_.settings().fpfh, scs, s_.seed, step_u);
-  if (s_.evaluate.grasp_offset_sigma > 0.0) set_grasps(scene, grasps);
+  if (s_.evaluate.grasp_offset_sigma > 0.0 || s_.twins.rivals > 0) set_grasps(scene, grasps);
   res.times.prepare_s = seconds_since(t0);
   res.contacts = scene.contacts.size();
   res.free_points = scene.free_space.size();
@@ -348,6 +357,32 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   }
   std::sort(next.begin(), next.end(), better);
 
+  // Extension: near-twin verification of the leading objects' best hypotheses.
+  std::size_t chosen = 0;  // index into next of the answer
+  if (s_.twins.rivals > 1 && !scene.grasps.empty() && !next.empty()) {
+    std::vector<std::size_t> lead;  // first (best) hypothesis of each leading object
+    for (std::size_t i = 0; i < next.size() && lead.size() < s_.twins.rivals; ++i) {
+      if (!(next[i].eval.log_weight >= next.front().eval.log_weight - s_.twins.max_gap)) break;
+      bool seen = false;
+      for (std::size_t j : lead) seen = seen || next[j].cand.object == next[i].cand.object;
+      if (!seen) lead.push_back(i);
+    }
+    if (lead.size() > 1) {
+      std::vector<Working> leaders;
+      for (std::size_t i : lead) leaders.push_back(next[i]);
+      const GeometryPins geometry = pin(db_, leaders);
+      std::vector<double> v(lead.size());
+      parallel_each(lead.size(), [&](std::size_t k) {
+        v[k] = twin_score(scene, geometry[leaders[k].cand.object], leaders[k].cand.T_scene_object, s_.twins);
+      });
+      std::size_t best_k = 0;
+      for (std::size_t k = 1; k < v.size(); ++k)
+        if (v[k] < v[best_k]) best_k = k;
+      chosen = lead[best_k];
+      for (std::size_t k = 0; k < lead.size(); ++k) res.rivals.push_back({leaders[k].cand.object, v[k]});
+    }
+  }
+
   // The new state in world coordinates; the best hypothesis and the posterior per object.
   state_.clear();
   double max_lw = -std::numeric_limits<double>::infinity();
@@ -374,9 +409,10 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   res.hypotheses = state_;
   res.valid = !state_.empty();
   if (res.valid) {
-    res.best = state_.front();
+    res.best = state_[chosen];
     res.posterior = res.posteriors[res.best.object];
   }
+  db_.trim();  // nothing of this step is pinned any more
   res.geometry_loads = db_.geometry_loads();
   res.geometry_resident = db_.geometry_resident();
   res.times.total_s = seconds_since(t_start);

@@ -117,6 +117,8 @@ std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& 
           {"W", double(s.ransac.prune_w)},
           {"W_per_object", double(s.ransac.prune_per_object)},
           {"prune_blocks", double(s.ransac.prune_blocks)},
+          {"object_draws", double(s.ransac.object_draws)},
+          {"twins", double(s.twins.rivals)},
           {"shortlist", double(s.shortlist.objects)},
           {"min_spacing", s.ransac.min_spacing},
           {"distance_tolerance", s.ransac.distance_tolerance},
@@ -574,6 +576,16 @@ void register_recognize(CLI::App& app) {
                                        "nearest to the query (approximate; 0: exact)")
                            ->group(g)
                            ->check(CLI::Range(0, 1000000));
+  auto* object_draws = sub->add_option("--object-draws", s.ransac.object_draws,
+                                       "Extension: with per-object pruning, each triplet searches the objects of this "
+                                       "many uniform draws when the database has more (0: every object)")
+                           ->group(g)
+                           ->check(CLI::Range(0, 100000000));
+  auto* twins = sub->add_option("--twins", s.twins.rivals,
+                                "Extension: near-twin verification, the leading objects compared by a likelihood "
+                                "with per-grasp offsets (0: off; tactile logs only)")
+                    ->group(g)
+                    ->check(CLI::Range(0, 1000));
   auto* shortlist = sub->add_option("--shortlist", s.shortlist.objects,
                                     "Extension: objects whose RANSAC candidates go on to ICP and evaluation per "
                                     "step, chosen by screening against the coarse clouds (0: all)")
@@ -627,6 +639,8 @@ void register_recognize(CLI::App& app) {
       {per_object_w, [](RecognizerSettings& r, const RecognizerSettings& i) { r.ransac.prune_per_object = i.ransac.prune_per_object; }},
       {prune_blocks, [](RecognizerSettings& r, const RecognizerSettings& i) { r.ransac.prune_blocks = i.ransac.prune_blocks; }},
       {shortlist, [](RecognizerSettings& r, const RecognizerSettings& i) { r.shortlist = i.shortlist; }},
+      {object_draws, [](RecognizerSettings& r, const RecognizerSettings& i) { r.ransac.object_draws = i.ransac.object_draws; }},
+      {twins, [](RecognizerSettings& r, const RecognizerSettings& i) { r.twins = i.twins; }},
       {grasp_sigma, [](RecognizerSettings& r, const RecognizerSettings& i) { r.evaluate.grasp_offset_sigma = i.evaluate.grasp_offset_sigma; }},
   };
   sub->callback([o, extensions] {

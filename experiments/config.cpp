@@ -220,6 +220,15 @@ const std::vector<KeyDef>& key_defs() {
     add("evaluate.grasp_offset_sigma_m", true,
         [=](auto& c, auto& in, auto& x) { c.params.grasp_offset_sigma_m = number_in(in, 0, 1, x); },
         [](auto& c) { return opt(c.params.grasp_offset_sigma_m); });
+    add("ransac.prune_blocks", true,
+        [](auto& c, auto& in, auto& x) { c.params.prune_blocks = int_at_least(in, 0, x); },
+        [](auto& c) { return opt(c.params.prune_blocks); });
+    add("ransac.object_draws", true,
+        [](auto& c, auto& in, auto& x) { c.params.object_draws = int_at_least(in, 0, x); },
+        [](auto& c) { return opt(c.params.object_draws); });
+    add("twins.rivals", true,
+        [](auto& c, auto& in, auto& x) { c.params.twins = int_at_least(in, 0, x); },
+        [](auto& c) { return opt(c.params.twins); });
     add("shortlist.objects", true,
         [](auto& c, auto& in, auto& x) { c.params.shortlist = int_at_least(in, 0, x); },
         [](auto& c) { return opt(c.params.shortlist); });

@@ -25,6 +25,9 @@
 //   ransac.d_outlier_m, bricpsf.hypotheses (n_p), bricpsf.psi, bricpsf.lambda,
 //   evaluate.grasp_offset_sigma_m (extension: per-grasp arm offsets, 0: off),
 //   shortlist.objects (extension: objects whose candidates are evaluated per step, 0: all),
+//   ransac.prune_blocks (extension: approximate per-object pruning, blocks read; 0: exact),
+//   ransac.object_draws (extension: objects drawn per triplet for per-object pruning; 0: all),
+//   twins.rivals (extension: near-twin verification, leading objects compared; 0: off),
 //   icp.iterations     method parameters; unset means the recognizer's default
 //   memory_budget_mb   resident object geometry (MB, 0: no limit); default: the recognizer's
 //   schedule           runs | steps        parallel over runs (throughput) or inside each step
@@ -67,6 +70,9 @@ struct MethodParams {
   std::optional<int> icp_iterations;    ///< ICP iteration cap
   std::optional<double> grasp_offset_sigma_m;  ///< m, per-grasp offset prior (0: off)
   std::optional<int> shortlist;         ///< objects whose candidates are evaluated per step (0: all)
+  std::optional<int> prune_blocks;      ///< approximate per-object pruning: blocks read (0: exact)
+  std::optional<int> object_draws;      ///< per-object pruning: objects drawn per triplet (0: all)
+  std::optional<int> twins;             ///< near-twin verification: leading objects compared (0: off)
 };
 
 struct SweepAxis {

@@ -128,6 +128,8 @@ void set_param(RecognizerSettings& s, const std::string& kv) {
   else if (k == "refine_pool") s.refine_pool = static_cast<std::size_t>(v);
   else if (k == "new_per_object") s.new_per_object = static_cast<std::size_t>(v);
   else if (k == "prune_blocks") s.ransac.prune_blocks = static_cast<std::size_t>(v);
+  else if (k == "object_draws") s.ransac.object_draws = static_cast<std::size_t>(v);
+  else if (k == "twins") s.twins.rivals = static_cast<std::size_t>(v);
   else if (k == "shortlist") s.shortlist.objects = static_cast<std::size_t>(v);
   else if (k == "shortlist_contacts") s.shortlist.contacts = static_cast<std::size_t>(v);
   else if (k == "shortlist_outlier") s.shortlist.outlier_distance = v;

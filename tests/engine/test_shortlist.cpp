@@ -3,6 +3,7 @@
 // memory budget (LRU eviction, pinned objects kept, reloads equal), and the recognizer with a
 // shortlist (right object, fewer objects loaded, same result for 1 and 2 threads).
 #include "engine/feature_table.hpp"
+#include "engine/ransac.hpp"
 #include "engine/recognizer.hpp"
 #include "engine/shortlist.hpp"
 #include "recognition_fixture.hpp"
@@ -246,4 +247,78 @@ TEST_CASE("Recognizer with a shortlist: right object, fewer objects loaded, same
       }
     }
   }
+}
+
+TEST_CASE("Object draws: each triplet searches the objects its draws reach; all of them when few") {
+  auto src = test::make_source();
+  Database db(src);
+  const Pose T = test::random_pose(31, Vec3(0.0, 0.1, 0.2));
+  const PointCloud c = test::touch(src->fines[1], T, 6, 8, 0.0005, 0.0002);
+  const Scene scene = prepare_scene(c, {}, db.settings().fpfh, SceneSettings{}, 1, 1);
+  FeatureSearch search;
+  search.table = FeatureTable::shared(db);
+  const std::vector<std::uint8_t> allowed(db.size(), 1);
+  RansacSettings s = fast().ransac;
+  auto run = [&](std::size_t draws, int threads) {
+    RansacSettings x = s;
+    x.object_draws = draws;
+    RansacStats st;
+    tbb::task_arena arena(threads);
+    auto cands = arena.execute([&] { return ransac_candidates(scene, db, search, allowed, x, 3, 1, &st); });
+    return std::pair(cands, st);
+  };
+  const auto [all, st_all] = run(0, 2);
+  const auto [many, st_many] = run(db.size(), 2);  // no more objects than draws: all searched
+  REQUIRE(st_all.triplets > 0);
+  CHECK(st_all.objects_searched == st_all.triplets * db.size());
+  CHECK(st_many.objects_searched == st_all.objects_searched);
+  REQUIRE(all.size() == many.size());
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    CHECK(all[i].object == many[i].object);
+    CHECK(all[i].T_scene_object.matrix() == many[i].T_scene_object.matrix());
+  }
+  const auto [two, st_two] = run(2, 2);  // at most 2 objects per triplet
+  const auto [two1, st_two1] = run(2, 1);
+  CHECK(st_two.objects_searched <= 2 * st_two.triplets);
+  CHECK(st_two.objects_searched >= st_two.triplets);
+  CHECK(st_two.objects_reached <= st_two.objects_searched);
+  CHECK(two.size() < all.size());
+  // per triplet (slot / R), candidates of at most 2 objects
+  std::map<std::uint32_t, std::set<std::uint32_t>> per_triplet;
+  for (const Candidate& cd : two) per_triplet[cd.slot / static_cast<std::uint32_t>(s.registrations)].insert(cd.object);
+  for (const auto& [t, objects] : per_triplet) CHECK(objects.size() <= 2);
+  REQUIRE(two.size() == two1.size());
+  for (std::size_t i = 0; i < two.size(); ++i) {
+    CHECK(two[i].slot == two1[i].slot);
+    CHECK(two[i].T_scene_object.matrix() == two1[i].T_scene_object.matrix());
+  }
+}
+
+TEST_CASE("Approximate pruning by block: the exact search's neighbours when every block is read") {
+  auto src = feature_source();
+  Database db(src);
+  const FeatureTable table(db);
+  Rng rng(4, 0, 0, 0);
+  std::vector<Feature> queries;
+  for (int i = 0; i < 20; ++i) {
+    const auto& fs = src->feats[rng.index(src->size())].features;
+    queries.push_back(random_feature(rng, &fs[rng.index(fs.size())], 6.0f));
+  }
+  const auto exact = table.knn_per_object(queries, 9, std::vector<std::uint8_t>{});
+  const auto wide = table.knn_per_object(queries, 9, std::vector<std::uint8_t>{}, 1000);  // every block
+  const auto one = table.knn_per_object(queries, 9, std::vector<std::uint8_t>{}, 1);      // the nearest block
+  std::size_t found = 0, total = 0;
+  for (std::size_t q = 0; q < queries.size(); ++q) {
+    REQUIRE(wide[q].size() == exact[q].size());
+    for (std::size_t j = 0; j < exact[q].size(); ++j) CHECK(wide[q][j].index == exact[q][j].index);
+    // one block of 128 rows per object: w rows of each object, all from that block
+    for (const Neighbour& n : one[q]) {
+      ++total;
+      found += std::any_of(exact[q].begin(), exact[q].end(), [&](const Neighbour& e) { return e.index == n.index; });
+    }
+  }
+  std::size_t total_exact = 0;
+  for (const auto& v : exact) total_exact += v.size();
+  CHECK(total == total_exact);  // w of every object still (each block holds >= 9 rows)
+  CHECK(found > total / 2);  // the nearest block by mean holds most of the exact neighbours
 }

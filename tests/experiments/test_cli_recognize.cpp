@@ -121,19 +121,22 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
     CHECK_MESSAGE(expect.empty(), "missing parameters");
   };
   CHECK(ja["preset"] == "improved");  // the default
-  check_params(res, {{"W_per_object", 200.0}, {"refine_new", 1.0}, {"grasp_offset_sigma", 0.003}});
+  check_params(res, {{"W_per_object", 200.0}, {"refine_new", 1.0}, {"grasp_offset_sigma", 0.003},
+                     {"object_draws", 200.0}, {"shortlist", 48.0}, {"twins", 5.0}, {"prune_blocks", 0.0}});
 
   SUBCASE("--preset paper, and a flag on top of a preset") {
     const Run p = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --preset paper --out rp.h5" + kFast);
     REQUIRE_MESSAGE(p.code == 0, p.err);
     CHECK(nlohmann::json::parse(p.out)["preset"] == "paper");
     check_params(io::read_result(dir / "rp.h5"),
-                 {{"W_per_object", 0.0}, {"refine_new", 0.0}, {"dedupe", 0.0}, {"grasp_offset_sigma", 0.0}});
+                 {{"W_per_object", 0.0}, {"refine_new", 0.0}, {"dedupe", 0.0}, {"grasp_offset_sigma", 0.0},
+                  {"object_draws", 0.0}, {"shortlist", 0.0}, {"twins", 0.0}});
     const Run q = touchstone(dir, "recognize --db db.h5 --log log.h5 --steps 1 --prune-per-object 50 --no-dedupe "
-                                  "--grasp-offset-sigma 0.005 --out rq.h5" + kFast);
+                                  "--grasp-offset-sigma 0.005 --shortlist 3 --twins 0 --prune-blocks 2 --out rq.h5" + kFast);
     REQUIRE_MESSAGE(q.code == 0, q.err);
     check_params(io::read_result(dir / "rq.h5"),
-                 {{"W_per_object", 50.0}, {"dedupe", 0.0}, {"grasp_offset_sigma", 0.005}, {"refine_new", 1.0}});
+                 {{"W_per_object", 50.0}, {"dedupe", 0.0}, {"grasp_offset_sigma", 0.005}, {"refine_new", 1.0},
+                  {"shortlist", 3.0}, {"twins", 0.0}, {"prune_blocks", 2.0}, {"object_draws", 200.0}});
   }
   SUBCASE("--steps and --method") {
     const Run c = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --method batch-ransac" + kFast);
@@ -218,6 +221,34 @@ TEST_CASE("cli recognize: bad input gives one clear error and no output file") {
     expect_error("recognize --db db.h5 --cloud c2.ply --ground-truth bad.txt --out out.h5", "bad.txt, line 3");
     test::write_text(dir / "short.txt", "1 0 0\n");
     expect_error("recognize --db db.h5 --cloud c2.ply --ground-truth short.txt", "16 numbers");
+  }
+  // a memory budget that cannot hold the largest object's geometry
+  expect_error("recognize --db db.h5 --log log.h5 --memory-budget 0.01 --out out.h5" + kFast,
+               "cannot hold one object");
+  expect_error("recognize --db db.h5 --log log.h5 --memory-budget 0.01 --out out.h5" + kFast,
+               "(db.h5, --memory-budget)");
+  {  // a database truncated mid-object
+    const auto size = fs::file_size(dir / "db.h5");
+    fs::copy_file(dir / "db.h5", dir / "cut.h5");
+    fs::resize_file(dir / "cut.h5", size * 2 / 3);
+    expect_error("recognize --db cut.h5 --log log.h5 --out out.h5" + kFast, "cut.h5");
+  }
+  // a budget that holds an object: the same answer as no limit (eviction changes nothing)
+  {
+    const Run small = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --memory-budget 8" + kFast);
+    const Run none = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --memory-budget 0" + kFast);
+    REQUIRE_MESSAGE(small.code == 0, small.err);
+    REQUIRE_MESSAGE(none.code == 0, none.err);
+    auto strip = [](nlohmann::json j) {
+      for (auto& st : j["steps"])
+        for (const char* k : {"time_s", "stages_s", "geometry_loads", "geometry_resident"}) st.erase(k);
+      return j;
+    };
+    const auto js = nlohmann::json::parse(small.out), jn = nlohmann::json::parse(none.out);
+    CHECK(strip(js)["steps"] == strip(jn)["steps"]);
+    // and the small budget did evict: objects were loaded again
+    CHECK(js["steps"].back()["geometry_loads"].get<int>() > jn["steps"].back()["geometry_loads"].get<int>());
+    CHECK(js["steps"].back()["geometry_resident"].get<int>() < jn["steps"].back()["geometry_resident"].get<int>());
   }
   // usage errors exit 2
   CHECK(touchstone(dir, "recognize --db db.h5").code == 2);

@@ -167,6 +167,18 @@ TEST_CASE("Flags use the same setter as files") {
   CHECK(*c.params.prune_per_object == 0);
   set_key(c, "evaluate.grasp_offset_sigma_m", {"0.004"});
   CHECK(*c.params.grasp_offset_sigma_m == 0.004);
+  set_key(c, "shortlist.objects", {"24"});
+  set_key(c, "twins.rivals", {"0"});
+  set_key(c, "ransac.object_draws", {"100"});
+  set_key(c, "ransac.prune_blocks", {"3"});
+  set_key(c, "memory_budget_mb", {"512"});
+  CHECK(*c.params.shortlist == 24);
+  CHECK(*c.params.twins == 0);
+  CHECK(*c.params.object_draws == 100);
+  CHECK(*c.params.prune_blocks == 3);
+  CHECK(*c.memory_budget_mb == 512.0);
+  CHECK_THROWS_AS(set_key(c, "shortlist.objects", {"-1"}), Error);
+  CHECK_THROWS_AS(set_key(c, "memory_budget_mb", {"-5"}), Error);
   try {
     set_key(c, "runs", {"-1"});
     FAIL("no error");

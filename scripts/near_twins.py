@@ -1,0 +1,69 @@
+#!/usr/bin/python3
+"""Near-twin share of the misses in a run store (touchstone experiment output).
+
+    /usr/bin/python3 scripts/near_twins.py STORE.h5 [--steps 5,10,20,40]
+
+A miss names a wrong object; it is a near-twin miss when the named object belongs to the
+explored object's family. A family is the name without a trailing variant suffix `_v<k>`
+(scripts/make_variants.py) or a catalogue family's `-<k>` suffix. Prints, per step, the runs,
+the misses and how many of them are near-twin misses. Needs h5py (Debian's python3-h5py).
+"""
+import argparse
+import os
+import re
+import sys
+
+import h5py
+import numpy as np
+
+
+def family(name):
+    return re.sub(r"(_v\d+|-\d+)$", "", name)
+
+
+def text(x):
+    return x.decode() if isinstance(x, bytes) else str(x)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("store")
+    ap.add_argument("--steps", default="5,10,20,40")
+    a = ap.parse_args()
+    os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")
+    try:
+        f = h5py.File(a.store, "r")
+        names = [text(x) for x in f["header/database_objects"][:]]
+        explored = [text(x) for x in f["header/objects"][:]]
+        obj = f["runs/object"][:]
+        first = f["runs/first_step_row"][:]
+        best = f["steps/best_object"][:]
+        correct = f["steps/correct"][:]
+        step = f["steps/step"][:]
+    except (OSError, KeyError) as e:
+        sys.exit(f"near_twins: {a.store}: not a readable run store ({e})")
+    print(f"{a.store}: {len(obj)} runs")
+    print(f"{'step':>5} {'runs':>5} {'misses':>7} {'near-twin':>10} {'share':>7}")
+    for s in [int(x) for x in a.steps.split(",")]:
+        runs = misses = twins = 0
+        for r in range(len(obj)):
+            rows = np.nonzero(step[first[r]:first[r] + 1000] == s)[0]
+            if len(rows) == 0:
+                continue
+            k = first[r] + rows[0]
+            if step[k] != s:
+                continue
+            runs += 1
+            if correct[k] == 1:
+                continue
+            misses += 1
+            b = best[k]
+            if b >= 0 and family(names[b]) == family(explored[obj[r]]) and names[b] != explored[obj[r]]:
+                twins += 1
+        if runs:
+            share = f"{100.0 * twins / misses:.0f} %" if misses else "-"
+            print(f"{s:>5} {runs:>5} {misses:>7} {twins:>10} {share:>7}")
+
+
+if __name__ == "__main__":
+    main()
