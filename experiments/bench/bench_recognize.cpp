@@ -181,7 +181,8 @@ int main(int argc, char** argv) {
                 db.size(), method.c_str(), grasps, noise.c_str());
     std::printf("parameters: n_p %zu, psi %.2f, N %d, R %d, W %zu, W per object %zu, refine_new %d (pool %zu, "
                 "%zu per object), dedupe %d, free inside %d, d_outlier %.3f, lambda %.3f, res_free %.3f, "
-                "normal_tol %.1f deg, ICP %s (%d it, %zu pts)\n",
+                "normal_tol %.1f deg, ICP %s (%d it, %zu pts), object draws %zu, shortlist %zu, twins %zu, "
+                "prune blocks %zu\n",
                 rs.n_p, rs.psi, rs.ransac.triplets, rs.ransac.registrations, rs.ransac.prune_w,
                 rs.ransac.prune_per_object, int(rs.refine_new), rs.refine_pool, rs.new_per_object,
                 int(rs.dedupe), int(rs.evaluate.free_inside_penalty),
@@ -189,7 +190,8 @@ int main(int argc, char** argv) {
                 rs.icp.metric == IcpMetric::field            ? "distance-field"
                 : rs.icp.metric == IcpMetric::point_to_plane ? "point-to-plane"
                                                              : "point-to-point",
-                rs.icp.max_iterations, rs.icp.max_points);
+                rs.icp.max_iterations, rs.icp.max_points, rs.ransac.object_draws, rs.shortlist.objects,
+                rs.twins.rivals, rs.ransac.prune_blocks);
     const double s_obj_max = db.settings().max_extent;
 
     auto t0 = std::chrono::steady_clock::now();
