@@ -139,11 +139,13 @@ RecognizerSettings RecognizerSettings::improved() {
   s.new_per_object = 5;
   s.ransac.prune_per_object = 200;
   s.evaluate.grasp_offset_sigma = 0.003;
-  // Large databases: each triplet searches the objects of 200 draws, at most 48 objects'
-  // candidates go on per step (inactive up to 48 objects), near-ties between the leading
-  // objects are re-decided by the near-twin verification.
+  // Large databases: each triplet searches the objects of 200 draws; on databases of more
+  // than 48 objects, at most 16 objects' candidates (and the state's objects) go on per step,
+  // so that their geometry stays within the default memory budget; near-ties between the
+  // leading objects are re-decided by the near-twin verification.
   s.ransac.object_draws = 200;
-  s.shortlist.objects = 48;
+  s.shortlist.objects = 16;
+  s.shortlist.min_database = 48;
   s.twins.rivals = 5;
   return s;
 }
@@ -238,7 +240,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
       ransac_candidates(scene, db_, search_, allowed, s_.ransac, s_.seed, step_u, &rs);
   // Extension for large databases: only the shortlisted objects' candidates go on (and the
   // state's objects'), so only their geometry is loaded.
-  if (s_.shortlist.objects > 0) {
+  if (s_.shortlist.objects > 0 && db_.size() > s_.shortlist.min_database) {
     t0 = Clock::now();
     std::vector<std::uint32_t> held;
     for (const Hypothesis& h : state_) held.push_back(h.object);

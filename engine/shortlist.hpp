@@ -26,6 +26,8 @@ namespace ts {
 
 struct ShortlistSettings {
   std::size_t objects = 0;          ///< objects whose candidates go on (0: off, all of them)
+  std::size_t min_database = 0;     ///< active only on databases of more objects than this
+                                    ///< (smaller ones are searched whole and fit in memory)
   std::size_t contacts = 24;        ///< contacts scored per candidate (the scene's fixed order)
   double outlier_distance = 0.01;   ///< m, e = min(1, (d / outlier_distance)^2)
 };

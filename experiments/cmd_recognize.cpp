@@ -588,7 +588,8 @@ void register_recognize(CLI::App& app) {
                     ->check(CLI::Range(0, 1000));
   auto* shortlist = sub->add_option("--shortlist", s.shortlist.objects,
                                     "Extension: objects whose RANSAC candidates go on to ICP and evaluation per "
-                                    "step, chosen by screening against the coarse clouds (0: all)")
+                                    "step, chosen by screening against the coarse clouds (0: all; the improved "
+                                    "preset: 16 on databases of more than 48 objects)")
                         ->group(g)
                         ->check(CLI::Range(0, 100000000));
   sub->add_option("--memory-budget", o->memory_budget_mb,

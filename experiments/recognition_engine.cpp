@@ -151,7 +151,10 @@ RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
   if (p.lambda) s.evaluate.lambda = *p.lambda;
   if (p.icp_iterations) s.icp.max_iterations = *p.icp_iterations;
   if (p.grasp_offset_sigma_m) s.evaluate.grasp_offset_sigma = *p.grasp_offset_sigma_m;
-  if (p.shortlist) s.shortlist.objects = static_cast<std::size_t>(*p.shortlist);
+  if (p.shortlist) {  // asked for explicitly: on any database
+    s.shortlist.objects = static_cast<std::size_t>(*p.shortlist);
+    s.shortlist.min_database = 0;
+  }
   if (p.prune_blocks) s.ransac.prune_blocks = static_cast<std::size_t>(*p.prune_blocks);
   if (p.object_draws) s.ransac.object_draws = static_cast<std::size_t>(*p.object_draws);
   if (p.twins) s.twins.rivals = static_cast<std::size_t>(*p.twins);

@@ -204,10 +204,11 @@ TEST_CASE("Recognizer with a shortlist: right object, fewer objects loaded, same
   for (std::size_t obj : {1u, 4u}) {  // nut, wedge
     INFO("object " << src->infos[obj].name);
     const Pose T = test::random_pose(90 + obj, Vec3(-0.2, 0.1, 0.3));
-    auto run = [&](int threads, std::size_t shortlist) {
+    auto run = [&](int threads, std::size_t shortlist, std::size_t min_database = 0) {
       Database db(src);
       RecognizerSettings s = fast();
       s.shortlist.objects = shortlist;
+      s.shortlist.min_database = min_database;
       Recognizer rec(db, s);
       tbb::task_arena arena(threads);
       std::vector<StepResult> out;
@@ -220,6 +221,13 @@ TEST_CASE("Recognizer with a shortlist: right object, fewer objects loaded, same
     const auto [with, loads_with] = run(2, 2);
     const auto [with1, loads_with1] = run(1, 2);
     const auto [without, loads_without] = run(2, 0);
+    const auto [small_db, loads_small] = run(2, 2, src->size());  // a database this small: off
+    CHECK(loads_small == loads_without);
+    for (std::size_t k = 0; k < small_db.size(); ++k) {
+      CHECK(small_db[k].shortlist.empty());
+      CHECK(small_db[k].best.object == without[k].best.object);
+      CHECK(small_db[k].best.pose.matrix() == without[k].best.pose.matrix());
+    }
     REQUIRE(with.back().valid);
     CHECK(with.back().best.object == obj);
     CHECK(without.back().best.object == obj);
