@@ -105,7 +105,7 @@ GeometryRef Database::geometry(std::size_t i) const {
     s.last_use.store(cache_->clock.fetch_add(1) + 1, std::memory_order_relaxed);
     g = s.geometry;
   }
-  if (loaded && cache_->budget.load() > 0 && cache_->bytes.load() > cache_->budget.load()) trim();
+  if (loaded) trim();
   return g;
 }
 
@@ -151,7 +151,7 @@ std::size_t Database::geometry_peak_bytes() const { return cache_->peak.load(); 
 
 void Database::set_memory_budget(std::size_t bytes) {
   cache_->budget.store(bytes);
-  if (bytes > 0 && cache_->bytes.load() > bytes) trim();
+  trim();
 }
 
 std::size_t Database::memory_budget() const { return cache_->budget.load(); }

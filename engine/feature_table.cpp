@@ -46,7 +46,6 @@ struct FeatureTable::Impl {
   std::size_t rows = 0;
   std::size_t features = 0;         ///< rows that hold a feature (rows minus padding)
   std::vector<std::uint32_t> object_blocks;  ///< first block of each object present (+ end)
-  std::vector<std::uint32_t> block_object;   ///< the object of each block
   std::size_t nblocks() const { return (rows + kBlock - 1) / kBlock; }
   const float* block(std::size_t b) const { return blocks.data() + b * kDim * kBlock; }
 };
@@ -114,7 +113,6 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
     if ((b0 + nb) * kBlock >= std::numeric_limits<std::uint32_t>::max())
       throw Error("FeatureTable: too many features");
     m.object_blocks.push_back(static_cast<std::uint32_t>(b0));
-    m.block_object.insert(m.block_object.end(), nb, static_cast<std::uint32_t>(o));
     m.blocks.resize((b0 + nb) * kDim * kBlock, 1e18f);  // padding never wins
     m.lo.resize((b0 + nb) * kDim, std::numeric_limits<float>::infinity());
     m.hi.resize((b0 + nb) * kDim, -std::numeric_limits<float>::infinity());
@@ -242,36 +240,28 @@ struct BlockRange {
 std::vector<BlockRange> object_ranges(const FeatureTable::Impl& m, const std::vector<std::uint8_t>& mask) {
   std::vector<BlockRange> ranges;
   for (std::size_t g = 0; g + 1 < m.object_blocks.size(); ++g) {
-    const std::uint32_t o = m.block_object[m.object_blocks[g]];
+    const std::uint32_t o = m.refs[std::size_t{m.object_blocks[g]} * kBlock].object;
     if (!mask.empty() && (o >= mask.size() || !mask[o])) continue;
     ranges.push_back({m.object_blocks[g], m.object_blocks[g + 1]});
   }
   return ranges;
 }
 
-/// Per query, the w nearest rows: within each range in order (per_range), or over all the
-/// ranges' blocks together. Parallel over queries.
+/// Per query, the w nearest rows over all the ranges' blocks together. Parallel over queries.
 std::vector<std::vector<Neighbour>> search_ranges(const FeatureTable::Impl& m,
                                                   const std::vector<Feature>& queries, std::size_t w,
-                                                  const std::vector<BlockRange>& ranges, bool per_range,
-                                                  std::size_t max_blocks = 0) {
+                                                  const std::vector<BlockRange>& ranges) {
   std::vector<std::vector<Neighbour>> out(queries.size());
   if (queries.empty() || w == 0 || m.features == 0 || ranges.empty()) return out;
   std::vector<std::size_t> all;
-  if (!per_range)
-    for (const BlockRange& r : ranges)
-      for (std::size_t b : r) all.push_back(b);
+  for (const BlockRange& r : ranges)
+    for (std::size_t b : r) all.push_back(b);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 1), [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<std::pair<float, std::uint32_t>> order;
     std::vector<Item> cand;
     for (std::size_t q = range.begin(); q != range.end(); ++q) {
-      if (per_range) {
-        out[q].reserve(w * ranges.size());
-        for (const BlockRange& r : ranges) search_blocks(m, queries[q].data(), r, w, max_blocks, order, cand, out[q]);
-      } else {
-        out[q].reserve(w);
-        search_blocks(m, queries[q].data(), all, w, 0, order, cand, out[q]);
-      }
+      out[q].reserve(w);
+      search_blocks(m, queries[q].data(), all, w, 0, order, cand, out[q]);
     }
   });
   return out;
@@ -282,7 +272,7 @@ std::vector<std::vector<Neighbour>> search_ranges(const FeatureTable::Impl& m,
 std::vector<std::vector<Neighbour>> FeatureTable::knn(const std::vector<Feature>& queries,
                                                       std::size_t w) const {
   const Impl& m = *impl_;
-  return search_ranges(m, queries, std::min(w, m.features), object_ranges(m, {}), false);
+  return search_ranges(m, queries, std::min(w, m.features), object_ranges(m, {}));
 }
 
 std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vector<Feature>& queries,
@@ -294,7 +284,7 @@ std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vect
                                                                  std::size_t w,
                                                                  const std::vector<std::uint8_t>& mask,
                                                                  std::size_t max_blocks) const {
-  return search_ranges(*impl_, queries, w, object_ranges(*impl_, mask), true, max_blocks);
+  return knn_per_object(queries, w, std::vector<std::vector<std::uint8_t>>(queries.size(), mask), max_blocks);
 }
 
 std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(
@@ -307,9 +297,11 @@ std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 1), [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<std::pair<float, std::uint32_t>> order;
     std::vector<Item> cand;
-    for (std::size_t q = range.begin(); q != range.end(); ++q)
-      for (const BlockRange& r : object_ranges(m, masks[q]))
-        search_blocks(m, queries[q].data(), r, w, max_blocks, order, cand, out[q]);
+    for (std::size_t q = range.begin(); q != range.end(); ++q) {
+      const std::vector<BlockRange> ranges = object_ranges(m, masks[q]);
+      out[q].reserve(w * ranges.size());
+      for (const BlockRange& r : ranges) search_blocks(m, queries[q].data(), r, w, max_blocks, order, cand, out[q]);
+    }
   });
   return out;
 }
@@ -318,7 +310,7 @@ std::size_t FeatureTable::memory_bytes() const {
   const Impl& m = *impl_;
   return m.blocks.size() * sizeof(float) + (m.lo.size() + m.hi.size() + m.centre.size()) * sizeof(float) +
          m.refs.size() * sizeof(FeatureRef) +
-         (m.object_blocks.size() + m.block_object.size()) * sizeof(std::uint32_t);
+         m.object_blocks.size() * sizeof(std::uint32_t);
 }
 
 std::shared_ptr<const FeatureTable> FeatureTable::shared(const Database& db,

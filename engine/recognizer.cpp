@@ -381,7 +381,6 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
       for (std::size_t k = 1; k < v.size(); ++k)
         if (v[k] < v[best_k]) best_k = k;
       chosen = lead[best_k];
-      for (std::size_t k = 0; k < lead.size(); ++k) res.rivals.push_back({leaders[k].cand.object, v[k]});
     }
   }
 

@@ -111,9 +111,6 @@ struct StepResult {
   std::size_t objects_reached = 0;  ///< objects with at least one RANSAC candidate
   std::vector<std::uint32_t> shortlist;  ///< objects whose candidates went on, when a shortlist
                                          ///< left some out (empty otherwise)
-  /// Near-twin verification (TwinSettings): the leading objects compared, in weight order,
-  /// with their score V (lower is better); best is the lowest. Empty when off or undecided.
-  std::vector<std::pair<std::uint32_t, double>> rivals;
   std::size_t geometry_loads = 0;   ///< geometry loads of the database so far (reloads counted)
   std::size_t geometry_resident = 0;  ///< objects whose geometry is in memory after the step
   bool boundary_fallback = false;   ///< triplets had to use patch-boundary points

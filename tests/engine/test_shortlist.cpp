@@ -66,6 +66,17 @@ double sqf(const Feature& a, const Feature& b) {
 }
 
 /// Per-object pruning, smaller numbers (unit tests must be fast).
+/// n queries near random database features (with `anywhere`, every fourth one anywhere).
+std::vector<Feature> random_queries(const FeatureSource& src, int n, std::uint64_t seed, bool anywhere) {
+  Rng rng(seed, 0, 0, 0);
+  std::vector<Feature> queries;
+  for (int i = 0; i < n; ++i) {
+    const auto& fs = src.feats[rng.index(src.size())].features;
+    queries.push_back(anywhere && i % 4 == 0 ? random_feature(rng) : random_feature(rng, &fs[rng.index(fs.size())], 6.0f));
+  }
+  return queries;
+}
+
 RecognizerSettings fast() {
   RecognizerSettings s = test::fast_settings();
   s.ransac.prune_per_object = 100;
@@ -78,13 +89,7 @@ TEST_CASE("FeatureTable: per-object search restricted to a mask equals brute for
   auto src = feature_source();
   Database db(src);
   const FeatureTable table(db);
-  Rng rng(9, 0, 0, 0);
-  std::vector<Feature> queries;
-  for (int i = 0; i < 40; ++i) {
-    // near a random database feature (the realistic case), or anywhere
-    const auto& fs = src->feats[rng.index(src->size())].features;
-    queries.push_back(i % 4 ? random_feature(rng, &fs[rng.index(fs.size())], 6.0f) : random_feature(rng));
-  }
+  const std::vector<Feature> queries = random_queries(*src, 40, 9, true);
   for (const std::vector<std::uint8_t>& mask :
        {std::vector<std::uint8_t>{}, std::vector<std::uint8_t>{1, 0, 1, 1, 0, 1, 1, 0}}) {
     const auto per = table.knn_per_object(queries, 7, mask);
@@ -306,12 +311,7 @@ TEST_CASE("Approximate pruning by block: the exact search's neighbours when ever
   auto src = feature_source();
   Database db(src);
   const FeatureTable table(db);
-  Rng rng(4, 0, 0, 0);
-  std::vector<Feature> queries;
-  for (int i = 0; i < 20; ++i) {
-    const auto& fs = src->feats[rng.index(src->size())].features;
-    queries.push_back(random_feature(rng, &fs[rng.index(fs.size())], 6.0f));
-  }
+  const std::vector<Feature> queries = random_queries(*src, 20, 4, false);
   const auto exact = table.knn_per_object(queries, 9, std::vector<std::uint8_t>{});
   const auto wide = table.knn_per_object(queries, 9, std::vector<std::uint8_t>{}, 1000);  // every block
   const auto one = table.knn_per_object(queries, 9, std::vector<std::uint8_t>{}, 1);      // the nearest block
