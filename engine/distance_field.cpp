@@ -14,6 +14,9 @@
 // tiles). A coarse meshToVolume run was tried first: its propagated values were off by up to
 // 24 mm in thin regions.
 //
+// Both levels are then held as CompactGrids (4^3 bricks of int16 behind a dense brick index);
+// the OpenVDB grids are dropped after the build.
+//
 // Queries interpolate trilinearly from the fine level when its 8 corners are all active, else
 // from the coarse level. Outside B nothing is stored; there the distance to the surface is at
 // least dist(p, B) + coarse_margin (B shrunk by the margin still contains the mesh's bounding
@@ -61,7 +64,6 @@ struct MeshAdapter {
 };
 
 using Grid = openvdb::FloatGrid;
-using Accessor = Grid::ConstUnsafeAccessor;   // unregistered: cheap to create per call
 
 Grid::Ptr run_mesh_to_volume(const Mesh& mesh, double voxel, float ext_band, float int_band,
                              bool is_signed) {
@@ -105,42 +107,188 @@ SparseGrid to_sparse(const Grid& grid, double voxel) {
   return s;
 }
 
-Grid::Ptr from_sparse_grid(const SparseGrid& s, float background) {
-  auto grid = Grid::create(background);
-  grid->setTransform(openvdb::math::Transform::createLinearTransform(s.voxel));
-  auto acc = grid->getUnsafeAccessor();
-  for (std::size_t n = 0; n < s.ijk.size(); ++n)
-    acc.setValue(openvdb::Coord(s.ijk[n][0], s.ijk[n][1], s.ijk[n][2]), s.value[n]);
-  return grid;
+/// Smallest power of two q with max|v| / q <= 32000 (int16 with room to spare). Dequantized
+/// values k*q are exact in float and double, so quantizing them again gives them back.
+double quantum_for(double max_abs) {
+  double q = std::ldexp(1.0, -40);
+  while (max_abs / q > 32000.0) q *= 2.0;
+  return q;
 }
 
+std::int16_t quantize(double v, double q) {
+  const double k = std::nearbyint(v / q);
+  return static_cast<std::int16_t>(std::clamp(k, -32767.0, 32767.0));
+}
+
+inline int brick_of(int i) { return i >> 2; }           // floor division by CompactGrid::kBrick
+inline int in_brick(int a, int b, int c) { return ((a & 3) << 4) | ((b & 3) << 2) | (c & 3); }
+
+/// Sparse voxels (any order; a repeated voxel keeps its last value) -> compact grid with a
+/// quantum chosen for their values. Linear time: bricks are numbered in the order of a dense
+/// index over their box, which is the order of their coordinates.
+CompactGrid compact_from_cells(double voxel, const std::vector<std::pair<std::array<std::int32_t, 3>, double>>& cells) {
+  CompactGrid g;
+  g.voxel = voxel;
+  double max_abs = 0.0;
+  std::array<int, 3> lo{0, 0, 0}, hi{-1, -1, -1};
+  for (std::size_t n = 0; n < cells.size(); ++n) {
+    max_abs = std::max(max_abs, std::abs(cells[n].second));
+    for (int a = 0; a < 3; ++a) {
+      const int b = brick_of(cells[n].first[a]);
+      lo[a] = n == 0 ? b : std::min(lo[a], b);
+      hi[a] = n == 0 ? b : std::max(hi[a], b);
+    }
+  }
+  g.quantum = quantum_for(max_abs);
+  if (cells.empty()) return g;
+  const std::size_t dy = static_cast<std::size_t>(hi[1] - lo[1] + 1), dz = static_cast<std::size_t>(hi[2] - lo[2] + 1);
+  const double span = double(hi[0] - lo[0] + 1) * double(dy) * double(dz);
+  if (span > 1e8) throw Error("distance field: voxels span more than 1e8 bricks", {}, "ijk");
+  auto cell = [&](const std::array<std::int32_t, 3>& ijk) {
+    return (static_cast<std::size_t>(brick_of(ijk[0]) - lo[0]) * dy + static_cast<std::size_t>(brick_of(ijk[1]) - lo[1])) * dz +
+           static_cast<std::size_t>(brick_of(ijk[2]) - lo[2]);
+  };
+  std::vector<std::int32_t> number(static_cast<std::size_t>(span), -1);
+  for (const auto& c : cells) number[cell(c.first)] = 0;
+  std::int32_t count = 0;
+  for (std::size_t n = 0; n < number.size(); ++n)
+    if (number[n] == 0) {
+      number[n] = count++;
+      const std::size_t a = n / (dy * dz), b = (n / dz) % dy, c = n % dz;
+      g.bricks.push_back({lo[0] + static_cast<int>(a), lo[1] + static_cast<int>(b), lo[2] + static_cast<int>(c)});
+    }
+  g.values.assign(g.bricks.size() * CompactGrid::kBrickVoxels, CompactGrid::kInactive);
+  for (const auto& [ijk, v] : cells)
+    g.values[static_cast<std::size_t>(number[cell(ijk)]) * CompactGrid::kBrickVoxels + in_brick(ijk[0], ijk[1], ijk[2])] =
+        quantize(v, g.quantum);
+  return g;
+}
+
+CompactGrid compact_from_sparse(const SparseGrid& s) {
+  std::vector<std::pair<std::array<std::int32_t, 3>, double>> cells(s.ijk.size());
+  for (std::size_t n = 0; n < s.ijk.size(); ++n) cells[n] = {s.ijk[n], s.value[n]};
+  return compact_from_cells(s.voxel, cells);
+}
+
+/// A CompactGrid with its dense brick index, ready for lookups.
+struct Level {
+  CompactGrid grid;
+  double inv_voxel = 0.0;
+  std::array<int, 3> origin{0, 0, 0};   // brick coordinates of index cell 0
+  std::array<int, 3> dims{0, 0, 0};     // index extent in bricks
+  std::vector<std::int32_t> index;      // brick number, or -1
+
+  static Level make(CompactGrid g, const std::string& name) {
+    auto bad = [&](const std::string& why, const std::string& what) {
+      throw Error("distance field: " + why, {}, name + "/" + what);
+    };
+    if (!(g.voxel > 0.0) || !std::isfinite(g.voxel)) bad("voxel size must be positive", "voxel");
+    if (!(g.quantum > 0.0) || !std::isfinite(g.quantum)) bad("quantum must be positive", "quantum");
+    if (g.values.size() != g.bricks.size() * CompactGrid::kBrickVoxels)
+      bad(std::to_string(g.values.size()) + " values for " + std::to_string(g.bricks.size()) +
+              " bricks (expected 64 a brick)", "values");
+    constexpr std::int32_t kReach = 1 << 26;   // |brick coordinate|: keeps voxel ijk in int range
+    std::array<std::int64_t, 3> lo{0, 0, 0}, hi{-1, -1, -1};
+    for (std::size_t b = 0; b < g.bricks.size(); ++b) {
+      for (int a = 0; a < 3; ++a) {
+        if (std::abs(g.bricks[b][a]) >= kReach) bad("brick coordinate out of range", "bricks");
+        if (b == 0 || g.bricks[b][a] < lo[a]) lo[a] = g.bricks[b][a];
+        if (b == 0 || g.bricks[b][a] > hi[a]) hi[a] = g.bricks[b][a];
+      }
+      if (b > 0 && !(g.bricks[b - 1] < g.bricks[b])) bad("bricks not in increasing order", "bricks");
+    }
+    Level L;
+    L.inv_voxel = 1.0 / g.voxel;
+    if (!g.bricks.empty()) {
+      double cells = 1.0;
+      for (int a = 0; a < 3; ++a) cells *= double(hi[a] - lo[a] + 1);
+      if (cells > 1e8) bad("bricks span more than 1e8 index cells", "bricks");
+      for (int a = 0; a < 3; ++a) {
+        L.origin[a] = static_cast<int>(lo[a]);
+        L.dims[a] = static_cast<int>(hi[a] - lo[a] + 1);
+      }
+      L.index.assign(static_cast<std::size_t>(cells), -1);
+      for (std::size_t b = 0; b < g.bricks.size(); ++b)
+        L.index[L.cell(g.bricks[b][0] - L.origin[0], g.bricks[b][1] - L.origin[1], g.bricks[b][2] - L.origin[2])] =
+            static_cast<std::int32_t>(b);
+    }
+    L.grid = std::move(g);
+    return L;
+  }
+
+  std::size_t cell(int a, int b, int c) const {
+    return (static_cast<std::size_t>(a) * static_cast<std::size_t>(dims[1]) + static_cast<std::size_t>(b)) *
+               static_cast<std::size_t>(dims[2]) + static_cast<std::size_t>(c);
+  }
+
+  /// The values of the brick holding voxel (i, j, k), or nullptr.
+  const std::int16_t* brick(int i, int j, int k) const {
+    const int a = brick_of(i) - origin[0], b = brick_of(j) - origin[1], c = brick_of(k) - origin[2];
+    if (static_cast<unsigned>(a) >= static_cast<unsigned>(dims[0]) ||
+        static_cast<unsigned>(b) >= static_cast<unsigned>(dims[1]) ||
+        static_cast<unsigned>(c) >= static_cast<unsigned>(dims[2]))
+      return nullptr;
+    const std::int32_t n = index[cell(a, b, c)];
+    return n < 0 ? nullptr : grid.values.data() + static_cast<std::size_t>(n) * CompactGrid::kBrickVoxels;
+  }
+
+  bool empty() const { return grid.bricks.empty(); }
+
+  std::size_t bytes() const {
+    return grid.bricks.capacity() * sizeof(grid.bricks[0]) + grid.values.capacity() * sizeof(std::int16_t) +
+           index.capacity() * sizeof(std::int32_t) + sizeof(Level);
+  }
+
+  /// Active voxels with dequantized values, sorted by (i, j, k).
+  SparseGrid sparse() const {
+    SparseGrid s;
+    s.voxel = grid.voxel;
+    std::vector<std::pair<std::array<std::int32_t, 3>, float>> cells;
+    for (std::size_t b = 0; b < grid.bricks.size(); ++b)
+      for (int n = 0; n < CompactGrid::kBrickVoxels; ++n) {
+        const std::int16_t v = grid.values[b * CompactGrid::kBrickVoxels + static_cast<std::size_t>(n)];
+        if (v == CompactGrid::kInactive) continue;
+        cells.push_back({{grid.bricks[b][0] * 4 + (n >> 4), grid.bricks[b][1] * 4 + ((n >> 2) & 3),
+                          grid.bricks[b][2] * 4 + (n & 3)},
+                         static_cast<float>(v * grid.quantum)});
+      }
+    std::sort(cells.begin(), cells.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (const auto& [ijk, v] : cells) {
+      s.ijk.push_back(ijk);
+      s.value.push_back(v);
+    }
+    return s;
+  }
+};
+
 /// Trilinear interpolation at index-space point x when all 8 corners are active.
-inline bool trilinear(const Accessor& acc, const Vec3& x, double& out, Vec3* grad = nullptr) {
+inline bool trilinear(const Level& L, const Vec3& x, double& out, Vec3* grad = nullptr) {
   const double fx = std::floor(x.x()), fy = std::floor(x.y()), fz = std::floor(x.z());
   constexpr double kLimit = 1e9;   // keep far points out of int32 index range
   if (!(std::abs(fx) < kLimit && std::abs(fy) < kLimit && std::abs(fz) < kLimit)) return false;
-  const openvdb::Coord c0(static_cast<int>(fx), static_cast<int>(fy), static_cast<int>(fz));
+  const int i = static_cast<int>(fx), j = static_cast<int>(fy), k = static_cast<int>(fz);
   const double tx = x.x() - fx, ty = x.y() - fy, tz = x.z() - fz;
-  float v[8];
-  using Leaf = Grid::TreeType::LeafNodeType;
-  static_assert(Leaf::DIM == 8, "leaf offsets below assume 8^3 leaves");
-  const Leaf* leaf = acc.probeConstLeaf(c0);
-  if (leaf && (c0.x() & 7) != 7 && (c0.y() & 7) != 7 && (c0.z() & 7) != 7) {
-    // All 8 corners in one leaf (the common case): read them directly, offsets x*64 + y*8 + z.
-    const openvdb::Index o0 = Leaf::coordToOffset(c0);
-    const auto& mask = leaf->getValueMask();
-    const float* data = leaf->buffer().data();
+  int raw[8];
+  if ((i & 3) != 3 && (j & 3) != 3 && (k & 3) != 3) {
+    // All 8 corners in one brick (27 of 64 cells): offsets a*16 + b*4 + c.
+    const std::int16_t* b = L.brick(i, j, k);
+    if (!b) return false;
+    const int o0 = in_brick(i, j, k);
     for (int n = 0; n < 8; ++n) {
-      const openvdb::Index o = o0 + ((n & 1) << 6) + (((n >> 1) & 1) << 3) + ((n >> 2) & 1);
-      if (!mask.isOn(o)) return false;
-      v[n] = data[o];
+      raw[n] = b[o0 + ((n & 1) << 4) + (((n >> 1) & 1) << 2) + ((n >> 2) & 1)];
+      if (raw[n] == CompactGrid::kInactive) return false;
     }
   } else {
     for (int n = 0; n < 8; ++n) {
-      const openvdb::Coord c = c0.offsetBy(n & 1, (n >> 1) & 1, (n >> 2) & 1);
-      if (!acc.probeValue(c, v[n])) return false;
+      const int a = i + (n & 1), bb = j + ((n >> 1) & 1), c = k + ((n >> 2) & 1);
+      const std::int16_t* b = L.brick(a, bb, c);
+      if (!b) return false;
+      raw[n] = b[in_brick(a, bb, c)];
+      if (raw[n] == CompactGrid::kInactive) return false;
     }
   }
+  double v[8];
+  for (int n = 0; n < 8; ++n) v[n] = raw[n] * L.grid.quantum;
   const double x00 = v[0] + tx * (v[1] - v[0]);
   const double x10 = v[2] + tx * (v[3] - v[2]);
   const double x01 = v[4] + tx * (v[5] - v[4]);
@@ -162,29 +310,29 @@ inline bool trilinear(const Accessor& acc, const Vec3& x, double& out, Vec3* gra
 }  // namespace
 
 struct DistanceField::Impl {
-  Grid::Ptr fine, coarse;
-  double fine_voxel = 0.0, coarse_voxel = 0.0;
+  Level fine, coarse;
+  bool built = false;               // a coarse level exists (possibly without voxels)
   bool is_signed = false;
   double coarse_margin = 0.0;
   Eigen::AlignedBox3d coarse_box;   // object frame, spanned by the coarse voxel centres
 
-  double query(const Accessor& fa, const Accessor& ca, const Vec3& p) const {
+  double query(const Vec3& p) const {
     double d;
-    if (trilinear(fa, p / fine_voxel, d)) return d;
-    if (coarse_box.contains(p) && trilinear(ca, p / coarse_voxel, d)) return d;
+    if (trilinear(fine, p * fine.inv_voxel, d)) return d;
+    if (coarse_box.contains(p) && trilinear(coarse, p * coarse.inv_voxel, d)) return d;
     if (!finite(p)) return std::numeric_limits<double>::infinity();
     return std::sqrt(coarse_box.squaredExteriorDistance(p)) + coarse_margin;
   }
 
   /// As query(), with the gradient of the interpolant (zero where only a bound is known).
-  double query_gradient(const Accessor& fa, const Accessor& ca, const Vec3& p, Vec3& g) const {
+  double query_gradient(const Vec3& p, Vec3& g) const {
     double d;
-    if (trilinear(fa, p / fine_voxel, d, &g)) {
-      g /= fine_voxel;
+    if (trilinear(fine, p * fine.inv_voxel, d, &g)) {
+      g *= fine.inv_voxel;
       return d;
     }
-    if (coarse_box.contains(p) && trilinear(ca, p / coarse_voxel, d, &g)) {
-      g /= coarse_voxel;
+    if (coarse_box.contains(p) && trilinear(coarse, p * coarse.inv_voxel, d, &g)) {
+      g *= coarse.inv_voxel;
       return d;
     }
     g.setZero();
@@ -192,13 +340,15 @@ struct DistanceField::Impl {
     return std::sqrt(coarse_box.squaredExteriorDistance(p)) + coarse_margin;
   }
 
+  /// The box spanned by the active coarse voxels (the coarse level is a dense box).
   void set_box() {
     coarse_box.setEmpty();
-    if (!coarse) return;
-    const auto bb = coarse->evalActiveVoxelBoundingBox();
-    if (bb.empty()) return;
-    coarse_box.extend(Vec3(bb.min().x(), bb.min().y(), bb.min().z()) * coarse_voxel);
-    coarse_box.extend(Vec3(bb.max().x(), bb.max().y(), bb.max().z()) * coarse_voxel);
+    const CompactGrid& g = coarse.grid;
+    for (std::size_t b = 0; b < g.bricks.size(); ++b)
+      for (int n = 0; n < CompactGrid::kBrickVoxels; ++n)
+        if (g.values[b * CompactGrid::kBrickVoxels + static_cast<std::size_t>(n)] != CompactGrid::kInactive)
+          coarse_box.extend(Vec3(g.bricks[b][0] * 4 + (n >> 4), g.bricks[b][1] * 4 + ((n >> 2) & 3),
+                                 g.bricks[b][2] * 4 + (n & 3)) * g.voxel);
   }
 };
 
@@ -290,8 +440,6 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
   Impl& im = *df.impl_;
   im.is_signed = is_signed;
   im.coarse_margin = s.coarse_margin;
-  im.fine_voxel = s.fine_voxel;
-  im.coarse_voxel = s.coarse_voxel;
 
   // Coarse box: dense, every point of bbox + margin having its 8 corners inside.
   const double fv = s.fine_voxel, cv = s.coarse_voxel;
@@ -310,9 +458,10 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
 
   // The serial meshToVolume run (fine band topology and inside/outside) and the coarse
   // unsigned distances (parallel, on whatever threads the first leaves free) side by side.
+  Grid::Ptr band;   // meshToVolume's band and inside/outside classification
   tbb::parallel_invoke(
       [&] {
-        im.fine = run_mesh_to_volume(mesh, fv, static_cast<float>(s.fine_band_voxels),
+        band = run_mesh_to_volume(mesh, fv, static_cast<float>(s.fine_band_voxels),
                                      static_cast<float>(s.fine_band_voxels), is_signed);
       },
       [&] { coarse_distances(index, bbox, cmin, ny, nz, cv, cap, dense); });
@@ -321,8 +470,8 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
   {
     std::vector<openvdb::Coord> coords;
     std::vector<float> values;
-    coords.reserve(im.fine->activeVoxelCount());
-    for (auto it = im.fine->cbeginValueOn(); it; ++it)
+    coords.reserve(band->activeVoxelCount());
+    for (auto it = band->cbeginValueOn(); it; ++it)
       if (it.isVoxelValue()) {
         coords.push_back(it.getCoord());
         values.push_back(*it);
@@ -341,7 +490,7 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
         values[n] = (is_signed && values[n] < 0.0f) ? -d : d;
       }
     });
-    auto acc = im.fine->getUnsafeAccessor();
+    auto acc = band->getUnsafeAccessor();
     for (std::size_t n = 0; n < coords.size(); ++n) acc.setValueOnly(coords[n], values[n]);
   }
 
@@ -349,7 +498,7 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
   // interior/exterior tiles of meshToVolume's flood fill away from the surface).
   if (is_signed) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nx * ny), [&](const auto& range) {
-      auto fine_acc = im.fine->getConstUnsafeAccessor();
+      auto fine_acc = band->getConstUnsafeAccessor();
       for (std::size_t ij = range.begin(); ij != range.end(); ++ij)
         for (std::size_t kk = 0; kk < nz; ++kk) {
           const Vec3 p = Vec3(cmin.x() + static_cast<int>(ij / ny), cmin.y() + static_cast<int>(ij % ny),
@@ -360,16 +509,18 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
         }
     });
   }
-  im.coarse = Grid::create(static_cast<float>(cap));
-  im.coarse->setTransform(openvdb::math::Transform::createLinearTransform(cv));
+  im.fine = Level::make(compact_from_sparse(to_sparse(*band, fv)), "fine");
+  band.reset();
   {
-    auto acc = im.coarse->getUnsafeAccessor();
+    std::vector<std::pair<std::array<std::int32_t, 3>, double>> cells(dense.size());
     for (std::size_t ij = 0; ij < nx * ny; ++ij)
       for (std::size_t kk = 0; kk < nz; ++kk)
-        acc.setValue(openvdb::Coord(cmin.x() + static_cast<int>(ij / ny), cmin.y() + static_cast<int>(ij % ny),
-                                    cmin.z() + static_cast<int>(kk)),
-                     dense[ij * nz + kk]);
+        cells[ij * nz + kk] = {{cmin.x() + static_cast<int>(ij / ny), cmin.y() + static_cast<int>(ij % ny),
+                                cmin.z() + static_cast<int>(kk)},
+                               dense[ij * nz + kk]};
+    im.coarse = Level::make(compact_from_cells(cv, cells), "coarse");
   }
+  im.built = true;
   im.set_box();
   return df;
 }
@@ -384,41 +535,41 @@ DistanceField DistanceField::from_sparse(SparseGrid fine, SparseGrid coarse, boo
     if (!std::isfinite(v)) throw Error("distance field: non-finite value", {}, "fine/value");
   for (float v : coarse.value)
     if (!std::isfinite(v)) throw Error("distance field: non-finite value", {}, "coarse/value");
-  init_openvdb();
+  return from_compact(compact_from_sparse(fine), compact_from_sparse(coarse), is_signed, coarse_margin);
+}
+
+DistanceField DistanceField::from_compact(CompactGrid fine, CompactGrid coarse, bool is_signed,
+                                          double coarse_margin) {
+  if (!(coarse_margin >= 0.0) || !std::isfinite(coarse_margin))
+    throw Error("distance field: coarse margin must be a non-negative number", {}, "coarse_margin");
   DistanceField df;
   Impl& im = *df.impl_;
   im.is_signed = is_signed;
   im.coarse_margin = coarse_margin;
-  im.fine_voxel = fine.voxel;
-  im.coarse_voxel = coarse.voxel;
-  im.fine = from_sparse_grid(fine, 0.0f);
-  im.coarse = from_sparse_grid(coarse, 0.0f);
+  im.fine = Level::make(std::move(fine), "fine");
+  im.coarse = Level::make(std::move(coarse), "coarse");
+  im.built = true;
   im.set_box();
   return df;
 }
 
-SparseGrid DistanceField::fine_sparse() const {
-  return impl_->fine ? to_sparse(*impl_->fine, impl_->fine_voxel) : SparseGrid{};
-}
-
-SparseGrid DistanceField::coarse_sparse() const {
-  return impl_->coarse ? to_sparse(*impl_->coarse, impl_->coarse_voxel) : SparseGrid{};
-}
+SparseGrid DistanceField::fine_sparse() const { return impl_->built ? impl_->fine.sparse() : SparseGrid{}; }
+SparseGrid DistanceField::coarse_sparse() const { return impl_->built ? impl_->coarse.sparse() : SparseGrid{}; }
+CompactGrid DistanceField::fine_compact() const { return impl_->built ? impl_->fine.grid : CompactGrid{}; }
+CompactGrid DistanceField::coarse_compact() const { return impl_->built ? impl_->coarse.grid : CompactGrid{}; }
 
 std::size_t DistanceField::memory_bytes() const {
-  if (!impl_) return 0;
-  return (impl_->fine ? impl_->fine->memUsage() : 0) + (impl_->coarse ? impl_->coarse->memUsage() : 0);
+  if (!impl_ || !impl_->built) return 0;
+  return impl_->fine.bytes() + impl_->coarse.bytes();
 }
 
-bool DistanceField::empty() const { return !impl_ || !impl_->coarse; }
+bool DistanceField::empty() const { return !impl_ || !impl_->built; }
 bool DistanceField::is_signed() const { return impl_->is_signed; }
 double DistanceField::coarse_margin() const { return impl_->coarse_margin; }
 
 double DistanceField::distance(const Vec3& p_object) const {
   if (empty()) return std::numeric_limits<double>::infinity();
-  const Accessor fa = impl_->fine->getConstUnsafeAccessor();
-  const Accessor ca = impl_->coarse->getConstUnsafeAccessor();
-  return impl_->query(fa, ca, p_object);
+  return impl_->query(p_object);
 }
 
 void DistanceField::distances(const Vec3* pts, std::size_t n, const Pose& T_object_query,
@@ -427,9 +578,7 @@ void DistanceField::distances(const Vec3* pts, std::size_t n, const Pose& T_obje
     std::fill(out, out + n, std::numeric_limits<double>::infinity());
     return;
   }
-  const Accessor fa = impl_->fine->getConstUnsafeAccessor();
-  const Accessor ca = impl_->coarse->getConstUnsafeAccessor();
-  for (std::size_t i = 0; i < n; ++i) out[i] = impl_->query(fa, ca, T_object_query * pts[i]);
+  for (std::size_t i = 0; i < n; ++i) out[i] = impl_->query(T_object_query * pts[i]);
 }
 
 void DistanceField::distances_gradients(const Vec3* pts, std::size_t n, const Pose& T_object_query,
@@ -439,10 +588,7 @@ void DistanceField::distances_gradients(const Vec3* pts, std::size_t n, const Po
     std::fill(grad, grad + n, Vec3::Zero());
     return;
   }
-  const Accessor fa = impl_->fine->getConstUnsafeAccessor();
-  const Accessor ca = impl_->coarse->getConstUnsafeAccessor();
-  for (std::size_t i = 0; i < n; ++i)
-    out[i] = impl_->query_gradient(fa, ca, T_object_query * pts[i], grad[i]);
+  for (std::size_t i = 0; i < n; ++i) out[i] = impl_->query_gradient(T_object_query * pts[i], grad[i]);
 }
 
 }  // namespace ts

@@ -2,10 +2,15 @@
 // thousands of hypotheses per step (Eq. 4 and 8). Two levels: a fine narrow band around the
 // surface and a coarse grid covering the object's box plus `coarse_margin` (beyond it every
 // point is at least coarse_margin from the surface, which Eq. 4 treats as an outlier anyway).
-// Voxel values are exact point-to-mesh distances (float) at voxel centres; queries interpolate
-// trilinearly (error <~ half a voxel where the distance has a kink: the surface of an unsigned
-// field, medial axes). The coarse level is a dense box, so coarse_sparse() lists every voxel of
-// it in (i, j, k) order and can be stored as origin + shape + values.
+// Voxel values are exact point-to-mesh distances at voxel centres, quantized to 16 bits (a
+// power-of-two quantum per level: <= 1 um in the fine band, <= 8 um on the coarse grid);
+// queries interpolate trilinearly (error <~ half a voxel where the distance has a kink: the
+// surface of an unsigned field, medial axes).
+//
+// Storage: both levels are bricks of 4^3 voxels (CompactGrid) found through a dense brick
+// index over the level's box: 2 bytes a voxel of the band instead of OpenVDB's 4 bytes a voxel
+// of every touched 8^3 leaf, and a load is a copy of two arrays. OpenVDB builds the band
+// (meshToVolume) and is then let go.
 #pragma once
 
 #include "engine/core.hpp"
@@ -26,11 +31,27 @@ struct DistanceFieldSettings {
   double coarse_margin = 0.20;   ///< m, the coarse grid covers the bounding box grown by this
 };
 
-/// Sparse voxels of one level, sorted by (i, j, k): the serialized form stored in HDF5.
+/// Sparse voxels of one level, sorted by (i, j, k): the form of databases of schema version 1,
+/// and a plain view for tests and diagnostics.
 struct SparseGrid {
   double voxel = 0.0;
   std::vector<std::array<std::int32_t, 3>> ijk;
   std::vector<float> value;   ///< signed distance at voxel centres i*voxel (m)
+};
+
+/// One level as stored (databases of schema version 2) and held: bricks of 4^3 voxels whose
+/// values are quantized to int16 (value * quantum metres; kInactive where the level holds no
+/// voxel).
+struct CompactGrid {
+  static constexpr int kBrick = 4;                         ///< voxels along a brick's edge
+  static constexpr int kBrickVoxels = kBrick * kBrick * kBrick;
+  static constexpr std::int16_t kInactive = -32768;        ///< a voxel the level does not hold
+  double voxel = 0.0;     ///< m
+  double quantum = 0.0;   ///< m per unit of value (a power of two)
+  /// Brick coordinates (voxel ijk floor-divided by kBrick), strictly increasing.
+  std::vector<std::array<std::int32_t, 3>> bricks;
+  /// kBrickVoxels values per brick; voxel (a, b, c) of a brick at a*16 + b*4 + c.
+  std::vector<std::int16_t> values;
 };
 
 class DistanceField {
@@ -46,10 +67,19 @@ class DistanceField {
   static DistanceField build(const Mesh& mesh, bool is_signed, const DistanceFieldSettings& s);
   /// Same, reusing the mesh's BVH (its exact distances fill the grids). Uses TBB inside.
   static DistanceField build(const MeshIndex& mesh, bool is_signed, const DistanceFieldSettings& s);
+  /// From the sparse form (values quantized on the way in). Throws ts::Error on sizes that
+  /// differ, a non-positive voxel or non-finite values.
   static DistanceField from_sparse(SparseGrid fine, SparseGrid coarse, bool is_signed,
                                    double coarse_margin);
-  SparseGrid fine_sparse() const;
+  /// From the stored form. Throws ts::Error naming the field ("fine/bricks", ...) on a bad
+  /// voxel or quantum, values not 64 per brick, bricks out of order or spanning a box too
+  /// large to index.
+  static DistanceField from_compact(CompactGrid fine, CompactGrid coarse, bool is_signed,
+                                    double coarse_margin);
+  SparseGrid fine_sparse() const;     ///< active voxels, sorted by (i, j, k), values dequantized
   SparseGrid coarse_sparse() const;
+  CompactGrid fine_compact() const;
+  CompactGrid coarse_compact() const;
 
   bool empty() const;
   bool is_signed() const;

@@ -359,36 +359,64 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   }
   std::sort(next.begin(), next.end(), better);
 
-  // Extension: near-twin verification of the leading objects' best hypotheses.
+  // Posterior per object over the new state (log-sum-exp normalization: finite even when every
+  // wt underflows).
+  double max_lw = -std::numeric_limits<double>::infinity();
+  for (const Working& h : next) max_lw = std::max(max_lw, h.eval.log_weight);
+  double total = 0.0;
+  for (const Working& h : next) {
+    const double rel = std::isfinite(max_lw) ? std::exp(h.eval.log_weight - max_lw) : 1.0;
+    res.posteriors[h.cand.object] += rel;
+    total += rel;
+  }
+  if (total > 0.0)
+    for (double& p : res.posteriors) p /= total;
+
+  // The answer: the best hypothesis, or (answer_by_posterior) the best hypothesis of the object
+  // of largest posterior; then near-twin verification of the leading objects' best hypotheses.
   std::size_t chosen = 0;  // index into next of the answer
-  if (s_.twins.rivals > 1 && !scene.grasps.empty() && !next.empty()) {
-    std::vector<std::size_t> lead;  // first (best) hypothesis of each leading object
+  std::vector<std::size_t> lead;  // first (best) hypothesis of each leading object, best first
+  if (!next.empty() && s_.answer_by_posterior) {
+    std::vector<std::size_t> first(db_.size(), next.size());  // next is sorted best first
+    for (std::size_t i = 0; i < next.size(); ++i)
+      if (first[next[i].cand.object] == next.size()) first[next[i].cand.object] = i;
+    std::vector<std::size_t> by_posterior;
+    for (std::size_t o = 0; o < db_.size(); ++o)
+      if (first[o] < next.size()) by_posterior.push_back(first[o]);
+    // Largest posterior first; ties by the best hypothesis (deterministic: next's order).
+    std::sort(by_posterior.begin(), by_posterior.end(), [&](std::size_t a, std::size_t b) {
+      const double pa = res.posteriors[next[a].cand.object], pb = res.posteriors[next[b].cand.object];
+      return pa != pb ? pa > pb : a < b;
+    });
+    chosen = by_posterior.front();
+    const double top = res.posteriors[next[chosen].cand.object];
+    for (std::size_t i : by_posterior)
+      if (lead.size() < s_.twins.rivals && res.posteriors[next[i].cand.object] >= s_.twins.posterior_ratio * top)
+        lead.push_back(i);
+  } else if (!next.empty()) {
     for (std::size_t i = 0; i < next.size() && lead.size() < s_.twins.rivals; ++i) {
       if (!(next[i].eval.log_weight >= next.front().eval.log_weight - s_.twins.max_gap)) break;
       bool seen = false;
       for (std::size_t j : lead) seen = seen || next[j].cand.object == next[i].cand.object;
       if (!seen) lead.push_back(i);
     }
-    if (lead.size() > 1) {
-      std::vector<Working> leaders;
-      for (std::size_t i : lead) leaders.push_back(next[i]);
-      const GeometryPins geometry = pin(db_, leaders);
-      std::vector<double> v(lead.size());
-      parallel_each(lead.size(), [&](std::size_t k) {
-        v[k] = twin_score(scene, geometry[leaders[k].cand.object], leaders[k].cand.T_scene_object, s_.twins);
-      });
-      std::size_t best_k = 0;
-      for (std::size_t k = 1; k < v.size(); ++k)
-        if (v[k] < v[best_k]) best_k = k;
-      chosen = lead[best_k];
-    }
+  }
+  if (s_.twins.rivals > 1 && !scene.grasps.empty() && lead.size() > 1) {
+    std::vector<Working> leaders;
+    for (std::size_t i : lead) leaders.push_back(next[i]);
+    const GeometryPins geometry = pin(db_, leaders);
+    std::vector<double> v(lead.size());
+    parallel_each(lead.size(), [&](std::size_t k) {
+      v[k] = twin_score(scene, geometry[leaders[k].cand.object], leaders[k].cand.T_scene_object, s_.twins);
+    });
+    std::size_t best_k = 0;
+    for (std::size_t k = 1; k < v.size(); ++k)
+      if (v[k] < v[best_k]) best_k = k;
+    chosen = lead[best_k];
   }
 
   // The new state in world coordinates; the best hypothesis and the posterior per object.
   state_.clear();
-  double max_lw = -std::numeric_limits<double>::infinity();
-  for (const Working& h : next) max_lw = std::max(max_lw, h.eval.log_weight);
-  double total = 0.0;
   for (const Working& h : next) {
     Hypothesis out;
     out.object = h.cand.object;
@@ -400,13 +428,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
     out.icp_iterations = h.icp_iterations;
     out.icp_converged = h.icp_converged;
     state_.push_back(out);
-    // log-sum-exp normalization: finite even when every wt underflows
-    const double rel = std::isfinite(max_lw) ? std::exp(h.eval.log_weight - max_lw) : 1.0;
-    res.posteriors[h.cand.object] += rel;
-    total += rel;
   }
-  if (total > 0.0)
-    for (double& p : res.posteriors) p /= total;
   res.hypotheses = state_;
   res.valid = !state_.empty();
   if (res.valid) {

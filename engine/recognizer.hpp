@@ -46,6 +46,9 @@ struct RecognizerSettings {
   bool dedupe = false;              ///< extension: drop hypotheses that duplicate a better one
                                     ///< (same object, pose within dedupe_distance / 2 degrees)
   double dedupe_distance = 0.002;   ///< m
+  bool answer_by_posterior = false; ///< extension: the answer is the object of largest posterior
+                                    ///< (its hypotheses' weights summed), at its best hypothesis;
+                                    ///< false: the object of the single best hypothesis
   double icp_top = 0.0;             ///< ransac-icp(-fs): ICP only the best share of candidates
                                     ///< by pre-ICP score (0: all, as in the paper)
   std::uint64_t seed = 1;           ///< every random draw derives from (seed, step, task)

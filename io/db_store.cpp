@@ -133,17 +133,7 @@ Vec3 vec3_attribute(const h5::Group& g, const std::string& name) {
   return out;
 }
 
-void write_sparse(h5::Group g, const std::string& prefix, const SparseGrid& grid, const h5::Storage& st,
-                  const std::string& file) {
-  if (grid.ijk.size() != grid.value.size())
-    throw Error("distance field has " + std::to_string(grid.ijk.size()) + " voxels but " +
-                    std::to_string(grid.value.size()) + " values",
-                file, g.child_path(prefix));
-  g.write(prefix + "_ijk", grid.ijk.empty() ? nullptr : grid.ijk.data()->data(), {grid.ijk.size(), 3}, st);
-  g.write(prefix + "_value", grid.value.data(), {grid.value.size()}, st);
-  g.set_attribute(prefix + "_voxel", grid.voxel);
-}
-
+/// The stored form of schema 1 (read only).
 SparseGrid read_sparse(const h5::Group& g, const std::string& prefix) {
   SparseGrid grid;
   grid.voxel = g.double_attribute(prefix + "_voxel");
@@ -157,6 +147,39 @@ SparseGrid read_sparse(const h5::Group& g, const std::string& prefix) {
   for (std::size_t i = 0; i < grid.value.size(); ++i)
     if (!std::isfinite(grid.value[i]))
       throw Error("non-finite value in row " + std::to_string(i), g.file(), g.child_path(prefix + "_value"));
+  return grid;
+}
+
+void write_compact(h5::Group g, const std::string& prefix, const CompactGrid& grid, const h5::Storage& st,
+                   const std::string& file) {
+  if (grid.values.size() != grid.bricks.size() * CompactGrid::kBrickVoxels)
+    throw Error("distance field has " + std::to_string(grid.bricks.size()) + " bricks but " +
+                    std::to_string(grid.values.size()) + " values",
+                file, g.child_path(prefix));
+  g.write(prefix + "_bricks", grid.bricks.empty() ? nullptr : grid.bricks.data()->data(), {grid.bricks.size(), 3}, st);
+  g.write(prefix + "_values", grid.values.data(),
+          {grid.bricks.size(), static_cast<std::uint64_t>(CompactGrid::kBrickVoxels)}, st);
+  g.set_attribute(prefix + "_voxel", grid.voxel);
+  g.set_attribute(prefix + "_quantum", grid.quantum);
+}
+
+/// The stored form of schema 2; the level's own checks (order, sizes, span) run in
+/// DistanceField::from_compact.
+CompactGrid read_compact(const h5::Group& g, const std::string& prefix) {
+  CompactGrid grid;
+  grid.voxel = g.double_attribute(prefix + "_voxel");
+  if (!(grid.voxel > 0.0) || !std::isfinite(grid.voxel))
+    throw Error("voxel size must be positive", g.file(), g.path() + "@" + prefix + "_voxel");
+  grid.quantum = g.double_attribute(prefix + "_quantum");
+  if (!(grid.quantum > 0.0) || !std::isfinite(grid.quantum))
+    throw Error("quantum must be positive", g.file(), g.path() + "@" + prefix + "_quantum");
+  h5::Shape shape;
+  const auto bricks = g.read<std::int32_t>(prefix + "_bricks", {h5::kAny, 3}, &shape);
+  grid.values = g.read<std::int16_t>(prefix + "_values",
+                                     {static_cast<std::int64_t>(shape[0]), CompactGrid::kBrickVoxels});
+  grid.bricks.resize(shape[0]);
+  for (std::size_t i = 0; i < grid.bricks.size(); ++i)
+    grid.bricks[i] = {bricks[3 * i], bricks[3 * i + 1], bricks[3 * i + 2]};
   return grid;
 }
 
@@ -203,8 +226,8 @@ void write_object(h5::Group objects, const StoredObject& stored, const DbWriteSe
   auto field = g.create_group("field");
   field.set_attribute("signed", static_cast<std::int64_t>(o.field.is_signed() ? 1 : 0));
   field.set_attribute("coarse_margin", o.field.coarse_margin());
-  write_sparse(field, "fine", o.field.fine_sparse(), st, file);
-  write_sparse(field, "coarse", o.field.coarse_sparse(), st, file);
+  write_compact(field, "fine", o.field.fine_compact(), st, file);
+  write_compact(field, "coarse", o.field.coarse_compact(), st, file);
 }
 
 void check_unique(const std::vector<StoredObject>& objects, std::set<std::string> names, const std::string& file) {
@@ -216,15 +239,21 @@ void check_unique(const std::vector<StoredObject>& objects, std::set<std::string
 }
 
 /// Root checks shared by the reader and append: format, schema, feature size.
-void check_root(const h5::Group& root) {
+/// `writing`: new objects are to be appended (they are written in this program's schema, so the
+/// file must already have it); reading takes every schema since 1.
+void check_root(const h5::Group& root, bool writing) {
   if (!root.has_attribute("schema_version"))
     throw Error("not a Touchstone object database (no schema_version attribute)", root.file(), "/");
   if (!root.has_attribute("format") || root.string_attribute("format") != kDbFormatName)
     throw Error("not a Touchstone object database (format attribute is not '" + std::string(kDbFormatName) + "')",
                 root.file(), "/@format");
   const auto v = root.int_attribute("schema_version");
-  if (v != kDbSchemaVersion)
-    throw Error("database schema version " + std::to_string(v) + " is not supported (this program reads version " +
+  if (v < 1 || v > kDbSchemaVersion)
+    throw Error("database schema version " + std::to_string(v) + " is not supported (this program reads versions 1 to " +
+                    std::to_string(kDbSchemaVersion) + "); rebuild the database",
+                root.file(), "/@schema_version");
+  if (writing && v != kDbSchemaVersion)
+    throw Error("a database of schema version " + std::to_string(v) + " cannot take new objects (this program writes version " +
                     std::to_string(kDbSchemaVersion) + "); rebuild the database",
                 root.file(), "/@schema_version");
   if (root.int_attribute("feature_dim") != kFeatureDim)
@@ -304,7 +333,7 @@ void append_to_database(const std::filesystem::path& path, const std::vector<Sto
     std::lock_guard<std::recursive_mutex> lock(h5::mutex());
     auto f = h5::File::open(out.temp_path(), h5::File::Access::read_write, file);
     auto root = f.root();
-    check_root(root);
+    check_root(root, true);
     auto order = root.read_strings("order");
     check_unique(objects, std::set<std::string>(order.begin(), order.end()), file);
     auto objs = root.open_group("objects");
@@ -347,7 +376,7 @@ DbReader::DbReader(const std::filesystem::path& path) : impl_(std::make_unique<I
   d.path = path.string();
   d.file = h5::File::open(path, h5::File::Access::read);
   const auto root = d.file.root();
-  check_root(root);
+  check_root(root, false);
   d.schema = root.int_attribute("schema_version");
 
   const auto params = root.open_group("params");
@@ -450,21 +479,35 @@ PointCloud DbReader::load_fine(std::size_t i) const {
 }
 
 DistanceField DbReader::load_field(std::size_t i) const {
-  SparseGrid fine, coarse;
+  SparseGrid fine, coarse;            // schema 1
+  CompactGrid fine_c, coarse_c;       // schema 2
   bool is_signed = false;
   double margin = 0.0;
+  std::string where;
   {
     std::lock_guard<std::recursive_mutex> lock(h5::mutex());
     const auto field = impl_->group(i).open_group("field");
+    where = field.path();
     is_signed = field.int_attribute("signed") != 0;
     margin = field.double_attribute("coarse_margin");
     if (!(margin >= 0.0) || !std::isfinite(margin))
       throw Error("coarse margin must be a non-negative number", impl_->path, field.path() + "@coarse_margin");
-    fine = read_sparse(field, "fine");
-    coarse = read_sparse(field, "coarse");
+    if (impl_->schema >= 2) {
+      fine_c = read_compact(field, "fine");
+      coarse_c = read_compact(field, "coarse");
+    } else {
+      fine = read_sparse(field, "fine");
+      coarse = read_sparse(field, "coarse");
+    }
   }
-  // Building the grids needs no HDF5: outside the lock, so other threads can read meanwhile.
-  return DistanceField::from_sparse(std::move(fine), std::move(coarse), is_signed, margin);
+  // Building the levels needs no HDF5: outside the lock, so other threads can read meanwhile.
+  try {
+    if (impl_->schema >= 2)
+      return DistanceField::from_compact(std::move(fine_c), std::move(coarse_c), is_signed, margin);
+    return DistanceField::from_sparse(std::move(fine), std::move(coarse), is_signed, margin);
+  } catch (const Error& e) {
+    throw Error(e.message(), impl_->path, where + "/" + e.field());
+  }
 }
 
 Mesh DbReader::load_mesh(std::size_t i) const {

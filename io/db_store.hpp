@@ -23,7 +23,8 @@
 namespace ts::io {
 
 /// Schema version written by this program; readers refuse other versions.
-constexpr std::int64_t kDbSchemaVersion = 1;
+/// 2: distance fields stored as int16 bricks (CompactGrid); 1 (sparse float voxels) is still read.
+constexpr std::int64_t kDbSchemaVersion = 2;
 /// Value of the root attribute "format".
 constexpr const char* kDbFormatName = "touchstone-object-database";
 

@@ -118,6 +118,11 @@ struct TypeOf<float> {
   static hid_t file() { return H5T_IEEE_F32LE; }
 };
 template <>
+struct TypeOf<std::int16_t> {
+  static hid_t mem() { return H5T_NATIVE_INT16; }
+  static hid_t file() { return H5T_STD_I16LE; }
+};
+template <>
 struct TypeOf<std::int32_t> {
   static hid_t mem() { return H5T_NATIVE_INT32; }
   static hid_t file() { return H5T_STD_I32LE; }
@@ -908,6 +913,7 @@ void File::close() {
 
 TS_H5_INSTANTIATE(double)
 TS_H5_INSTANTIATE(float)
+TS_H5_INSTANTIATE(std::int16_t)
 TS_H5_INSTANTIATE(std::int32_t)
 TS_H5_INSTANTIATE(std::int64_t)
 TS_H5_INSTANTIATE(std::uint8_t)

@@ -81,7 +81,7 @@ class Group {
 
   // --- datasets ---------------------------------------------------------------------------
   /// Write a new dataset of `shape` from `data` (row-major, product(shape) values).
-  /// T: double, float, int32_t, int64_t, uint8_t, uint32_t, uint64_t.
+  /// T: double, float, int16_t, int32_t, int64_t, uint8_t, uint32_t, uint64_t.
   template <class T>
   void write(const std::string& name, const T* data, const Shape& shape, const Storage& storage = {});
   template <class T>

@@ -205,16 +205,20 @@ TEST_CASE("Distance field matches brute force on closed meshes, with correct sig
     CHECK(e.sign_errors == 0);
     CHECK(e.bound_errors == 0);
 
-    // Voxel-centre values are the exact distances (float), with the right sign; coarse voxels
-    // beyond coarse_margin + 2 voxels hold that cap.
+    // Voxel-centre values are the exact distances to within half the level's quantum (at most
+    // 1 um fine, 8 um coarse), with the right sign; coarse voxels beyond coarse_margin + 2
+    // voxels hold that cap.
     const double cap = s.coarse_margin + 2 * s.coarse_voxel;
-    for (const SparseGrid& g : {df.fine_sparse(), df.coarse_sparse()}) {
+    CHECK(df.fine_compact().quantum <= 1e-6);
+    CHECK(df.coarse_compact().quantum <= 8e-6);
+    for (const auto& [g, quantum] : {std::pair{df.fine_sparse(), df.fine_compact().quantum},
+                                     std::pair{df.coarse_sparse(), df.coarse_compact().quantum}}) {
       int wrong = 0;
       for (std::size_t n = 0; n < g.ijk.size(); n += 1 + g.ijk.size() / 250) {
         const Vec3 p = Vec3(g.ijk[n][0], g.ijk[n][1], g.ijk[n][2]) * g.voxel;
         const double ex = exact_distance(c.mesh, p, true);
         const double want = std::abs(ex) > cap ? std::copysign(cap, ex) : ex;
-        if (std::abs(g.value[n] - want) > 1e-6 + 1e-6 * std::abs(want)) ++wrong;
+        if (std::abs(g.value[n] - want) > 0.5 * quantum + 1e-7 * std::abs(want)) ++wrong;
       }
       CHECK(wrong == 0);
     }

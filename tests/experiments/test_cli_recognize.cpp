@@ -20,6 +20,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <map>
+#include <regex>
 
 using namespace ts;
 namespace fs = std::filesystem;
@@ -233,9 +234,14 @@ TEST_CASE("cli recognize: bad input gives one clear error and no output file") {
     fs::resize_file(dir / "cut.h5", size * 2 / 3);
     expect_error("recognize --db cut.h5 --log log.h5 --out out.h5" + kFast, "cut.h5");
   }
-  // a budget that holds an object: the same answer as no limit (eviction changes nothing)
+  // a budget that holds the largest object and little more: the same answer as no limit
+  // (eviction changes nothing)
   {
-    const Run small = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --memory-budget 8" + kFast);
+    const Run refused = touchstone(dir, "recognize --db db.h5 --log log.h5 --memory-budget 0.01" + kFast);
+    std::smatch m;
+    REQUIRE(std::regex_search(refused.err, m, std::regex("needs ([0-9.]+) MB")));
+    const std::string budget = std::to_string(1.3 * std::stod(m[1].str()));
+    const Run small = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --memory-budget " + budget + kFast);
     const Run none = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --memory-budget 0" + kFast);
     REQUIRE_MESSAGE(small.code == 0, small.err);
     REQUIRE_MESSAGE(none.code == 0, none.err);

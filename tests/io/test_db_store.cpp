@@ -6,6 +6,8 @@
 
 #include <doctest/doctest.h>
 
+#include <functional>
+
 #include <thread>
 
 namespace fs = std::filesystem;
@@ -246,6 +248,90 @@ TEST_CASE("db store: foreign, truncated and incompatible files are refused") {
   }
   CHECK_THROWS_WITH_AS(ts::io::DbReader(dir / "db.h5"), doctest::Contains("schema version 99 is not supported"),
                        ts::Error);
+}
+
+TEST_CASE("db store: schema 1 databases (sparse float fields) still read; appending to them is refused") {
+  TempDir dir("db");
+  std::vector<ts::BuiltObject> objects;
+  objects.push_back(synthetic_object("a", 1));
+  objects.push_back(synthetic_object("b", 2));
+  ts::io::write_database(dir / "db.h5", stored(objects), {}, 5);
+  {  // rewrite the file as schema 1 wrote it: field/{fine,coarse}_{ijk,value}, no quantum
+    auto f = h5::File::open(dir / "db.h5", h5::File::Access::read_write);
+    f.root().set_attribute("schema_version", std::int64_t{1});
+    for (const auto& o : objects) {
+      auto field = f.group("objects/" + o.info.name + "/field");
+      for (const char* level : {"fine", "coarse"}) {
+        const std::string l = level;
+        field.remove(l + "_bricks");
+        field.remove(l + "_values");
+        const ts::SparseGrid g = l == "fine" ? o.field.fine_sparse() : o.field.coarse_sparse();
+        field.write(l + "_ijk", g.ijk.data()->data(), {g.ijk.size(), 3});
+        field.write(l + "_value", g.value.data(), {g.value.size()});
+      }
+    }
+    f.close();
+  }
+  {
+    ts::io::DbReader db(dir / "db.h5");
+    CHECK(db.schema_version() == 1);
+    for (std::size_t i = 0; i < objects.size(); ++i) check_same(db, i, objects[i]);
+  }
+  const auto before = ts::test::read_bytes(dir / "db.h5");
+  auto c = synthetic_object("c", 3);
+  CHECK_THROWS_WITH_AS(ts::io::append_to_database(dir / "db.h5", stored_one(c), {}),
+                       doctest::Contains("schema version 1 cannot take new objects"), ts::Error);
+  CHECK(ts::test::read_bytes(dir / "db.h5") == before);
+}
+
+TEST_CASE("db store: crafted distance fields are refused, naming the file and the dataset") {
+  TempDir dir("db");
+  std::vector<ts::BuiltObject> objects;
+  objects.push_back(synthetic_object("a", 1));
+  ts::io::write_database(dir / "db.h5", stored(objects), {}, 5);
+  const auto pristine = ts::test::read_bytes(dir / "db.h5");
+  const std::string file = (dir / "db.h5").string();
+  auto craft = [&](const std::function<void(h5::Group&)>& edit) {
+    ts::test::write_text(dir / "db.h5", pristine);
+    auto f = h5::File::open(dir / "db.h5", h5::File::Access::read_write);
+    auto field = f.group("objects/a/field");
+    edit(field);
+    f.close();
+    return ts::io::DbReader(dir / "db.h5");
+  };
+  const ts::CompactGrid fine = objects[0].field.fine_compact();
+  REQUIRE(fine.bricks.size() >= 2);
+  {  // bricks out of order
+    auto bricks = fine.bricks;
+    std::swap(bricks[0], bricks[1]);
+    const auto db = craft([&](h5::Group& g) {
+      g.remove("fine_bricks");
+      g.write("fine_bricks", bricks.data()->data(), {bricks.size(), 3});
+    });
+    CHECK_THROWS_WITH_AS(db.load_field(0), ("distance field: bricks not in increasing order (" + file +
+                                            ", /objects/a/field/fine/bricks)").c_str(), ts::Error);
+  }
+  {  // a brick so far away that its index would not fit in memory
+    auto bricks = fine.bricks;
+    bricks.back() = {40000000, 0, 0};
+    const auto db = craft([&](h5::Group& g) {
+      g.remove("fine_bricks");
+      g.write("fine_bricks", bricks.data()->data(), {bricks.size(), 3});
+    });
+    CHECK_THROWS_WITH_AS(db.load_field(0), doctest::Contains("/objects/a/field/fine/bricks"), ts::Error);
+  }
+  {  // values not 64 a brick
+    const auto db = craft([&](h5::Group& g) {
+      g.remove("coarse_values");
+      std::vector<std::int16_t> v(10, 0);
+      g.write("coarse_values", v.data(), {10});
+    });
+    CHECK_THROWS_WITH_AS(db.load_field(0), doctest::Contains("/objects/a/field/coarse_values"), ts::Error);
+  }
+  {  // a quantum that is not a positive number
+    const auto db = craft([&](h5::Group& g) { g.set_attribute("fine_quantum", -1.0); });
+    CHECK_THROWS_WITH_AS(db.load_field(0), doctest::Contains("/objects/a/field@fine_quantum"), ts::Error);
+  }
 }
 
 TEST_CASE("db store: object names and seeds") {
