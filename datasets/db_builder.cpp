@@ -2,13 +2,17 @@
 
 #include "datasets/archive.hpp"
 #include "datasets/manifest.hpp"
+#include "io/atomic_file.hpp"
+#include "io/sha256.hpp"
 
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <exception>
+#include <fstream>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -150,6 +154,79 @@ BuildResult build_one(const MeshInput& input, const DatabaseSettings& settings, 
   return build_imported(input, import_input(input, settings, bytes), settings, seed);
 }
 
+namespace {
+
+/// What identifies a build: format, parameters, seed and every input (name, source, mesh bytes).
+std::string build_fingerprint(const std::vector<MeshInput>& inputs, const std::vector<std::string>& mesh_sha256,
+                              const BuildSettings& settings) {
+  std::string text = "touchstone db build, schema " + std::to_string(io::kDbSchemaVersion) + "\n";
+  text += "seed " + std::to_string(settings.seed) + "\ndeflate " + std::to_string(settings.write.deflate) + "\n";
+  char value[64];
+  for (const auto& v : io::settings_values(settings.database)) {
+    std::snprintf(value, sizeof value, "%.17g", v.value);
+    text += v.group + "." + v.name + " " + value + "\n";
+  }
+  for (std::size_t i = 0; i < inputs.size(); ++i)
+    text += inputs[i].name + "\t" + inputs[i].source + "\t" + mesh_sha256[i] + "\n";
+  return io::sha256_hex(text);
+}
+
+std::string read_file_text(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+/// The parts folder of this build: created with the fingerprint, or checked against it.
+void prepare_parts(const std::filesystem::path& dir, const std::string& fingerprint, const std::vector<MeshInput>& inputs) {
+  std::error_code ec;
+  const auto print = dir / "fingerprint";
+  const std::string where = inputs.front().origin.empty() ? inputs.front().display() : inputs.front().origin;
+  if (std::filesystem::exists(dir, ec)) {
+    if (!std::filesystem::is_directory(dir, ec) || !std::filesystem::is_regular_file(print, ec))
+      throw Error("the parts folder of this build exists but is not one (no fingerprint file): " + dir.string() +
+                      "; remove it to start over",
+                  where);
+    if (read_file_text(print) != fingerprint + "\n")
+      throw Error("the stopped build in " + dir.string() +
+                      " was started with other inputs, parameters or seed; rerun it as it was, or remove the folder "
+                      "to start over",
+                  where, "fingerprint");
+    for (const auto& entry : std::filesystem::directory_iterator(dir, ec))   // a killed part's temporary
+      if (entry.path().filename().string().find(".tmp-") != std::string::npos) std::filesystem::remove(entry.path(), ec);
+    return;
+  }
+  std::filesystem::create_directories(dir, ec);
+  if (ec) throw Error("cannot create the parts folder: " + ec.message(), dir.string());
+  {
+    io::AtomicOutput out(print);
+    std::ofstream f(out.temp_path(), std::ios::binary);
+    f << fingerprint << "\n";
+    f.close();
+    if (!f) throw Error("cannot write the fingerprint", print.string());
+    out.commit();
+  }
+}
+
+/// A part left by an earlier run: one object of this name and mesh.
+bool part_is_done(const std::filesystem::path& part, const std::string& name, const std::string& sha256) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(part, ec)) return false;
+  try {
+    io::DbReader db(part);
+    return db.size() == 1 && db.info(0).name == name && db.info(0).mesh_sha256 == sha256;
+  } catch (const Error&) {
+    return false;   // unreadable: build it again
+  }
+}
+
+std::string part_name(std::size_t i) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%07zu.h5", i);
+  return buf;
+}
+
+}  // namespace
+
 BuildReport build_database(const std::vector<MeshInput>& inputs, const std::filesystem::path& out,
                            const BuildSettings& settings) {
   const auto t_start = Clock::now();
@@ -176,41 +253,76 @@ BuildReport build_database(const std::vector<MeshInput>& inputs, const std::file
     return in.member.empty() ? nullptr : &members.at(in.path).at(in.member);
   };
 
-  // 2. Import every mesh (fast); the first bad mesh in input order is the error.
-  std::vector<std::optional<Imported>> imported(n);
-  parallel_each(n, false, [&](std::size_t i) { imported[i] = import_input(inputs[i], settings.database, bytes_of(inputs[i])); });
-  members.clear();
-
-  // 3. Build every object into its own slot.
-  std::vector<std::optional<BuildResult>> built(n);
-  std::mutex progress_mutex;
-  std::size_t done = 0;
-  parallel_each(n, true, [&](std::size_t i) {
-    built[i] = build_imported(inputs[i], std::move(*imported[i]), settings.database,
-                              io::object_seed(settings.seed, inputs[i].name));
-    imported[i].reset();
-    if (settings.progress) {
-      std::lock_guard<std::mutex> lock(progress_mutex);
-      settings.progress(++done, n, inputs[i].name);
-    }
+  // 2. Import every mesh (fast; the meshes are not kept, so thousands fit): the first bad mesh
+  //    in input order is the error, before anything is built. Checksums, warnings, flips.
+  std::vector<std::string> sha(n);
+  report.warnings.resize(n);
+  report.flipped.resize(n);
+  std::vector<double> import_s(n, 0.0);
+  parallel_each(n, false, [&](std::size_t i) {
+    Imported im = import_input(inputs[i], settings.database, bytes_of(inputs[i]));
+    sha[i] = im.mesh.sha256;
+    report.warnings[i] = im.mesh.warnings;
+    report.flipped[i] = im.mesh.flipped;
+    import_s[i] = im.import_s;
   });
 
-  // 4. Write, serially in input order.
-  t0 = Clock::now();
-  std::vector<io::StoredObject> stored;
-  for (std::size_t i = 0; i < n; ++i) {
-    const BuildResult& r = *built[i];
-    stored.push_back({&r.object, r.seed});
-    report.names.push_back(inputs[i].name);
-    report.warnings.push_back(r.warnings);
-    report.flipped.push_back(r.flipped);
-    report.coverage.push_back(r.object.info.coverage);
-    report.times.import_s += r.import_s;
-    report.times.scan_s += r.object.timings.scan_s;
-    report.times.features_s += r.object.timings.features_s;
-    report.times.field_s += r.object.timings.field_s;
+  // 3. The parts folder: new, or a stopped build of the same inputs to resume.
+  const std::filesystem::path parts = settings.parts.empty() ? std::filesystem::path(out.string() + ".parts") : settings.parts;
+  prepare_parts(parts, build_fingerprint(inputs, sha, settings), inputs);
+  std::vector<std::size_t> todo;
+  for (std::size_t i = 0; i < n; ++i)
+    if (!part_is_done(parts / part_name(i), inputs[i].name, sha[i])) todo.push_back(i);
+  report.resumed = n - todo.size();
+
+  // 4. Build what is missing, each object written to its part as it finishes.
+  std::mutex progress_mutex;
+  BuildProgress progress;
+  progress.total = n;
+  progress.resumed = progress.done = report.resumed;
+  const auto t_build = Clock::now();
+  try {
+    parallel_each(todo.size(), true, [&](std::size_t k) {
+      const std::size_t i = todo[k];
+      Imported im = import_input(inputs[i], settings.database, bytes_of(inputs[i]));
+      BuildResult r = build_imported(inputs[i], std::move(im), settings.database,
+                                     io::object_seed(settings.seed, inputs[i].name));
+      io::write_database(parts / part_name(i), {{&r.object, r.seed}}, settings.database, settings.seed, settings.write);
+      std::lock_guard<std::mutex> lock(progress_mutex);
+      report.times.import_s += import_s[i];
+      report.times.scan_s += r.object.timings.scan_s;
+      report.times.features_s += r.object.timings.features_s;
+      report.times.field_s += r.object.timings.field_s;
+      ++progress.done;
+      if (settings.progress) {
+        progress.elapsed_s = seconds_since(t_build);
+        progress.name = inputs[i].name;
+        settings.progress(progress);
+      }
+    });
+  } catch (const Error& e) {
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < n; ++i) kept += std::filesystem::exists(parts / part_name(i));
+    throw Error(e.message() + " [" + std::to_string(kept) + " of " + std::to_string(n) + " objects finished, kept in " +
+                    parts.string() + "; the same command resumes]",
+                e.file(), e.field());
   }
-  io::write_database(out, stored, settings.database, settings.seed, settings.write);
+  members.clear();
+
+  // 5. Merge, in input order; then the parts go.
+  t0 = Clock::now();
+  std::vector<std::filesystem::path> files;
+  for (std::size_t i = 0; i < n; ++i) files.push_back(parts / part_name(i));
+  io::merge_databases(files, out, settings.database, settings.seed);
+  {
+    io::DbReader db(out);
+    for (std::size_t i = 0; i < n; ++i) {
+      report.names.push_back(inputs[i].name);
+      report.coverage.push_back(db.info(i).coverage);
+    }
+  }
+  std::error_code ec;
+  std::filesystem::remove_all(parts, ec);
   report.times.write_s = seconds_since(t0);
   report.times.wall_s = seconds_since(t_start);
   return report;

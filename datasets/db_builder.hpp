@@ -4,6 +4,14 @@
 // Determinism: object i is built with io::object_seed(seed, name) into its own slot and the
 // file is written serially in input order, so the database is byte-identical for any thread
 // count (and an object's data do not depend on the other objects).
+//
+// Objects are written as they finish, each to a single-object database in the parts folder
+// (OUT.parts/ by default, written atomically), and merged into OUT at the end (compressed
+// arrays copied as they are); memory holds only the objects being built. A build that stops
+// (a kill, a failing mesh) keeps its finished parts: the same command resumes, building only
+// what is missing. The parts folder records a fingerprint of the inputs (names, sources, mesh
+// checksums), the parameters and the seed; a resume whose inputs or parameters changed is an
+// error naming the manifest and the folder.
 #pragma once
 
 #include "engine/database.hpp"
@@ -51,13 +59,29 @@ struct BuildTimes {
   double wall_s = 0.0;
 };
 
+/// Where a build stands, after each object.
+struct BuildProgress {
+  std::size_t done = 0;       ///< objects finished, resumed ones included
+  std::size_t total = 0;
+  std::size_t resumed = 0;    ///< objects taken from an earlier, stopped build
+  double elapsed_s = 0.0;     ///< since this build started building
+  std::string name;           ///< the object just finished
+  /// Seconds left at the rate of this build so far (0 before the first object).
+  double remaining_s() const {
+    const std::size_t built = done - resumed;
+    return built == 0 ? 0.0 : elapsed_s / double(built) * double(total - done);
+  }
+};
+
 struct BuildSettings {
   DatabaseSettings database;
   std::uint64_t seed = 1;                   ///< build seed (each object: io::object_seed)
   io::DbWriteSettings write;
-  /// Called after each object is built (done, total, name), under a lock, from the thread that
-  /// built it; may be empty.
-  std::function<void(std::size_t, std::size_t, const std::string&)> progress;
+  /// Folder of finished objects (empty: OUT.parts beside OUT); removed after the merge.
+  std::filesystem::path parts;
+  /// Called after each object is built, under a lock, from the thread that built it; may be
+  /// empty.
+  std::function<void(const BuildProgress&)> progress;
 };
 
 /// An imported and built object, with what the import noticed.
@@ -74,7 +98,8 @@ struct BuildReport {
   std::vector<std::vector<std::string>> warnings;    ///< per object
   std::vector<bool> flipped;
   std::vector<double> coverage;
-  BuildTimes times;
+  std::size_t resumed = 0;                           ///< objects kept from a stopped build
+  BuildTimes times;                                  ///< of the objects built by this run
 };
 
 /// Import one mesh (bytes already read when `bytes` is given) and build it with `seed`.
@@ -82,7 +107,9 @@ BuildResult build_one(const MeshInput& input, const DatabaseSettings& settings, 
                       const std::string* bytes = nullptr);
 
 /// Build every input and write the database to `out` (atomically). Throws the error of the
-/// first failing input (in input order); nothing is written then.
+/// first failing input (in input order); `out` is not written then. A mesh that does not import
+/// fails before anything is built; an object that fails to build leaves the finished ones in the
+/// parts folder, for the same call to resume.
 BuildReport build_database(const std::vector<MeshInput>& inputs, const std::filesystem::path& out,
                            const BuildSettings& settings);
 

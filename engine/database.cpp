@@ -38,6 +38,7 @@ struct Database::Cache {
   std::atomic<std::uint64_t> clock{0};
   std::atomic<std::size_t> bytes{0}, peak{0}, loads{0}, evictions{0}, resident{0};
   std::atomic<std::size_t> budget{0};
+  std::atomic<bool> surface{true};
   std::mutex trim_mutex;
 };
 
@@ -87,8 +88,10 @@ GeometryRef Database::geometry(std::size_t i) const {
       // up another task that could ask for this object and block on this slot.
       auto fresh = tbb::this_task_arena::isolate([&] {
         auto g = std::make_shared<ObjectGeometry>();
-        g->fine = source_->load_fine(i);
-        g->tree = KdTree3(g->fine.points);
+        if (cache_->surface.load()) {
+          g->fine = source_->load_fine(i);
+          g->tree = KdTree3(g->fine.points);
+        }
         g->field = source_->load_field(i);
         return g;
       });
@@ -155,6 +158,32 @@ void Database::set_memory_budget(std::size_t bytes) {
 }
 
 std::size_t Database::memory_budget() const { return cache_->budget.load(); }
+
+void Database::set_surface(bool on) {
+  std::lock_guard<std::mutex> guard(cache_->trim_mutex);
+  if (cache_->surface.load() == on) return;
+  for (std::size_t i = 0; i < size(); ++i) {
+    Slot& s = slots_[i];
+    std::lock_guard<std::mutex> lock(s.mutex);
+    if (s.geometry && s.geometry.use_count() > 1)
+      throw Error("cannot change which geometry is loaded while '" + info(i).name + "' is in use");
+  }
+  cache_->surface.store(on);
+  for (std::size_t i = 0; i < size(); ++i) {
+    Slot& s = slots_[i];
+    std::lock_guard<std::mutex> lock(s.mutex);
+    if (!s.geometry) continue;
+    s.geometry.reset();
+    s.resident.store(false, std::memory_order_release);
+    cache_->bytes.fetch_sub(s.bytes);
+    cache_->resident.fetch_sub(1);
+    s.bytes = 0;
+  }
+}
+
+bool Database::surface() const { return cache_->surface.load(); }
+
+PointCloud Database::load_fine(std::size_t i) const { return source_->load_fine(i); }
 
 void GeometryPins::load(const Database& db, const std::vector<std::uint32_t>& objects) {
   std::vector<std::uint32_t> missing;

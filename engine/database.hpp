@@ -139,6 +139,15 @@ class Database {
   std::size_t geometry_bytes() const;                ///< resident geometry (estimated bytes)
   std::size_t geometry_peak_bytes() const;           ///< largest geometry_bytes() so far
 
+  /// Whether geometry() loads each object's fine cloud and its k-d tree (the default) or the
+  /// distance field alone (a quarter of the memory and load time; enough for field ICP and the
+  /// field evaluation: see needs_surface in recognizer.hpp). A change drops the resident
+  /// geometry; throws ts::Error while some of it is in use.
+  void set_surface(bool on);
+  bool surface() const;
+  /// The fine cloud read from the source, not cached (symmetry detection, diagnostics).
+  PointCloud load_fine(std::size_t i) const;
+
   /// Resident geometry allowed (bytes, estimated from the loaded arrays and grids); 0: no limit
   /// (the default). A smaller budget evicts at once what is not in use.
   void set_memory_budget(std::size_t bytes);

@@ -77,7 +77,7 @@ IcpResult icp(const Scene& scene, const ObjectGeometry& geo, const Pose& T_init,
   const std::size_t m = s.max_points == 0 ? C : std::min(C, s.max_points);
   const bool use_field = s.metric == IcpMetric::field && !geo.field.empty();
   const bool plane = use_field || (s.metric != IcpMetric::point_to_point && geo.fine.has_normals());
-  if (m < 3 || geo.tree.size() < 3 || !T_init.matrix().allFinite()) return res;
+  if (m < 3 || (use_field ? geo.field.empty() : geo.tree.size() < 3) || !T_init.matrix().allFinite()) return res;
   res.valid = true;
   const double gate2 = s.max_correspondence > 0.0 ? s.max_correspondence * s.max_correspondence
                                                   : std::numeric_limits<double>::infinity();

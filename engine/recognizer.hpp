@@ -46,9 +46,6 @@ struct RecognizerSettings {
   bool dedupe = false;              ///< extension: drop hypotheses that duplicate a better one
                                     ///< (same object, pose within dedupe_distance / 2 degrees)
   double dedupe_distance = 0.002;   ///< m
-  bool answer_by_posterior = false; ///< extension: the answer is the object of largest posterior
-                                    ///< (its hypotheses' weights summed), at its best hypothesis;
-                                    ///< false: the object of the single best hypothesis
   double icp_top = 0.0;             ///< ransac-icp(-fs): ICP only the best share of candidates
                                     ///< by pre-ICP score (0: all, as in the paper)
   std::uint64_t seed = 1;           ///< every random draw derives from (seed, step, task)
@@ -119,6 +116,11 @@ struct StepResult {
   bool boundary_fallback = false;   ///< triplets had to use patch-boundary points
   StageTimes times;
 };
+
+/// Whether recognition with `s` reads the objects' fine clouds and k-d trees (ICP other than
+/// the field metric, the evaluation without the field, or d_outlier beyond the field's coarse
+/// margin); when not, Database::set_surface(false) loads the distance fields alone.
+bool needs_surface(const RecognizerSettings& s, const DatabaseSettings& database);
 
 class Recognizer {
  public:

@@ -13,8 +13,6 @@
 // difference either in larger offsets or in residuals, the original does not. The best
 // hypothesis of each of the `rivals` leading objects (by weight) whose ln wt is within
 // `max_gap` of the best is scored, and the one with the lowest V is the answer of the step.
-// When the recognizer answers by posterior (answer_by_posterior), the leading objects are those
-// whose posterior is at least `posterior_ratio` of the largest, in posterior order.
 // Only near-ties are re-decided: V ignores free space, which Eq. 6 weighs, so an object that
 // Eq. 6 already rejects clearly (free-space violations cost lambda = 0.02 each) keeps its rank.
 #pragma once
@@ -30,8 +28,6 @@ namespace ts {
 struct TwinSettings {
   std::size_t rivals = 0;           ///< leading objects compared (0: off; needs grasp groups)
   double max_gap = 0.005;           ///< only objects within this of the best ln wt compete
-  double posterior_ratio = 0.5;     ///< with answer_by_posterior: only objects whose posterior
-                                    ///< is at least this share of the largest compete
   double contact_sigma = 0.001;     ///< m, contact noise of the likelihood
   double offset_sigma = 0.003;      ///< m, per-grasp arm offset prior (per axis)
   std::size_t fit_points = 64;      ///< contacts per grasp in the offset fit

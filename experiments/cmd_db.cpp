@@ -70,6 +70,14 @@ void print_warnings(const std::string& name, const std::vector<std::string>& war
   for (const auto& w : warnings) std::cerr << "touchstone: warning: " << name << ": " << w << " (" << where << ")\n";
 }
 
+/// "45 s", "12 min 5 s", "2 h 3 min".
+std::string duration_text(double seconds) {
+  const long s = std::lround(std::max(0.0, seconds));
+  if (s < 60) return std::to_string(s) + " s";
+  if (s < 3600) return std::to_string(s / 60) + " min " + std::to_string(s % 60) + " s";
+  return std::to_string(s / 3600) + " h " + std::to_string((s % 3600) / 60) + " min";
+}
+
 std::string fixed(double v, int digits) {
   std::ostringstream s;
   s << std::fixed << std::setprecision(digits) << v;
@@ -92,12 +100,21 @@ int run_build(const BuildOptions& o) {
   bs.seed = o.common.seed;
   bs.write.deflate = o.deflate;
   const bool tty = stderr_is_terminal();
-  if (tty)
-    bs.progress = [](std::size_t done, std::size_t total, const std::string& name) {
-      std::cerr << "\r\033[K[" << done << "/" << total << "] " << name << std::flush;
-    };
+  // Progress with the time left: a line kept up to date on a terminal, else a line per tenth.
+  auto next_tenth = std::make_shared<std::size_t>(1);
+  bs.progress = [tty, next_tenth](const datasets::BuildProgress& p) {
+    const std::string left = p.done == p.total ? "" : ", about " + duration_text(p.remaining_s()) + " left";
+    const std::string resumed = p.resumed ? " (" + std::to_string(p.resumed) + " resumed)" : "";
+    if (tty) {
+      std::cerr << "\r\033[K[" << p.done << "/" << p.total << "]" << resumed << " " << p.name << left << std::flush;
+    } else if (p.done * 10 >= *next_tenth * p.total) {
+      *next_tenth = p.done * 10 / p.total + 1;
+      std::cerr << "built " << p.done << " of " << p.total << " objects" << resumed << left << "\n";
+    }
+  };
   const auto report = datasets::build_database(inputs, o.out, bs);
   if (tty) std::cerr << "\r\033[K";
+  if (report.resumed) std::cerr << "resumed a stopped build: " << report.resumed << " objects were already built\n";
   for (std::size_t i = 0; i < inputs.size(); ++i) print_warnings(report.names[i], report.warnings[i], inputs[i].display());
 
   const auto& t = report.times;
@@ -115,6 +132,7 @@ int run_build(const BuildOptions& o) {
     json j;
     j["out"] = o.out;
     j["objects"] = report.names;
+    j["resumed"] = report.resumed;
     json warnings = json::array();
     for (std::size_t i = 0; i < report.names.size(); ++i)
       for (const auto& w : report.warnings[i]) warnings.push_back({{"object", report.names[i]}, {"message", w}});

@@ -509,6 +509,7 @@ int run_recognize(const RecognizeOptions& o) {
   auto source = std::make_shared<io::DbReader>(o.db);
   Database db(source);
   if (db.size() == 0) throw Error("the database has no objects", o.db, "/objects");
+  db.set_surface(needs_surface(rs, db.settings()));
   set_memory_budget(db, o.memory_budget_mb, o.db);
   double largest = 0.0;
   for (std::size_t i = 0; i < db.size(); ++i) largest = std::max(largest, db.info(i).extent.norm());

@@ -191,7 +191,15 @@ class RecognitionEngine final : public RunEngine {
       // The recognizer sees its objects in the file's order (the whole file: the file itself),
       // so an experiment over the full database recognizes exactly as `touchstone recognize`.
       std::sort(objects.begin(), objects.end());
+      const RecognizerSettings rs = recognizer_settings(v.config);
+      const bool surface = needs_surface(rs, reader_->settings());
+      const std::string db_label = db_.description.value("path", std::string("database"));
       auto [it, inserted] = group_of.emplace(objects, groups_.size());
+      if (!inserted && surface && !groups_[it->second].database->surface()) {
+        // A later variant needs the fine clouds the group's first one did not: load them too.
+        groups_[it->second].database->set_surface(true);
+        cli::set_memory_budget(*groups_[it->second].database, config.memory_budget_mb, db_label, "memory_budget_mb");
+      }
       if (inserted) {
         DatabaseGroup g;
         g.objects = objects;
@@ -205,8 +213,8 @@ class RecognitionEngine final : public RunEngine {
         else
           source = std::make_shared<SubsetSource>(reader_, objects);
         g.database = std::make_unique<Database>(source);
-        cli::set_memory_budget(*g.database, config.memory_budget_mb,
-                               db_.description.value("path", std::string("database")), "memory_budget_mb");
+        g.database->set_surface(surface);
+        cli::set_memory_budget(*g.database, config.memory_budget_mb, db_label, "memory_budget_mb");
         groups_.push_back(std::move(g));
       }
       VariantData d;
@@ -214,7 +222,7 @@ class RecognitionEngine final : public RunEngine {
       d.group = it->second;
       d.simulation = simulation_settings(v.config);
       d.pool_key = pool_key(d.simulation);
-      d.recognizer = recognizer_settings(v.config);
+      d.recognizer = rs;
       variants_.push_back(std::move(d));
       labels_.push_back(v.label);
       configs_.push_back(to_json(v.config).dump());

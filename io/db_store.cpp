@@ -296,6 +296,16 @@ void check_object_name(const std::string& name, const std::string& file, const s
   if (name.front() == ' ' || name.back() == ' ') bad("leading or trailing blank");
 }
 
+namespace {
+/// A new database's root attributes and /params.
+void write_root(h5::Group& root, const DatabaseSettings& settings, std::uint64_t build_seed) {
+  root.set_attribute("format", kDbFormatName);
+  root.set_attribute("schema_version", kDbSchemaVersion);
+  root.set_attribute("feature_dim", static_cast<std::int64_t>(kFeatureDim));
+  write_params(root, settings, build_seed);
+}
+}  // namespace
+
 void write_database(const std::filesystem::path& path, const std::vector<StoredObject>& objects,
                     const DatabaseSettings& settings, std::uint64_t build_seed, const DbWriteSettings& write) {
   const std::string file = path.string();
@@ -305,15 +315,42 @@ void write_database(const std::filesystem::path& path, const std::vector<StoredO
     std::lock_guard<std::recursive_mutex> lock(h5::mutex());
     auto f = h5::File::create(out);
     auto root = f.root();
-    root.set_attribute("format", kDbFormatName);
-    root.set_attribute("schema_version", kDbSchemaVersion);
-    root.set_attribute("feature_dim", static_cast<std::int64_t>(kFeatureDim));
-    write_params(root, settings, build_seed);
+    write_root(root, settings, build_seed);
     std::vector<std::string> order;
     auto objs = root.create_group("objects");
     for (const auto& s : objects) {
       write_object(objs, s, write, file);
       order.push_back(s.object->info.name);
+    }
+    root.write_strings("order", order);
+    f.close();
+  }
+  out.commit();
+}
+
+void merge_databases(const std::vector<std::filesystem::path>& parts, const std::filesystem::path& path,
+                     const DatabaseSettings& settings, std::uint64_t build_seed) {
+  const std::string file = path.string();
+  AtomicOutput out(path);
+  {
+    std::lock_guard<std::recursive_mutex> lock(h5::mutex());
+    auto f = h5::File::create(out);
+    auto root = f.root();
+    write_root(root, settings, build_seed);
+    std::vector<std::string> order;
+    std::set<std::string> names;
+    auto objs = root.create_group("objects");
+    for (const auto& part : parts) {
+      auto pf = h5::File::open(part, h5::File::Access::read, part.string());
+      const auto proot = pf.root();
+      check_root(proot, true);
+      const auto names_in = proot.read_strings("order");
+      if (names_in.size() != 1)
+        throw Error("a part must hold one object, not " + std::to_string(names_in.size()), part.string(), "/order");
+      if (!names.insert(names_in[0]).second)
+        throw Error("object '" + names_in[0] + "' already exists", file, "/objects/" + names_in[0]);
+      objs.copy_from(proot.open_group("objects"), names_in[0]);
+      order.push_back(names_in[0]);
     }
     root.write_strings("order", order);
     f.close();

@@ -49,6 +49,13 @@ void write_database(const std::filesystem::path& path, const std::vector<StoredO
                     const DatabaseSettings& settings, std::uint64_t build_seed,
                     const DbWriteSettings& write = {});
 
+/// One database from single-object databases (`db build`'s parts, written as objects finish),
+/// in the given order: each part's object is copied as stored (no recompression). Every part
+/// must hold exactly one object, of this program's schema; `settings` and `build_seed` are the
+/// database's /params. Written atomically, like write_database.
+void merge_databases(const std::vector<std::filesystem::path>& parts, const std::filesystem::path& path,
+                     const DatabaseSettings& settings, std::uint64_t build_seed);
+
 /// Append objects to an existing database (built with the database's settings). The original
 /// file is replaced only when everything succeeded.
 void append_to_database(const std::filesystem::path& path, const std::vector<StoredObject>& objects,

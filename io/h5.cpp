@@ -422,6 +422,18 @@ void Group::remove(const std::string& name) {
   if (H5Ldelete(node_->id, name.c_str(), H5P_DEFAULT) < 0) node_->fail(field, "cannot remove the object");
 }
 
+void Group::copy_from(const Group& source, const std::string& name) {
+  Guard g;
+  const std::string field = child_path(name);
+  if (!node_ || !source.node_) throw Error("HDF5 group used before it was opened", "", field);
+  node_->require_open(field);
+  source.node_->require_open(source.child_path(name));
+  if (!source.has(name)) throw Error("cannot copy a missing object", source.node_->file_name, source.child_path(name));
+  if (has(name)) throw Error("object already exists", node_->file_name, field);
+  if (H5Ocopy(source.node_->id, name.c_str(), node_->id, name.c_str(), H5P_DEFAULT, H5P_DEFAULT) < 0)
+    node_->fail(field, "cannot copy " + source.node_->file_name + ":" + source.child_path(name));
+}
+
 // --- datasets --------------------------------------------------------------------------------
 template <class T>
 void Group::write(const std::string& name, const T* data, const Shape& shape, const Storage& storage) {

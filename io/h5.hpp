@@ -78,6 +78,9 @@ class Group {
   std::vector<std::string> children() const;
   /// Unlink a child (group or dataset). Its space is not reclaimed in the file.
   void remove(const std::string& name);
+  /// Copy `source`'s child `name` (a group with everything below it, or a dataset) here under
+  /// the same name, compressed chunks as they are (H5Ocopy). Throws when it exists here.
+  void copy_from(const Group& source, const std::string& name);
 
   // --- datasets ---------------------------------------------------------------------------
   /// Write a new dataset of `shape` from `data` (row-major, product(shape) values).

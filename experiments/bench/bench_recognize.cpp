@@ -130,8 +130,6 @@ void set_param(RecognizerSettings& s, const std::string& kv) {
   else if (k == "prune_blocks") s.ransac.prune_blocks = static_cast<std::size_t>(v);
   else if (k == "object_draws") s.ransac.object_draws = static_cast<std::size_t>(v);
   else if (k == "twins") s.twins.rivals = static_cast<std::size_t>(v);
-  else if (k == "twins_ratio") s.twins.posterior_ratio = v;
-  else if (k == "answer_by_posterior") s.answer_by_posterior = v != 0;
   else if (k == "shortlist") s.shortlist.objects = static_cast<std::size_t>(v);
   else if (k == "shortlist_contacts") s.shortlist.contacts = static_cast<std::size_t>(v);
   else if (k == "shortlist_outlier") s.shortlist.outlier_distance = v;
@@ -177,6 +175,7 @@ int main(int argc, char** argv) {
 
     auto reader = std::make_shared<io::DbReader>(db_path);
     Database db(reader);
+    db.set_surface(needs_surface(rs, db.settings()));   // as `touchstone recognize` does
     const std::size_t n_obj = objects > 0 ? std::min(objects, db.size()) : db.size();
     std::printf("bench_recognize: %s\nmachine: %s\ndatabase: %s (%zu objects), method %s, %zu grasps, noise %s\n",
                 "recognizer speed and accuracy", cli::machine_description().c_str(), db_path.c_str(),
@@ -184,7 +183,7 @@ int main(int argc, char** argv) {
     std::printf("parameters: n_p %zu, psi %.2f, N %d, R %d, W %zu, W per object %zu, refine_new %d (pool %zu, "
                 "%zu per object), dedupe %d, free inside %d, d_outlier %.3f, lambda %.3f, res_free %.3f, "
                 "normal_tol %.1f deg, ICP %s (%d it, %zu pts), object draws %zu, shortlist %zu, twins %zu, "
-                "prune blocks %zu, answer by posterior %d\n",
+                "prune blocks %zu\n",
                 rs.n_p, rs.psi, rs.ransac.triplets, rs.ransac.registrations, rs.ransac.prune_w,
                 rs.ransac.prune_per_object, int(rs.refine_new), rs.refine_pool, rs.new_per_object,
                 int(rs.dedupe), int(rs.evaluate.free_inside_penalty),
@@ -193,7 +192,7 @@ int main(int argc, char** argv) {
                 : rs.icp.metric == IcpMetric::point_to_plane ? "point-to-plane"
                                                              : "point-to-point",
                 rs.icp.max_iterations, rs.icp.max_points, rs.ransac.object_draws, rs.shortlist.objects,
-                rs.twins.rivals, rs.ransac.prune_blocks, int(rs.answer_by_posterior));
+                rs.twins.rivals, rs.ransac.prune_blocks);
     const double s_obj_max = db.settings().max_extent;
 
     auto t0 = std::chrono::steady_clock::now();

@@ -83,9 +83,10 @@ TEST_CASE("db builder: meshes inside an archive; the first bad mesh in input ord
   ts::datasets::BuildSettings settings;
   settings.database = fast_settings();
   std::size_t progress_calls = 0;
-  settings.progress = [&](std::size_t done, std::size_t total, const std::string&) {
+  settings.progress = [&](const ts::datasets::BuildProgress& p) {
     ++progress_calls;
-    CHECK(done <= total);
+    CHECK(p.done <= p.total);
+    CHECK(p.resumed == 0);
   };
   tbb::task_arena arena(2);
   const auto report = arena.execute(
@@ -113,4 +114,67 @@ TEST_CASE("db builder: meshes inside an archive; the first bad mesh in input ord
   inputs[1] = ts::datasets::input_from_path((dir / "src/m/ball.off").string(), "box");
   CHECK_THROWS_WITH_AS(ts::datasets::build_database(inputs, dir / "x.h5", settings), doctest::Contains("duplicate"),
                        ts::Error);
+}
+
+TEST_CASE("db builder: a stopped build keeps its finished objects and resumes to the same bytes") {
+  TempDir dir("builder");
+  ts::test::write_off(dir / "box.off", ts::test::box_mesh({0, 0, 0}, {2, 1, 1}));
+  ts::test::write_off(dir / "ball.off", ts::test::sphere_mesh(1.0, 1));
+  ts::test::write_off(dir / "slab.off", ts::test::box_mesh({0, 0, 0}, {3, 2, 0.5}));
+  ts::test::write_text(dir / "m.tsv", "pkg\tbox.off\tbox\npkg\tball.off\tball\npkg\tslab.off\tslab\n");
+  const auto inputs = ts::datasets::inputs_from_manifest(dir / "m.tsv");
+  ts::datasets::BuildSettings settings;
+  settings.database = fast_settings();
+  tbb::task_arena one(1);
+  one.execute([&] { ts::datasets::build_database(inputs, dir / "whole.h5", settings); });
+  CHECK_FALSE(fs::exists(dir / "whole.h5.parts"));   // removed after the merge
+
+  // Stop after the first object (as a kill would, between objects): nothing under the real
+  // name, the finished object kept.
+  ts::datasets::BuildSettings stopping = settings;
+  stopping.progress = [](const ts::datasets::BuildProgress& p) {
+    if (p.done == 1) throw ts::Error("stopped by the test");
+  };
+  CHECK_THROWS_WITH_AS(one.execute([&] { ts::datasets::build_database(inputs, dir / "db.h5", stopping); }),
+                       doctest::Contains("1 of 3 objects finished, kept in"), ts::Error);
+  CHECK_FALSE(fs::exists(dir / "db.h5"));
+  REQUIRE(fs::exists(dir / "db.h5.parts/fingerprint"));
+
+  // A resume with other inputs is refused, naming the manifest; the parts stay.
+  ts::test::write_text(dir / "m2.tsv", "pkg\tbox.off\tbox\npkg\tslab.off\tball\npkg\tball.off\tslab\n");
+  CHECK_THROWS_WITH_AS(ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "m2.tsv"), dir / "db.h5", settings),
+                       doctest::Contains("was started with other inputs, parameters or seed"), ts::Error);
+  CHECK_THROWS_WITH_AS(ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "m2.tsv"), dir / "db.h5", settings),
+                       doctest::Contains(("(" + (dir / "m2.tsv").string() + ", fingerprint)").c_str()), ts::Error);
+  ts::datasets::BuildSettings other_seed = settings;
+  other_seed.seed = 2;
+  CHECK_THROWS_WITH_AS(ts::datasets::build_database(inputs, dir / "db.h5", other_seed),
+                       doctest::Contains("was started with other inputs"), ts::Error);
+  REQUIRE(fs::exists(dir / "db.h5.parts/fingerprint"));
+
+  // The same inputs resume: only what is missing is built, and the database is the same bytes
+  // as the uninterrupted build (with 2 threads: the thread count does not matter either).
+  std::size_t built = 0;
+  ts::datasets::BuildSettings resuming = settings;
+  resuming.progress = [&](const ts::datasets::BuildProgress& p) {
+    ++built;
+    CHECK(p.resumed == 1);
+  };
+  tbb::task_arena two(2);
+  const auto report = two.execute([&] { return ts::datasets::build_database(inputs, dir / "db.h5", resuming); });
+  CHECK(report.resumed == 1);
+  CHECK(built == 2);
+  CHECK(report.names == std::vector<std::string>{"box", "ball", "slab"});
+  CHECK_FALSE(fs::exists(dir / "db.h5.parts"));
+  CHECK(ts::test::read_bytes(dir / "db.h5") == ts::test::read_bytes(dir / "whole.h5"));
+
+  // A damaged part (a crash of the disk, not of the build: parts are written atomically) is
+  // built again.
+  CHECK_THROWS(one.execute([&] { ts::datasets::build_database(inputs, dir / "db2.h5", stopping); }));
+  const auto part = dir / "db2.h5.parts/0000000.h5";
+  REQUIRE(fs::exists(part));
+  fs::resize_file(part, fs::file_size(part) / 2);
+  const auto again = one.execute([&] { return ts::datasets::build_database(inputs, dir / "db2.h5", settings); });
+  CHECK(again.resumed == 0);
+  CHECK(ts::test::read_bytes(dir / "db2.h5") == ts::test::read_bytes(dir / "whole.h5"));
 }
