@@ -341,14 +341,31 @@ struct DistanceField::Impl {
   }
 
   /// The box spanned by the active coarse voxels (the coarse level is a dense box).
+  /// Only bricks that reach beyond the bounds so far are scanned voxel by voxel (a load reads
+  /// a few of the thousands).
   void set_box() {
     coarse_box.setEmpty();
     const CompactGrid& g = coarse.grid;
-    for (std::size_t b = 0; b < g.bricks.size(); ++b)
-      for (int n = 0; n < CompactGrid::kBrickVoxels; ++n)
-        if (g.values[b * CompactGrid::kBrickVoxels + static_cast<std::size_t>(n)] != CompactGrid::kInactive)
-          coarse_box.extend(Vec3(g.bricks[b][0] * 4 + (n >> 4), g.bricks[b][1] * 4 + ((n >> 2) & 3),
-                                 g.bricks[b][2] * 4 + (n & 3)) * g.voxel);
+    std::array<int, 3> lo{0, 0, 0}, hi{-1, -1, -1};
+    bool any = false;
+    for (std::size_t b = 0; b < g.bricks.size(); ++b) {
+      const auto& c = g.bricks[b];
+      if (any && 4 * c[0] >= lo[0] && 4 * c[0] + 3 <= hi[0] && 4 * c[1] >= lo[1] && 4 * c[1] + 3 <= hi[1] &&
+          4 * c[2] >= lo[2] && 4 * c[2] + 3 <= hi[2])
+        continue;   // nothing in it can widen the box
+      for (int n = 0; n < CompactGrid::kBrickVoxels; ++n) {
+        if (g.values[b * CompactGrid::kBrickVoxels + static_cast<std::size_t>(n)] == CompactGrid::kInactive) continue;
+        const std::array<int, 3> v{4 * c[0] + (n >> 4), 4 * c[1] + ((n >> 2) & 3), 4 * c[2] + (n & 3)};
+        for (int a = 0; a < 3; ++a) {
+          lo[a] = any ? std::min(lo[a], v[a]) : v[a];
+          hi[a] = any ? std::max(hi[a], v[a]) : v[a];
+        }
+        any = true;
+      }
+    }
+    if (!any) return;
+    coarse_box.extend(Vec3(lo[0], lo[1], lo[2]) * g.voxel);
+    coarse_box.extend(Vec3(hi[0], hi[1], hi[2]) * g.voxel);
   }
 };
 

@@ -36,7 +36,7 @@ int thread_count(const CommonOptions& options);
 std::string machine_description();
 
 /// Default resident object geometry of `recognize`, `experiment` and the benchmarks (MB).
-constexpr double kDefaultMemoryBudgetMb = 768;
+constexpr double kDefaultMemoryBudgetMb = 256;
 /// A --memory-budget / memory_budget_mb value in MB (unset: the default; 0: no limit) in bytes.
 std::size_t memory_budget_bytes(const std::optional<double>& mb);
 

@@ -230,7 +230,7 @@ void register_experiment(CLI::App& app) {
                 "step on every thread (latency). Never changes results");
   e->add_option("--memory-budget", eo->memory_budget,
                 "Resident object geometry in MB, loaded on demand and evicted least-recently-used "
-                "(default 768; 0: no limit). Never changes results");
+                "(default 256; 0: no limit). Never changes results");
   e->add_option("--set", eo->set,
                 "Any configuration key, KEY=VALUE (repeatable), e.g. --set ransac.samples=50x200 "
                 "or --set sweep.method=bricpsf,ransac-icp");

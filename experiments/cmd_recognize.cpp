@@ -595,7 +595,7 @@ void register_recognize(CLI::App& app) {
                         ->check(CLI::Range(0, 100000000));
   sub->add_option("--memory-budget", o->memory_budget_mb,
                   "Resident object geometry in MB, loaded on demand and evicted least-recently-used "
-                  "(default 768; 0: no limit). Never changes results")
+                  "(default 256; 0: no limit). Never changes results")
       ->check(CLI::NonNegativeNumber);
   sub->add_option("--d-outlier", s.evaluate.d_outlier, "Outlier distance of Eq. 4 (m)")->group(g)->check(CLI::PositiveNumber);
   sub->add_option("--lambda", s.evaluate.lambda, "Free-space weight of Eq. 9")->group(g)->check(CLI::NonNegativeNumber);

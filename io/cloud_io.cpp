@@ -347,6 +347,8 @@ PointCloud read_ply(const std::filesystem::path& path) {
       if (tok.size() == 5 && tok[1] == "list") {
         const auto ct = ply_scalar(std::string(tok[2])), it = ply_scalar(std::string(tok[3]));
         if (!ct || !it) throw Error("unknown property type in list", file, where);
+        if (*ct == Scalar::f32 || *ct == Scalar::f64)
+          throw Error("a list's count type must be an integer type, not '" + std::string(tok[2]) + "'", file, where);
         p.list = true;
         p.count_type = *ct;
         p.type = *it;
@@ -412,6 +414,10 @@ PointCloud read_ply(const std::filesystem::path& path) {
           if (p.list) {
             if (t >= tok.size() || !parse_uint(tok[t], skip))
               throw Error("malformed list count", file, where);
+            if (skip > tok.size() - t - 1)
+              throw Error("the list holds " + std::to_string(skip) + " values, the line only " +
+                              std::to_string(tok.size() - t - 1) + " more",
+                          file, where);
             t += 1 + skip;
             continue;
           }
@@ -442,7 +448,7 @@ PointCloud read_ply(const std::filesystem::path& path) {
               throw Error("the file ends inside element '" + e.name + "'", file, where);
             const double c = load(p, prop.count_type, big);
             p += cs;
-            if (c < 0) throw Error("negative list length", file, where);
+            if (!(c >= 0) || c > 4294967295.0) throw Error("list length out of range", file, where);
             const auto bytes = static_cast<std::uint64_t>(c) * scalar_size(prop.type);
             if (static_cast<std::uint64_t>(end - p) < bytes)
               throw Error("the file ends inside element '" + e.name + "'", file, where);
@@ -577,14 +583,23 @@ PointCloud read_pcd(const std::filesystem::path& path) {
                     ", " + std::to_string(sizes.size()) + ", " + std::to_string(types.size()) + ", " +
                     std::to_string(counts.size()) + ")",
                 file, fwhere);
+  // Counts are validated before anything is computed from them: every product below fits.
+  constexpr std::uint64_t kMaxPoints = std::uint64_t{1} << 40, kMaxCount = std::uint64_t{1} << 20;
+  std::uint64_t wh = 0;
+  if (width && __builtin_mul_overflow(*width, height.value_or(1), &wh))
+    throw Error("WIDTH*HEIGHT overflows", file, "WIDTH");
   if (!points) {
     if (!width) throw Error("the PCD header has neither POINTS nor WIDTH", file);
-    points = *width * height.value_or(1);
-  } else if (width && *width * height.value_or(1) != *points) {
-    throw Error("POINTS (" + std::to_string(*points) + ") differs from WIDTH*HEIGHT (" +
-                    std::to_string(*width * height.value_or(1)) + ")",
+    points = wh;
+  } else if (width && wh != *points) {
+    throw Error("POINTS (" + std::to_string(*points) + ") differs from WIDTH*HEIGHT (" + std::to_string(wh) + ")",
                 file);
   }
+  if (*points > kMaxPoints)
+    throw Error("POINTS " + std::to_string(*points) + " is beyond any real cloud (at most 2^40)", file, "POINTS");
+  for (std::size_t i = 0; i < counts.size(); ++i)
+    if (counts[i] > kMaxCount)
+      throw Error("field '" + names[i] + "' has COUNT " + std::to_string(counts[i]) + " (at most 2^20)", file, fwhere);
 
   // Fields: value index of each component, byte offset within a binary record.
   std::vector<PcdField> fields(names.size());
@@ -654,7 +669,11 @@ PointCloud read_pcd(const std::filesystem::path& path) {
 
   const auto* body = reinterpret_cast<const unsigned char*>(data.data()) + lines.pos;
   const std::size_t available = data.size() - lines.pos;
-  const std::uint64_t needed = *points * record;
+  std::uint64_t needed = 0;   // bytes of point data
+  if (__builtin_mul_overflow(*points, record, &needed))
+    throw Error("POINTS (" + std::to_string(*points) + ") records of " + std::to_string(record) +
+                    " bytes exceed any file",
+                file, "POINTS");
   if (encoding == "binary") {
     if (record > 0 && available / record < *points)
       throw Error("the file is truncated: " + std::to_string(*points) + " points need " +

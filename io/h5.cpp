@@ -504,6 +504,27 @@ Shape Group::shape(const std::string& name) const {
   return dataset_shape(*node_, ds.get(), child_path(name));
 }
 
+namespace {
+/// Never trust a size read from a file: the declared shape must not overflow, and the values it
+/// declares must be backed by the bytes the file stores for them (zlib cannot compress better
+/// than about 1 000:1; the writers here never leave chunks unallocated). Checked before any
+/// allocation, so a crafted few-KB file cannot ask for gigabytes.
+void check_declared_size(const Node& node, hid_t ds, const std::string& field, const Shape& s, std::size_t value_size) {
+  std::uint64_t n = 1;
+  for (std::uint64_t d : s)
+    if (__builtin_mul_overflow(n, d, &n)) throw Error("dataset shape overflows", node.file_name, field);
+  std::uint64_t bytes = 0;
+  if (__builtin_mul_overflow(n, std::uint64_t{value_size}, &bytes))
+    throw Error("dataset shape overflows", node.file_name, field);
+  const std::uint64_t stored = H5Dget_storage_size(ds);
+  constexpr std::uint64_t kMaxRatio = 1100, kSlack = std::uint64_t{1} << 20;
+  if (bytes > kSlack && (bytes - kSlack) / kMaxRatio > stored)
+    throw Error("dataset declares " + std::to_string(n) + " values (" + std::to_string(bytes) +
+                    " bytes) but the file stores only " + std::to_string(stored) + " bytes for them",
+                node.file_name, field);
+}
+}  // namespace
+
 template <class T>
 std::vector<T> Group::read(const std::string& name, const ShapeSpec& expected, Shape* actual) const {
   Guard g;
@@ -513,6 +534,7 @@ std::vector<T> Group::read(const std::string& name, const ShapeSpec& expected, S
   check_type<T>(*node_, ds.get(), field, "dataset");
   const Shape s = dataset_shape(*node_, ds.get(), field);
   check_shape(*node_, field, s, expected);
+  check_declared_size(*node_, ds.get(), field, s, sizeof(T));
   std::vector<T> out(product(s));
   if (!out.empty() && H5Dread(ds.get(), TypeOf<T>::mem(), H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()) < 0)
     node_->fail(field, "cannot read the dataset");
@@ -530,6 +552,7 @@ std::vector<T> Group::read_rows(const std::string& name, std::uint64_t first, st
   check_type<T>(*node_, ds.get(), field, "dataset");
   const Shape s = dataset_shape(*node_, ds.get(), field);
   check_shape(*node_, field, s, expected);
+  check_declared_size(*node_, ds.get(), field, s, sizeof(T));
   if (s.empty()) throw Error("dataset is a scalar, expected rows", node_->file_name, field);
   if (first > s[0] || count > s[0] - first)
     throw Error("rows [" + std::to_string(first) + "," + std::to_string(first + count) +

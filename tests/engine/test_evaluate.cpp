@@ -297,7 +297,7 @@ TEST_CASE("Per-grasp offsets: a single flat patch keeps its unobservable offsets
   s.grasp_offset_sigma = 0.003;
   const GraspFit fit = fit_grasp_offsets(sc, box.field, Pose::Identity(), s);
   REQUIRE(fit.offsets.size() == 1);
-  CHECK(fit.offsets[0].z() == doctest::Approx(-0.002).epsilon(0.01));
+  CHECK(fit.offsets[0].z() == doctest::Approx(-0.002).epsilon(0.01).scale(0));   // within 1 %
   CHECK(std::abs(fit.offsets[0].x()) < 1e-9);
   CHECK(std::abs(fit.offsets[0].y()) < 1e-9);
   // Farther than 3 sigma: the offset stops at 3 sigma and the rest stays an error.
@@ -332,7 +332,7 @@ TEST_CASE("Per-grasp offsets separate a sphere from a faceted look-alike that pl
   CHECK(sphere_on.log_weight > facets_on.log_weight);
   CHECK(sphere_on.grasp_offset_rms == doctest::Approx(std::sqrt([&] {
           double s2 = 0; for (const Vec3& t : g.offsets) s2 += t.squaredNorm(); return s2 / 12; }()))
-                                          .epsilon(0.25));
+                                          .epsilon(0.25).scale(0));   // within 25 %
 }
 
 TEST_CASE("Near-twin verification: the box beats its 10 % stretched twin that Eq. 4 cannot tell apart") {

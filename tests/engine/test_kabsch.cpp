@@ -54,7 +54,7 @@ TEST_CASE("Kabsch with noise: residual near the noise, pose close") {
   for (const Vec3& p : src) dst.push_back(T * p + sigma * Vec3(rng.normal(), rng.normal(), rng.normal()));
   const RigidFit fit = kabsch(src, dst);
   REQUIRE(fit.valid);
-  CHECK(fit.rms == doctest::Approx(sigma * std::sqrt(3.0)).epsilon(0.1));
+  CHECK(fit.rms == doctest::Approx(sigma * std::sqrt(3.0)).epsilon(0.1).scale(0));   // within 10 %
   CHECK(angle_between(fit.T_target_source, T) < 1e-3);
 }
 

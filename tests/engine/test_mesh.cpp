@@ -86,11 +86,13 @@ TEST_CASE("mesh measurements: unit cube area, volume and winding") {
   const double r = 0.1;
   const double vs = mesh_signed_volume(make_sphere(r, 4));
   CHECK(vs < 4.0 / 3.0 * std::numbers::pi * r * r * r);
-  CHECK(vs == doctest::Approx(4.0 / 3.0 * std::numbers::pi * r * r * r).epsilon(0.01));
+  // Relative tolerances (.scale(0)): these values are far below 1, where doctest's default
+  // scale would make epsilon an absolute tolerance that accepts anything.
+  CHECK(vs == doctest::Approx(4.0 / 3.0 * std::numbers::pi * r * r * r).epsilon(0.01).scale(0));
   const double vt = mesh_signed_volume(make_torus(0.07, 0.025, 96, 48));
-  CHECK(vt == doctest::Approx(2.0 * std::numbers::pi * std::numbers::pi * 0.07 * 0.025 * 0.025).epsilon(0.01));
+  CHECK(vt == doctest::Approx(2.0 * std::numbers::pi * std::numbers::pi * 0.07 * 0.025 * 0.025).epsilon(0.01).scale(0));
   CHECK(mesh_area(make_torus(0.07, 0.025, 96, 48)) ==
-        doctest::Approx(4.0 * std::numbers::pi * std::numbers::pi * 0.07 * 0.025).epsilon(0.01));
+        doctest::Approx(4.0 * std::numbers::pi * std::numbers::pi * 0.07 * 0.025).epsilon(0.01).scale(0));
 }
 
 TEST_CASE("mesh topology: closed, open and non-manifold meshes") {

@@ -164,6 +164,48 @@ TEST_CASE("Geometry is loaded only for objects a hypothesis reaches") {
   CHECK(steps.back().objects_allowed < db.size());
 }
 
+TEST_CASE("Distance fields alone: the same answers, a fraction of the memory; settings that need more refuse") {
+  auto src = test::make_source();
+  RecognizerSettings s = fast();
+  s.icp.metric = IcpMetric::field;   // field ICP and field evaluation: no fine cloud needed
+  REQUIRE_FALSE(needs_surface(s, src->settings()));
+  Database full(src), fields(src);
+  fields.set_surface(false);
+  Recognizer a(full, s), b(fields, s);
+  const Pose T = test::random_pose(31, Vec3(0.2, 0, 0));
+  const auto ra = explore(a, 1, T, 4, 9, 0.0005, 0.0002);
+  const auto rb = explore(b, 1, T, 4, 9, 0.0005, 0.0002);
+  for (std::size_t k = 0; k < ra.size(); ++k) {
+    REQUIRE(ra[k].hypotheses.size() == rb[k].hypotheses.size());
+    for (std::size_t i = 0; i < ra[k].hypotheses.size(); ++i) {
+      CHECK(ra[k].hypotheses[i].object == rb[k].hypotheses[i].object);
+      CHECK(ra[k].hypotheses[i].log_weight == rb[k].hypotheses[i].log_weight);
+      CHECK(ra[k].hypotheses[i].pose.matrix() == rb[k].hypotheses[i].pose.matrix());
+    }
+  }
+  REQUIRE(fields.geometry_resident() > 0);
+  CHECK(fields.geometry_bytes() * 2 < full.geometry_bytes());
+  {
+    const GeometryRef g = fields.geometry(1);
+    CHECK(g->fine.empty());
+    CHECK(g->tree.size() == 0);
+    CHECK_FALSE(g->field.empty());
+    // While geometry is in use the choice cannot change.
+    CHECK_THROWS_AS(fields.set_surface(true), Error);
+  }
+  fields.set_surface(true);   // afterwards it can, and loads follow it
+  CHECK(fields.geometry_resident() == 0);
+  CHECK_FALSE(fields.geometry(1)->fine.empty());
+
+  // Point-to-plane ICP reads the fine cloud: refused on a fields-only database.
+  RecognizerSettings plane = s;
+  plane.icp.metric = IcpMetric::point_to_plane;
+  CHECK(needs_surface(plane, src->settings()));
+  Database fields_only(src);
+  fields_only.set_surface(false);
+  CHECK_THROWS_WITH_AS(Recognizer(fields_only, plane), doctest::Contains("need the objects' fine clouds"), Error);
+}
+
 TEST_CASE("Exact early rejection: the selected top k equal a full evaluation's") {
   auto src = test::make_source();
   Database db(src);

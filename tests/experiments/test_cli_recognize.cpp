@@ -83,6 +83,8 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
   CHECK(ja["method"] == "bricpsf");
   REQUIRE(ja["steps"].size() == 6);
   CHECK(finite_numbers(ja));
+  // The per-answer checks below run at least on the last step: six ideal grasps give an answer.
+  REQUIRE_FALSE(ja["steps"][5]["object"].is_null());
   for (std::size_t k = 0; k < 6; ++k) {
     const auto& s = ja["steps"][k];
     for (const char* key : {"step", "object", "weight", "posterior", "pose", "position_error_m",
@@ -123,7 +125,7 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
   };
   CHECK(ja["preset"] == "improved");  // the default
   check_params(res, {{"W_per_object", 200.0}, {"refine_new", 1.0}, {"grasp_offset_sigma", 0.003},
-                     {"object_draws", 200.0}, {"shortlist", 16.0}, {"twins", 5.0}, {"prune_blocks", 0.0}});
+                     {"object_draws", 100.0}, {"shortlist", 16.0}, {"twins", 5.0}, {"prune_blocks", 0.0}});
 
   SUBCASE("--preset paper, and a flag on top of a preset") {
     const Run p = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --preset paper --out rp.h5" + kFast);
@@ -137,7 +139,7 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
     REQUIRE_MESSAGE(q.code == 0, q.err);
     check_params(io::read_result(dir / "rq.h5"),
                  {{"W_per_object", 50.0}, {"dedupe", 0.0}, {"grasp_offset_sigma", 0.005}, {"refine_new", 1.0},
-                  {"shortlist", 3.0}, {"twins", 0.0}, {"prune_blocks", 2.0}, {"object_draws", 200.0}});
+                  {"shortlist", 3.0}, {"twins", 0.0}, {"prune_blocks", 2.0}, {"object_draws", 100.0}});
   }
   SUBCASE("--steps and --method") {
     const Run c = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --method batch-ransac" + kFast);

@@ -172,15 +172,22 @@ TEST_CASE("cloud io: PCL binary_compressed (LZF) data") {
   CHECK_THROWS_WITH_AS(ts::io::read_cloud(dir / "bad.pcd"), doctest::Contains("corrupt"), ts::Error);
 }
 
+namespace {
+/// Writes `text` to dir/name; reading it must throw one error with `message` and the path.
+void expect_refused(const fs::path& dir, const char* name, const std::string& text, const char* message) {
+  const std::string label = name;
+  CAPTURE(label);
+  const auto p = dir / name;
+  ts::test::write_text(p, text);
+  CHECK_THROWS_WITH_AS(ts::io::read_cloud(p), doctest::Contains(message), ts::Error);
+  CHECK_THROWS_WITH_AS(ts::io::read_cloud(p), doctest::Contains(p.string().c_str()), ts::Error);
+}
+}  // namespace
+
 TEST_CASE("cloud io: malformed headers and data name the file and the line") {
   TempDir dir("cloud");
   auto expect = [&](const char* name, const std::string& text, const char* message) {
-    const std::string label = name;
-    CAPTURE(label);
-    const auto p = dir / name;
-    ts::test::write_text(p, text);
-    CHECK_THROWS_WITH_AS(ts::io::read_cloud(p), doctest::Contains(message), ts::Error);
-    CHECK_THROWS_WITH_AS(ts::io::read_cloud(p), doctest::Contains(p.string().c_str()), ts::Error);
+    expect_refused(dir.path(), name, text, message);
   };
   expect("a.ply", "plx\n", "not a PLY file");
   expect("b.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n", "no end_header");
@@ -223,6 +230,43 @@ TEST_CASE("cloud io: malformed headers and data name the file and the line") {
          "line 8");
   expect("x.xyz", "1 2 3\n", "unknown point-cloud format");
   CHECK_THROWS_WITH_AS(ts::io::read_cloud(dir / "missing.ply"), doctest::Contains("does not exist"), ts::Error);
+}
+
+TEST_CASE("cloud io: crafted counts are refused before anything is computed from them") {
+  TempDir dir("cloud");
+  auto expect = [&](const char* name, const std::string& text, const char* message) {
+    expect_refused(dir.path(), name, text, message);
+  };
+  // The review's 100-byte file: POINTS * record wrapped around to 4 bytes, which the compressed
+  // header then matched; reading the points ran off the buffer (a segmentation fault).
+  std::string lzf = std::string("\x05\x00\x00\x00\x04\x00\x00\x00", 8) + std::string("\x03\x01\x02\x03\x04\x00", 6);
+  expect("wrap.pcd",
+         "VERSION 0.7\nFIELDS x y z\nSIZE 1 1 2\nTYPE U U U\nCOUNT 1 1 1\nPOINTS 4611686018427387905\n"
+         "DATA binary_compressed\n" + lzf,
+         "is beyond any real cloud");
+  expect("count.pcd",
+         "VERSION 0.7\nFIELDS x y z w\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 18446744073709551615\nPOINTS 1\n"
+         "DATA binary\n0123456789abcdef",
+         "has COUNT 18446744073709551615 (at most 2^20)");
+  expect("wh.pcd",
+         "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 9223372036854775808\nHEIGHT 4\nDATA binary\n",
+         "WIDTH*HEIGHT overflows");
+  expect("record.pcd",
+         "VERSION 0.7\nFIELDS x y z w\nSIZE 4 4 4 8\nTYPE F F F F\nCOUNT 1 1 1 1048576\nPOINTS 1099511627776\n"
+         "DATA binary\n0123",
+         "truncated");
+  expect("float_count.ply",
+         "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+         "property float z\nelement face 1\nproperty list float int vertex_indices\nend_header\n",
+         "a list's count type must be an integer type, not 'float'");
+  expect("long_list.ply",
+         "ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar int idx\nproperty float x\n"
+         "property float y\nproperty float z\nend_header\n200 1 2 3\n",
+         "the list holds 200 values, the line only 3 more");
+  expect("huge_list.ply",
+         "ply\nformat ascii 1.0\nelement vertex 1\nproperty list uint int idx\nproperty float x\n"
+         "property float y\nproperty float z\nend_header\n18446744073709551615 1 2 3\n",
+         "the list holds 18446744073709551615 values");
 }
 
 TEST_CASE("cloud io: writing rejects non-finite values and unknown extensions, leaving no file") {

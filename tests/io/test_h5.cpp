@@ -287,3 +287,30 @@ TEST_CASE("h5: strings as h5py writes them (variable-length UTF-8) and ASCII fix
   CHECK(root.string_attribute("noise") == "underwater");
   CHECK(root.string_attribute("unit") == "metre");
 }
+
+TEST_CASE("h5: a dataset declaring more values than the file stores is refused before allocating") {
+  TempDir dir("h5");
+  const auto path = dir / "huge.h5";
+  {  // a chunked dataset of 1e9 x 7 doubles (56 GB declared), nothing written: a few KB of file
+    const hid_t f = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    REQUIRE(f >= 0);
+    const hsize_t dims[2] = {1000000000, 7}, chunk[2] = {1024, 7};
+    const hid_t space = H5Screate_simple(2, dims, nullptr);
+    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    H5Pset_chunk(dcpl, 2, chunk);
+    const hid_t ds = H5Dcreate2(f, "truth", H5T_IEEE_F64LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+    REQUIRE(ds >= 0);
+    H5Dclose(ds);
+    H5Pclose(dcpl);
+    H5Sclose(space);
+    H5Fclose(f);
+  }
+  REQUIRE(fs::file_size(path) < 100000);
+  const auto file = h5::File::open(path);
+  const auto root = file.root();
+  CHECK_THROWS_WITH_AS(root.read<double>("truth", {h5::kAny, 7}),
+                       doctest::Contains("declares 7000000000 values (56000000000 bytes) but the file stores only"),
+                       ts::Error);
+  CHECK_THROWS_WITH_AS(root.read<double>("truth", {h5::kAny, 7}), doctest::Contains("/truth)"), ts::Error);
+  CHECK_THROWS_WITH_AS(root.read_rows<double>("truth", 0, 2, {h5::kAny, 7}), doctest::Contains("declares"), ts::Error);
+}
