@@ -2,10 +2,13 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <limits>
 #include <map>
+#include <memory>
 #include <mutex>
 
 namespace ts {
@@ -92,8 +95,8 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
   Impl& m = *impl_;
   // Each object's rows in k-d leaf order, starting on a block boundary (padding rows between
   // objects), so that a block belongs to one object: knn_per_object searches an object's blocks
-  // best-first like knn searches all of them. Objects are read one at a time (the table keeps
-  // the only copy of the features).
+  // best-first like knn searches all of them. The table keeps the only copy of the features
+  // (a few objects' worth in flight while it is built).
   std::size_t expected = 0;  // blocks, from the summaries (a reservation, not trusted)
   for (std::size_t o = 0; o < db.size(); ++o)
     if (objects.empty() || (o < objects.size() && objects[o]))
@@ -101,14 +104,18 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
   expected = std::min<std::size_t>(expected, std::size_t{1} << 26);
   m.blocks.reserve(expected * kDim * kBlock);
   m.refs.reserve(expected * kBlock);
-  for (std::size_t o = 0; o < db.size(); ++o) {
-    if (!objects.empty() && (o >= objects.size() || !objects[o])) continue;
-    const std::vector<Feature> fs = db.load_features(o).features;
-    if (fs.empty()) continue;
-    std::vector<const Feature*> of(fs.size());
-    std::vector<std::uint32_t> idx(fs.size());
-    for (std::size_t i = 0; i < fs.size(); ++i) of[i] = &fs[i], idx[i] = static_cast<std::uint32_t>(i);
-    kd_order(of, idx, 0, idx.size());
+  struct Loaded {
+    std::size_t o = 0;
+    std::vector<Feature> fs;
+    std::vector<const Feature*> of;
+    std::vector<std::uint32_t> idx;
+  };
+  auto append = [&](const Loaded& L) {
+    const std::size_t o = L.o;
+    const std::vector<Feature>& fs = L.fs;
+    const std::vector<const Feature*>& of = L.of;
+    const std::vector<std::uint32_t>& idx = L.idx;
+    if (fs.empty()) return;
     const std::size_t b0 = m.refs.size() / kBlock, nb = (fs.size() + kBlock - 1) / kBlock;
     if ((b0 + nb) * kBlock >= std::numeric_limits<std::uint32_t>::max())
       throw Error("FeatureTable: too many features");
@@ -141,7 +148,38 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
       }
     }
     m.features += fs.size();
-  }
+  };
+  // Objects are read in order (the store reads serially), k-d ordered in parallel, appended in
+  // order: the same table for any thread count, with a few objects in flight at a time.
+  std::size_t next = 0;
+  const auto tokens = static_cast<std::size_t>(2 * std::max(1, tbb::this_task_arena::max_concurrency()));
+  tbb::parallel_pipeline(
+      tokens,
+      tbb::make_filter<void, std::shared_ptr<Loaded>>(
+          tbb::filter_mode::serial_in_order,
+          [&](tbb::flow_control& fc) -> std::shared_ptr<Loaded> {
+            while (next < db.size() && !objects.empty() && (next >= objects.size() || !objects[next])) ++next;
+            if (next >= db.size()) {
+              fc.stop();
+              return nullptr;
+            }
+            auto L = std::make_shared<Loaded>();
+            L->o = next++;
+            L->fs = db.load_features(L->o).features;
+            return L;
+          }) &
+          tbb::make_filter<std::shared_ptr<Loaded>, std::shared_ptr<Loaded>>(
+              tbb::filter_mode::parallel,
+              [](std::shared_ptr<Loaded> L) {
+                L->of.resize(L->fs.size());
+                L->idx.resize(L->fs.size());
+                for (std::size_t i = 0; i < L->fs.size(); ++i)
+                  L->of[i] = &L->fs[i], L->idx[i] = static_cast<std::uint32_t>(i);
+                kd_order(L->of, L->idx, 0, L->idx.size());
+                return L;
+              }) &
+          tbb::make_filter<std::shared_ptr<Loaded>, void>(tbb::filter_mode::serial_in_order,
+                                                          [&](std::shared_ptr<Loaded> L) { append(*L); }));
   m.object_blocks.push_back(static_cast<std::uint32_t>(m.refs.size() / kBlock));
   m.rows = m.refs.size();
   m.blocks.shrink_to_fit();

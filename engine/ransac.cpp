@@ -322,7 +322,8 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
       masks.push_back(mask);
     }
   }
-  const auto nearest = s.prune_per_object > 0 ? search.knn_per_object(queries, s.prune_per_object, masks, s.prune_blocks)
+  const std::size_t blocks = db.size() > s.prune_blocks_min_database ? s.prune_blocks : 0;
+  const auto nearest = s.prune_per_object > 0 ? search.knn_per_object(queries, s.prune_per_object, masks, blocks)
                                                : search.knn(queries, s.prune_w);
   {
     std::vector<std::array<std::size_t, 2>> jobs;  // (triplet, first query)

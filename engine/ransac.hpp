@@ -34,6 +34,8 @@ struct RansacSettings {
                                       ///< object's prune_blocks blocks of 128 features nearest
                                       ///< to the query (approximate; 0: exact, every block
                                       ///< that can hold one of the W_obj nearest)
+  std::size_t prune_blocks_min_database = 0;  ///< prune_blocks acts only on databases of more
+                                              ///< objects than this (smaller ones: exact)
   bool feature_table = true;          ///< W-nearest search: exact batched brute force
                                       ///< (FeatureTable); false: the FeatureIndex
   double min_spacing = 0.0;           ///< m between triplet points; 0: the FPFH feature radius.

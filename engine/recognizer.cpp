@@ -147,6 +147,10 @@ RecognizerSettings RecognizerSettings::improved() {
   s.ransac.object_draws = 100;
   s.shortlist.objects = 16;
   s.shortlist.min_database = 48;
+  // ... and on them, per-object pruning reads each object's 8 blocks of 128 features nearest to
+  // the query (450 objects: 0.181 s a step against 0.191 s exact, 62 % at step 20 either way).
+  s.ransac.prune_blocks = 8;
+  s.ransac.prune_blocks_min_database = 48;
   s.twins.rivals = 5;
   return s;
 }

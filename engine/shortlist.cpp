@@ -4,9 +4,33 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <limits>
+#include <mutex>
+#include <set>
 
 namespace ts {
+
+namespace {
+
+/// e of contact k of the scene under candidate pose T_object_scene (see shortlist.hpp).
+struct Screen {
+  const Scene& scene;
+  const PointCloud& coarse;
+  const KdTree3& tree;
+  double voxel, inv2;
+  double error(const Pose& T_object_scene, std::size_t k) const {
+    const Vec3 p = T_object_scene * scene.ordered[k];
+    const Neighbour nb = tree.nearest(p);
+    const Vec3 v = p - coarse.points[nb.index];
+    double d = std::sqrt(nb.sq_distance) - voxel;
+    if (coarse.has_normals()) d = std::max(d, std::abs(coarse.normals[nb.index].dot(v)));
+    return std::min(1.0, d * d * inv2);
+  }
+};
+
+}  // namespace
 
 std::vector<double> screen_candidates(const Scene& scene, const Database& db,
                                       const std::vector<Candidate>& cands, const ShortlistSettings& s) {
@@ -20,23 +44,81 @@ std::vector<double> screen_candidates(const Scene& scene, const Database& db,
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t i = r.begin(); i != r.end(); ++i) {
                         const Candidate& c = cands[i];
-                        const PointCloud& coarse = db.keypoints(c.object).coarse;
-                        const KdTree3& tree = db.keypoints(c.object).tree;
-                        if (tree.size() == 0) continue;
+                        const ObjectKeypoints& kp = db.keypoints(c.object);
+                        if (kp.tree.size() == 0) continue;
+                        const Screen sc{scene, kp.coarse, kp.tree, voxel, inv2};
                         const Pose T = c.T_scene_object.inverse();
                         double sum = 0.0;
-                        for (std::size_t k = 0; k < m; ++k) {
-                          const Vec3 p = T * scene.ordered[k];
-                          const Neighbour nb = tree.nearest(p);
-                          const Vec3 v = p - coarse.points[nb.index];
-                          double d = std::sqrt(nb.sq_distance) - voxel;
-                          if (coarse.has_normals()) d = std::max(d, std::abs(coarse.normals[nb.index].dot(v)));
-                          sum += std::min(1.0, d * d * inv2);
-                        }
+                        for (std::size_t k = 0; k < m; ++k) sum += sc.error(T, k);
                         score[i] = sum / double(m);
                       }
                     });
   return score;
+}
+
+std::vector<double> screen_objects(const Scene& scene, const Database& db, const std::vector<Candidate>& cands,
+                                   const ShortlistSettings& s, std::size_t keep) {
+  std::vector<double> best(db.size(), 1.0);
+  const std::size_t m = std::min(s.contacts, scene.ordered.size());
+  if (m == 0 || !(s.outlier_distance > 0.0)) return best;
+  std::vector<std::vector<std::uint32_t>> of(db.size());   // candidates of each object, in order
+  for (std::size_t i = 0; i < cands.size(); ++i) of[cands[i].object].push_back(static_cast<std::uint32_t>(i));
+  std::vector<std::uint32_t> objects;
+  for (std::uint32_t o = 0; o < db.size(); ++o)
+    if (!of[o].empty()) {
+      objects.push_back(o);
+      (void)db.keypoints(o);   // load on this thread first
+    }
+  // Objects with the most candidates first: likely the good ones, which lower the bar early.
+  std::stable_sort(objects.begin(), objects.end(),
+                   [&](std::uint32_t x, std::uint32_t y) { return of[x].size() > of[y].size(); });
+  const double voxel = db.settings().scan.coarse_voxel;
+  const double inv2 = 1.0 / (s.outlier_distance * s.outlier_distance);
+  // The bar of `keep`: the keep-th smallest of the objects' best scores so far (each an upper
+  // bound of that object's final best), so never below the final keep-th best.
+  std::mutex bar_mutex;
+  std::multiset<double> bests;
+  std::atomic<double> bar{std::numeric_limits<double>::infinity()};
+  auto publish = [&](double before, double now) {
+    std::lock_guard<std::mutex> lock(bar_mutex);
+    if (before < 1.5) bests.erase(bests.find(before));
+    bests.insert(now);
+    if (bests.size() >= keep) bar.store(*std::next(bests.begin(), static_cast<std::ptrdiff_t>(keep - 1)));
+  };
+  tbb::parallel_for(std::size_t{0}, objects.size(), [&](std::size_t j) {
+    const std::uint32_t o = objects[j];
+    const ObjectKeypoints& kp = db.keypoints(o);
+    if (kp.tree.size() == 0) return;
+    const Screen sc{scene, kp.coarse, kp.tree, voxel, inv2};
+    double low = 1.0, published = 2.0;   // 2: not published yet
+    for (std::uint32_t i : of[o]) {
+      // Stop once the partial sum (each e >= 0) shows the candidate cannot beat the object's
+      // best so far (nor, with keep, the bar), with a margin that rounding cannot cross.
+      const double limit = keep > 0 ? std::min(low, bar.load(std::memory_order_relaxed)) : low;
+      const double stop = limit * double(m) * (1.0 + 1e-12) + 1e-12;
+      const Pose T = cands[i].T_scene_object.inverse();
+      double sum = 0.0;
+      std::size_t k = 0;
+      for (; k < m && sum <= stop; ++k) sum += sc.error(T, k);
+      if (k == m && sum <= stop && sum / double(m) < low) {
+        low = sum / double(m);
+        if (keep > 0) {
+          publish(published, low);
+          published = low;
+        }
+      }
+    }
+    best[o] = low;
+  });
+  if (keep > 0) {
+    // Only the keep best are exact (the others may have been cut short, depending on timing):
+    // report 1 for the others, so that the result does not depend on the threads.
+    std::vector<std::uint32_t> order = objects;
+    std::sort(order.begin(), order.end(),
+              [&](std::uint32_t x, std::uint32_t y) { return best[x] != best[y] ? best[x] < best[y] : x < y; });
+    for (std::size_t r = keep; r < order.size(); ++r) best[order[r]] = 1.0;
+  }
+  return best;
 }
 
 Shortlist shortlist_objects(const Scene& scene, const Database& db, const std::vector<Candidate>& cands,
@@ -54,9 +136,7 @@ Shortlist shortlist_objects(const Scene& scene, const Database& db, const std::v
       if (reached[o]) out.ranked.push_back(o);
     return out;
   }
-  const std::vector<double> score = screen_candidates(scene, db, cands, s);
-  for (std::size_t i = 0; i < cands.size(); ++i)
-    out.best[cands[i].object] = std::min(out.best[cands[i].object], score[i]);
+  out.best = screen_objects(scene, db, cands, s, s.objects);
   for (std::uint32_t o = 0; o < db.size(); ++o)
     if (reached[o]) out.ranked.push_back(o);
   std::stable_sort(out.ranked.begin(), out.ranked.end(),

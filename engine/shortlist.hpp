@@ -36,8 +36,10 @@ struct Shortlist {
   bool active = false;                ///< false: nothing was left out
   std::vector<std::uint8_t> mask;     ///< per database object: its candidates go on
   std::vector<double> best;           ///< per database object: best screening score (lower is
-                                      ///< better; 1 where it has no candidate)
-  std::vector<std::uint32_t> ranked;  ///< objects with candidates, best first (ties: smaller index)
+                                      ///< better; exact for the `objects` best, 1 for the others
+                                      ///< and where it has no candidate)
+  std::vector<std::uint32_t> ranked;  ///< objects with candidates, best first (ties: smaller
+                                      ///< index); beyond the `objects` best, in index order
   std::size_t kept = 0;               ///< objects in the mask
 };
 
@@ -46,6 +48,14 @@ struct Shortlist {
 std::vector<double> screen_candidates(const Scene& scene, const Database& db,
                                       const std::vector<Candidate>& candidates,
                                       const ShortlistSettings& settings);
+/// Per database object, its best (lowest) candidate score: the minimum of screen_candidates over
+/// the object's candidates, exactly, but a candidate stops being scored as soon as its partial
+/// sum shows it cannot beat the object's best so far (1 for objects without candidates). With
+/// keep > 0 only the keep best objects (by score, then index) matter: a candidate also stops once
+/// it cannot beat the keep-th best score so far, and every other object reports 1. Either way
+/// the result is the same for any thread count.
+std::vector<double> screen_objects(const Scene& scene, const Database& db, const std::vector<Candidate>& cands,
+                                   const ShortlistSettings& s, std::size_t keep = 0);
 
 /// Rank the objects of `candidates` by their best screening score and keep the settings.objects
 /// best and every object of `always`. Inactive (every object kept) when settings.objects is 0

@@ -155,7 +155,10 @@ RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
     s.shortlist.objects = static_cast<std::size_t>(*p.shortlist);
     s.shortlist.min_database = 0;
   }
-  if (p.prune_blocks) s.ransac.prune_blocks = static_cast<std::size_t>(*p.prune_blocks);
+  if (p.prune_blocks) {  // asked for explicitly: on any database
+    s.ransac.prune_blocks = static_cast<std::size_t>(*p.prune_blocks);
+    s.ransac.prune_blocks_min_database = 0;
+  }
   if (p.object_draws) s.ransac.object_draws = static_cast<std::size_t>(*p.object_draws);
   if (p.twins) s.twins.rivals = static_cast<std::size_t>(*p.twins);
   return s;

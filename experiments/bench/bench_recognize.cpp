@@ -127,7 +127,10 @@ void set_param(RecognizerSettings& s, const std::string& kv) {
   else if (k == "d_thresh") s.evaluate.d_thresh = v;
   else if (k == "refine_pool") s.refine_pool = static_cast<std::size_t>(v);
   else if (k == "new_per_object") s.new_per_object = static_cast<std::size_t>(v);
-  else if (k == "prune_blocks") s.ransac.prune_blocks = static_cast<std::size_t>(v);
+  else if (k == "prune_blocks") {  // asked for explicitly: on any database
+    s.ransac.prune_blocks = static_cast<std::size_t>(v);
+    s.ransac.prune_blocks_min_database = 0;
+  }
   else if (k == "object_draws") s.ransac.object_draws = static_cast<std::size_t>(v);
   else if (k == "twins") s.twins.rivals = static_cast<std::size_t>(v);
   else if (k == "shortlist") s.shortlist.objects = static_cast<std::size_t>(v);

@@ -119,8 +119,15 @@ int main(int argc, char** argv) {
             RansacStats st;
             const auto cands = ransac_candidates(scene, db, search, allowed, rs.ransac, seed, step, &st);
             t0 = Clock::now();
-            const Shortlist sl = shortlist_objects(scene, db, cands, {}, ShortlistSettings{.objects = 1});
+            // every object's exact best (the recognizer's shortlist computes only its K best)
+            const std::vector<double> best = screen_objects(scene, db, cands, ShortlistSettings{});
             screen_time.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+            Shortlist sl;
+            for (const Candidate& c : cands) sl.ranked.push_back(c.object);
+            std::sort(sl.ranked.begin(), sl.ranked.end());
+            sl.ranked.erase(std::unique(sl.ranked.begin(), sl.ranked.end()), sl.ranked.end());
+            std::stable_sort(sl.ranked.begin(), sl.ranked.end(),
+                             [&](std::uint32_t a, std::uint32_t b) { return best[a] < best[b]; });
             prune_time.push_back(st.time_prune_s);
             register_time.push_back(st.time_register_s);
             reached.push_back(st.objects_reached);

@@ -330,3 +330,44 @@ TEST_CASE("Approximate pruning by block: the exact search's neighbours when ever
   CHECK(total == total_exact);  // w of every object still (each block holds >= 9 rows)
   CHECK(found > total / 2);  // the nearest block by mean holds most of the exact neighbours
 }
+
+TEST_CASE("Shortlist: each object's best score, cut short where a candidate cannot win, equals the full minimum") {
+  auto src = test::make_source();
+  Database db(src);
+  ShortlistSettings s;
+  const Pose T = test::random_pose(90, Vec3(0.1, -0.2, 0.3));
+  const PointCloud c = test::touch(src->fines[1], T, 6, 9, 0.0005, 0.0002);
+  const Scene scene = prepare_scene(c, {}, db.settings().fpfh, SceneSettings{}, 1, 1);
+  // Candidates of every object, near and far from the truth, interleaved in a random order.
+  Rng rng(91);
+  std::vector<Candidate> cands;
+  for (int n = 0; n < 400; ++n) {
+    Candidate x;
+    x.object = static_cast<std::uint32_t>(rng.index(db.size()));
+    x.T_scene_object = scene.to_scene(T);
+    x.T_scene_object.translation() += rng.uniform(0.0, 0.03) * rng.unit_vector();
+    x.T_scene_object.linear() = x.T_scene_object.linear() * Eigen::AngleAxisd(rng.uniform(0.0, 0.3), rng.unit_vector()).toRotationMatrix();
+    cands.push_back(x);
+  }
+  const std::vector<double> score = screen_candidates(scene, db, cands, s);
+  std::vector<double> want(db.size(), 1.0);
+  for (std::size_t i = 0; i < cands.size(); ++i) want[cands[i].object] = std::min(want[cands[i].object], score[i]);
+  std::vector<double> one, two;
+  tbb::task_arena(1).execute([&] { one = screen_objects(scene, db, cands, s); });
+  tbb::task_arena(2).execute([&] { two = screen_objects(scene, db, cands, s); });
+  CHECK(one == want);   // bit for bit
+  CHECK(two == want);
+  // Only the K best needed: they are exact and the same; the others report 1.
+  std::vector<std::uint32_t> order;
+  for (std::uint32_t o = 0; o < db.size(); ++o) order.push_back(o);
+  std::sort(order.begin(), order.end(),
+            [&](std::uint32_t x, std::uint32_t y) { return want[x] != want[y] ? want[x] < want[y] : x < y; });
+  for (std::size_t K : {1u, 2u, 3u}) {
+    std::vector<double> k1, k2;
+    tbb::task_arena(1).execute([&] { k1 = screen_objects(scene, db, cands, s, K); });
+    tbb::task_arena(2).execute([&] { k2 = screen_objects(scene, db, cands, s, K); });
+    CHECK(k1 == k2);
+    for (std::size_t r = 0; r < order.size(); ++r) CHECK(k1[order[r]] == (r < K ? want[order[r]] : 1.0));
+  }
+  CHECK(*std::min_element(want.begin(), want.end()) < 0.5);   // some candidate is good
+}

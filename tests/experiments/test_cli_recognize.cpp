@@ -125,7 +125,7 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
   };
   CHECK(ja["preset"] == "improved");  // the default
   check_params(res, {{"W_per_object", 200.0}, {"refine_new", 1.0}, {"grasp_offset_sigma", 0.003},
-                     {"object_draws", 100.0}, {"shortlist", 16.0}, {"twins", 5.0}, {"prune_blocks", 0.0}});
+                     {"object_draws", 100.0}, {"shortlist", 16.0}, {"twins", 5.0}, {"prune_blocks", 8.0}});
 
   SUBCASE("--preset paper, and a flag on top of a preset") {
     const Run p = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --preset paper --out rp.h5" + kFast);
