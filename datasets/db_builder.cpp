@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <exception>
 #include <fstream>
@@ -41,11 +42,18 @@ struct Imported {
 
 Imported import_input(const MeshInput& in, const DatabaseSettings& settings, const std::string* bytes) {
   const auto t0 = Clock::now();
-  const io::MeshImportSettings s{.max_extent = settings.max_extent};
+  const io::MeshImportSettings s{
+      .scale = settings.scale, .max_extent = settings.max_extent, .units = in.units > 0.0 ? in.units : 1.0};
   Imported out;
-  if (bytes) out.mesh = io::import_mesh_from_memory(*bytes, in.display(), s);
-  else if (!in.member.empty()) out.mesh = io::import_mesh_from_memory(read_archive_member(in.path, in.member), in.display(), s);
-  else out.mesh = io::import_mesh(in.path, s);
+  try {
+    if (bytes) out.mesh = io::import_mesh_from_memory(*bytes, in.display(), s);
+    else if (!in.member.empty()) out.mesh = io::import_mesh_from_memory(read_archive_member(in.path, in.member), in.display(), s);
+    else out.mesh = io::import_mesh(in.path, s);
+  } catch (const Error& e) {
+    // A wrong size at true scale is the declaration's mistake: name where the units came from.
+    if (e.field() != "units" || in.origin.empty()) throw;
+    throw Error(e.message() + " (" + in.display() + ")", in.origin, in.origin_field + ", units");
+  }
   out.import_s = seconds_since(t0);
   return out;
 }
@@ -97,6 +105,7 @@ std::vector<MeshInput> inputs_from_manifest(const std::filesystem::path& manifes
   for (const auto& e : read_manifest(manifest)) {
     MeshInput in;
     in.name = e.name;
+    in.units = e.units;
     in.path = e.path;
     in.member = e.member;
     in.source = e.source + ": " + e.path.filename().string() + (e.member.empty() ? "" : ":" + e.member);
@@ -160,14 +169,22 @@ namespace {
 std::string build_fingerprint(const std::vector<MeshInput>& inputs, const std::vector<std::string>& mesh_sha256,
                               const BuildSettings& settings) {
   std::string text = "touchstone db build, schema " + std::to_string(io::kDbSchemaVersion) + "\n";
+  const bool keep = settings.database.scale == ObjectScale::keep;
+  if (keep) text += "scale keep\n";   // (fit builds: the text of the builds before keep existed)
   text += "seed " + std::to_string(settings.seed) + "\ndeflate " + std::to_string(settings.write.deflate) + "\n";
   char value[64];
   for (const auto& v : io::settings_values(settings.database)) {
     std::snprintf(value, sizeof value, "%.17g", v.value);
     text += v.group + "." + v.name + " " + value + "\n";
   }
-  for (std::size_t i = 0; i < inputs.size(); ++i)
-    text += inputs[i].name + "\t" + inputs[i].source + "\t" + mesh_sha256[i] + "\n";
+  for (std::size_t i = 0; i < inputs.size(); ++i) {
+    text += inputs[i].name + "\t" + inputs[i].source + "\t" + mesh_sha256[i];
+    if (keep) {
+      std::snprintf(value, sizeof value, "\t%.17g", inputs[i].units);
+      text += value;
+    }
+    text += "\n";
+  }
   return io::sha256_hex(text);
 }
 
@@ -227,9 +244,14 @@ std::string part_name(std::size_t i) {
 
 }  // namespace
 
-BuildReport build_database(const std::vector<MeshInput>& inputs, const std::filesystem::path& out,
+BuildReport build_database(const std::vector<MeshInput>& given, const std::filesystem::path& out,
                            const BuildSettings& settings) {
   const auto t_start = Clock::now();
+  std::vector<MeshInput> inputs = given;
+  if (!(settings.units > 0.0) || !std::isfinite(settings.units))
+    throw Error("mesh units must be a positive number of metres", out.string(), "units");
+  for (auto& in : inputs)
+    if (!(in.units > 0.0)) in.units = settings.units;
   const std::size_t n = inputs.size();
   if (n == 0) throw Error("no objects to build", out.string());
   {

@@ -33,6 +33,7 @@ struct MeshInput {
   std::string member;           ///< archive member, or empty
   std::string origin;           ///< where the input was declared (for errors), e.g. "m.tsv"
   std::string origin_field;     ///< e.g. "line 12"
+  double units = 0.0;           ///< m per mesh unit under --scale keep (0: BuildSettings::units)
 
   /// "path" or "archive:member" (what errors name).
   std::string display() const;
@@ -77,6 +78,8 @@ struct BuildSettings {
   DatabaseSettings database;
   std::uint64_t seed = 1;                   ///< build seed (each object: io::object_seed)
   io::DbWriteSettings write;
+  /// m per mesh unit of the inputs without their own units (database.scale = keep).
+  double units = 1.0;
   /// Folder of finished objects (empty: OUT.parts beside OUT); removed after the merge.
   std::filesystem::path parts;
   /// Called after each object is built, under a lock, from the thread that built it; may be

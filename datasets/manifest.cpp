@@ -2,6 +2,7 @@
 
 #include "engine/core.hpp"
 #include "io/db_store.hpp"
+#include "io/mesh_import.hpp"
 
 #include <fstream>
 #include <set>
@@ -35,9 +36,9 @@ std::vector<ManifestEntry> read_manifest(const std::filesystem::path& manifest) 
     std::stringstream ss(line);
     for (std::string f; std::getline(ss, f, '\t');) fields.push_back(f);
     const std::string where = "line " + std::to_string(number);
-    if (fields.size() < 3)
+    if (fields.size() < 3 || fields.size() > 4)
       throw Error("manifest line has " + std::to_string(fields.size()) +
-                      " fields, expected source<TAB>path<TAB>name", manifest.string(), where);
+                      " fields, expected source<TAB>path<TAB>name[<TAB>units]", manifest.string(), where);
     ManifestEntry e;
     e.source = fields[0];
     e.name = fields[2];
@@ -47,6 +48,12 @@ std::vector<ManifestEntry> read_manifest(const std::filesystem::path& manifest) 
     io::check_object_name(e.name, manifest.string(), where);
     if (!names.insert(e.name).second)
       throw Error("duplicate object name '" + e.name + "'", manifest.string(), where);
+    if (fields.size() == 4) {
+      const auto units = io::metres_per_unit(fields[3]);
+      if (!units)
+        throw Error("units must be m, cm, mm or in, not '" + fields[3] + "'", manifest.string(), where + ", units");
+      e.units = *units;
+    }
     auto [path, member] = split_archive_path(fields[1]);
     e.member = member;
     if (!e.member.empty() && e.member.back() == '/')

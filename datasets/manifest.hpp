@@ -1,6 +1,8 @@
-// Mesh manifests: one object a line, "source<TAB>path<TAB>name". `path` is a mesh file or
+// Mesh manifests: one object a line, "source<TAB>path<TAB>name[<TAB>units]". `path` is a mesh file or
 // "ARCHIVE:MEMBER" for a mesh inside a (gzip-compressed) tar archive; relative paths are
-// resolved against the manifest's folder. Blank lines and lines starting with '#' are skipped.
+// resolved against the manifest's folder. `units` (m, cm, mm or in) is the length unit of the
+// mesh file, used when the database keeps real sizes (db build --scale keep); without it the
+// build's --units applies. Blank lines and lines starting with '#' are skipped.
 #pragma once
 
 #include <filesystem>
@@ -15,6 +17,7 @@ struct ManifestEntry {
   std::filesystem::path path;   ///< resolved file (the archive, when member is set)
   std::string member;           ///< member inside the archive, or empty
   std::string name;
+  double units = 0.0;           ///< metres per mesh unit from the units column (0: not given)
   int line = 0;                 ///< 1-based line in the manifest
 };
 

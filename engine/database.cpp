@@ -10,6 +10,27 @@
 
 namespace ts {
 
+namespace {
+template <class Db>
+double largest_extent_of(const Db& db) {
+  if (db.settings().scale == ObjectScale::fit || db.size() == 0) return db.settings().max_extent;
+  double largest = 0.0;
+  for (std::size_t i = 0; i < db.size(); ++i) largest = std::max(largest, db.info(i).extent.maxCoeff());
+  return largest;
+}
+}  // namespace
+
+double largest_object_extent(const ObjectSource& source) { return largest_extent_of(source); }
+double largest_object_extent(const Database& db) { return largest_extent_of(db); }
+
+const char* to_string(ObjectScale scale) { return scale == ObjectScale::keep ? "keep" : "fit"; }
+
+ObjectScale parse_object_scale(const std::string& word, const std::string& file, const std::string& field) {
+  if (word == "fit") return ObjectScale::fit;
+  if (word == "keep") return ObjectScale::keep;
+  throw Error("object scale must be 'fit' or 'keep', not '" + word + "'", file, field);
+}
+
 MemorySource::MemorySource(std::vector<BuiltObject> objects, DatabaseSettings settings)
     : objects_(std::move(objects)), settings_(std::move(settings)) {}
 

@@ -17,9 +17,15 @@
 
 namespace ts {
 
+/// How a mesh's size becomes the object's: `fit` scales every mesh so that its largest
+/// bounding-box side is max_extent (the paper's evaluation: shape alone tells objects apart);
+/// `keep` keeps the mesh's own size, in metres after its units (a 5 cm bolt stays 5 cm).
+enum class ObjectScale { fit, keep };
+
 /// Everything needed to build a database object from its mesh.
 struct DatabaseSettings {
-  double max_extent = 0.20;        ///< m, largest bounding-box extent after scaling
+  ObjectScale scale = ObjectScale::fit;
+  double max_extent = 0.20;        ///< m, largest bounding-box extent after scaling (fit)
   ScanSettings scan;
   FpfhSettings fpfh;
   DistanceFieldSettings field;
@@ -88,6 +94,16 @@ class ObjectSource {
   virtual PointCloud load_fine(std::size_t i) const = 0;
   virtual DistanceField load_field(std::size_t i) const = 0;
 };
+
+/// The largest object length of a database (s_obj_max of Eq. 3, the half-margin of the free-space
+/// box): max_extent under `fit`, the largest bounding-box side over the objects under `keep`.
+double largest_object_extent(const ObjectSource& source);
+class Database;
+double largest_object_extent(const Database& db);
+
+/// "fit" / "keep"; parse_object_scale throws ts::Error naming `where` naming file and field on another word.
+const char* to_string(ObjectScale scale);
+ObjectScale parse_object_scale(const std::string& word, const std::string& file, const std::string& field = {});
 
 /// In-memory source over built objects (tests, `recognize` right after a build).
 class MemorySource final : public ObjectSource {

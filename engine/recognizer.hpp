@@ -73,13 +73,18 @@ struct RecognizerSettings {
   static RecognizerSettings improved();
 };
 
+/// Slots of hypotheses made by pose transfer (TwinSettings::transfer): kTransferSlot + object,
+/// apart from RANSAC's triplet * R + r.
+constexpr std::uint32_t kTransferSlot = 0x80000000u;
+
 struct Hypothesis {
   std::uint32_t object = 0;
   Pose pose = Pose::Identity();     ///< T_world_object
   double log_weight = -std::numeric_limits<double>::infinity();  ///< ln wt (Eq. 5 or 6)
   double weight = 0.0;              ///< wt = exp(log_weight)
   int born = 0;                     ///< step that created it
-  std::uint32_t slot = 0;           ///< RANSAC slot that created it (triplet * R + r)
+  std::uint32_t slot = 0;           ///< RANSAC slot that created it (triplet * R + r), or
+                                    ///< kTransferSlot + object for a pose transfer
   int icp_iterations = 0;           ///< of the last refinement (0: none)
   bool icp_converged = false;
 };

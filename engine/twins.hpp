@@ -32,6 +32,12 @@ struct TwinSettings {
   double offset_sigma = 0.003;      ///< m, per-grasp arm offset prior (per axis)
   std::size_t fit_points = 64;      ///< contacts per grasp in the offset fit
   int iterations = 5;               ///< Gauss-Newton iterations of the offset fit
+  /// Pose transfer: each step the leading hypothesis's pose is also tried on the `transfer`
+  /// other objects whose keypoints fit the contacts best at that pose (the shortlist's
+  /// screening), refined by ICP and evaluated like new hypotheses, so that a look-alike of the
+  /// leader is judged at the right pose even when RANSAC found it nowhere (0: off).
+  std::size_t transfer = 0;
+  std::size_t transfer_min_database = 0;   ///< transfer acts only on databases of more objects
 };
 
 /// V of one hypothesis (see above), or +inf when the scene has no grasp groups or the object

@@ -6,6 +6,7 @@
 #include "engine/core.hpp"
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
+#include "io/mesh_import.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -14,6 +15,7 @@
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <sstream>
 
@@ -27,7 +29,13 @@ using json = nlohmann::ordered_json;
 /// The build parameters a user may set; defaults from ts::DatabaseSettings.
 void add_build_parameters(CLI::App* sub, DatabaseSettings& s, int& deflate) {
   const auto positive = CLI::PositiveNumber;
-  sub->add_option("--max-extent", s.max_extent, "Largest bounding-box side of every object, m")
+  sub->add_option("--scale", s.scale,
+                  "Object size: fit (every mesh scaled to --max-extent; the paper's evaluation) or keep "
+                  "(each mesh's own size in metres, after its units)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, ObjectScale>{{"fit", ObjectScale::fit},
+                                                                              {"keep", ObjectScale::keep}}))
+      ->default_str("fit");
+  sub->add_option("--max-extent", s.max_extent, "Largest bounding-box side of every object under --scale fit, m")
       ->check(positive)->capture_default_str();
   sub->add_option("--fine-spacing", s.scan.fine_spacing, "Scanner: fine cloud spacing (voxel filter), m")
       ->check(positive)->capture_default_str();
@@ -62,6 +70,7 @@ json params_json(const DatabaseSettings& s, std::uint64_t seed) {
     if (v.group.empty()) p[v.name] = value;
     else p[v.group][v.name] = value;
   }
+  p["scale"] = to_string(s.scale);
   p["seed"] = seed;
   return p;
 }
@@ -87,16 +96,30 @@ std::string fixed(double v, int digits) {
 // --- db build --------------------------------------------------------------------------------
 struct BuildOptions {
   CommonOptions common;
-  std::string manifest, meshes, out;
+  std::string manifest, meshes, out, units = "m";
+  bool units_given = false;
   DatabaseSettings settings;
   int deflate = io::DbWriteSettings{}.deflate;
 };
+
+/// The --units option (m, cm, mm, in) of db build and db add.
+CLI::Option* add_units_option(CLI::App* sub, std::string& units) {
+  return sub->add_option("--units", units,
+                         "Length unit of the mesh files under --scale keep (a manifest's 4th column overrides it "
+                         "per line)")
+      ->check(CLI::IsMember({"m", "cm", "mm", "in"}))
+      ->capture_default_str();
+}
 
 int run_build(const BuildOptions& o) {
   const auto inputs = o.manifest.empty() ? datasets::inputs_from_folder(o.meshes)
                                          : datasets::inputs_from_manifest(o.manifest);
   datasets::BuildSettings bs;
   bs.database = o.settings;
+  bs.units = *io::metres_per_unit(o.units);
+  if (o.units_given && o.settings.scale == ObjectScale::fit)
+    std::cerr << "touchstone: warning: --units has no effect under --scale fit (every mesh is scaled to "
+              << o.settings.max_extent << " m)\n";
   bs.seed = o.common.seed;
   bs.write.deflate = o.deflate;
   const bool tty = stderr_is_terminal();
@@ -150,11 +173,12 @@ int run_build(const BuildOptions& o) {
 struct AddOptions {
   CommonOptions common;
   bool seed_given = false;
-  std::string db, mesh, name;
+  std::string db, mesh, name, units = "m";
 };
 
 int run_add(const AddOptions& o) {
-  const auto input = datasets::input_from_path(o.mesh, o.name);
+  auto input = datasets::input_from_path(o.mesh, o.name);
+  input.units = *io::metres_per_unit(o.units);
   DatabaseSettings settings;
   std::uint64_t seed = 0;
   std::size_t before = 0;
@@ -239,7 +263,7 @@ int run_info(const InfoOptions& o) {
   }
   std::cout << o.db << ": object database, schema " << db.schema_version() << ", " << db.size() << " objects ("
             << open << " open meshes), " << fine << " fine and " << coarse << " coarse points\n"
-            << "params: max extent " << s.max_extent << " m; scan: fine spacing " << s.scan.fine_spacing
+            << "params: " << (s.scale == ObjectScale::keep ? "real sizes (scale keep)" : "max extent " + fixed(s.max_extent, 3) + " m") << "; scan: fine spacing " << s.scan.fine_spacing
             << " m, coarse voxel " << s.scan.coarse_voxel << " m; fpfh: normal radius " << s.fpfh.normal_radius
             << " m, feature radius " << s.fpfh.feature_radius << " m (" << db.feature_dim()
             << " bins); field: voxel " << s.field.fine_voxel << " m, coarse voxel " << s.field.coarse_voxel
@@ -300,8 +324,12 @@ void register_db(CLI::App& app) {
     src->require_option(1);
     sub->add_option("--out", o->out, "Output database (HDF5)")->required();
     add_build_parameters(sub, o->settings, o->deflate);
+    auto* units = add_units_option(sub, o->units);
     add_common(sub, o->common);
-    sub->callback([o] { run_command(o->common, [o] { return run_build(*o); }); });
+    sub->callback([o, units] {
+      o->units_given = units->count() > 0;
+      run_command(o->common, [o] { return run_build(*o); });
+    });
   }
   {
     auto o = std::make_shared<AddOptions>();
@@ -309,6 +337,7 @@ void register_db(CLI::App& app) {
     sub->add_option("db", o->db, "Database (HDF5)")->required();
     sub->add_option("mesh", o->mesh, "Mesh file, or ARCHIVE:MEMBER")->required();
     sub->add_option("--name", o->name, "Object name (default: the file name without extension)");
+    add_units_option(sub, o->units);
     add_common(sub, o->common);
     sub->callback([o, sub] {
       o->seed_given = sub->get_option("--seed")->count() > 0;

@@ -119,6 +119,7 @@ std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& 
           {"prune_blocks", double(s.ransac.prune_blocks)},
           {"object_draws", double(s.ransac.object_draws)},
           {"twins", double(s.twins.rivals)},
+          {"transfer", double(s.twins.transfer)},
           {"shortlist", double(s.shortlist.objects)},
           {"min_spacing", s.ransac.min_spacing},
           {"distance_tolerance", s.ransac.distance_tolerance},
@@ -219,7 +220,7 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
   ExplorationSettings es;
   es.contact_voxel = o.contact_voxel;
   es.free.res_free = c.rs.evaluate.res_free;
-  es.free.s_obj_max = db.settings().max_extent;
+  es.free.s_obj_max = largest_object_extent(db);
   std::optional<Exploration> ex;
   if (log) ex.emplace(*log, es);
   const bool with_free = c.rs.method == Method::bricpsf || c.rs.method == Method::ransac_icp_fs;
@@ -588,6 +589,12 @@ void register_recognize(CLI::App& app) {
                                 "with per-grasp offsets (0: off; tactile logs only)")
                     ->group(g)
                     ->check(CLI::Range(0, 1000));
+  auto* transfer = sub->add_option("--transfer", s.twins.transfer,
+                                   "Extension: each step the leading hypothesis's pose is also tried on this many "
+                                   "other objects that fit the contacts best there, refined and evaluated (0: off; "
+                                   "the improved preset: 2 on databases of more than 48 objects)")
+                       ->group(g)
+                       ->check(CLI::Range(0, 100000));
   auto* shortlist = sub->add_option("--shortlist", s.shortlist.objects,
                                     "Extension: objects whose RANSAC candidates go on to ICP and evaluation per "
                                     "step, chosen by screening against the coarse clouds (0: all; the improved "
@@ -646,7 +653,11 @@ void register_recognize(CLI::App& app) {
        }},
       {shortlist, [](RecognizerSettings& r, const RecognizerSettings& i) { r.shortlist = i.shortlist; }},
       {object_draws, [](RecognizerSettings& r, const RecognizerSettings& i) { r.ransac.object_draws = i.ransac.object_draws; }},
-      {twins, [](RecognizerSettings& r, const RecognizerSettings& i) { r.twins = i.twins; }},
+      {twins, [](RecognizerSettings& r, const RecognizerSettings& i) { r.twins.rivals = i.twins.rivals; }},
+      {transfer, [](RecognizerSettings& r, const RecognizerSettings& i) {
+         r.twins.transfer = i.twins.transfer;
+         r.twins.transfer_min_database = i.twins.transfer_min_database;
+       }},
       {grasp_sigma, [](RecognizerSettings& r, const RecognizerSettings& i) { r.evaluate.grasp_offset_sigma = i.evaluate.grasp_offset_sigma; }},
   };
   sub->callback([o, extensions] {

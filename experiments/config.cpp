@@ -229,6 +229,9 @@ const std::vector<KeyDef>& key_defs() {
     add("twins.rivals", true,
         [](auto& c, auto& in, auto& x) { c.params.twins = int_at_least(in, 0, x); },
         [](auto& c) { return opt(c.params.twins); });
+    add("twins.transfer", true,
+        [](auto& c, auto& in, auto& x) { c.params.twins_transfer = int_at_least(in, 0, x); },
+        [](auto& c) { return opt(c.params.twins_transfer); });
     add("shortlist.objects", true,
         [](auto& c, auto& in, auto& x) { c.params.shortlist = int_at_least(in, 0, x); },
         [](auto& c) { return opt(c.params.shortlist); });

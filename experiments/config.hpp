@@ -28,6 +28,7 @@
 //   ransac.prune_blocks (extension: approximate per-object pruning, blocks read; 0: exact),
 //   ransac.object_draws (extension: objects drawn per triplet for per-object pruning; 0: all),
 //   twins.rivals (extension: near-twin verification, leading objects compared; 0: off),
+//   twins.transfer (extension: the leader's pose tried on this many look-alike objects; 0: off),
 //   icp.iterations     method parameters; unset means the recognizer's default
 //   memory_budget_mb   resident object geometry (MB, 0: no limit); default: the recognizer's
 //   schedule           runs | steps        parallel over runs (throughput) or inside each step
@@ -73,6 +74,7 @@ struct MethodParams {
   std::optional<int> prune_blocks;      ///< approximate per-object pruning: blocks read (0: exact)
   std::optional<int> object_draws;      ///< per-object pruning: objects drawn per triplet (0: all)
   std::optional<int> twins;             ///< near-twin verification: leading objects compared (0: off)
+  std::optional<int> twins_transfer;    ///< pose transfer to look-alikes of the leader (0: off)
 };
 
 struct SweepAxis {

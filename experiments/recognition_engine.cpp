@@ -161,6 +161,10 @@ RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
   }
   if (p.object_draws) s.ransac.object_draws = static_cast<std::size_t>(*p.object_draws);
   if (p.twins) s.twins.rivals = static_cast<std::size_t>(*p.twins);
+  if (p.twins_transfer) {  // asked for explicitly: on any database
+    s.twins.transfer = static_cast<std::size_t>(*p.twins_transfer);
+    s.twins.transfer_min_database = 0;
+  }
   return s;
 }
 
@@ -370,7 +374,7 @@ class RecognitionEngine final : public RunEngine {
     Recognizer recognizer(*group.database, group.index, rs);
     ExplorationSettings es;  // as `touchstone recognize`: B from the database's largest object
     es.free.res_free = rs.evaluate.res_free;
-    es.free.s_obj_max = group.database->settings().max_extent;
+    es.free.s_obj_max = largest_object_extent(*group.database);
     Exploration exploration(log, es);
     const auto run_start = Clock::now();
     for (int k = 1; k <= v.config.steps; ++k) {

@@ -88,6 +88,7 @@ void read_fields(const h5::Group& g, S& s, const std::vector<Field<S>>& fields) 
 void write_params(h5::Group root, const DatabaseSettings& s, std::uint64_t seed) {
   auto p = root.create_group("params");
   p.set_attribute("max_extent", s.max_extent);
+  p.set_attribute("scale", std::string(to_string(s.scale)));
   p.set_attribute("seed", static_cast<std::int64_t>(seed));
   write_fields(p.create_group("scan"), s.scan, scan_fields());
   write_fields(p.create_group("fpfh"), s.fpfh, fpfh_fields());
@@ -418,6 +419,9 @@ DbReader::DbReader(const std::filesystem::path& path) : impl_(std::make_unique<I
 
   const auto params = root.open_group("params");
   d.settings.max_extent = params.double_attribute("max_extent");
+  // Databases written before `keep` existed have no scale: every object was fitted.
+  if (params.has_attribute("scale"))
+    d.settings.scale = parse_object_scale(params.string_attribute("scale"), d.path, "/params@scale");
   d.seed = static_cast<std::uint64_t>(params.int_attribute("seed"));
   read_fields(params.open_group("scan"), d.settings.scan, scan_fields());
   read_fields(params.open_group("fpfh"), d.settings.fpfh, fpfh_fields());

@@ -8,6 +8,7 @@
 #include <assimp/scene.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <iterator>
@@ -85,9 +86,19 @@ std::array<std::uint64_t, 3> position_key(const Vec3& v) {
 
 }  // namespace
 
+std::optional<double> metres_per_unit(const std::string& unit) {
+  if (unit == "m") return 1.0;
+  if (unit == "cm") return 0.01;
+  if (unit == "mm") return 0.001;
+  if (unit == "in") return 0.0254;
+  return std::nullopt;
+}
+
 ImportedMesh normalize_mesh(Mesh input, const std::string& name, const MeshImportSettings& settings) {
-  if (!(settings.max_extent > 0.0) || !std::isfinite(settings.max_extent))
+  if (settings.scale == ObjectScale::fit && (!(settings.max_extent > 0.0) || !std::isfinite(settings.max_extent)))
     throw Error("max extent must be a positive number of metres", name);
+  if (settings.scale == ObjectScale::keep && (!(settings.units > 0.0) || !std::isfinite(settings.units)))
+    throw Error("mesh units must be a positive number of metres", name);
   const int nv = static_cast<int>(input.vertices.size());
   for (std::size_t i = 0; i < input.vertices.size(); ++i)
     if (!finite(input.vertices[i]))
@@ -152,13 +163,24 @@ ImportedMesh normalize_mesh(Mesh input, const std::string& name, const MeshImpor
     mesh.vertices = std::move(kept);
   }
 
-  // Object frame: bounding-box centre at the origin, largest side = max_extent.
+  // Object frame: bounding-box centre at the origin; largest side = max_extent (fit) or the
+  // mesh's own size in metres (keep).
   const Eigen::AlignedBox3d box = mesh_bounds(mesh);
   const Vec3 size = box.sizes();
   const double largest = size.maxCoeff();
   if (!(largest > 0.0) || !std::isfinite(largest)) throw Error("mesh has zero extent", name);  // guarded above
   out.centre = box.center();
-  out.scale = settings.max_extent / largest;
+  out.scale = settings.scale == ObjectScale::fit ? settings.max_extent / largest : settings.units;
+  if (settings.scale == ObjectScale::keep) {
+    // A real object touched by a hand: a size outside 5 mm .. 5 m is a units mistake (a mesh
+    // in millimetres read as metres), and would make grids of millions of voxels a side.
+    const double metres = largest * out.scale;
+    if (!(metres >= kKeepMinSize && metres <= kKeepMaxSize)) {
+      char text[160];
+      std::snprintf(text, sizeof text, "at its own size the object is %.4g m long (%.4g file units x %.4g m): check the units", metres, largest, out.scale);
+      throw Error(text, name, "units");
+    }
+  }
   for (auto& v : mesh.vertices) v = out.scale * (v - out.centre);
   out.extent = mesh_bounds(mesh).sizes();
 

@@ -2,9 +2,11 @@
 //
 // The object frame (what every database object, simulated dive and ground-truth pose refers to):
 //   p_object = scale * (p_file - centre)
-// where `centre` is the centre of the mesh's axis-aligned bounding box in file units and
-// `scale` = max_extent / (largest bounding-box side), so the object's largest extent is
-// max_extent metres (default 0.20 m) and its bounding box is centred on the origin. Axes are
+// where `centre` is the centre of the mesh's axis-aligned bounding box in file units and, with
+// the `fit` scale (the default), `scale` = max_extent / (largest bounding-box side), so the
+// object's largest extent is max_extent metres (default 0.20 m); with the `keep` scale, `scale`
+// is the metres of one file unit (1 for m, 0.01 for cm, 0.001 for mm, 0.0254 for in), so the
+// object keeps its real size. Either way its bounding box is centred on the origin. Axes are
 // the file's axes (no rotation). See io/FORMAT_DB.md.
 //
 // Steps: Assimp with aiProcess_Triangulate | aiProcess_JoinIdenticalVertices (points and lines
@@ -17,17 +19,28 @@
 #pragma once
 
 #include "engine/core.hpp"
+#include "engine/database.hpp"
 #include "engine/mesh.hpp"
 
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
 namespace ts::io {
 
 struct MeshImportSettings {
-  double max_extent = 0.20;   ///< m, largest bounding-box side in the object frame
+  ObjectScale scale = ObjectScale::fit;
+  double max_extent = 0.20;   ///< m, largest bounding-box side in the object frame (fit)
+  double units = 1.0;         ///< m per file unit (keep)
 };
+
+/// Sizes a `keep` object may have (largest bounding-box side): outside, its units are wrong.
+inline constexpr double kKeepMinSize = 0.005;   ///< m
+inline constexpr double kKeepMaxSize = 5.0;     ///< m
+
+/// Metres per unit of "m", "cm", "mm" or "in"; nullopt for another word.
+std::optional<double> metres_per_unit(const std::string& unit);
 
 struct ImportedMesh {
   Mesh mesh;                  ///< object frame, faces wound outward (when closed)

@@ -133,6 +133,10 @@ void set_param(RecognizerSettings& s, const std::string& kv) {
   }
   else if (k == "object_draws") s.ransac.object_draws = static_cast<std::size_t>(v);
   else if (k == "twins") s.twins.rivals = static_cast<std::size_t>(v);
+  else if (k == "transfer") {  // asked for explicitly: on any database
+    s.twins.transfer = static_cast<std::size_t>(v);
+    s.twins.transfer_min_database = 0;
+  }
   else if (k == "shortlist") s.shortlist.objects = static_cast<std::size_t>(v);
   else if (k == "shortlist_contacts") s.shortlist.contacts = static_cast<std::size_t>(v);
   else if (k == "shortlist_outlier") s.shortlist.outlier_distance = v;
@@ -196,7 +200,7 @@ int main(int argc, char** argv) {
                                                              : "point-to-point",
                 rs.icp.max_iterations, rs.icp.max_points, rs.ransac.object_draws, rs.shortlist.objects,
                 rs.twins.rivals, rs.ransac.prune_blocks);
-    const double s_obj_max = db.settings().max_extent;
+    const double s_obj_max = largest_object_extent(db);
 
     auto t0 = std::chrono::steady_clock::now();
     std::shared_ptr<const FeatureIndex> index;

@@ -103,7 +103,7 @@ int main(int argc, char** argv) {
         datasets::Simulator sim(reader->load_mesh(o), db.info(o).name, Gripper(), ss);
         const TactileLog log = sim.run().log;
         ExplorationSettings es;
-        es.free.s_obj_max = db.settings().max_extent;
+        es.free.s_obj_max = largest_object_extent(db);
         Exploration ex(log, es);
         for (std::size_t step : steps) {
           ex.advance_to(step);

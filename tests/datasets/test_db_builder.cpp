@@ -178,3 +178,80 @@ TEST_CASE("db builder: a stopped build keeps its finished objects and resumes to
   CHECK(again.resumed == 0);
   CHECK(ts::test::read_bytes(dir / "db2.h5") == ts::test::read_bytes(dir / "whole.h5"));
 }
+
+TEST_CASE("db builder: --scale keep builds objects at their real sizes, in their units") {
+  TempDir dir("builder");
+  // A 6 x 3 x 3 cm block in centimetres and a 10 cm ball (radius 0.05) in metres.
+  ts::test::write_off(dir / "block.off", ts::test::box_mesh({0, 0, 0}, {6, 3, 3}));
+  ts::test::write_off(dir / "ball.off", ts::test::sphere_mesh(0.05, 2));
+  ts::test::write_text(dir / "m.tsv", "pkg\tblock.off\tblock\tcm\npkg\tball.off\tball\n");
+  ts::datasets::BuildSettings settings;
+  settings.database = fast_settings();
+  settings.database.scale = ts::ObjectScale::keep;
+  settings.database.field.fine_voxel = 0.005;
+  settings.database.scan.coarse_voxel = 0.01;
+  ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "m.tsv"), dir / "db.h5", settings);
+  ts::io::DbReader db(dir / "db.h5");
+  CHECK(db.settings().scale == ts::ObjectScale::keep);
+  REQUIRE(db.size() == 2);
+  CHECK((db.info(0).extent - ts::Vec3(0.06, 0.03, 0.03)).cwiseAbs().maxCoeff() < 1e-9);
+  CHECK(db.info(0).scale == 0.01);
+  CHECK(db.info(1).extent.maxCoeff() == doctest::Approx(0.1).epsilon(0.01).scale(0));
+  CHECK(db.info(1).scale == 1.0);
+  // Eq. 3's s_obj_max follows the largest object, not max_extent.
+  CHECK(ts::largest_object_extent(db) == doctest::Approx(db.info(1).extent.maxCoeff()).epsilon(1e-12).scale(0));
+  // The stored fine cloud lies on the real-size block: within its box (plus a scan spacing).
+  const auto fine = db.load_fine(0);
+  REQUIRE(fine.size() > 0);
+  Eigen::AlignedBox3d box;
+  for (const auto& q : fine.points) box.extend(q);
+  CHECK(box.sizes().x() == doctest::Approx(0.06).epsilon(0.007).scale(0));
+  CHECK(box.sizes().y() == doctest::Approx(0.03).epsilon(0.007).scale(0));
+
+  // Under fit the same manifest gives two objects of the same largest side.
+  ts::datasets::BuildSettings fit = settings;
+  fit.database.scale = ts::ObjectScale::fit;
+  ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "m.tsv"), dir / "fit.h5", fit);
+  ts::io::DbReader fitted(dir / "fit.h5");
+  CHECK(fitted.settings().scale == ts::ObjectScale::fit);
+  CHECK(fitted.info(0).extent.maxCoeff() == doctest::Approx(0.2).epsilon(1e-9).scale(0));
+  CHECK(fitted.info(1).extent.maxCoeff() == doctest::Approx(0.2).epsilon(1e-9).scale(0));
+  CHECK(ts::largest_object_extent(fitted) == fitted.settings().max_extent);
+
+  // A units mistake (the block's centimetres read as millimetres: 6 mm is fine, but as metres
+  // it is 6 m long) names the manifest line, and nothing is written.
+  ts::test::write_text(dir / "bad.tsv", "pkg\tblock.off\tblock\tm\npkg\tball.off\tball\n");
+  CHECK_THROWS_WITH_AS(
+      ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "bad.tsv"), dir / "bad.h5", settings),
+      doctest::Contains(("(" + (dir / "bad.tsv").string() + ", line 1, units)").c_str()), ts::Error);
+  CHECK_FALSE(fs::exists(dir / "bad.h5"));
+}
+
+TEST_CASE("db builder: a resumed keep build whose units changed is refused (fingerprint)") {
+  TempDir dir("builder");
+  ts::test::write_off(dir / "block.off", ts::test::box_mesh({0, 0, 0}, {6, 3, 3}));
+  ts::test::write_off(dir / "slab.off", ts::test::box_mesh({0, 0, 0}, {8, 4, 1}));
+  ts::test::write_text(dir / "cm.tsv", "pkg\tblock.off\tblock\tcm\npkg\tslab.off\tslab\tcm\n");
+  ts::test::write_text(dir / "in.tsv", "pkg\tblock.off\tblock\tin\npkg\tslab.off\tslab\tcm\n");
+  ts::datasets::BuildSettings settings;
+  settings.database = fast_settings();
+  settings.database.scale = ts::ObjectScale::keep;
+  settings.database.field.fine_voxel = 0.005;
+  ts::datasets::BuildSettings stopping = settings;
+  stopping.progress = [](const ts::datasets::BuildProgress& p) {
+    if (p.done == 1) throw ts::Error("stopped by the test");
+  };
+  tbb::task_arena one(1);
+  CHECK_THROWS(one.execute([&] { ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "cm.tsv"), dir / "db.h5", stopping); }));
+  REQUIRE(fs::exists(dir / "db.h5.parts/fingerprint"));
+  CHECK_THROWS_WITH_AS(ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "in.tsv"), dir / "db.h5", settings),
+                       doctest::Contains("fingerprint"), ts::Error);
+  ts::datasets::BuildSettings fitted = settings;
+  fitted.database.scale = ts::ObjectScale::fit;
+  CHECK_THROWS_WITH_AS(ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "cm.tsv"), dir / "db.h5", fitted),
+                       doctest::Contains("fingerprint"), ts::Error);
+  // The same declaration resumes.
+  const auto report = ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "cm.tsv"), dir / "db.h5", settings);
+  CHECK(report.resumed == 1);
+  CHECK(ts::io::DbReader(dir / "db.h5").info(0).extent.x() == doctest::Approx(0.06).epsilon(1e-9).scale(0));
+}

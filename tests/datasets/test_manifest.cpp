@@ -48,6 +48,21 @@ TEST_CASE("manifest errors name the file and the line") {
   CHECK_THROWS_AS(ts::datasets::read_manifest("/nonexistent/manifest.tsv"), ts::Error);
 }
 
+TEST_CASE("manifest units column: m, cm, mm, in per line, another word names the line") {
+  Files f;
+  const auto p = f.write("u.tsv", "a\tx.off\tx\tcm\nb\ty.off\ty\nc\tz.off\tz\tin\n");
+  const auto m = ts::datasets::read_manifest(p);
+  REQUIRE(m.size() == 3);
+  CHECK(m[0].units == 0.01);
+  CHECK(m[1].units == 0.0);   // not given: the build's --units
+  CHECK(m[2].units == 0.0254);
+  const auto bad = f.write("u2.tsv", "a\tx.off\tx\tm\nb\ty.off\ty\tfeet\n");
+  CHECK_THROWS_WITH_AS(ts::datasets::read_manifest(bad), doctest::Contains("line 2, units"), ts::Error);
+  CHECK_THROWS_WITH_AS(ts::datasets::read_manifest(bad), doctest::Contains("'feet'"), ts::Error);
+  const auto five = f.write("u3.tsv", "a\tx.off\tx\tm\textra\n");
+  CHECK_THROWS_WITH_AS(ts::datasets::read_manifest(five), doctest::Contains("5 fields"), ts::Error);
+}
+
 TEST_CASE("the shipped default manifest lists 45 distinct objects") {
   Files f;
   const auto m = ts::datasets::read_manifest(fs::path(TS_SOURCE_DIR) / "datasets/dev45.tsv");

@@ -371,3 +371,67 @@ TEST_CASE("Shortlist: each object's best score, cut short where a candidate cann
   }
   CHECK(*std::min_element(want.begin(), want.end()) < 0.5);   // some candidate is good
 }
+
+TEST_CASE("Pose transfer: the leader's pose tried on its look-alikes, at that pose; off on small databases") {
+  // A skewed wedge (no symmetry) and its twin 5 mm taller, among other shapes; the scene
+  // touches the twin.
+  auto src = std::make_shared<test::TestSource>();
+  src->add("wedge", test::prism_mesh(3, 0.07, 0.05, 0.25), 1);
+  src->add("wedge_tall", test::prism_mesh(3, 0.07, 0.055, 0.25), 2);
+  src->add("nut", test::prism_mesh(5, 0.06, 0.04), 3);
+  src->add("box", test::box_mesh(Vec3(0.12, 0.08, 0.05)), 4);
+  src->add("hexbar", test::prism_mesh(6, 0.03, 0.14), 5);
+  const std::uint32_t truth = 1;
+  const Pose T = test::random_pose(77, Vec3(0.1, -0.2, 0.3));
+  auto run = [&](int threads, std::size_t transfer, std::size_t min_database) {
+    Database db(src);
+    RecognizerSettings s = fast();
+    s.n_p = 20;
+    s.twins.transfer = transfer;
+    s.twins.transfer_min_database = min_database;
+    Recognizer rec(db, s);
+    tbb::task_arena arena(threads);
+    std::vector<StepResult> out;
+    for (int k = 1; k <= 8; ++k) {
+      const PointCloud c = test::touch(src->fines[truth], T, k, 31, 0.0003, 0.0001);
+      out.push_back(arena.execute([&] { return rec.step(c, {}); }));
+    }
+    return out;
+  };
+  const auto with = run(2, 2, 0), with1 = run(1, 2, 0), off = run(2, 0, 0), gated = run(2, 2, src->size());
+  std::size_t transferred = 0, near_truth = 0;
+  for (const StepResult& r : with)
+    for (const Hypothesis& h : r.hypotheses) {
+      if (h.slot < kTransferSlot) continue;
+      ++transferred;
+      CHECK(h.slot - kTransferSlot == h.object);   // the slot names the object it was moved to
+      // The wedges share their frame (bounding-box centred): once the leader stands on the
+      // truth, its pose carried to the other wedge is the truth's within the height change.
+      if (h.object <= 1 && r.step == with.back().step) {
+        const double dt = (h.pose.translation() - T.translation()).norm();
+        const double da = Eigen::AngleAxisd(h.pose.linear().transpose() * T.linear()).angle();
+        near_truth += dt < 0.01 && da < 0.1;
+      }
+    }
+  CHECK(transferred > 0);
+  REQUIRE(with.back().valid);
+  CHECK(with.back().best.object <= 1);   // one of the wedges (they are look-alikes by design)
+  CHECK(near_truth > 0);
+  for (const auto* other : {&off, &gated})
+    for (const StepResult& r : *other)
+      for (const Hypothesis& h : r.hypotheses) CHECK(h.slot < kTransferSlot);
+  // Gated off by the database size: the same results as transfer off.
+  for (std::size_t k = 0; k < off.size(); ++k) {
+    REQUIRE(gated[k].hypotheses.size() == off[k].hypotheses.size());
+    CHECK(gated[k].best.pose.matrix() == off[k].best.pose.matrix());
+  }
+  // Any thread count: the same state.
+  for (std::size_t k = 0; k < with.size(); ++k) {
+    REQUIRE(with[k].hypotheses.size() == with1[k].hypotheses.size());
+    for (std::size_t i = 0; i < with[k].hypotheses.size(); ++i) {
+      CHECK(with[k].hypotheses[i].object == with1[k].hypotheses[i].object);
+      CHECK(with[k].hypotheses[i].slot == with1[k].hypotheses[i].slot);
+      CHECK(with[k].hypotheses[i].pose.matrix() == with1[k].hypotheses[i].pose.matrix());
+    }
+  }
+}

@@ -120,6 +120,40 @@ TEST_CASE("cli db: add builds the object as build would, and refuses duplicates 
   CHECK_FALSE(leftovers(dir.path()));
 }
 
+TEST_CASE("cli db: --scale keep with --units and per-line units; db add keeps the database's scale") {
+  TempDir dir("cli");
+  fs::create_directories(dir / "meshes");
+  ts::test::write_off(dir / "meshes/plate.off", ts::test::box_mesh({0, 0, 0}, {120, 80, 10}));   // mm
+  ts::test::write_off(dir / "meshes/peg.off", ts::test::box_mesh({0, 0, 0}, {2, 2, 6}));        // cm
+  ts::test::write_text(dir / "m.tsv", "t\tmeshes/plate.off\tplate\nt\tmeshes/peg.off\tpeg\tcm\n");
+  const auto b = touchstone(dir, "db build --manifest m.tsv --out k.h5 --scale keep --units mm" + kFast);
+  REQUIRE_MESSAGE(b.code == 0, b.err);
+  const auto info = nlohmann::json::parse(touchstone(dir, "db info k.h5 --json").out);
+  CHECK(info["params"]["scale"] == "keep");
+  CHECK(info["objects"][0]["extent_m"][0].get<double>() == doctest::Approx(0.12).epsilon(1e-9).scale(0));
+  CHECK(info["objects"][0]["scale"].get<double>() == 0.001);
+  CHECK(info["objects"][1]["extent_m"][2].get<double>() == doctest::Approx(0.06).epsilon(1e-9).scale(0));
+  CHECK(touchstone(dir, "db info k.h5").out.find("real sizes (scale keep)") != std::string::npos);
+  // db add: the database's scale, the mesh's --units.
+  const auto add = touchstone(dir, "db add k.h5 meshes/peg.off --name peg_mm --units mm");
+  REQUIRE_MESSAGE(add.code == 0, add.err);
+  CHECK(ts::io::DbReader(dir / "k.h5").info(2).extent.z() == doctest::Approx(0.006).epsilon(1e-9).scale(0));
+  // A units mistake: one error naming the manifest line, exit 1, nothing written.
+  const auto bad = touchstone(dir, "db build --manifest m.tsv --out bad.h5 --scale keep --units m" + kFast);
+  CHECK(bad.code == 1);
+  CHECK(bad.err.find("(m.tsv, line 1, units)") != std::string::npos);
+  CHECK_FALSE(fs::exists(dir / "bad.h5"));
+  const auto word = touchstone(dir, "db build --manifest m.tsv --out bad.h5 --scale keep --units ft" + kFast);
+  CHECK(word.code == 2);
+  const auto scale = touchstone(dir, "db build --manifest m.tsv --out bad.h5 --scale real" + kFast);
+  CHECK(scale.code == 2);
+  // Units under fit are only a warning: fitted objects have no size of their own.
+  const auto fit = touchstone(dir, "db build --manifest m.tsv --out f.h5 --units cm" + kFast);
+  REQUIRE(fit.code == 0);
+  CHECK(fit.err.find("--units has no effect under --scale fit") != std::string::npos);
+  CHECK(nlohmann::json::parse(touchstone(dir, "db info f.h5 --json").out)["params"]["scale"] == "fit");
+}
+
 TEST_CASE("cli db: export writes PLY and PCD clouds with normals") {
   TempDir dir("cli");
   write_meshes(dir);
@@ -145,7 +179,7 @@ TEST_CASE("cli db: bad input gives one error line, exit 1, and no output file") 
   ts::test::write_text(dir / "short.tsv", "test\tmeshes/box.off\n");
   auto r = touchstone(dir, "db build --manifest short.tsv --out x.h5");
   CHECK(r.code == 1);
-  CHECK(r.err == "touchstone: error: manifest line has 2 fields, expected source<TAB>path<TAB>name (short.tsv, line 1)\n");
+  CHECK(r.err == "touchstone: error: manifest line has 2 fields, expected source<TAB>path<TAB>name[<TAB>units] (short.tsv, line 1)\n");
 
   ts::test::write_text(dir / "missing.tsv", "test\tmeshes/box.off\tbox\ntest\tmeshes/gone.off\tgone\n");
   r = touchstone(dir, "db build --manifest missing.tsv --out x.h5");

@@ -52,6 +52,40 @@ TEST_CASE("mesh import: a box lands in the object frame") {
   CHECK(half.extent.isApprox(ts::Vec3(0.05, 0.1, 0.025)));
 }
 
+TEST_CASE("mesh import: the keep scale keeps the mesh's size in its units") {
+  TempDir dir("mesh");
+  const auto p = dir / "box.off";
+  ts::test::write_off(p, ts::test::box_mesh({10, 20, 0}, {12, 24, 1}));   // 2 x 4 x 1 file units
+  const auto cm = io::import_mesh(p, {.scale = ts::ObjectScale::keep, .units = *io::metres_per_unit("cm")});
+  CHECK(cm.scale == 0.01);
+  CHECK(cm.centre.isApprox(ts::Vec3(11, 22, 0.5)));
+  CHECK((cm.extent - ts::Vec3(0.02, 0.04, 0.01)).cwiseAbs().maxCoeff() < 1e-12);
+  CHECK(ts::mesh_signed_volume(cm.mesh) == doctest::Approx(0.02 * 0.04 * 0.01).epsilon(1e-9).scale(0));
+  const auto in = io::import_mesh(p, {.scale = ts::ObjectScale::keep, .units = *io::metres_per_unit("in")});
+  CHECK(in.extent.y() == doctest::Approx(4 * 0.0254).epsilon(1e-12).scale(0));
+  CHECK(*io::metres_per_unit("mm") == 0.001);
+  CHECK_FALSE(io::metres_per_unit("ft").has_value());
+  // 4 m of metres is a real object; 4 units read as metres after a millimetre mesh of 4000 is a
+  // units mistake, refused naming the file and the units.
+  ts::test::write_off(dir / "mm.off", ts::test::box_mesh({0, 0, 0}, {4000, 100, 100}));
+  CHECK(io::import_mesh(dir / "mm.off", {.scale = ts::ObjectScale::keep, .units = 0.001}).extent.x() ==
+        doctest::Approx(4.0).epsilon(1e-12).scale(0));
+  CHECK_THROWS_WITH_AS(io::import_mesh(dir / "mm.off", {.scale = ts::ObjectScale::keep, .units = 1.0}),
+                       doctest::Contains("4000 m long"), ts::Error);
+  try {
+    io::import_mesh(dir / "mm.off", {.scale = ts::ObjectScale::keep, .units = 1.0});
+  } catch (const ts::Error& e) {
+    CHECK(e.field() == "units");
+    CHECK(e.file() == (dir / "mm.off").string());
+  }
+  ts::test::write_off(dir / "tiny.off", ts::test::box_mesh({0, 0, 0}, {2, 1, 1}));   // 2 mm
+  CHECK_THROWS_WITH_AS(io::import_mesh(dir / "tiny.off", {.scale = ts::ObjectScale::keep, .units = 0.001}),
+                       doctest::Contains("check the units"), ts::Error);
+  // The fit scale ignores units.
+  CHECK(io::import_mesh(dir / "tiny.off", {.scale = ts::ObjectScale::fit, .units = 0.001}).extent.x() ==
+        doctest::Approx(0.2).epsilon(1e-12).scale(0));
+}
+
 TEST_CASE("mesh import: inside-out meshes are flipped, quads triangulated, duplicates welded") {
   TempDir dir("mesh");
   const auto inv = dir / "inv.off";
