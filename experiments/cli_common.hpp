@@ -52,5 +52,6 @@ void register_db(CLI::App& app);          // db build|add|info|export
 void register_tactile(CLI::App& app);     // simulate, log info|export
 void register_recognize(CLI::App& app);   // recognize
 void register_experiment(CLI::App& app);  // experiment, report
+void register_catalogue(CLI::App& app);   // catalogue
 
 }  // namespace ts::cli

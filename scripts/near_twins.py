@@ -5,7 +5,8 @@
 
 A miss names a wrong object; it is a near-twin miss when the named object belongs to the
 explored object's family. A family is the name without a trailing variant suffix `_v<k>`
-(scripts/make_variants.py) or a catalogue family's `-<k>` suffix. Prints, per step, the runs,
+(scripts/make_variants.py), a `-<k>` suffix, or a `touchstone catalogue` object's `_<NNNN>` index
+(its family: `flange_blind_0005` is a `flange_blind`). Prints, per step, the runs,
 the misses and how many of them are near-twin misses. Needs h5py (Debian's python3-h5py).
 """
 import argparse
@@ -18,7 +19,7 @@ import numpy as np
 
 
 def family(name):
-    return re.sub(r"(_v\d+|-\d+)$", "", name)
+    return re.sub(r"(_v\d+|-\d+|_\d{4,})$", "", name)
 
 
 def text(x):

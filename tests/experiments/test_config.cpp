@@ -1,6 +1,7 @@
 // Experiment configuration: files, flags, sweeps and clear errors that name the key.
 #include "experiments/config.hpp"
 #include "datasets/manifest.hpp"
+#include "datasets/catalogue/catalogue.hpp"
 
 #include <doctest/doctest.h>
 
@@ -256,6 +257,22 @@ TEST_CASE("Every study configuration of experiments/studies parses") {
     CHECK_NOTHROW(validate(c, e.path().string()));
     CHECK(expand_variants(c).size() >= 1);
     if (e.path().filename() == "study7_db450.toml") continue;   // its database is db450.h5
+    if (e.path().filename() == "study7_catalogue.toml") {
+      // Its database is the catalogue's: objects are named family_<index>, the index of the
+      // catalogue's round robin over its 18 families (within the 450 the study builds).
+      const auto families = ts::catalogue::FamilySet::select().families;
+      REQUIRE(families.size() == 18);
+      CHECK(c.objects.size() == 20);
+      for (const std::string& name : c.objects) {
+        CAPTURE(name);
+        const auto cut = name.rfind('_');
+        REQUIRE(cut != std::string::npos);
+        const std::size_t index = std::stoul(name.substr(cut + 1));
+        CHECK(index < 450);
+        CHECK(name.substr(0, cut) == families[index % families.size()].name);
+      }
+      continue;
+    }
     const ResolvedObjects r = resolve_objects(c, dev45);
     CHECK_FALSE(r.explored.empty());
     if (c.objects.empty()) CHECK(r.explored.size() == 45);
