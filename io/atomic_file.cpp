@@ -3,8 +3,10 @@
 #include "engine/core.hpp"
 
 #include <atomic>
+#include <cerrno>
 #include <csignal>
 #include <cstring>
+#include <fcntl.h>
 #include <mutex>
 #include <unistd.h>
 
@@ -57,9 +59,27 @@ void remove_temporaries_on_interrupt() {
   }
 }
 
+namespace {
+
+/// Flush a file's (or a directory's) data and metadata to the disk; errors are reported.
+void sync_path(const std::filesystem::path& p, const std::string& what, const std::string& target) {
+  const int fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw Error("cannot open " + what + " to flush it: " + std::strerror(errno), target);
+  const int rc = ::fsync(fd);
+  const int err = errno;
+  ::close(fd);
+  if (rc != 0 && err != EINVAL)   // (EINVAL: a file system without fsync on this kind of file)
+    throw Error("cannot flush " + what + " to the disk: " + std::strerror(err), target);
+}
+
+std::atomic<unsigned long> g_serial{0};
+
+}  // namespace
+
 AtomicOutput::AtomicOutput(std::filesystem::path target) : target_(std::move(target)) {
+  // Unique within the process as well: two outputs to one target (threads) never share a file.
   temp_ = target_;
-  temp_ += ".tmp-" + std::to_string(::getpid());
+  temp_ += ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(g_serial.fetch_add(1));
   const auto dir = target_.has_parent_path() ? target_.parent_path() : std::filesystem::path(".");
   if (!std::filesystem::is_directory(dir))
     throw Error("output directory does not exist", target_.string());
@@ -75,9 +95,14 @@ AtomicOutput::~AtomicOutput() {
 }
 
 void AtomicOutput::commit() {
+  // The data reach the disk before the name does: after a power cut the target is the old file
+  // or the whole new one, never a renamed file whose blocks were not written yet.
+  sync_path(temp_, "the finished output", target_.string());
   std::error_code ec;
   std::filesystem::rename(temp_, target_, ec);
   if (ec) throw Error("cannot move the finished output into place: " + ec.message(), target_.string());
+  const auto dir = target_.has_parent_path() ? target_.parent_path() : std::filesystem::path(".");
+  sync_path(dir, "the output's folder", target_.string());   // the rename itself
   committed_ = true;
   unregister_temp(slot_);
   slot_ = -1;

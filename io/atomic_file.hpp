@@ -15,7 +15,8 @@ void remove_temporaries_on_interrupt();
 
 class AtomicOutput {
  public:
-  /// Reserve `target`; temp_path() is "<target>.tmp-<pid>" in the same directory.
+  /// Reserve `target`; temp_path() is "<target>.tmp-<pid>-<serial>" in the same directory
+  /// (unique within the process too).
   explicit AtomicOutput(std::filesystem::path target);
   ~AtomicOutput();  ///< removes the temporary file unless commit() succeeded
   AtomicOutput(const AtomicOutput&) = delete;
@@ -23,7 +24,8 @@ class AtomicOutput {
 
   const std::filesystem::path& temp_path() const { return temp_; }
   const std::filesystem::path& target() const { return target_; }
-  /// Rename the temporary file onto the target (atomic on one file system).
+  /// Flush the temporary file to the disk (fsync), rename it onto the target (atomic on one
+  /// file system), then flush the folder, so that the rename survives a power cut.
   void commit();
 
  private:

@@ -245,9 +245,8 @@ TEST_CASE("atomic output: Ctrl-C (SIGINT) or SIGTERM removes the temporary file,
     REQUIRE(::waitpid(child, &status, 0) == child);
     CHECK(WIFSIGNALED(status));
     CHECK(WTERMSIG(status) == sig);
-    std::filesystem::path tmp = dir / "old.h5";
-    tmp += ".tmp-" + std::to_string(child);
-    CHECK_FALSE(std::filesystem::exists(tmp));
+    for (const auto& e : std::filesystem::directory_iterator(dir.path()))
+      CHECK(e.path().filename().string().find(".tmp-" + std::to_string(child)) == std::string::npos);
     CHECK(ts::test::read_bytes(dir / "old.h5") == "previous content");
   }
 }
@@ -313,4 +312,22 @@ TEST_CASE("h5: a dataset declaring more values than the file stores is refused b
                        ts::Error);
   CHECK_THROWS_WITH_AS(root.read<double>("truth", {h5::kAny, 7}), doctest::Contains("/truth)"), ts::Error);
   CHECK_THROWS_WITH_AS(root.read_rows<double>("truth", 0, 2, {h5::kAny, 7}), doctest::Contains("declares"), ts::Error);
+}
+
+TEST_CASE("atomic output: two outputs to one target in one process never share a temporary file") {
+  TempDir dir("h5");
+  ts::io::AtomicOutput a(dir / "out.bin"), b(dir / "out.bin");
+  CHECK(a.temp_path() != b.temp_path());
+  ts::test::write_text(a.temp_path(), "first");
+  ts::test::write_text(b.temp_path(), "second");
+  a.commit();
+  CHECK(ts::test::read_bytes(dir / "out.bin") == "first");
+  CHECK(std::filesystem::exists(b.temp_path()));   // b's work is its own, untouched by a
+  b.commit();
+  CHECK(ts::test::read_bytes(dir / "out.bin") == "second");
+  for (const auto& e : std::filesystem::directory_iterator(dir.path()))
+    CHECK(e.path().filename().string().find(".tmp-") == std::string::npos);
+  // Nothing written under the temporary name: the commit is one error naming the target.
+  ts::io::AtomicOutput c(dir / "sub.bin");
+  CHECK_THROWS_WITH_AS(c.commit(), doctest::Contains("sub.bin"), ts::Error);
 }
