@@ -16,6 +16,8 @@
 #include <map>
 #include <numeric>
 #include <sstream>
+#include <cerrno>
+#include <csignal>
 #include <unistd.h>
 
 namespace ts::catalogue {
@@ -90,6 +92,23 @@ struct FolderGuard {
     fs::remove_all(path, ec);
   }
 };
+
+/// Remove "<out>.tmp-<pid>" folders of catalogue runs that died (a kill, Ctrl-C: the signal
+/// handler can only unlink files): their process no longer exists. Folders of live runs stay.
+void remove_stale_temporaries(const fs::path& out) {
+  const fs::path parent = out.has_parent_path() ? out.parent_path() : fs::path(".");
+  const std::string prefix = out.filename().string() + ".tmp-";
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(parent, ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind(prefix, 0) != 0 || !e.is_directory(ec)) continue;
+    const std::string digits = name.substr(prefix.size());
+    if (digits.empty() || digits.size() > 9 || digits.find_first_not_of("0123456789") != std::string::npos) continue;
+    const auto pid = static_cast<pid_t>(std::stol(digits));
+    if (pid == ::getpid() || ::kill(pid, 0) == 0 || errno != ESRCH) continue;   // alive, or not ours to judge
+    fs::remove_all(e.path(), ec);
+  }
+}
 
 void write_text_file(const fs::path& file, const std::string& text) {
   std::ofstream out(file, std::ios::binary | std::ios::trunc);
@@ -323,6 +342,7 @@ CatalogueReport generate_catalogue(const fs::path& out, const CatalogueSettings&
   if (!fs::is_directory(parent, ec)) throw Error("parent folder does not exist", out.string());
 
   // Everything goes into a temporary sibling folder, renamed onto `out` when complete.
+  remove_stale_temporaries(out);
   fs::path tmp = out;
   tmp += ".tmp-" + std::to_string(::getpid());
   fs::remove_all(tmp, ec);

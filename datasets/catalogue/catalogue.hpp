@@ -16,7 +16,8 @@
 // do not depend on the number of threads (set by the caller's task arena).
 // Output: everything is written into "<out>.tmp-<pid>" and renamed onto <out> at the end; an
 // existing <out> is an error unless `force` (then it is replaced only once the new catalogue is
-// complete). A failure leaves <out> as it was.
+// complete). A failure leaves <out> as it was. Temporary folders "<out>.tmp-<pid>" of runs
+// whose process no longer exists (killed, interrupted) are removed by the next run.
 #pragma once
 
 #include "datasets/catalogue/families.hpp"

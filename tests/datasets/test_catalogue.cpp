@@ -8,6 +8,8 @@
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>
+#include <sys/wait.h>
+#include <unistd.h>
 #include <tbb/task_arena.h>
 
 #include <cmath>
@@ -192,6 +194,25 @@ TEST_CASE("catalogue: same seed, same bytes for any thread count; another seed d
   const auto c = folder_bytes(dir / "c");
   CHECK(c.at("meshes/elbow_0000.ply") != a.at("meshes/elbow_0000.ply"));
   CHECK(c.at("catalogue.tsv").find("seed=2") != std::string::npos);
+}
+
+TEST_CASE("catalogue: temporary folders of runs that died are removed, those of live runs kept") {
+  TempDir dir("catalogue");
+  const pid_t child = ::fork();   // a process that has ended: its pid names a dead run
+  REQUIRE(child >= 0);
+  if (child == 0) ::_exit(0);
+  int status = 0;
+  REQUIRE(::waitpid(child, &status, 0) == child);
+  const fs::path dead = dir / ("d.tmp-" + std::to_string(child));
+  const fs::path alive = dir / ("d.tmp-" + std::to_string(::getppid()));   // the test's parent runs
+  const fs::path other = dir / "d.tmp-notapid";
+  for (const auto& p : {dead, alive, other}) fs::create_directories(p / "meshes");
+  auto s = fast_settings(1);
+  cat::generate_catalogue(dir / "d", s);
+  CHECK(fs::exists(dir / "d/manifest.tsv"));
+  CHECK_FALSE(fs::exists(dead));
+  CHECK(fs::exists(alive));
+  CHECK(fs::exists(other));
 }
 
 TEST_CASE("catalogue: congruent duplicates are redrawn, or the generator stops with an error") {
