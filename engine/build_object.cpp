@@ -62,7 +62,7 @@ BuiltObject build_object(const Mesh& object_frame_mesh, ObjectInfo info,
 
   // 3. Distance field (signed only where inside/outside means something).
   t0 = std::chrono::steady_clock::now();
-  out.field = DistanceField::build(object_frame_mesh, info.closed, settings.field);
+  out.field = DistanceField::build(index, info.closed, settings.field);   // the scan's BVH
   out.timings.field_s = seconds_since(t0);
 
   info.fine_points = scan.fine.size();

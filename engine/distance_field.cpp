@@ -399,16 +399,19 @@ Eigen::AlignedBox3d checked_bounds(const Mesh& mesh, const DistanceFieldSettings
 namespace {
 
 /// Unsigned distances of the coarse box's voxel centres, column by column along k, each voxel
-/// in its own slot: exact up to `cap`, `cap` beyond. Two bounds from the previous voxel of the
-/// column (distance 1 voxel away) keep the BVH work small: its closest point bounds d(p) from
-/// above (usually tightly: deep inside a sphere the BVH otherwise visits most triangles), and
-/// d(prev) - voxel bounds it from below, which skips runs of voxels beyond the cap (searched
+/// in its own slot: exact up to `cap`, `cap` beyond. Bounds from the voxels 1 voxel away keep the
+/// BVH work small: the closest points of the previous voxel of the column and of the same voxel
+/// of the previous column bound d(p) from above (usually tightly: deep inside a sphere the BVH
+/// otherwise visits most triangles), and d(prev) - voxel bounds it from below, which skips runs of voxels beyond the cap (searched
 /// up to cap + 4 voxels to learn how far beyond they are).
 void coarse_distances(const MeshIndex& index, const Eigen::AlignedBox3d& bbox, const openvdb::Coord& cmin,
                       std::size_t ny, std::size_t nz, double cv, double cap, std::vector<float>& dense) {
   const double reach = cap + 4.0 * cv;
   const std::size_t columns = dense.size() / nz;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns), [&](const auto& range) {
+    // closest surface points of the previous column of this range (one voxel away in j, or a
+    // farther column: any surface point bounds the distance from above)
+    std::vector<std::optional<Vec3>> previous(nz), current(nz);
     for (std::size_t ij = range.begin(); ij != range.end(); ++ij) {
       const int i = cmin.x() + static_cast<int>(ij / ny), j = cmin.y() + static_cast<int>(ij % ny);
       std::optional<Vec3> last;   // closest surface point of the previous voxel
@@ -419,7 +422,10 @@ void coarse_distances(const MeshIndex& index, const Eigen::AlignedBox3d& bbox, c
         std::optional<Vec3> found;
         if (lower < cap && bbox.squaredExteriorDistance(p) < cap * cap) {
           std::optional<ClosestPoint> hit;
-          const double bound = last ? (p - *last).norm() * (1.0 + 1e-9) + 1e-12 : reach;
+          double near = reach;
+          if (last) near = std::min(near, (p - *last).norm());
+          if (previous[kk]) near = std::min(near, (p - *previous[kk]).norm());
+          const double bound = near * (1.0 + 1e-9) + 1e-12;
           if (bound < reach) hit = index.closest_within(p, bound);
           if (!hit) hit = index.closest_within(p, reach);
           d = hit ? hit->distance : reach;
@@ -428,9 +434,11 @@ void coarse_distances(const MeshIndex& index, const Eigen::AlignedBox3d& bbox, c
           d = std::max(lower, cap);   // d(p) >= lower, and >= dist(p, bbox) >= cap
         }
         last = found;
+        current[kk] = found;
         dense[ij * nz + kk] = static_cast<float>(std::min(d, cap));
         lower = d - cv * (1.0 + 1e-9);
       }
+      std::swap(previous, current);
     }
   });
 }

@@ -124,43 +124,58 @@ struct CellGrid {
     first.push_back(static_cast<std::uint32_t>(kv.size()));
   }
 
-  /// Points of the 27 cells around cell c, in cell-key order.
-  void candidates(std::size_t c, std::vector<std::uint32_t>& out) const {
+  /// Cells of the half shell of cell c: the 13 neighbours whose key comes after c's (x + 1:
+  /// 9 cells; x, y + 1: 3; x, y, z + 1: 1), as ranges [first, last) of cell indices.
+  void half_shell(std::size_t c, std::vector<std::pair<std::size_t, std::size_t>>& out) const {
     out.clear();
     const Key& k = key[c];
-    for (std::int64_t di = -1; di <= 1; ++di)
-      for (std::int64_t dj = -1; dj <= 1; ++dj) {
-        const Key lo{k[0] + di, k[1] + dj, k[2] - 1}, hi{k[0] + di, k[1] + dj, k[2] + 1};
-        for (auto it = std::lower_bound(key.begin(), key.end(), lo); it != key.end() && *it <= hi; ++it) {
-          const auto g = static_cast<std::size_t>(it - key.begin());
-          out.insert(out.end(), order.begin() + first[g], order.begin() + first[g + 1]);
-        }
-      }
+    const auto run = [&](const Key& lo, const Key& hi) {
+      auto a = std::lower_bound(key.begin(), key.end(), lo);
+      auto b = std::upper_bound(a, key.end(), hi);
+      if (a != b) out.push_back({static_cast<std::size_t>(a - key.begin()), static_cast<std::size_t>(b - key.begin())});
+    };
+    for (std::int64_t dj = -1; dj <= 1; ++dj) run({k[0] + 1, k[1] + dj, k[2] - 1}, {k[0] + 1, k[1] + dj, k[2] + 1});
+    run({k[0], k[1] + 1, k[2] - 1}, {k[0], k[1] + 1, k[2] + 1});
+    run({k[0], k[1], k[2] + 1}, {k[0], k[1], k[2] + 1});
   }
 };
 
-/// Step 2 for surface point `s`: pairs with every surface point within r (its neighbourhood N,
-/// s included), among the candidates.
-Spfh spfh(const PointCloud& surface, std::uint32_t s, const std::vector<std::uint32_t>& candidates, double r2) {
-  std::array<int, kFeatureDim> count{};
-  std::size_t n = 0;
-  const Vec3& ps = surface.points[s];
-  const Vec3& ns = surface.normals[s];
-  for (const std::uint32_t t : candidates) {
-    if ((surface.points[t] - ps).squaredNorm() > r2) continue;
-    ++n;
-    if (t == s) continue;
-    int b[3];
-    if (!pair_bins(ps, ns, surface.points[t], surface.normals[t], b)) continue;
-    ++count[b[0]];
-    ++count[kBins + b[1]];
-    ++count[2 * kBins + b[2]];
+/// Integer SPFH counts of one surface point: 33 bins, then |N| (its r-neighbourhood, itself
+/// included). Integers, so the order in which pairs add to them does not matter.
+using SpfhCount = std::array<std::int32_t, kFeatureDim + 1>;
+
+/// Step 2 for the pair (s, t), both within r of each other: each adds its pair bins to its own
+/// count when it is needed (row != kNone). bins(s, t) = bins(t, s) bit for bit unless |a_s| =
+/// |a_t| exactly (negating d negates every product of the dot products and cross product, and
+/// the swap then picks the same origin), where the source stays the origin: computed twice then.
+inline void add_pair(const PointCloud& surface, std::uint32_t s, std::uint32_t t, std::uint32_t rs,
+                     std::uint32_t rt, std::vector<SpfhCount>& count) {
+  constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
+  const Vec3 &ps = surface.points[s], &ns = surface.normals[s];
+  const Vec3 &pt = surface.points[t], &nt = surface.normals[t];
+  const auto add = [&](std::uint32_t r, const int b[3]) {
+    ++count[r][b[0]];
+    ++count[r][kBins + b[1]];
+    ++count[r][2 * kBins + b[2]];
+  };
+  int bs[3];
+  bool ok_s = false;
+  if (rs != kNone) {
+    ++count[rs][kFeatureDim];
+    ok_s = pair_bins(ps, ns, pt, nt, bs);
+    if (ok_s) add(rs, bs);
   }
-  Spfh h{};
-  if (n < 2) return h;
-  const double incr = 100.0 / static_cast<double>(n - 1);
-  for (int i = 0; i < kFeatureDim; ++i) h[i] = count[i] * incr;
-  return h;
+  if (rt == kNone) return;
+  ++count[rt][kFeatureDim];
+  const Vec3 d = pt - ps;   // as pair_bins(ps, ns, pt, nt) computes it
+  const double as = std::abs(ns.dot(d)), at = std::abs(nt.dot(d));
+  const bool ordered = as < at || at < as;   // not a tie (nor a NaN): the same origin either way
+  if (rs != kNone && ordered) {
+    if (ok_s) add(rt, bs);
+    return;
+  }
+  int bt[3];
+  if (pair_bins(pt, nt, ps, ns, bt)) add(rt, bt);
 }
 
 }  // namespace
@@ -202,27 +217,50 @@ FpfhResult compute_fpfh(const std::vector<Vec3>& keypoints, const std::vector<Ve
       needed.push_back(s);
     }
 
-  // SPFHs, cell by cell (each point's histogram is written by one task; the order in which a
-  // neighbourhood is visited does not matter, every pair adds the same increment).
+  // SPFHs: every pair of surface points within r once (the cell of the first in key order, or
+  // the later of two in one cell, visits it), each needed point counting its own bins. The
+  // tasks of one pass are the cells of one x column, every other column: a pair writes only
+  // to points of its column and the next, so tasks of a pass never write the same count.
   std::vector<Spfh> hist(needed.size());
   if (!needed.empty()) {
     const CellGrid grid(surface.points, r);
     const double r2 = r * r;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, grid.key.size(), 4),
-                      [&](const tbb::blocked_range<std::size_t>& range) {
-                        std::vector<std::uint32_t> candidates;
-                        for (std::size_t c = range.begin(); c != range.end(); ++c) {
-                          bool any = false;
-                          for (std::uint32_t m = grid.first[c]; m < grid.first[c + 1] && !any; ++m)
-                            any = row[grid.order[m]] != kNone;
-                          if (!any) continue;
-                          grid.candidates(c, candidates);
-                          for (std::uint32_t m = grid.first[c]; m < grid.first[c + 1]; ++m) {
-                            const std::uint32_t s = grid.order[m];
-                            if (row[s] != kNone) hist[row[s]] = spfh(surface, s, candidates, r2);
-                          }
-                        }
-                      });
+    std::vector<SpfhCount> count(needed.size(), SpfhCount{});
+    std::vector<std::size_t> column{0};   // cells of x column m: [column[m], column[m + 1])
+    for (std::size_t c = 1; c < grid.key.size(); ++c)
+      if (grid.key[c][0] != grid.key[c - 1][0]) column.push_back(c);
+    column.push_back(grid.key.size());
+    const std::size_t columns = column.size() - 1;
+    const auto visit = [&](std::size_t m, std::vector<std::pair<std::size_t, std::size_t>>& shell) {
+      for (std::size_t c = column[m]; c < column[m + 1]; ++c) {
+        grid.half_shell(c, shell);
+        for (std::uint32_t i = grid.first[c]; i < grid.first[c + 1]; ++i) {
+          const std::uint32_t s = grid.order[i];
+          const Vec3& ps = surface.points[s];
+          const auto pair = [&](std::uint32_t t) {
+            if ((surface.points[t] - ps).squaredNorm() > r2) return;
+            if (row[s] != kNone || row[t] != kNone) add_pair(surface, s, t, row[s], row[t], count);
+          };
+          for (std::uint32_t j = i + 1; j < grid.first[c + 1]; ++j) pair(grid.order[j]);
+          for (const auto& [g0, g1] : shell)
+            for (std::uint32_t j = grid.first[g0]; j < grid.first[g1]; ++j) pair(grid.order[j]);
+        }
+      }
+    };
+    for (std::size_t parity = 0; parity < 2; ++parity)
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (columns + 1 - parity) / 2),
+                        [&](const tbb::blocked_range<std::size_t>& range) {
+                          std::vector<std::pair<std::size_t, std::size_t>> shell;
+                          for (std::size_t h = range.begin(); h != range.end(); ++h)
+                            visit(2 * h + parity, shell);   // keys of columns m, m + 2 differ by >= 2
+                        });
+    for (std::size_t k = 0; k < needed.size(); ++k) {
+      // |N| counts the point itself; a point alone has no SPFH
+      const std::int32_t n = count[k][kFeatureDim] + 1;
+      if (n < 2) continue;
+      const double incr = 100.0 / static_cast<double>(n - 1);
+      for (int i = 0; i < kFeatureDim; ++i) hist[k][i] = count[k][i] * incr;
+    }
   }
 
   // Step 3: weighted sum, per-block normalization. Neighbours come sorted by (distance, index),

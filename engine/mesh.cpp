@@ -457,6 +457,11 @@ static void closest_search(const std::vector<Node>& nodes, const std::vector<Tri
     if (box_sq_distance(n, p) > best.d2) continue;
     if (n.count > 0) {
       for (int i = n.start; i < n.start + n.count; ++i) {
+        // The distance to the triangle's plane bounds the distance from below: a triangle whose
+        // plane is clearly farther than the best is skipped (the margin covers the rounding of
+        // the two computations, so the answer is the one without the test).
+        const double h = tris[i].normal.dot(p - tris[i].a);
+        if (h * h > best.d2 * (1.0 + 1e-6) + 1e-24) continue;
         const Vec3 q = closest_on_triangle(p, tris[i]);
         const double d2 = (q - p).squaredNorm();
         // Ties go to the smaller face index (independent of the tree's shape).

@@ -159,6 +159,35 @@ TEST_CASE("FPFH matches an independent brute-force implementation") {
   CHECK_FALSE(res.valid.back());
 }
 
+TEST_CASE("FPFH matches the brute-force implementation where pairs tie (n_s . d = n_t . d)") {
+  // Points on two planes, z = 0 and z = 2 mm, with normals ~(sin a, 0.3, +-cos a) for a few
+  // tilts a and either sign of z: two points of one plane with the same tilt have
+  // n_s . d = n_t . d exactly (d has no z component), so the source stays the frame origin and
+  // the pair's bins depend on its direction (f3 changes sign). The engine counts each pair once
+  // and must compute such pairs twice.
+  PointCloud surface;
+  Rng rng(7);
+  for (int i = 0; i < 500; ++i) {
+    const double a = 0.4 + 0.5 * static_cast<double>(rng.index(3));
+    const double z = rng.uniform() < 0.5 ? std::cos(a) : -std::cos(a);
+    surface.points.emplace_back(rng.uniform(-0.012, 0.012), rng.uniform(-0.012, 0.012),
+                                rng.uniform() < 0.5 ? 0.0 : 0.002);
+    surface.normals.push_back(Vec3(std::sin(a), 0.3, z).normalized());
+  }
+  const KdTree3 tree(surface.points);
+  FpfhSettings settings;
+  settings.feature_radius = 0.006;
+  std::vector<Vec3> keypoints;
+  for (int i = 0; i < 30; ++i) keypoints.emplace_back(rng.uniform(-0.006, 0.006), rng.uniform(-0.006, 0.006), 0.001);
+  const auto res = compute_fpfh(keypoints, {}, surface, tree, settings);
+  for (std::size_t k = 0; k < keypoints.size(); ++k) {
+    const auto [want, ok] = ref_fpfh(surface, keypoints[k], settings.feature_radius);
+    REQUIRE(ok);
+    CHECK(res.valid[k]);
+    for (int b = 0; b < kFeatureDim; ++b) CHECK(std::abs(res.features[k][b] - want[b]) < 1e-4);
+  }
+}
+
 TEST_CASE("FPFH of a plane is the same everywhere: all pairs fall in the middle bins") {
   PointCloud plane;
   for (int i = 0; i < 30; ++i)
