@@ -4,6 +4,7 @@
 #include "io/h5.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <array>
 #include <chrono>
 #include <thread>
@@ -331,17 +332,6 @@ std::vector<RunRecord> read_runs(const h5::File& file, const RunStoreHeader& h,
   return sorted;
 }
 
-/// Rows `rows` (each `width` values) of a flat column, in that order.
-template <class T>
-std::vector<T> gather(const std::vector<T>& column, std::size_t width, const std::vector<std::size_t>& rows) {
-  std::vector<T> out;
-  out.reserve(rows.size() * width);
-  for (std::size_t r : rows)
-    out.insert(out.end(), column.begin() + static_cast<std::ptrdiff_t>(r * width),
-               column.begin() + static_cast<std::ptrdiff_t>((r + 1) * width));
-  return out;
-}
-
 /// Open a store, retrying for a while when the file is momentarily locked by another process
 /// (HDF5 locks files: `touchstone report` reading a store while the experiment appends to it).
 /// Missing and foreign files fail at once.
@@ -357,12 +347,121 @@ h5::File open_store(const std::filesystem::path& path, h5::File::Access access) 
   }
 }
 
+
+/// The folder of runs appended since the store was last rewritten: "<store>.runs/", one file a
+/// batch, named by an 8-digit serial ("00000001.h5"); anything else in it (a writer's temporary
+/// file) is ignored.
+std::filesystem::path pending_dir(const std::filesystem::path& store) {
+  return std::filesystem::path(store.string() + ".runs");
+}
+
+/// Serials of the pending run files, ascending.
+std::vector<std::uint64_t> pending_serials(const std::filesystem::path& store) {
+  std::vector<std::uint64_t> out;
+  std::error_code ec;
+  const auto dir = pending_dir(store);
+  if (!std::filesystem::is_directory(dir, ec)) return out;
+  for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {
+    const std::string n = e.path().filename().string();
+    if (n.size() != 11 || n.substr(8) != ".h5") continue;
+    if (!std::all_of(n.begin(), n.begin() + 8, [](char c) { return c >= '0' && c <= '9'; })) continue;
+    out.push_back(std::stoull(n.substr(0, 8)));
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+std::filesystem::path pending_file(const std::filesystem::path& store, std::uint64_t serial) {
+  char name[32];
+  std::snprintf(name, sizeof name, "%08llu.h5", static_cast<unsigned long long>(serial));
+  return pending_dir(store) / name;
+}
+
+/// A pending file belongs to its store: the same configuration and layout.
+void check_pending_header(const RunStoreHeader& store, const RunStoreHeader& pending,
+                          const std::filesystem::path& file) {
+  if (pending.config_json != store.config_json || pending.database_json != store.database_json ||
+      pending.steps != store.steps ||
+      pending.stages != store.stages || pending.objects != store.objects ||
+      pending.variant_labels != store.variant_labels || pending.database_objects != store.database_objects)
+    throw Error("these runs belong to another experiment than their store (remove the file, or the store)",
+                file.string(), "/config");
+}
+
+/// Fold pending runs in after this many files.
+constexpr std::size_t kFoldPending = 64;
+
+struct MissingPending {};   ///< a pending file went away while reading (folded by a writer)
+
+/// Committed runs of the store and of its pending files, merged (first copy of a key kept:
+/// the store's, then the files' in serial order), and where each returned run was read:
+/// files[0] is the store, source[i] = (file, row of /runs) of runs[i].
+struct Merged {
+  RunStoreContents contents;
+  std::vector<std::filesystem::path> files;
+  std::vector<std::pair<std::size_t, std::size_t>> source;
+};
+Merged read_merged(const std::filesystem::path& path) {
+  // The pending files are listed before the store is read: a writer folds them into a new store
+  // (renamed in) before it removes them, so a listed file that has gone means the store read
+  // may predate the fold (the caller reads again).
+  const std::vector<std::uint64_t> serials = pending_serials(path);
+  Merged m;
+  RunStoreContents& c = m.contents;
+  std::vector<std::pair<RunRecord, std::pair<std::size_t, std::size_t>>> all;
+  {
+    h5::File f = open_store(path, h5::File::Access::read);
+    c.header = parse_header(f);
+    std::vector<std::size_t> rows;
+    std::vector<RunRecord> runs = read_runs(f, c.header, &rows);
+    c.complete = f.root().int_attribute("complete") != 0;
+    m.files.push_back(path);
+    for (std::size_t i = 0; i < runs.size(); ++i) all.push_back({std::move(runs[i]), {0, rows[i]}});
+  }
+  for (std::uint64_t serial : serials) {
+    const auto file = pending_file(path, serial);
+    std::error_code ec;
+    if (!std::filesystem::exists(file, ec)) throw MissingPending{};
+    h5::File f = open_store(file, h5::File::Access::read);
+    const RunStoreHeader h = parse_header(f);
+    check_pending_header(c.header, h, file);
+    std::vector<std::size_t> rows;
+    std::vector<RunRecord> runs = read_runs(f, h, &rows);
+    for (std::size_t i = 0; i < runs.size(); ++i) all.push_back({std::move(runs[i]), {m.files.size(), rows[i]}});
+    m.files.push_back(file);
+  }
+  if (!serials.empty()) c.complete = false;
+  std::stable_sort(all.begin(), all.end(), [](const auto& a, const auto& b) {
+    return std::tie(a.first.variant, a.first.object, a.first.run) <
+           std::tie(b.first.variant, b.first.object, b.first.run);
+  });
+  for (auto& [run, where] : all) {
+    if (!c.runs.empty() && c.runs.back().same_key(run)) continue;
+    c.runs.push_back(std::move(run));
+    m.source.push_back(where);
+  }
+  return m;
+}
+
+Merged read_consistent(const std::filesystem::path& path) {
+  for (int attempt = 0;; ++attempt) {
+    try {
+      return read_merged(path);
+    } catch (const MissingPending&) {
+      if (attempt >= 100) throw Error("the store keeps changing while being read", path.string());
+    }
+  }
+}
+
 }  // namespace
 
 void RunStore::create(const std::filesystem::path& path, const RunStoreHeader& header) {
   std::error_code ec;
   if (std::filesystem::exists(path, ec))
     throw Error("the run store already exists (continue it with --resume, or remove it)", path.string());
+  if (std::filesystem::exists(pending_dir(path), ec))
+    throw Error("runs of an earlier store of this name are pending here (remove the folder)",
+                pending_dir(path).string());
   if (header.steps < 1) throw Error("steps must be at least 1", path.string(), "steps");
   AtomicOutput out(path);
   {
@@ -379,79 +478,127 @@ RunStoreHeader RunStore::read_header(const std::filesystem::path& path) {
 }
 
 RunStoreContents RunStore::read(const std::filesystem::path& path) {
-  h5::File f = open_store(path, h5::File::Access::read);
-  RunStoreContents c;
-  c.header = parse_header(f);
-  c.runs = read_runs(f, c.header);
-  c.complete = f.root().int_attribute("complete") != 0;
-  return c;
+  return read_consistent(path).contents;
 }
 
 void RunStore::append(const std::filesystem::path& path, const std::vector<RunRecord>& runs) {
   if (runs.empty()) return;
-  h5::File f = open_store(path, h5::File::Access::read_write);
-  const RunStoreHeader h = parse_header(f);
+  const RunStoreHeader h = read_header(path);
   for (const RunRecord& r : runs)
     if (r.variant < 0 || static_cast<std::size_t>(r.variant) >= h.variant_labels.size() ||
         r.object < 0 || static_cast<std::size_t>(r.object) >= h.objects.size() || r.run < 0)
       throw Error("run key out of range", path.string(), "/runs");
-  append_runs(f.root(), h, runs);
-  f.close();
+  // The store itself is never written in place: the runs go to a new pending file, complete
+  // before it appears under its name (AtomicOutput: fsync, rename, fsync of the folder).
+  const auto dir = pending_dir(path);
+  std::filesystem::create_directories(dir);
+  const std::vector<std::uint64_t> serials = pending_serials(path);
+  const std::uint64_t serial = serials.empty() ? 1 : serials.back() + 1;
+  if (serial > 99999999) throw Error("too many pending run files (fold them: touchstone experiment --resume)", dir.string());
+  {
+    AtomicOutput out(pending_file(path, serial));
+    {
+      h5::File f = h5::File::create(out);
+      write_header(f.root(), h);
+      append_runs(f.root(), h, runs);
+      f.close();
+    }
+    out.commit();
+  }
+  if (serials.size() + 1 >= kFoldPending) compact(path, false);
 }
+
+namespace {
+
+/// The columns of one file's /runs and /steps as stored (no round trip through Pose).
+struct Columns {
+  std::vector<std::int32_t> variant, object, run, grasps, step;
+  std::vector<std::int64_t> first;
+  std::vector<double> truth, wall, pose, stage;
+  std::vector<std::uint8_t> correct;
+  std::vector<std::vector<std::int32_t>> ints;
+  std::vector<std::vector<double>> dbls;
+};
+
+Columns read_columns(const std::filesystem::path& file, const RunStoreHeader& h) {
+  Columns c;
+  h5::File f = open_store(file, h5::File::Access::read);
+  h5::Group rg = f.root().open_group("runs");
+  h5::Group st = f.root().open_group("steps");
+  const std::size_t S = h.stages.size();
+  c.variant = rg.read<std::int32_t>("variant", {h5::kAny});
+  c.object = rg.read<std::int32_t>("object", {h5::kAny});
+  c.run = rg.read<std::int32_t>("run", {h5::kAny});
+  c.grasps = rg.read<std::int32_t>("grasps", {h5::kAny, h.steps});
+  c.truth = rg.read<double>("truth", {h5::kAny, 7});
+  c.wall = rg.read<double>("wall_time_s", {h5::kAny});
+  c.first = rg.read<std::int64_t>("first_step_row", {h5::kAny});
+  c.step = st.read<std::int32_t>("step", {h5::kAny});
+  c.correct = st.read<std::uint8_t>("correct", {h5::kAny});
+  for (const char* n : kStepInts) c.ints.push_back(st.read<std::int32_t>(n, {h5::kAny}));
+  for (const char* n : kStepDoubles) c.dbls.push_back(st.read<double>(n, {h5::kAny}));
+  c.pose = st.read<double>("pose", {h5::kAny, 7});
+  if (S) c.stage = st.read<double>("stage_times_s", {h5::kAny, static_cast<std::int64_t>(S)});
+  f.close();
+  return c;
+}
+
+/// Append row `r` (`width` values a row) of `from` to `to`.
+template <class T>
+void take_row(std::vector<T>& to, const std::vector<T>& from, std::size_t r, std::size_t width) {
+  to.insert(to.end(), from.begin() + static_cast<std::ptrdiff_t>(r * width),
+            from.begin() + static_cast<std::ptrdiff_t>((r + 1) * width));
+}
+
+}  // namespace
 
 void RunStore::compact(const std::filesystem::path& path, bool complete) {
   // Copy the stored values themselves (no round trip through Pose), so compacting twice changes
-  // nothing and equal runs give equal bytes however often their store was resumed.
-  RunStoreHeader h;
-  std::vector<std::size_t> rows;
-  struct Columns {
-    std::vector<std::int32_t> variant, object, run, grasps, step;
-    std::vector<double> truth, wall, pose, stage;
-    std::vector<std::uint8_t> correct;
-    std::vector<std::vector<std::int32_t>> ints;
-    std::vector<std::vector<double>> dbls;
-  } c;
-  {
-    h5::File f = open_store(path, h5::File::Access::read);
-    h = parse_header(f);
-    const std::vector<RunRecord> runs = read_runs(f, h, &rows);  // validates, picks the rows
-    h5::Group rg = f.root().open_group("runs");
-    h5::Group st = f.root().open_group("steps");
-    const auto steps = static_cast<std::size_t>(h.steps);
-    const std::size_t S = h.stages.size();
-    c.variant = gather(rg.read<std::int32_t>("variant", {h5::kAny}), 1, rows);
-    c.object = gather(rg.read<std::int32_t>("object", {h5::kAny}), 1, rows);
-    c.run = gather(rg.read<std::int32_t>("run", {h5::kAny}), 1, rows);
-    c.grasps = gather(rg.read<std::int32_t>("grasps", {h5::kAny, h.steps}), steps, rows);
-    c.truth = gather(rg.read<double>("truth", {h5::kAny, 7}), 7, rows);
-    c.wall = gather(rg.read<double>("wall_time_s", {h5::kAny}), 1, rows);
-    const auto first = rg.read<std::int64_t>("first_step_row", {h5::kAny});
-    std::vector<std::size_t> step_rows;
-    for (std::size_t r : rows)
-      for (std::size_t k = 0; k < steps; ++k) step_rows.push_back(static_cast<std::size_t>(first[r]) + k);
-    c.step = gather(st.read<std::int32_t>("step", {h5::kAny}), 1, step_rows);
-    c.correct = gather(st.read<std::uint8_t>("correct", {h5::kAny}), 1, step_rows);
-    for (const char* n : kStepInts) c.ints.push_back(gather(st.read<std::int32_t>(n, {h5::kAny}), 1, step_rows));
-    for (const char* n : kStepDoubles) c.dbls.push_back(gather(st.read<double>(n, {h5::kAny}), 1, step_rows));
-    c.pose = gather(st.read<double>("pose", {h5::kAny, 7}), 7, step_rows);
-    if (S) c.stage = gather(st.read<double>("stage_times_s", {h5::kAny, static_cast<std::int64_t>(S)}), S, step_rows);
-    f.close();
+  // nothing and equal runs give equal bytes however often their store was resumed. The pending
+  // files are folded in; the new store is renamed in before they are removed (a kill between
+  // the two leaves runs present twice, which read as once).
+  const Merged m = read_consistent(path);
+  const RunStoreHeader& h = m.contents.header;
+  std::vector<Columns> in;
+  for (const auto& file : m.files) in.push_back(read_columns(file, h));
+  const auto steps = static_cast<std::size_t>(h.steps);
+  const std::size_t S = h.stages.size();
+  Columns c;
+  c.ints.resize(std::size(kStepInts));
+  c.dbls.resize(std::size(kStepDoubles));
+  for (const auto& [part, r] : m.source) {
+    const Columns& x = in[part];
+    take_row(c.variant, x.variant, r, 1);
+    take_row(c.object, x.object, r, 1);
+    take_row(c.run, x.run, r, 1);
+    take_row(c.grasps, x.grasps, r, steps);
+    take_row(c.truth, x.truth, r, 7);
+    take_row(c.wall, x.wall, r, 1);
+    for (std::size_t k = 0; k < steps; ++k) {   // read_runs checked these rows exist
+      const auto row = static_cast<std::size_t>(x.first[r]) + k;
+      take_row(c.step, x.step, row, 1);
+      take_row(c.correct, x.correct, row, 1);
+      for (std::size_t i = 0; i < c.ints.size(); ++i) take_row(c.ints[i], x.ints[i], row, 1);
+      for (std::size_t i = 0; i < c.dbls.size(); ++i) take_row(c.dbls[i], x.dbls[i], row, 1);
+      take_row(c.pose, x.pose, row, 7);
+      if (S) take_row(c.stage, x.stage, row, S);
+    }
   }
-  const std::size_t n = rows.size(), m = n * static_cast<std::size_t>(h.steps);
+  const std::size_t n = m.source.size(), rows = n * steps;
   AtomicOutput out(path);
   {
     h5::File f = h5::File::create(out);
     write_header(f.root(), h);
     h5::Group st = f.root().open_group("steps");
     h5::Group rg = f.root().open_group("runs");
-    st.append("step", c.step.data(), m);
-    st.append("correct", c.correct.data(), m);
-    for (std::size_t i = 0; i < std::size(kStepInts); ++i) st.append(kStepInts[i], c.ints[i].data(), m);
-    for (std::size_t i = 0; i < std::size(kStepDoubles); ++i) st.append(kStepDoubles[i], c.dbls[i].data(), m);
-    st.append("pose", c.pose.data(), m);
-    if (!h.stages.empty()) st.append("stage_times_s", c.stage.data(), m);
+    st.append("step", c.step.data(), rows);
+    st.append("correct", c.correct.data(), rows);
+    for (std::size_t i = 0; i < std::size(kStepInts); ++i) st.append(kStepInts[i], c.ints[i].data(), rows);
+    for (std::size_t i = 0; i < std::size(kStepDoubles); ++i) st.append(kStepDoubles[i], c.dbls[i].data(), rows);
+    st.append("pose", c.pose.data(), rows);
+    if (S) st.append("stage_times_s", c.stage.data(), rows);
     std::vector<std::int64_t> first(n);
-    for (std::size_t i = 0; i < n; ++i) first[i] = static_cast<std::int64_t>(i) * h.steps;
+    for (std::size_t i = 0; i < n; ++i) first[i] = static_cast<std::int64_t>(i * steps);
     rg.append("first_step_row", first.data(), n);
     rg.append("grasps", c.grasps.data(), n);
     rg.append("truth", c.truth.data(), n);
@@ -463,6 +610,9 @@ void RunStore::compact(const std::filesystem::path& path, bool complete) {
     f.close();
   }
   out.commit();
+  for (std::size_t i = 1; i < m.files.size(); ++i) std::filesystem::remove(m.files[i]);
+  std::error_code ec;
+  std::filesystem::remove(pending_dir(path), ec);   // only when empty (no writer's temporary)
 }
 
 }  // namespace ts::io

@@ -3,10 +3,13 @@
 // summary, the errors and per-stage timings. Runs are appended as they complete; a store can be
 // re-opened to continue an interrupted experiment (`touchstone experiment --resume`).
 //
-// Crash behaviour: each append opens the file, writes the step rows, then the run row (the
-// commit record), and closes it. A reader only trusts step rows of committed runs, so a kill
-// between appends loses only the runs in flight. HDF5 itself is not journaled: a kill in the
-// milliseconds of an append can still damage the file's metadata (open() then reports it).
+// Crash behaviour: the store file is never written in place. append() writes its runs to a
+// new file of the folder "<store>.runs/" (temporary name, fsync, rename, fsync of the folder),
+// and read() merges the store with those files; compact() (every 64 files, and at the end of an
+// experiment) writes a new store with them folded in, renames it over the old one, then
+// removes them. A kill at any instant leaves the store and every finished append intact: it
+// loses only the runs in flight (a kill between the rename and the removal leaves runs present
+// twice, which read as once).
 // All calls go through io/h5.hpp, i.e. behind the global HDF5 mutex.
 #pragma once
 
@@ -82,13 +85,15 @@ class RunStore {
   static void create(const std::filesystem::path& path, const RunStoreHeader& header);
   /// The header of an existing store; throws a clear error for a missing, foreign or damaged file.
   static RunStoreHeader read_header(const std::filesystem::path& path);
-  /// Header and committed runs (sorted; a run present twice, e.g. after a crash in the middle of
-  /// an append, counts once).
+  /// Header and committed runs of the store and its pending files (sorted; a run present twice
+  /// counts once). A pending file of another experiment is an error naming it.
   static RunStoreContents read(const std::filesystem::path& path);
-  /// Append completed runs (their step rows, then their run rows) and close the file.
+  /// Append completed runs: a new file in "<store>.runs/" (see above); folds the folder into the
+  /// store once it holds 64 files.
   static void append(const std::filesystem::path& path, const std::vector<RunRecord>& runs);
-  /// Rewrite the store atomically with only its committed runs, sorted by key, and mark it
-  /// complete when `complete`. Equal results give equal bytes except the timing columns.
+  /// Rewrite the store atomically with its committed runs and those of its pending files, sorted
+  /// by key, mark it complete when `complete`, then remove the pending files. Equal results give
+  /// equal bytes except the timing columns.
   static void compact(const std::filesystem::path& path, bool complete);
 };
 

@@ -10,6 +10,8 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <csignal>
+#include <fstream>
 #include <thread>
 
 using namespace ts;
@@ -163,7 +165,11 @@ TEST_CASE("Compaction gives the same bytes whatever the completion order") {
   RunStore::append(b, {record(1, 1, 0)});
   RunStore::append(b, {record(0, 0, 1)});
   RunStore::append(b, {record(0, 0, 0)});
-  CHECK(test::read_bytes(a) != test::read_bytes(b));
+  // appends leave both stores as created; their pending runs came in different batches
+  CHECK(test::read_bytes(a) == test::read_bytes(b));
+  CHECK(std::filesystem::exists(dir / "a.h5.runs" / "00000002.h5"));
+  CHECK_FALSE(std::filesystem::exists(dir / "a.h5.runs" / "00000003.h5"));
+  CHECK(std::filesystem::exists(dir / "b.h5.runs" / "00000003.h5"));
   RunStore::compact(a, true);
   RunStore::compact(b, true);
   CHECK(test::read_bytes(a) == test::read_bytes(b));
@@ -174,7 +180,7 @@ TEST_CASE("Compaction gives the same bytes whatever the completion order") {
   CHECK(std::filesystem::directory_iterator(dir.path()) != std::filesystem::directory_iterator());
   int files = 0;
   for (auto& e : std::filesystem::directory_iterator(dir.path())) (void)e, ++files;
-  CHECK(files == 2);  // no temporary left behind
+  CHECK(files == 2);  // no temporary nor pending folder left behind
 }
 
 TEST_CASE("Foreign and missing files give clear errors") {
@@ -233,4 +239,127 @@ TEST_CASE("An append waits while another process holds the store's HDF5 lock") {
   CHECK(WIFEXITED(status));
   CHECK(WEXITSTATUS(status) == 0);
   CHECK(RunStore::read(path).runs.size() == 1);
+}
+
+TEST_CASE("Appends never write the store in place: pending files, merged on read, folded by compact") {
+  test::TempDir dir("runstore");
+  const auto path = dir / "run.h5";
+  const auto pending = dir / "run.h5.runs";
+  RunStore::create(path, header());
+  const std::string created = test::read_bytes(path);
+  RunStore::append(path, {record(1, 0, 0)});
+  RunStore::append(path, {record(0, 1, 1), record(0, 0, 0)});
+  CHECK(test::read_bytes(path) == created);   // the store itself is untouched
+  CHECK(std::filesystem::exists(pending / "00000001.h5"));
+  CHECK(std::filesystem::exists(pending / "00000002.h5"));
+  // a writer's temporary file (killed mid-write) is ignored
+  { std::ofstream(pending / "00000003.h5.tmp-1-0") << "half a file"; }
+  RunStoreContents c = RunStore::read(path);
+  REQUIRE(c.runs.size() == 3);
+  check_equal(c.runs[0], record(0, 0, 0));
+  check_equal(c.runs[1], record(0, 1, 1));
+  check_equal(c.runs[2], record(1, 0, 0));
+  CHECK_FALSE(c.complete);
+  RunStore::compact(path, true);
+  CHECK_FALSE(std::filesystem::exists(pending / "00000001.h5"));
+  CHECK_FALSE(std::filesystem::exists(pending / "00000002.h5"));
+  c = RunStore::read(path);
+  REQUIRE(c.runs.size() == 3);
+  check_equal(c.runs[1], record(0, 1, 1));
+  CHECK(c.complete);
+  // the same runs appended to one store in place of three gives the same bytes
+  const auto other = dir / "other.h5";
+  RunStore::create(other, header());
+  RunStore::append(other, {record(0, 0, 0), record(0, 1, 1), record(1, 0, 0)});
+  RunStore::compact(other, true);
+  CHECK(test::read_bytes(other) == test::read_bytes(path));
+  CHECK_FALSE(std::filesystem::exists(dir / "other.h5.runs"));
+}
+
+TEST_CASE("Pending runs fold into the store every 64 files; a fold interrupted before the removal counts runs once") {
+  test::TempDir dir("runstore");
+  const auto path = dir / "run.h5";
+  RunStore::create(path, header());
+  for (int r = 0; r < 70; ++r) RunStore::append(path, {record(r % 2, 0, r)});
+  std::size_t files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir / "run.h5.runs")) files += e.is_regular_file();
+  CHECK(files == 6);   // 64 folded, 6 since
+  CHECK(RunStore::read(path).runs.size() == 70);
+  // A kill after the fold's rename, before it removed the files: copy a folded run back.
+  const auto copy = dir / "copy.h5";
+  RunStore::create(copy, header());
+  RunStore::append(copy, {record(0, 0, 0)});
+  std::filesystem::copy_file(dir / "copy.h5.runs" / "00000001.h5", dir / "run.h5.runs" / "00000099.h5");
+  const RunStoreContents c = RunStore::read(path);
+  CHECK(c.runs.size() == 70);
+  RunStore::compact(path, true);
+  CHECK(RunStore::read(path).runs.size() == 70);
+}
+
+TEST_CASE("A pending file of another experiment, or left by an earlier store, is an error naming it") {
+  test::TempDir dir("runstore");
+  const auto path = dir / "run.h5";
+  RunStore::create(path, header());
+  RunStoreHeader h = header();
+  h.config_json = R"({"runs":2,"steps":3,"seed":2})";
+  const auto foreign = dir / "foreign.h5";
+  RunStore::create(foreign, h);
+  RunStore::append(foreign, {record(0, 0, 0)});
+  std::filesystem::create_directories(dir / "run.h5.runs");
+  std::filesystem::copy_file(dir / "foreign.h5.runs" / "00000001.h5", dir / "run.h5.runs" / "00000001.h5");
+  try {
+    RunStore::read(path);
+    FAIL("a foreign pending file was read");
+  } catch (const Error& e) {
+    CHECK(std::string(e.what()).find("00000001.h5") != std::string::npos);
+    CHECK(std::string(e.what()).find("another experiment") != std::string::npos);
+  }
+  std::filesystem::remove(path);   // the store removed, its pending runs left
+  try {
+    RunStore::create(path, header());
+    FAIL("a store was created over pending runs");
+  } catch (const Error& e) {
+    CHECK(std::string(e.what()).find("run.h5.runs") != std::string::npos);
+  }
+  CHECK_FALSE(std::filesystem::exists(path));
+}
+
+TEST_CASE("Killed at random instants while appending and folding, the store loses only the run in flight") {
+  // A child process appends runs 0, 1, 2, ... in order (folding every 64 files) and is killed
+  // (SIGKILL) after a random delay; the store must read, hold a prefix of the runs with
+  // their exact values, and the next child continues from there. 50 kills.
+  test::TempDir dir("runstore");
+  const auto path = dir / "run.h5";
+  RunStore::create(path, header(2));
+  const int total = 400;
+  Rng rng(2024);
+  std::size_t stored = 0;
+  int kills = 0;
+  for (int round = 0; round < 200 && kills < 50 && stored < static_cast<std::size_t>(total); ++round) {
+    const pid_t pid = fork();
+    REQUIRE(pid >= 0);
+    if (pid == 0) {
+      try {
+        for (int r = static_cast<int>(stored); r < total; ++r) RunStore::append(path, {record(0, 0, r, 2)});
+      } catch (...) {
+        _exit(3);
+      }
+      _exit(0);
+    }
+    std::this_thread::sleep_for(std::chrono::microseconds(rng.index(40000)));
+    kill(pid, SIGKILL);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    if (WIFSIGNALED(status)) ++kills;
+    else REQUIRE(WEXITSTATUS(status) == 0);
+    const RunStoreContents c = RunStore::read(path);
+    REQUIRE(c.runs.size() >= stored);
+    for (std::size_t i = 0; i < c.runs.size(); ++i) REQUIRE(c.runs[i].run == static_cast<int>(i));
+    stored = c.runs.size();
+  }
+  CHECK(kills == 50);
+  const RunStoreContents c = RunStore::read(path);
+  for (std::size_t i = 0; i < c.runs.size(); i += 37) check_equal(c.runs[i], record(0, 0, static_cast<int>(i), 2));
+  RunStore::compact(path, true);
+  CHECK(RunStore::read(path).runs.size() == stored);
 }
