@@ -4,6 +4,7 @@
 // the loaded database; each input gets its own recognizer with the seed it would have alone.
 #include "experiments/cli_common.hpp"
 
+#include "engine/feature_table.hpp"
 #include "engine/free_cloud.hpp"
 #include "engine/fusion.hpp"
 #include "engine/pose_error.hpp"
@@ -446,6 +447,9 @@ int recognize_many(const Context& c, const std::vector<Input>& inputs,
   const bool progress = stderr_is_terminal() && !o.common.json;
   std::mutex progress_mutex;
   std::size_t done = 0;
+  // Every input's recognizer shares one FeatureTable, held here for the whole batch
+  // (FeatureTable::shared keeps a table only while someone holds it).
+  const auto table = c.rs.ransac.feature_table ? FeatureTable::shared(c.db, c.rs.objects) : nullptr;
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, inputs.size(), 1),
       [&](const tbb::blocked_range<std::size_t>& range) {
