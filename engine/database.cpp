@@ -89,7 +89,7 @@ const ObjectKeypoints& Database::keypoints(std::size_t i) const {
     tbb::this_task_arena::isolate([&] {
       auto k = std::make_unique<ObjectKeypoints>();
       k->coarse = source_->load_coarse(i);
-      k->tree = KdTree3(k->coarse.points);
+      k->tree = KdTree3::over(k->coarse.points);
       s.keypoints = std::move(k);
     });
   });
@@ -111,7 +111,7 @@ GeometryRef Database::geometry(std::size_t i) const {
         auto g = std::make_shared<ObjectGeometry>();
         if (cache_->surface.load()) {
           g->fine = source_->load_fine(i);
-          g->tree = KdTree3(g->fine.points);
+          g->tree = KdTree3::over(g->fine.points);
         }
         g->field = source_->load_field(i);
         return g;

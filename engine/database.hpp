@@ -54,12 +54,12 @@ struct ObjectFeatures {
 /// themselves live only in the search structure built from Database::load_features.
 struct ObjectKeypoints {
   PointCloud coarse;               ///< object frame, with normals
-  KdTree3 tree;                    ///< over coarse.points
+  KdTree3 tree;                    ///< over coarse.points, not a copy (KdTree3::over)
 };
 
 struct ObjectGeometry {
   PointCloud fine;                 ///< object frame, with normals
-  KdTree3 tree;                    ///< over fine.points
+  KdTree3 tree;                    ///< over fine.points, not a copy (KdTree3::over)
   DistanceField field;
 };
 
@@ -156,8 +156,8 @@ class Database {
   std::size_t geometry_peak_bytes() const;           ///< largest geometry_bytes() so far
 
   /// Whether geometry() loads each object's fine cloud and its k-d tree (the default) or the
-  /// distance field alone (a quarter of the memory and load time; enough for field ICP and the
-  /// field evaluation: see needs_surface in recognizer.hpp). A change drops the resident
+  /// distance field alone (about half the memory, less load time: bench_geometry; enough for
+  /// field ICP and the field evaluation: see needs_surface in recognizer.hpp). A change drops the resident
   /// geometry; throws ts::Error while some of it is in use.
   void set_surface(bool on);
   bool surface() const;

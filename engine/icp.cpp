@@ -83,7 +83,7 @@ IcpResult icp(const Scene& scene, const ObjectGeometry& geo, const Pose& T_init,
                                                   : std::numeric_limits<double>::infinity();
   const double min_rot = s.min_rotation_deg * std::numbers::pi / 180.0;
   const double trim = std::clamp(s.trim_fraction, 0.0, 1.0);
-  const std::vector<Vec3>& model = geo.tree.points();
+  const std::span<const Vec3> model = geo.tree.points();
 
   std::vector<Pair> pairs(m);
   std::vector<Vec3> src, dst, nrm;

@@ -77,9 +77,10 @@ void sort_neighbours(std::vector<Neighbour>& v) {
 // KdTree3 on nanoflann
 
 struct CloudAdaptor {
-  const std::vector<Vec3>* pts;
-  std::size_t kdtree_get_point_count() const { return pts->size(); }
-  double kdtree_get_pt(std::uint32_t i, std::size_t d) const { return (*pts)[i][static_cast<int>(d)]; }
+  const Vec3* pts = nullptr;
+  std::size_t n = 0;
+  std::size_t kdtree_get_point_count() const { return n; }
+  double kdtree_get_pt(std::uint32_t i, std::size_t d) const { return pts[i][static_cast<int>(d)]; }
   template <class Box>
   bool kdtree_get_bbox(Box&) const { return false; }
 };
@@ -131,11 +132,13 @@ class NanoRadiusSet {
 }  // namespace
 
 struct KdTree3::Impl {
-  std::vector<Vec3> points;
-  CloudAdaptor adaptor{&points};
+  std::vector<Vec3> own;            // empty for a view (KdTree3::over)
+  CloudAdaptor adaptor;
   std::unique_ptr<NanoTree> tree;   // null when empty
 
-  explicit Impl(std::vector<Vec3> p) : points(std::move(p)) {
+  Impl(std::vector<Vec3> p, const std::vector<Vec3>* view) : own(std::move(p)) {
+    const std::vector<Vec3>& points = view ? *view : own;
+    adaptor = {points.data(), points.size()};
     if (points.size() >= std::numeric_limits<std::uint32_t>::max())
       throw Error("KdTree3: too many points for 32-bit indices");
     if (!points.empty()) {
@@ -144,25 +147,30 @@ struct KdTree3::Impl {
   }
 };
 
-KdTree3::KdTree3() : impl_(std::make_unique<Impl>(std::vector<Vec3>{})) {}
-KdTree3::KdTree3(std::vector<Vec3> points) : impl_(std::make_unique<Impl>(std::move(points))) {}
+KdTree3::KdTree3() : impl_(std::make_unique<Impl>(std::vector<Vec3>{}, nullptr)) {}
+KdTree3::KdTree3(std::vector<Vec3> points) : impl_(std::make_unique<Impl>(std::move(points), nullptr)) {}
+KdTree3 KdTree3::over(const std::vector<Vec3>& points) {
+  KdTree3 t;
+  t.impl_ = std::make_unique<Impl>(std::vector<Vec3>{}, &points);
+  return t;
+}
 KdTree3::~KdTree3() = default;
 KdTree3::KdTree3(KdTree3&&) noexcept = default;
 KdTree3& KdTree3::operator=(KdTree3&&) noexcept = default;
 
 std::size_t KdTree3::memory_bytes() const {
   if (!impl_) return 0;
-  const std::size_t n = impl_->points.capacity();
-  // points, the tree's index permutation, and about one node (~64 bytes) per 5 points (leaves
-  // of at most 10)
-  return n * sizeof(Vec3) + n * sizeof(std::uint32_t) + (n / 5 + 1) * 64;
+  const std::size_t n = impl_->adaptor.n;
+  // its own points, the tree's index permutation, and about one node (~64 bytes) per 5 points
+  // (leaves of at most 10)
+  return impl_->own.capacity() * sizeof(Vec3) + n * sizeof(std::uint32_t) + (n / 5 + 1) * 64;
 }
 
-std::size_t KdTree3::size() const { return impl_ ? impl_->points.size() : 0; }
+std::size_t KdTree3::size() const { return impl_ ? impl_->adaptor.n : 0; }
 
-const std::vector<Vec3>& KdTree3::points() const {
-  static const std::vector<Vec3> kEmpty;
-  return impl_ ? impl_->points : kEmpty;
+std::span<const Vec3> KdTree3::points() const {
+  if (!impl_) return {};
+  return {impl_->adaptor.pts, impl_->adaptor.n};
 }
 
 Neighbour KdTree3::nearest(const Vec3& q) const {
@@ -173,7 +181,7 @@ Neighbour KdTree3::nearest(const Vec3& q) const {
 
 std::vector<Neighbour> KdTree3::knn(const Vec3& q, std::size_t k) const {
   if (!impl_ || !impl_->tree || k == 0) return {};
-  NanoKnnSet set(std::min(k, impl_->points.size()));
+  NanoKnnSet set(std::min(k, impl_->adaptor.n));
   const double qv[3] = {q.x(), q.y(), q.z()};
   impl_->tree->findNeighbors(set, qv, nanoflann::SearchParams());
   return set.take();

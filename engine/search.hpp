@@ -6,6 +6,7 @@
 #include "engine/core.hpp"
 
 #include <memory>
+#include <span>
 
 namespace ts {
 
@@ -14,19 +15,24 @@ struct Neighbour {
   double sq_distance = 0.0;
 };
 
-/// Exact k-d tree over 3-D points. Keeps its own copy of the points. sq_distance is
+/// Exact k-d tree over 3-D points. Keeps its own copy of the points, or (KdTree3::over) searches
+/// points its owner keeps beside it. sq_distance is
 /// (q0-p0)^2 + (q1-p1)^2 + (q2-p2)^2 summed in that order; radius() is inclusive (<= r).
 class KdTree3 {
  public:
   KdTree3();
   explicit KdTree3(std::vector<Vec3> points);
+  /// A tree over points it does not copy: `points`' buffer must outlive the tree unchanged
+  /// (moving the vector keeps its buffer; resizing or assigning it does not). For a cloud and its
+  /// tree held together (a database object's coarse and fine clouds): half the memory of a copy.
+  static KdTree3 over(const std::vector<Vec3>& points);
   ~KdTree3();
   KdTree3(KdTree3&&) noexcept;
   KdTree3& operator=(KdTree3&&) noexcept;
 
   std::size_t size() const;
-  const std::vector<Vec3>& points() const;
-  std::size_t memory_bytes() const;   ///< points and tree nodes (estimate from their counts)
+  std::span<const Vec3> points() const;
+  std::size_t memory_bytes() const;   ///< own points and tree nodes (estimate from their counts)
   /// Nearest point; sq_distance = +inf when the tree is empty.
   Neighbour nearest(const Vec3& q) const;
   /// k nearest, sorted by distance then index.

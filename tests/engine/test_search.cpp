@@ -178,6 +178,30 @@ TEST_CASE("KdTree3 handles empty trees, k = 0 and all-identical points") {
   CHECK(other.points()[49] == Vec3(1, 2, 3));
 }
 
+TEST_CASE("KdTree3::over searches its owner's points without a copy, and survives moving them") {
+  Rng rng(12);
+  std::vector<Vec3> pts = random_cloud(rng, 3000, 0.1);
+  const std::vector<Vec3> copy = pts;
+  const Vec3* buffer = pts.data();
+  struct Held {   // a cloud and its tree held together, as a database object holds them
+    std::vector<Vec3> points;
+    KdTree3 tree;
+  };
+  Held held{std::move(pts), KdTree3()};
+  held.tree = KdTree3::over(held.points);
+  Held moved = std::move(held);   // the buffer moves with the vector
+  REQUIRE(moved.points.data() == buffer);
+  CHECK(moved.tree.points().data() == buffer);
+  CHECK(moved.tree.size() == copy.size());
+  const KdTree3 own(copy);
+  CHECK(moved.tree.memory_bytes() + copy.size() * sizeof(Vec3) == own.memory_bytes());
+  for (int q = 0; q < 200; ++q) {
+    const Vec3 query(rng.uniform(-0.12, 0.12), rng.uniform(-0.12, 0.12), rng.uniform(-0.12, 0.12));
+    check_same(moved.tree.knn(query, 7), brute_knn(copy, query, 7));
+    check_same(moved.tree.radius(query, 0.02), brute_radius(copy, query, 0.02));
+  }
+}
+
 TEST_CASE("KdTree3 parallel queries equal serial queries") {
   Rng rng(5);
   const auto pts = random_cloud(rng, 5000, 0.1);

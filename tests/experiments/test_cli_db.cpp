@@ -241,7 +241,9 @@ TEST_CASE("cli db: build killed at random instants resumes to the same bytes, ne
   // byte-identical to an uninterrupted build.
   TempDir dir("cli_db_kill");
   write_meshes(dir);
+  const auto t0 = std::chrono::steady_clock::now();
   REQUIRE(touchstone(dir, "db build --meshes meshes --out clean.h5 --threads 1" + kFast).code == 0);
+  const auto build_ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - t0).count();
   const std::string clean = ts::test::read_bytes(dir / "clean.h5");
   ts::Rng rng(77);
   int kills = 0, rounds = 0;
@@ -256,8 +258,10 @@ TEST_CASE("cli db: build killed at random instants resumes to the same bytes, ne
       execl("/bin/sh", "sh", "-c", cmd.c_str(), static_cast<char*>(nullptr));
       _exit(127);
     }
-    // the later rounds are let run longer, so the build finishes
-    std::this_thread::sleep_for(std::chrono::milliseconds(rng.index(static_cast<std::size_t>(60 + 40 * rounds))));
+    // Killed within a growing fraction of the uninterrupted build's time (so that the first
+    // rounds are killed on any machine), the later rounds let run longer, so the build finishes.
+    const auto limit = static_cast<std::size_t>(build_ms) * static_cast<std::size_t>(rounds + 2) / 20;
+    std::this_thread::sleep_for(std::chrono::milliseconds(rng.index(std::max<std::size_t>(limit, 2))));
     kill(pid, SIGKILL);
     int status = 0;
     waitpid(pid, &status, 0);
