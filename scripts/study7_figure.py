@@ -4,12 +4,14 @@ intervals, which assume independent runs) and the median time per step, from run
 `touchstone experiment`, on a log axis of database size.
 
     /usr/bin/python3 scripts/study7_figure.py STORE.h5 [STORE.h5 ...] --out FIG.png \
-        [--label STORE.h5=catalogue ...] [--memory STORE.h5=1.6 ...]
+        [--label STORE.h5=catalogue ...] [--memory STORE.h5=1.6 ...] [--db-size STORE.h5=1.0 ...]
+        [--build-time STORE.h5=5.6 ...]
 
 A store's database size is its configuration's database_size, else the number of objects of
 its database. Stores with the same label are joined by a line (default label: the store's
-experiment name). --memory adds a third panel of peak resident memory (GB, measured outside:
-the stores do not hold it). Needs h5py and matplotlib (Debian's python3-h5py, python3-matplotlib).
+experiment name). --memory, --db-size and --build-time each add a panel: peak resident memory
+of the experiment (GB), the database file (GB) and its build time (minutes), measured outside
+(the stores do not hold them). Needs h5py and matplotlib (Debian's python3-h5py, python3-matplotlib).
 """
 import argparse
 import json
@@ -59,6 +61,8 @@ def main():
     ap.add_argument("--out", required=True)
     ap.add_argument("--label", action="append", default=[], help="STORE=LABEL")
     ap.add_argument("--memory", action="append", default=[], help="STORE=GB")
+    ap.add_argument("--db-size", action="append", default=[], help="STORE=GB")
+    ap.add_argument("--build-time", action="append", default=[], help="STORE=minutes")
     ap.add_argument("--steps", default="5,10,20,40")
     a = ap.parse_args()
     os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")
@@ -67,7 +71,13 @@ def main():
     import matplotlib.pyplot as plt
 
     labels = dict(x.split("=", 1) for x in a.label)
-    memory = {k: float(v) for k, v in (x.split("=", 1) for x in a.memory)}
+    extra = []   # (key, values per store, axis label) of the externally measured panels
+    for key, values, ylabel in (("memory", a.memory, "peak resident memory (GB)"),
+                                ("db_size", a.db_size, "database file (GB)"),
+                                ("build_time", a.build_time, "database build (min)")):
+        given = {k: float(v) for k, v in (x.split("=", 1) for x in values)}
+        if given:
+            extra.append((key, given, ylabel))
     steps = [int(s) for s in a.steps.split(",")]
     series = {}
     for path in a.stores:
@@ -75,10 +85,17 @@ def main():
             d = load(path)
         except (OSError, KeyError, ValueError) as e:
             sys.exit(f"study7_figure: error: cannot read {path}: {e}")
-        d["memory"] = memory.get(path)
+        for key, given, _ in extra:
+            d[key] = given.get(path)
         series.setdefault(labels.get(path, d["name"]), []).append(d)
-    panels = 3 if memory else 2
-    fig, axes = plt.subplots(1, panels, figsize=(5.2 * panels, 4.2))
+    panels = 2 + len(extra)
+    rows = 1 if panels <= 3 else 2
+    cols = (panels + rows - 1) // rows
+    fig, grid = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.2 * rows), squeeze=False)
+    axes = list(grid.flat)
+    for ax in axes[panels:]:
+        ax.set_visible(False)
+    axes = axes[:panels]
     markers = "osD^v"
     for li, (label, points) in enumerate(sorted(series.items())):
         points.sort(key=lambda d: d["size"])
@@ -97,17 +114,20 @@ def main():
                              label=f"{label}, step {s}")
         t = [d["time"].get(20, d["time"][max(d["time"])]) for d in points]
         axes[1].plot(x, t, marker=markers[li % len(markers)], label=label)
-        if memory:
-            m = [(d["size"], d["memory"]) for d in points if d["memory"] is not None]
+        for pi, (key, _, _) in enumerate(extra):
+            m = [(d["size"], d[key]) for d in points if d[key] is not None]
             if m:
-                axes[2].plot([p[0] for p in m], [p[1] for p in m], marker=markers[li % len(markers)], label=label)
+                axes[2 + pi].plot([p[0] for p in m], [p[1] for p in m], marker=markers[li % len(markers)], label=label)
     axes[0].set_ylabel("recognized (%), Wilson 95 %")
     axes[0].set_ylim(0, 102)
     axes[1].set_ylabel("time per step at step 20, median (s)")
-    if memory:
-        axes[2].set_ylabel("peak resident memory (GB)")
+    for pi, (_, _, ylabel) in enumerate(extra):
+        axes[2 + pi].set_ylabel(ylabel)
+    sizes = [d["size"] for points in series.values() for d in points]
     for ax in axes:
         ax.set_xscale("log")
+        ax.set_xlim(min(sizes) / 1.4, max(sizes) * 1.4)   # every panel on the same axis
+        ax.set_ylim(bottom=0)
         ax.set_xlabel("objects in the database")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
