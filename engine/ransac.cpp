@@ -317,6 +317,8 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
       for (std::size_t d = 0; d < s.object_draws; ++d) mask[allowed_list[rng.index(allowed_list.size())]] = 1;
     }
     st.objects_searched += static_cast<std::size_t>(std::count(mask.begin(), mask.end(), 1));
+    st.searched.resize(mask.size(), 0);
+    for (std::size_t o = 0; o < mask.size(); ++o) st.searched[o] |= mask[o];
     for (int j = 0; j < 3; ++j) {
       queries.push_back(scene.features[t.point[j]]);
       masks.push_back(mask);

@@ -59,6 +59,7 @@ struct RansacStats {
   std::size_t objects_allowed = 0;        ///< objects large enough to span the contacts
   std::size_t objects_reached = 0;        ///< objects with at least one candidate
   std::size_t objects_searched = 0;       ///< (triplet, object) pairs whose features were searched
+  std::vector<std::uint8_t> searched;     ///< per database object: some triplet searched it
   bool boundary_fallback = false;         ///< too few interior points: boundary points used
   double time_prune_s = 0.0;              ///< triplet sampling and feature pruning
   double time_register_s = 0.0;           ///< triplet registration

@@ -265,6 +265,16 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   RansacStats rs;
   std::vector<Candidate> cands =
       ransac_candidates(scene, db_, search_, allowed, s_.ransac, s_.seed, step_u, &rs);
+  const bool watching = watch_ && *watch_ < db_.size();
+  if (watching) {
+    const std::uint32_t w = *watch_;
+    Funnel f;
+    f.searched = w < rs.searched.size() && rs.searched[w];
+    f.candidates = static_cast<std::size_t>(
+        std::count_if(cands.begin(), cands.end(), [&](const Candidate& c) { return c.object == w; }));
+    f.shortlisted = f.candidates > 0;   // unless the shortlist leaves it out (below)
+    res.watched = f;
+  }
   // Extension for large databases: only the shortlisted objects' candidates go on (and the
   // state's objects'), so only their geometry is loaded.
   if (s_.shortlist.objects > 0 && db_.size() > s_.shortlist.min_database) {
@@ -274,6 +284,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
     const Shortlist sl = shortlist_objects(scene, db_, cands, held, s_.shortlist);
     if (sl.active) {
       std::erase_if(cands, [&](const Candidate& c) { return !sl.mask[c.object]; });
+      if (watching) res.watched->shortlisted = res.watched->candidates > 0 && sl.mask[*watch_];
       for (std::uint32_t o = 0; o < sl.mask.size(); ++o)
         if (sl.mask[o]) res.shortlist.push_back(o);
     }
@@ -402,6 +413,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
       return fit[a] != fit[b] ? fit[a] < fit[b] : a < b;
     });
     if (order.size() > s_.twins.transfer) order.resize(s_.twins.transfer);
+    if (watching) res.watched->transferred = std::find(order.begin(), order.end(), *watch_) != order.end();
     res.times.shortlist_s += seconds_since(t0);
     std::vector<Working> moved;
     for (std::uint32_t o : order) {
@@ -475,6 +487,9 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
     state_.push_back(out);
   }
   res.hypotheses = state_;
+  if (watching)
+    res.watched->hypotheses = static_cast<std::size_t>(std::count_if(
+        state_.begin(), state_.end(), [&](const Hypothesis& h) { return h.object == *watch_; }));
   res.valid = !state_.empty();
   if (res.valid) {
     res.best = state_[chosen];

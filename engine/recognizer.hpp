@@ -99,6 +99,16 @@ struct StageTimes {
   double total_s = 0.0;
 };
 
+/// Where one watched object stood in a step's search (Recognizer::watch; diagnostics, e.g. the
+/// explored object of a simulated run: was it lost to the search or to the evaluation?).
+struct Funnel {
+  bool searched = false;          ///< some RANSAC triplet's pruning searched its features
+  std::size_t candidates = 0;     ///< RANSAC registrations on it
+  bool shortlisted = false;       ///< some of them went on to ICP and evaluation
+  bool transferred = false;       ///< pose transfer moved the leader's pose onto it
+  std::size_t hypotheses = 0;     ///< its hypotheses in the state after the step
+};
+
 struct StepResult {
   int step = 0;                     ///< 1-based
   bool valid = false;               ///< there is at least one hypothesis
@@ -119,6 +129,7 @@ struct StepResult {
   std::size_t geometry_loads = 0;   ///< geometry loads of the database so far (reloads counted)
   std::size_t geometry_resident = 0;  ///< objects whose geometry is in memory after the step
   bool boundary_fallback = false;   ///< triplets had to use patch-boundary points
+  std::optional<Funnel> watched;    ///< the watched object's funnel, when one is watched
   StageTimes times;
 };
 
@@ -143,6 +154,8 @@ class Recognizer {
   StepResult step(const PointCloud& contacts_world, const std::vector<Vec3>& free_world,
                   const GraspGroups& grasps = {});
   void reset();                     ///< forget the hypotheses; the next step is step 1
+  /// Report each step's Funnel of this database object (nullopt: none). Changes no result.
+  void watch(std::optional<std::uint32_t> object) { watch_ = object; }
   int steps_done() const { return step_; }
   const std::vector<Hypothesis>& hypotheses() const { return state_; }
   const RecognizerSettings& settings() const { return s_; }
@@ -154,6 +167,7 @@ class Recognizer {
   RecognizerSettings s_;
   int step_ = 0;
   std::vector<Hypothesis> state_;   ///< S_t, world poses, best first
+  std::optional<std::uint32_t> watch_;
 };
 
 }  // namespace ts

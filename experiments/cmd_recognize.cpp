@@ -215,6 +215,7 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
   }
 
   Recognizer rec(db, c.rs);
+  if (truth_object) rec.watch(static_cast<std::uint32_t>(*truth_object));   // the JSON's truth_funnel
   const SymmetryGroup* sym = nullptr;
   if (truth_object && run.truth_pose) sym = &c.symmetries.get(db, *truth_object);
 
@@ -308,6 +309,12 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     st["objects_allowed"] = r.objects_allowed;
     st["objects_reached"] = r.objects_reached;
     st["objects_shortlisted"] = r.shortlist.empty() ? r.objects_reached : r.shortlist.size();
+    if (r.watched) {   // where the known object stood in the search (see Funnel)
+      const Funnel& f = *r.watched;
+      st["truth_funnel"] = {{"searched", f.searched},       {"candidates", f.candidates},
+                            {"shortlisted", f.shortlisted}, {"transferred", f.transferred},
+                            {"hypotheses", f.hypotheses}};
+    }
     st["geometry_loads"] = r.geometry_loads;
     st["geometry_resident"] = r.geometry_resident;
     st["stages_s"] = {{"fusion", run.fusion_time[k]}, {"prepare", r.times.prepare_s},

@@ -271,3 +271,50 @@ TEST_CASE("Free points closer than d_thresh to a contact are dropped (they canno
   Recognizer rec(db, fast());
   CHECK(rec.step(c, free).free_points == 1);
 }
+
+TEST_CASE("Watching an object reports where it stood in the search and changes no result") {
+  auto big = test::make_source();
+  auto src = std::make_shared<test::TestSource>(*big);
+  src->add("pebble", test::scaled(test::sphere_mesh(0.005), 1.0), 77);   // cannot span the contacts
+  Database db(src);
+  const std::size_t wedge = 4, pebble = db.find("pebble");
+  Recognizer plain(db, fast()), watched(db, fast()), small(db, fast());
+  watched.watch(static_cast<std::uint32_t>(wedge));
+  small.watch(static_cast<std::uint32_t>(pebble));
+  const Pose T = test::random_pose(44, Vec3(0.1, 0.2, -0.1));
+  const auto a = explore(plain, wedge, T, 6, 15, 0.0005, 0.0002);
+  const auto b = explore(watched, wedge, T, 6, 15, 0.0005, 0.0002);
+  const auto c = explore(small, wedge, T, 6, 15, 0.0005, 0.0002);
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    CHECK_FALSE(a[k].watched.has_value());
+    REQUIRE(b[k].watched.has_value());
+    REQUIRE(c[k].watched.has_value());
+    REQUIRE(a[k].hypotheses.size() == b[k].hypotheses.size());
+    for (std::size_t i = 0; i < a[k].hypotheses.size(); ++i) {
+      CHECK(a[k].hypotheses[i].object == b[k].hypotheses[i].object);
+      CHECK(a[k].hypotheses[i].log_weight == b[k].hypotheses[i].log_weight);
+      CHECK(a[k].hypotheses[i].pose.matrix() == b[k].hypotheses[i].pose.matrix());
+    }
+    const Funnel& f = *b[k].watched;
+    const auto held = static_cast<std::size_t>(std::count_if(
+        b[k].hypotheses.begin(), b[k].hypotheses.end(), [&](const Hypothesis& h) { return h.object == wedge; }));
+    CHECK(f.hypotheses == held);
+    CHECK(f.searched);                          // a small database: every allowed object searched
+    CHECK(f.candidates <= b[k].candidates);
+    CHECK(f.shortlisted == (f.candidates > 0)); // no shortlist on a small database
+    CHECK_FALSE(f.transferred);                 // nor pose transfer
+    // The pebble: what is not searched has no candidate, what has none is not shortlisted.
+    const Funnel& g = *c[k].watched;
+    if (!g.searched) CHECK(g.candidates == 0);
+    CHECK(g.shortlisted == (g.candidates > 0));
+  }
+  // Once the contacts are wider than the pebble it is not even searched.
+  REQUIRE(c.back().objects_allowed < db.size());
+  CHECK_FALSE(c.back().watched->searched);
+  CHECK(c.back().watched->hypotheses == 0);
+  // Recognized at the end: its candidates carried it into the state.
+  REQUIRE(b.back().valid);
+  CHECK(b.back().best.object == wedge);
+  CHECK(b.back().watched->candidates > 0);
+  CHECK(b.back().watched->hypotheses > 0);
+}
