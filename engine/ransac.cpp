@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <numeric>
 #include <chrono>
 #include <cmath>
 #include <numbers>
@@ -307,14 +308,28 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   for (std::uint32_t o = 0; o < allowed.size(); ++o)
     if (allowed[o]) allowed_list.push_back(o);
   const bool draw = s.object_draws > 0 && allowed_list.size() > s.object_draws;
+  // The objects of the draws: consecutive slices of one shuffled order of the database (the
+  // same for every step of a run), each triplet D = object_draws objects on from where the
+  // previous one stopped, each step on from where the previous step stopped: every allowed
+  // object is searched once before any is searched twice.
+  std::vector<std::uint32_t> order;
+  std::size_t offset = 0;
+  if (draw) {
+    std::vector<std::uint32_t> all(allowed.size());
+    std::iota(all.begin(), all.end(), 0u);
+    Rng rng(seed, 0, kTagObjects, 0);
+    for (std::size_t k = all.size(); k > 1; --k) std::swap(all[k - 1], all[rng.index(k)]);
+    for (std::uint32_t o : all)
+      if (allowed[o]) order.push_back(o);
+    offset = (static_cast<std::size_t>(step > 0 ? step - 1 : 0) * trip.size() * s.object_draws) % order.size();
+  }
   for (std::size_t i = 0; i < trip.size(); ++i) {
     const Triplet& t = trip[i];
     if (!t.valid) continue;
     std::vector<std::uint8_t> mask = allowed;
-    if (draw) {  // the objects this triplet's draws reach
+    if (draw) {  // the objects of this triplet's slice
       mask.assign(allowed.size(), 0);
-      Rng rng(seed, step, kTagObjects, i);
-      for (std::size_t d = 0; d < s.object_draws; ++d) mask[allowed_list[rng.index(allowed_list.size())]] = 1;
+      for (std::size_t d = 0; d < s.object_draws; ++d) mask[order[(offset + i * s.object_draws + d) % order.size()]] = 1;
     }
     st.objects_searched += static_cast<std::size_t>(std::count(mask.begin(), mask.end(), 1));
     st.searched.resize(mask.size(), 0);

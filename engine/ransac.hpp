@@ -25,8 +25,9 @@ struct RansacSettings {
                                       ///< allowed object instead of the W nearest overall
                                       ///< (0: the paper's global W); needs feature_table
   std::size_t object_draws = 0;       ///< extension, large databases: with per-object pruning,
-                                      ///< each triplet searches only the objects drawn by this
-                                      ///< many uniform draws among the allowed objects (all of
+                                      ///< each triplet searches only this many allowed objects,
+                                      ///< the next slice of the run's shuffled object order
+                                      ///< (every allowed object once before any twice; all of
                                       ///< them when there are no more allowed objects than
                                       ///< draws; 0: always all). Bounds the pruning of a step
                                       ///< by N x object_draws objects, whatever the database

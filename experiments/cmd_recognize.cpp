@@ -591,8 +591,8 @@ void register_recognize(CLI::App& app) {
                            ->group(g)
                            ->check(CLI::Range(0, 1000000));
   auto* object_draws = sub->add_option("--object-draws", s.ransac.object_draws,
-                                       "Extension: with per-object pruning, each triplet searches the objects of this "
-                                       "many uniform draws when the database has more (0: every object)")
+                                       "Extension: with per-object pruning, each triplet searches this many objects, the "
+                                       "next of a shuffled order, when the database has more (0: every object)")
                            ->group(g)
                            ->check(CLI::Range(0, 100000000));
   auto* twins = sub->add_option("--twins", s.twins.rivals,

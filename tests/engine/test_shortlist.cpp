@@ -292,8 +292,7 @@ TEST_CASE("Object draws: each triplet searches the objects its draws reach; all 
   }
   const auto [two, st_two] = run(2, 2);  // at most 2 objects per triplet
   const auto [two1, st_two1] = run(2, 1);
-  CHECK(st_two.objects_searched <= 2 * st_two.triplets);
-  CHECK(st_two.objects_searched >= st_two.triplets);
+  CHECK(st_two.objects_searched == 2 * st_two.triplets);   // 2 distinct objects per triplet
   CHECK(st_two.objects_reached <= st_two.objects_searched);
   CHECK(two.size() < all.size());
   // per triplet (slot / R), candidates of at most 2 objects
@@ -305,6 +304,52 @@ TEST_CASE("Object draws: each triplet searches the objects its draws reach; all 
     CHECK(two[i].slot == two1[i].slot);
     CHECK(two[i].T_scene_object.matrix() == two1[i].T_scene_object.matrix());
   }
+}
+
+TEST_CASE("Object draws rotate: every allowed object is searched once before any is searched twice") {
+  auto src = test::make_source();
+  Database db(src);
+  const std::size_t A = db.size();
+  REQUIRE(A >= 5);
+  const Pose T = test::random_pose(32, Vec3(0.0, 0.1, 0.2));
+  const PointCloud c = test::touch(src->fines[1], T, 6, 8, 0.0005, 0.0002);
+  const Scene scene = prepare_scene(c, {}, db.settings().fpfh, SceneSettings{}, 1, 1);
+  FeatureSearch search;
+  search.table = FeatureTable::shared(db);
+  std::vector<std::uint8_t> allowed(A, 1);
+  allowed[2] = 0;   // never searched
+  const std::size_t allowed_n = A - 1;
+  RansacSettings x = fast().ransac;
+  x.triplets = 2;
+  x.object_draws = 1;   // each step searches 2 objects
+  std::vector<int> count(A, 0);
+  std::size_t searched = 0;
+  for (std::uint64_t step = 1; searched < allowed_n; ++step) {
+    REQUIRE(step <= allowed_n);
+    RansacStats st;
+    (void)ransac_candidates(scene, db, search, allowed, x, 3, step, &st);
+    REQUIRE(st.triplets == 2);
+    CHECK(st.objects_searched == 2);
+    for (std::size_t o = 0; o < A; ++o)
+      if (o < st.searched.size() && st.searched[o]) ++count[o];
+    searched += 2;
+    CHECK(count[2] == 0);
+    // once before twice: while fewer than allowed_n searches were made, no object twice
+    if (searched <= allowed_n)
+      for (std::size_t o = 0; o < A; ++o) CHECK(count[o] <= 1);
+  }
+  for (std::size_t o = 0; o < A; ++o)
+    if (o != 2) CHECK(count[o] >= 1);
+  // Another seed, another order (the first step's two objects differ for some seed).
+  bool differs = false;
+  RansacStats first;
+  (void)ransac_candidates(scene, db, search, allowed, x, 3, 1, &first);
+  for (std::uint64_t seed = 4; seed < 12 && !differs; ++seed) {
+    RansacStats st;
+    (void)ransac_candidates(scene, db, search, allowed, x, seed, 1, &st);
+    differs = st.searched != first.searched;
+  }
+  CHECK(differs);
 }
 
 TEST_CASE("Approximate pruning by block: the exact search's neighbours when every block is read") {
