@@ -212,16 +212,34 @@ void prepare_parts(const std::filesystem::path& dir, const std::string& fingerpr
       if (entry.path().filename().string().find(".tmp-") != std::string::npos) std::filesystem::remove(entry.path(), ec);
     return;
   }
-  std::filesystem::create_directories(dir, ec);
-  if (ec) throw Error("cannot create the parts folder: " + ec.message(), dir.string());
+  // Created whole or not at all: the folder and its fingerprint are made under a temporary name
+  // and renamed into place, so that a build killed here leaves nothing that blocks the next one.
+  const std::filesystem::path fresh = dir.string() + ".new";
+  std::filesystem::remove_all(fresh, ec);   // a killed build's unfinished folder
+  std::filesystem::create_directories(fresh, ec);
+  if (ec) throw Error("cannot create the parts folder: " + ec.message(), fresh.string());
   {
-    io::AtomicOutput out(print);
+    io::AtomicOutput out(fresh / "fingerprint");
     std::ofstream f(out.temp_path(), std::ios::binary);
     f << fingerprint << "\n";
     f.close();
     if (!f) throw Error("cannot write the fingerprint", print.string());
     out.commit();
   }
+  std::filesystem::rename(fresh, dir, ec);
+  if (ec) throw Error("cannot create the parts folder: " + ec.message(), dir.string());
+}
+
+/// The parts folder goes after the merge: the parts first and the fingerprint last, so that a
+/// build killed while removing it leaves a folder the next build still recognizes.
+void remove_parts(const std::filesystem::path& dir) {
+  std::error_code ec;
+  std::vector<std::filesystem::path> files;
+  for (const auto& entry : std::filesystem::directory_iterator(dir, ec))
+    if (entry.path().filename() != "fingerprint") files.push_back(entry.path());
+  for (const auto& f : files) std::filesystem::remove_all(f, ec);
+  std::filesystem::remove(dir / "fingerprint", ec);
+  std::filesystem::remove(dir, ec);
 }
 
 /// A part left by an earlier run: one object of this name and mesh.
@@ -343,8 +361,7 @@ BuildReport build_database(const std::vector<MeshInput>& given, const std::files
       report.coverage.push_back(db.info(i).coverage);
     }
   }
-  std::error_code ec;
-  std::filesystem::remove_all(parts, ec);
+  remove_parts(parts);
   report.times.write_s = seconds_since(t0);
   report.times.wall_s = seconds_since(t_start);
   return report;
