@@ -6,6 +6,7 @@
 #include <hdf5.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cstring>
 #include <numeric>
 #include <type_traits>
@@ -906,6 +907,12 @@ File File::open(const std::filesystem::path& path, Access access, const std::str
   File f;
   f.node_ = make_file_node(id, name);
   return f;
+}
+
+bool is_lock_contention(const Error& e) {
+  std::string what = e.what();
+  std::transform(what.begin(), what.end(), what.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return what.find("unable to lock") != std::string::npos;
 }
 
 bool File::is_open() const { return node_ && node_->id >= 0; }

@@ -22,6 +22,9 @@
 #include <string>
 #include <vector>
 
+namespace ts {
+class Error;
+}
 namespace ts::io {
 class AtomicOutput;
 }
@@ -159,5 +162,10 @@ class File {
  private:
   std::shared_ptr<detail::Node> node_;
 };
+
+/// Whether an error thrown by File::open says the file is locked by another process (HDF5's
+/// "unable to lock (the) file"), which is worth waiting out, as opposed to a missing, foreign or
+/// corrupt file, which is not.
+bool is_lock_contention(const ts::Error& e);
 
 }  // namespace ts::io::h5

@@ -47,11 +47,46 @@ void append_node(const aiScene& scene, const aiNode& node, const aiMatrix4x4& pa
   for (unsigned c = 0; c < node.mNumChildren; ++c) append_node(scene, *node.mChildren[c], T, out);
 }
 
-Mesh scene_mesh(const aiScene* scene, const Assimp::Importer& importer, const std::string& name) {
-  if (!scene) {
-    const char* e = importer.GetErrorString();
-    throw Error(std::string("cannot read the mesh") + (e && *e ? std::string(": ") + e : ""), name);
+[[noreturn]] void import_failed(const Assimp::Importer& importer, const std::string& name) {
+  const char* e = importer.GetErrorString();
+  throw Error(std::string("cannot read the mesh") + (e && *e ? std::string(": ") + e : ""), name);
+}
+
+/// Read the file without post-processing, check what the importer made, then post-process.
+/// Assimp's importers can leave a scene that its own post-processing asserts on (a PLY face
+/// list cut short: a mesh declared to hold polygons that holds none, and Debian's Assimp aborts
+/// on assertions): every face must have vertices within its mesh, and each mesh's primitive
+/// types are recomputed from its faces before kFlags run.
+const aiScene* checked_scene(Assimp::Importer& importer, const aiScene* scene, const std::string& name) {
+  if (!scene) import_failed(importer, name);
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    aiMesh* mesh = scene->mMeshes ? scene->mMeshes[m] : nullptr;
+    if (!mesh || (mesh->mNumVertices > 0 && !mesh->mVertices) || (mesh->mNumFaces > 0 && !mesh->mFaces))
+      throw Error("the mesh file declares data it does not hold (mesh " + std::to_string(m) + ")", name);
+    unsigned types = 0;
+    for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
+      const aiFace& face = mesh->mFaces[f];
+      if (face.mNumIndices == 0 || !face.mIndices)
+        throw Error("face " + std::to_string(f) + " has no vertices", name, "faces");
+      for (unsigned i = 0; i < face.mNumIndices; ++i)
+        if (face.mIndices[i] >= mesh->mNumVertices)
+          throw Error("face " + std::to_string(f) + " names vertex " + std::to_string(face.mIndices[i]) + " of " +
+                          std::to_string(mesh->mNumVertices),
+                      name, "faces");
+      types |= face.mNumIndices == 1   ? aiPrimitiveType_POINT
+               : face.mNumIndices == 2 ? aiPrimitiveType_LINE
+               : face.mNumIndices == 3 ? aiPrimitiveType_TRIANGLE
+                                       : aiPrimitiveType_POLYGON;
+    }
+    mesh->mPrimitiveTypes = types;
   }
+  scene = importer.ApplyPostProcessing(kFlags);
+  if (!scene) import_failed(importer, name);
+  return scene;
+}
+
+Mesh scene_mesh(const aiScene* scene, const Assimp::Importer& importer, const std::string& name) {
+  if (!scene) import_failed(importer, name);
   Mesh mesh;
   if (scene->mRootNode) append_node(*scene, *scene->mRootNode, aiMatrix4x4(), mesh);
   return mesh;
@@ -200,6 +235,49 @@ ImportedMesh normalize_mesh(Mesh input, const std::string& name, const MeshImpor
   return out;
 }
 
+namespace {
+
+/// Assimp (5.2) loops forever on a PLY header cut short and sizes buffers from element counts
+/// it has not checked against the file: the header is checked here first. It must end with an
+/// end_header line within the file, and no element may declare more records than the bytes
+/// after the header could hold (a record takes at least one byte, two in ascii).
+void check_ply_header(const std::string& bytes, const std::string& name) {
+  if (bytes.compare(0, 3, "ply") != 0) return;   // not PLY: Assimp's own format detection decides
+  std::size_t pos = 0, line_no = 0;
+  bool ascii = false;
+  std::vector<std::pair<std::string, double>> elements;
+  for (;;) {
+    const std::size_t end = bytes.find('\n', pos);
+    if (end == std::string::npos)
+      throw Error("PLY header has no end_header line (the file ends inside the header)", name, "header");
+    std::string line = bytes.substr(pos, end - pos);
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    pos = end + 1;
+    ++line_no;
+    if (line == "end_header") break;
+    char word[32] = {}, what[64] = {};
+    double count = 0.0;
+    if (std::sscanf(line.c_str(), "%31s", word) != 1) continue;
+    if (std::strcmp(word, "format") == 0) ascii = line.find("ascii") != std::string::npos;
+    if (std::strcmp(word, "element") == 0) {
+      if (std::sscanf(line.c_str(), "element %63s %lf", what, &count) != 2 || !(count >= 0.0) ||
+          count != std::floor(count))
+        throw Error("PLY header line " + std::to_string(line_no) + " declares no whole element count: '" + line + "'",
+                    name, "header, element");
+      elements.emplace_back(what, count);
+    }
+  }
+  const double room = static_cast<double>(bytes.size() - pos) / (ascii ? 2.0 : 1.0);
+  for (const auto& [what, count] : elements)
+    if (count > room)
+      throw Error("PLY element '" + what + "' declares " + std::to_string(static_cast<unsigned long long>(
+                      std::min(count, 1e19))) + " records, more than the " + std::to_string(bytes.size() - pos) +
+                      " bytes after the header can hold",
+                  name, "element " + what);
+}
+
+}  // namespace
+
 bool is_mesh_extension(const std::string& extension) {
   if (extension.empty() || extension == ".") return false;
   std::string ext = extension[0] == '.' ? extension : "." + extension;
@@ -210,10 +288,11 @@ bool is_mesh_extension(const std::string& extension) {
 ImportedMesh import_mesh(const std::filesystem::path& file, const MeshImportSettings& settings) {
   const std::string name = file.string();
   const std::string bytes = read_bytes(file);
+  check_ply_header(bytes, name);
   Assimp::Importer importer;
   configure(importer);
   // From the file (not memory) so formats with companion files (OBJ + MTL, glTF + BIN) work.
-  const aiScene* scene = importer.ReadFile(name, kFlags);
+  const aiScene* scene = checked_scene(importer, importer.ReadFile(name, 0), name);
   ImportedMesh out = normalize_mesh(scene_mesh(scene, importer, name), name, settings);
   out.sha256 = sha256_hex(bytes);
   return out;
@@ -224,9 +303,11 @@ ImportedMesh import_mesh_from_memory(const std::string& bytes, const std::string
   std::string hint = std::filesystem::path(name).extension().string();
   if (!hint.empty() && hint[0] == '.') hint.erase(0, 1);
   if (bytes.empty()) throw Error("mesh file is empty", name);
+  check_ply_header(bytes, name);
   Assimp::Importer importer;
   configure(importer);
-  const aiScene* scene = importer.ReadFileFromMemory(bytes.data(), bytes.size(), kFlags, hint.c_str());
+  const aiScene* scene =
+      checked_scene(importer, importer.ReadFileFromMemory(bytes.data(), bytes.size(), 0, hint.c_str()), name);
   ImportedMesh out = normalize_mesh(scene_mesh(scene, importer, name), name, settings);
   out.sha256 = sha256_hex(bytes);
   return out;

@@ -340,8 +340,9 @@ h5::File open_store(const std::filesystem::path& path, h5::File::Access access) 
     try {
       return h5::File::open(path, access);
     } catch (const Error& e) {
-      const std::string what = e.what();
-      if (attempt >= 100 || what.find("lock") == std::string::npos) throw;
+      // Only another process's lock is waited out; a corrupt file is refused at once (matching
+      // the word "lock" alone also matched "superblock" and kept a damaged store retrying ~55 s).
+      if (attempt >= 100 || !h5::is_lock_contention(e)) throw;
       std::this_thread::sleep_for(std::chrono::milliseconds(50 + 10 * attempt));
     }
   }

@@ -8,6 +8,8 @@
 
 #include <chrono>
 #include <csignal>
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 #include <filesystem>
@@ -180,6 +182,44 @@ TEST_CASE("h5: missing, foreign and truncated files give one clear error") {
   ts::test::write_text(cut, bytes.substr(0, bytes.size() / 2));
   CHECK_THROWS_WITH_AS(h5::File::open(cut), doctest::Contains("truncated"), ts::Error);
   CHECK_THROWS_WITH_AS(h5::File::open(cut), doctest::Contains(cut.string().c_str()), ts::Error);
+}
+
+TEST_CASE("h5: a file locked by another writer is told apart from a damaged one") {
+  // The run store waits out lock contention (report reading while an experiment appends) but
+  // must refuse a damaged file at once: HDF5's messages for a bad superblock contain "lock".
+  TempDir dir("h5");
+  const auto full = dir / "full.h5";
+  write_sample(full);
+  auto bytes = ts::test::read_bytes(full);
+  const auto damaged = dir / "damaged.h5";
+  for (std::size_t i = 8; i < 24 && i < bytes.size(); ++i) bytes[i] = '\xff';  // after the signature
+  ts::test::write_text(damaged, bytes);
+  bool refused = false;
+  try {
+    (void)h5::File::open(damaged);
+  } catch (const ts::Error& e) {
+    refused = true;
+    INFO(std::string(e.what()));
+    CHECK_FALSE(h5::is_lock_contention(e));
+  }
+  CHECK(refused);
+
+  // Another holder of an exclusive lock (flock on a separate descriptor conflicts even within
+  // one process, as with a second process's HDF5 writer).
+  const int fd = ::open(full.c_str(), O_RDONLY);
+  REQUIRE(fd >= 0);
+  REQUIRE(::flock(fd, LOCK_EX | LOCK_NB) == 0);
+  bool locked = false;
+  try {
+    (void)h5::File::open(full);
+  } catch (const ts::Error& e) {
+    locked = true;
+    INFO(std::string(e.what()));
+    CHECK(h5::is_lock_contention(e));
+  }
+  ::close(fd);
+  CHECK(locked);
+  CHECK_NOTHROW((void)h5::File::open(full));  // free again
 }
 
 TEST_CASE("h5: the same content gives identical bytes (no timestamps)") {

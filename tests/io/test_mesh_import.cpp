@@ -186,3 +186,33 @@ TEST_CASE("mesh import: bad meshes are rejected naming the file") {
   line.faces.emplace_back(0, 1, 2);
   CHECK_THROWS_WITH_AS(io::normalize_mesh(line, "l.off"), doctest::Contains("all 1 are degenerate"), ts::Error);
 }
+
+TEST_CASE("mesh import: a PLY cut short or declaring more than it holds is refused, not hung or aborted") {
+  // Found by fuzzing (scripts/fuzz mesh): Debian's Assimp 5.2 loops forever on a header without
+  // end_header and aborts on an assertion when an ascii face list ends early.
+  const std::string header =
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 4\nproperty list uchar int vertex_indices\nend_header\n";
+  const std::string body = "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+  CHECK(io::import_mesh_from_memory(header + body, "tetra.ply").mesh.faces.size() == 4);
+
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(header.substr(0, 60), "cut.ply"),
+                       doctest::Contains("no end_header"), ts::Error);
+  std::string huge = header;
+  huge.replace(huge.find("vertex 4"), 8, "vertex 4000000000");
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(huge + body, "huge.ply"),
+                       doctest::Contains("element 'vertex' declares 4000000000 records"), ts::Error);
+  std::string negative = header;
+  negative.replace(negative.find("face 4"), 6, "face -2");
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(negative + body, "neg.ply"),
+                       doctest::Contains("no whole element count"), ts::Error);
+  // Face list ending inside its last record, at every cut point: refused or read, never more.
+  for (std::size_t cut = body.find("3 0 2 1"); cut < body.size(); ++cut) {
+    INFO(cut);
+    try {
+      const auto m = io::import_mesh_from_memory(header + body.substr(0, cut), "short.ply");
+      CHECK(m.mesh.faces.size() <= 4);
+    } catch (const ts::Error&) {
+    }
+  }
+}

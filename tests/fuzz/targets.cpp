@@ -1,0 +1,172 @@
+#include "fuzz/targets.hpp"
+
+#include "datasets/archive.hpp"
+#include "datasets/manifest.hpp"
+#include "engine/core.hpp"
+#include "experiments/config.hpp"
+#include "io/cloud_io.hpp"
+#include "io/db_store.hpp"
+#include "io/gripper_io.hpp"
+#include "io/log_store.hpp"
+#include "io/mesh_import.hpp"
+#include "io/result_store.hpp"
+#include "io/run_store.hpp"
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
+namespace ts::fuzz {
+namespace {
+
+namespace fs = std::filesystem;
+
+/// This process's folder for the inputs (removed at exit).
+const fs::path& scratch() {
+  struct Dir {
+    fs::path path;
+    Dir() {
+      const fs::path shm = "/dev/shm";
+      std::error_code ec;
+      const fs::path base = fs::is_directory(shm, ec) ? shm : fs::temp_directory_path();
+      path = base / ("ts_fuzz_" + std::to_string(::getpid()));
+      fs::create_directories(path);
+    }
+    ~Dir() {
+      std::error_code ec;
+      fs::remove_all(path, ec);
+    }
+  };
+  static const Dir dir;
+  return dir.path;
+}
+
+/// The bytes as a file `name` of the scratch folder.
+fs::path as_file(std::span<const std::uint8_t> bytes, const std::string& name) {
+  const fs::path p = scratch() / name;
+  std::ofstream out(p, std::ios::binary | std::ios::trunc);
+  out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  return p;
+}
+
+/// The first byte chooses among `choices` (a format hint such as an extension); the rest is the
+/// input. Empty input: the first choice and no bytes.
+std::pair<std::string, std::span<const std::uint8_t>> choose(std::span<const std::uint8_t> bytes,
+                                                             const std::vector<std::string>& choices) {
+  if (bytes.empty()) return {choices.front(), bytes};
+  return {choices[bytes[0] % choices.size()], bytes.subspan(1)};
+}
+
+/// Run `read`; ts::Error is a refusal, the expected answer to a bad input. Other exceptions
+/// propagate (findings).
+template <class F>
+bool refusal_ok(F&& read) {
+  try {
+    read();
+    return true;
+  } catch (const ts::Error&) {
+    return false;
+  }
+}
+
+bool pcd(std::span<const std::uint8_t> b) {
+  const auto p = as_file(b, "in.pcd");
+  return refusal_ok([&] { (void)io::read_pcd(p); });
+}
+
+bool ply(std::span<const std::uint8_t> b) {
+  const auto p = as_file(b, "in.ply");
+  return refusal_ok([&] { (void)io::read_ply(p); });
+}
+
+bool mesh(std::span<const std::uint8_t> b) {
+  const auto [hint, rest] = choose(b, {"off", "obj", "stl", "ply"});
+  const std::string bytes(reinterpret_cast<const char*>(rest.data()), rest.size()), ext = hint;
+  return refusal_ok([&] { (void)io::import_mesh_from_memory(bytes, "fuzz." + ext); });
+}
+
+bool tar(std::span<const std::uint8_t> b) {
+  const auto [ext, rest] = choose(b, {"tar", "tar.gz"});
+  const fs::path p = as_file(rest, "in." + ext);
+  return refusal_ok([&] {
+    const auto members = datasets::list_archive(p);
+    (void)datasets::read_archive_members(p, std::set<std::string>(members.begin(), members.end()));
+  });
+}
+
+bool manifest(std::span<const std::uint8_t> b) {
+  const auto p = as_file(b, "in.tsv");
+  return refusal_ok([&] { (void)datasets::read_manifest(p); });
+}
+
+bool gripper(std::span<const std::uint8_t> b) {
+  const std::string text(reinterpret_cast<const char*>(b.data()), b.size());
+  return refusal_ok([&] { (void)io::parse_gripper(text, "fuzz.json"); });
+}
+
+bool config(std::span<const std::uint8_t> b) {
+  const auto [ext, rest] = choose(b, {"toml", "ini"});
+  const fs::path p = as_file(rest, "in." + ext);
+  return refusal_ok([&] {
+    experiments::ExperimentConfig c;
+    experiments::load_config_file(c, p);
+    experiments::validate(c, p.string());
+  });
+}
+
+bool database(std::span<const std::uint8_t> b) {
+  const auto p = as_file(b, "in.h5");
+  return refusal_ok([&] {
+    io::DbReader db(p);
+    for (std::size_t i = 0; i < db.size() && i < 4; ++i) {
+      (void)db.load_features(i);
+      (void)db.load_coarse(i);
+      (void)db.load_fine(i);
+      (void)db.load_field(i);
+      (void)db.load_mesh(i);
+    }
+  });
+}
+
+bool log(std::span<const std::uint8_t> b) {
+  const auto p = as_file(b, "in.h5");
+  return refusal_ok([&] { (void)io::read_log(p); });
+}
+
+bool runs(std::span<const std::uint8_t> b) {
+  const auto p = as_file(b, "in.h5");
+  return refusal_ok([&] { (void)io::RunStore::read(p); });
+}
+
+bool result(std::span<const std::uint8_t> b) {
+  const auto p = as_file(b, "in.h5");
+  return refusal_ok([&] { (void)io::read_result(p); });
+}
+
+}  // namespace
+
+const std::vector<Target>& targets() {
+  static const std::vector<Target> all = {
+      {"pcd", "PCD point cloud (read_pcd)", pcd},
+      {"ply", "PLY point cloud (read_ply)", ply},
+      {"mesh", "mesh import (Assimp; first byte: OFF, OBJ, STL or PLY)", mesh},
+      {"tar", "tar archive members (first byte: .tar or .tar.gz)", tar},
+      {"manifest", "mesh manifest (TSV)", manifest},
+      {"gripper", "gripper description (JSON)", gripper},
+      {"config", "study configuration (first byte: TOML or INI), validated", config},
+      {"database", "object database (HDF5): summary and the first objects' data", database},
+      {"log", "tactile log (HDF5)", log},
+      {"runs", "experiment run store (HDF5)", runs},
+      {"result", "recognition result (HDF5)", result},
+  };
+  return all;
+}
+
+const Target* find_target(const std::string& name) {
+  for (const Target& t : targets())
+    if (t.name == name) return &t;
+  return nullptr;
+}
+
+}  // namespace ts::fuzz
