@@ -498,13 +498,6 @@ void Group::write_strings(const std::string& name, const std::vector<std::string
     node_->fail(field, "cannot write the dataset");
 }
 
-Shape Group::shape(const std::string& name) const {
-  Guard g;
-  if (!node_) throw Error("HDF5 group used before it was opened", "", name);
-  Id ds = open_dataset(*node_, name);
-  return dataset_shape(*node_, ds.get(), child_path(name));
-}
-
 namespace {
 /// Never trust a size read from a file: the declared shape must not overflow, and the values it
 /// declares must be backed by the bytes the file stores for them (zlib cannot compress better
@@ -525,6 +518,14 @@ void check_declared_size(const Node& node, hid_t ds, const std::string& field, c
                 node.file_name, field);
 }
 }  // namespace
+
+Shape Group::shape(const std::string& name) const {
+  Guard g;
+  if (!node_) throw Error("HDF5 group used before it was opened", "", name);
+  Id ds = open_dataset(*node_, name);
+  return dataset_shape(*node_, ds.get(), child_path(name));
+}
+
 
 template <class T>
 std::vector<T> Group::read(const std::string& name, const ShapeSpec& expected, Shape* actual) const {
@@ -584,9 +585,11 @@ std::vector<std::string> Group::read_strings(const std::string& name) const {
                 node_->file_name, field);
   const Shape s = dataset_shape(*node_, ds.get(), field);
   check_shape(*node_, field, s, {kAny});
+  const bool variable = H5Tis_variable_str(type.get()) > 0;
+  check_declared_size(*node_, ds.get(), field, s, variable ? sizeof(char*) : H5Tget_size(type.get()));
   std::vector<std::string> out(s[0]);
   if (out.empty()) return out;
-  if (H5Tis_variable_str(type.get()) > 0) {
+  if (variable) {
     Id mtype(H5Tcopy(H5T_C_S1));
     H5Tset_size(mtype.get(), H5T_VARIABLE);
     H5Tset_cset(mtype.get(), H5Tget_cset(type.get()));  // h5py writes UTF-8, others ASCII

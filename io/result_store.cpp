@@ -3,6 +3,7 @@
 #include "io/atomic_file.hpp"
 #include "io/h5.hpp"
 
+#include <charconv>
 #include <cmath>
 #include <limits>
 
@@ -185,7 +186,12 @@ ResultData read_result(const std::filesystem::path& path) {
                 file, "/schema_version");
   ResultHeader& h = d.header;
   h.method = root.string_attribute("method");
-  h.seed = std::stoull(root.string_attribute("seed"));
+  {
+    const std::string seed = root.string_attribute("seed");   // a string: uint64 does not fit HDF5's int attributes
+    const auto [end, ec] = std::from_chars(seed.data(), seed.data() + seed.size(), h.seed);
+    if (seed.empty() || ec != std::errc{} || end != seed.data() + seed.size())
+      throw Error("'" + seed.substr(0, 40) + "' is not a seed (a whole number below 2^64)", file, "/seed");
+  }
   h.database = root.string_attribute("database");
   h.input = root.string_attribute("input");
   h.input_kind = root.string_attribute("input_kind");

@@ -58,7 +58,11 @@ TEST_CASE("Fuzz corpora: truncated and corrupted seeds are refused with ts::Erro
   // Deterministic mutations of every seed: cut at 16 places, 24 single-byte changes and 8 runs
   // of 0xFF (sizes and counts declared as huge). A bad input may be read or refused, never
   // crash, throw anything but ts::Error, or allocate from an unchecked size.
+  // Not the raw hdf5 target: Debian's libhdf5 1.10.8 itself crashes on some damaged metadata
+  // (H5Aiterate2 on a corrupt attribute table; README, Hardening). The HDF5 readers' own
+  // validation is fuzzed through edit scripts (next test case).
   for (const auto& t : ts::fuzz::targets()) {
+    if (t.name == "hdf5") continue;
     for (const fs::path& f : corpus(t.name)) {
       if (is_finding(f)) continue;
       const auto seed = bytes_of(f);
@@ -82,5 +86,31 @@ TEST_CASE("Fuzz corpora: truncated and corrupted seeds are refused with ts::Erro
         CHECK_NOTHROW((void)t.run(inputs[k]));
       }
     }
+  }
+}
+
+TEST_CASE("Fuzz corpora: random HDF5 edit scripts are refused with ts::Error or read") {
+  // The HDF5 targets' structured mode (tests/fuzz/h5_edits.hpp): well-formed files holding
+  // values, extents (up to 2^62) and types the readers must validate before allocating.
+  constexpr int kScripts = 200;
+  ts::Rng rng(11, 0, 0, 0);
+  for (const std::string name : {"database", "log", "runs", "result"}) {
+    const ts::fuzz::Target* t = ts::fuzz::find_target(name);
+    REQUIRE(t != nullptr);
+    std::size_t accepted = 0;
+    for (int k = 0; k < kScripts; ++k) {
+      std::vector<std::uint8_t> script(16 * (1 + rng.index(3)));
+      for (auto& b : script) b = static_cast<std::uint8_t>(rng.index(256));
+      // Half the values small (plausible counts and indices), half anything.
+      if (k % 2 == 0)
+        for (std::size_t r = 0; r < script.size(); r += 16) std::fill(script.begin() + r + 9, script.begin() + r + 15, 0);
+      INFO(name << ", script " << k);
+      bool ok = false;
+      CHECK_NOTHROW(ok = t->run(script));
+      accepted += ok ? 1 : 0;
+    }
+    INFO(name << ": " << accepted << " of " << kScripts << " accepted");
+    CHECK(accepted < kScripts);   // the edits reach the validation: some must be refused
+    CHECK(accepted > 0);          // and some leave a readable store
   }
 }

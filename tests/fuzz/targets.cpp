@@ -1,5 +1,7 @@
 #include "fuzz/targets.hpp"
 
+#include "fuzz/h5_edits.hpp"
+
 #include "datasets/archive.hpp"
 #include "datasets/manifest.hpp"
 #include "engine/core.hpp"
@@ -115,33 +117,49 @@ bool config(std::span<const std::uint8_t> b) {
   });
 }
 
-bool database(std::span<const std::uint8_t> b) {
-  const auto p = as_file(b, "in.h5");
+/// The HDF5 readers. Each takes a file path.
+void read_database(const fs::path& p) {
+  io::DbReader db(p);
+  for (std::size_t i = 0; i < db.size() && i < 4; ++i) {
+    (void)db.load_features(i);
+    (void)db.load_coarse(i);
+    (void)db.load_fine(i);
+    (void)db.load_field(i);
+    (void)db.load_mesh(i);
+  }
+}
+void read_log(const fs::path& p) { (void)io::read_log(p); }
+void read_runs(const fs::path& p) { (void)io::RunStore::read(p); }
+void read_result(const fs::path& p) { (void)io::read_result(p); }
+
+/// A store Touchstone wrote, the base of a target's edit scripts (tests/fuzz/base/).
+fs::path base_file(const std::string& name) { return fs::path(TS_SOURCE_DIR) / "tests/fuzz/base" / name; }
+
+/// An HDF5 target in edit mode: the script applied to the base file, then read.
+template <void (*Read)(const fs::path&)>
+bool edited(std::span<const std::uint8_t> script, const char* base) {
+  const fs::path p = scratch() / "in.h5";
+  apply_h5_edits(base_file(base), p, script);
+  return refusal_ok([&] { Read(p); });
+}
+
+bool database(std::span<const std::uint8_t> b) { return edited<read_database>(b, "box_db.h5"); }
+bool log(std::span<const std::uint8_t> b) { return edited<read_log>(b, "box_3_grasps.h5"); }
+bool runs(std::span<const std::uint8_t> b) { return edited<read_runs>(b, "box_1_run.h5"); }
+bool result(std::span<const std::uint8_t> b) { return edited<read_result>(b, "box_3_steps.h5"); }
+
+/// Raw bytes as an HDF5 file (first byte: which reader): what libhdf5 itself makes of damaged
+/// metadata. Debian's libhdf5 1.10.8 crashes on some (README, Hardening): not in "all".
+bool hdf5(std::span<const std::uint8_t> b) {
+  const auto [reader, rest] = choose(b, {"database", "log", "runs", "result"});
+  const fs::path p = as_file(rest, "raw.h5");
+  const std::string r = reader;
   return refusal_ok([&] {
-    io::DbReader db(p);
-    for (std::size_t i = 0; i < db.size() && i < 4; ++i) {
-      (void)db.load_features(i);
-      (void)db.load_coarse(i);
-      (void)db.load_fine(i);
-      (void)db.load_field(i);
-      (void)db.load_mesh(i);
-    }
+    if (r == "database") read_database(p);
+    else if (r == "log") read_log(p);
+    else if (r == "runs") read_runs(p);
+    else read_result(p);
   });
-}
-
-bool log(std::span<const std::uint8_t> b) {
-  const auto p = as_file(b, "in.h5");
-  return refusal_ok([&] { (void)io::read_log(p); });
-}
-
-bool runs(std::span<const std::uint8_t> b) {
-  const auto p = as_file(b, "in.h5");
-  return refusal_ok([&] { (void)io::RunStore::read(p); });
-}
-
-bool result(std::span<const std::uint8_t> b) {
-  const auto p = as_file(b, "in.h5");
-  return refusal_ok([&] { (void)io::read_result(p); });
 }
 
 }  // namespace
@@ -155,10 +173,11 @@ const std::vector<Target>& targets() {
       {"manifest", "mesh manifest (TSV)", manifest},
       {"gripper", "gripper description (JSON)", gripper},
       {"config", "study configuration (first byte: TOML or INI), validated", config},
-      {"database", "object database (HDF5): summary and the first objects' data", database},
-      {"log", "tactile log (HDF5)", log},
-      {"runs", "experiment run store (HDF5)", runs},
-      {"result", "recognition result (HDF5)", result},
+      {"database", "object database (HDF5 edit script on a database: summary, first objects' data)", database},
+      {"log", "tactile log (HDF5 edit script on a log)", log},
+      {"runs", "experiment run store (HDF5 edit script on a store)", runs},
+      {"result", "recognition result (HDF5 edit script on a result)", result},
+      {"hdf5", "raw bytes as any HDF5 store (first byte: database, log, runs, result): libhdf5's own parsing", hdf5},
   };
   return all;
 }
