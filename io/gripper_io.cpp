@@ -124,6 +124,8 @@ Gripper parse_gripper(const std::string& text, const std::string& file) {
   } catch (const json::parse_error& e) {
     throw Error("gripper description does not parse as JSON: " + std::string(e.what()), file,
                 "byte " + std::to_string(e.byte));
+  } catch (const json::exception& e) {   // a number beyond double's range ("1E999"): out_of_range.406
+    throw Error("gripper description does not parse as JSON: " + std::string(e.what()), file);
   }
   if (!doc.is_object()) throw Error("gripper description must be a JSON object", file);
   const Reader root(doc, "", file);

@@ -7,6 +7,7 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -276,6 +277,42 @@ void check_ply_header(const std::string& bytes, const std::string& name) {
                   name, "element " + what);
 }
 
+/// Assimp (5.2) allocates OFF vertex and face arrays from the counts in the header without
+/// checking them against the file (a 70-byte file asked for 53 GB): each record takes at least
+/// two bytes ("0\n"), so counts beyond half the bytes after them are refused first.
+void check_off_header(const std::string& bytes, const std::string& name) {
+  std::size_t pos = bytes.find_first_not_of(" \t\r\n");
+  if (pos == std::string::npos) return;
+  const std::size_t token_end = std::min(bytes.find_first_of(" \t\r\n", pos), bytes.size());
+  std::string keyword = bytes.substr(pos, token_end - pos);
+  for (char& c : keyword) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  if (keyword.size() < 3 || keyword.size() > 8 || keyword.compare(keyword.size() - 3, 3, "OFF") != 0) return;
+  pos = token_end;
+  double counts[2] = {0, 0};
+  std::string texts[2];
+  for (int k = 0; k < 2; ++k) {
+    for (;;) {   // blanks, and comment lines before the counts
+      pos = bytes.find_first_not_of(" \t\r\n", pos);
+      if (pos == std::string::npos) return;   // no counts: Assimp refuses it
+      if (bytes[pos] != '#') break;
+      pos = bytes.find('\n', pos);
+      if (pos == std::string::npos) return;
+    }
+    const std::size_t end = std::min(bytes.find_first_not_of("0123456789", pos), bytes.size());
+    if (end == pos) return;   // not a count: Assimp's own parsing decides
+    texts[k] = bytes.substr(pos, std::min<std::size_t>(end - pos, 30));
+    counts[k] = std::strtod(texts[k].c_str(), nullptr);
+    pos = end;
+  }
+  const double room = static_cast<double>(bytes.size() - std::min(pos, bytes.size())) / 2.0;
+  const char* what[2] = {"vertices", "faces"};
+  for (int k = 0; k < 2; ++k)
+    if (counts[k] > room)
+      throw Error("OFF header declares " + texts[k] + " " + what[k] + ", more than the " + std::to_string(bytes.size() - pos) +
+                      " bytes after it can hold",
+                  name, std::string("header, ") + what[k]);
+}
+
 }  // namespace
 
 bool is_mesh_extension(const std::string& extension) {
@@ -289,6 +326,7 @@ ImportedMesh import_mesh(const std::filesystem::path& file, const MeshImportSett
   const std::string name = file.string();
   const std::string bytes = read_bytes(file);
   check_ply_header(bytes, name);
+  check_off_header(bytes, name);
   Assimp::Importer importer;
   configure(importer);
   // From the file (not memory) so formats with companion files (OBJ + MTL, glTF + BIN) work.
@@ -304,6 +342,7 @@ ImportedMesh import_mesh_from_memory(const std::string& bytes, const std::string
   if (!hint.empty() && hint[0] == '.') hint.erase(0, 1);
   if (bytes.empty()) throw Error("mesh file is empty", name);
   check_ply_header(bytes, name);
+  check_off_header(bytes, name);
   Assimp::Importer importer;
   configure(importer);
   const aiScene* scene =

@@ -216,3 +216,16 @@ TEST_CASE("mesh import: a PLY cut short or declaring more than it holds is refus
     }
   }
 }
+
+TEST_CASE("mesh import: an OFF header declaring more vertices or faces than the file holds is refused") {
+  // Found by fuzzing: Assimp 5.2 allocated 53 GB for "OFF\n4 111...476\n" before reading on.
+  const std::string body = "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+  CHECK(io::import_mesh_from_memory("OFF\n4 4 0\n" + body, "t.off").mesh.faces.size() == 4);
+  CHECK(io::import_mesh_from_memory("OFF\n# a comment\n4 4 0\n" + body, "c.off").mesh.faces.size() == 4);
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("OFF\n4 1111111111111111476\n" + body, "f.off"),
+                       doctest::Contains("declares 1111111111111111476 faces"), ts::Error);
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("OFF 90000 4 0\n" + body, "v.off"),
+                       doctest::Contains("declares 90000 vertices"), ts::Error);
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("COFF\n4 90000 0\n" + body, "v.off"),
+                       doctest::Contains("(v.off, header, faces)"), ts::Error);
+}
