@@ -306,18 +306,21 @@ struct PlyElement {
   std::vector<PlyProperty> properties;
   int line = 0;
 };
-}  // namespace
 
-PointCloud read_ply(const std::filesystem::path& path) {
-  const std::string file = path.string();
-  const std::string data = read_file(path);
-  Lines lines{data};
+enum class PlyFormat { ascii, le, be };
+
+struct PlyHeader {
+  PlyFormat format = PlyFormat::ascii;
+  std::vector<PlyElement> elements;
+};
+
+/// Parse the header; `lines` is left at the first line of the body.
+PlyHeader parse_ply_header(Lines& lines, const std::string& file) {
   std::string_view line;
   if (!lines.next(line) || line != "ply") throw Error("not a PLY file (the first line is not 'ply')", file, "line 1");
-
-  enum class Format { ascii, le, be } format = Format::ascii;
+  PlyHeader h;
   bool have_format = false, ended = false;
-  std::vector<PlyElement> elements;
+  std::vector<PlyElement>& elements = h.elements;
   while (lines.next(line)) {
     const auto tok = split_ws(line);
     const std::string where = where_line(lines.line);
@@ -329,9 +332,9 @@ PointCloud read_ply(const std::filesystem::path& path) {
     }
     if (tok[0] == "format") {
       if (tok.size() != 3) throw Error("malformed format line", file, where);
-      if (tok[1] == "ascii") format = Format::ascii;
-      else if (tok[1] == "binary_little_endian") format = Format::le;
-      else if (tok[1] == "binary_big_endian") format = Format::be;
+      if (tok[1] == "ascii") h.format = PlyFormat::ascii;
+      else if (tok[1] == "binary_little_endian") h.format = PlyFormat::le;
+      else if (tok[1] == "binary_big_endian") h.format = PlyFormat::be;
       else throw Error("unknown PLY format '" + std::string(tok[1]) + "'", file, where);
       have_format = true;
     } else if (tok[0] == "element") {
@@ -368,6 +371,73 @@ PointCloud read_ply(const std::filesystem::path& path) {
   }
   if (!ended) throw Error("the PLY header has no end_header line", file);
   if (!have_format) throw Error("the PLY header has no format line", file);
+  return h;
+}
+
+/// Skip one binary list (count, then values) at `p`; false if the file ends inside it.
+/// Throws on a count that is negative, fractional or beyond 2^32.
+bool skip_binary_list(const unsigned char*& p, const unsigned char* end, const PlyProperty& prop, bool big,
+                      const std::string& file, const std::string& where) {
+  const std::size_t cs = scalar_size(prop.count_type);
+  if (static_cast<std::size_t>(end - p) < cs) return false;
+  const double c = load(p, prop.count_type, big);
+  p += cs;
+  if (!(c >= 0) || c > 4294967295.0) throw Error("list length out of range", file, where);
+  const auto bytes = static_cast<std::uint64_t>(c) * scalar_size(prop.type);
+  if (static_cast<std::uint64_t>(end - p) < bytes) return false;
+  p += bytes;
+  return true;
+}
+
+}  // namespace
+
+void check_ply_structure(const std::string& data, const std::string& file) {
+  Lines lines{data};
+  const PlyHeader h = parse_ply_header(lines, file);
+  std::string_view line;
+  if (h.format == PlyFormat::ascii) {
+    for (const auto& e : h.elements)
+      for (std::uint64_t r = 0; r < e.count; ++r) {
+        if (!lines.next(line))
+          throw Error("the file ends inside element '" + e.name + "' (" + std::to_string(r) + " of " +
+                          std::to_string(e.count) + " read)",
+                      file, where_line(lines.line));
+        const auto tok = split_ws(line);
+        std::size_t t = 0;
+        for (const auto& p : e.properties) {
+          std::uint64_t n = 0;
+          if (p.list && (t >= tok.size() || !parse_uint(tok[t], n) || n > tok.size() - t - 1))
+            throw Error("a list of element '" + e.name + "' declares more values than its line holds", file,
+                        where_line(lines.line));
+          if (!p.list && t >= tok.size())
+            throw Error("too few values for element '" + e.name + "'", file, where_line(lines.line));
+          t += p.list ? 1 + n : 1;
+        }
+      }
+    return;
+  }
+  const bool big = h.format == PlyFormat::be;
+  const auto* p = reinterpret_cast<const unsigned char*>(data.data()) + lines.pos;
+  const auto* end = reinterpret_cast<const unsigned char*>(data.data()) + data.size();
+  for (const auto& e : h.elements) {
+    if (e.properties.empty()) continue;
+    for (std::uint64_t r = 0; r < e.count; ++r)
+      for (const auto& prop : e.properties) {
+        const std::string where = where_point(e.name.c_str(), r);
+        const std::size_t sz = scalar_size(prop.type);
+        if (prop.list ? !skip_binary_list(p, end, prop, big, file, where) : static_cast<std::size_t>(end - p) < sz)
+          throw Error("the file ends inside element '" + e.name + "'", file, where);
+        if (!prop.list) p += sz;
+      }
+  }
+}
+
+PointCloud read_ply(const std::filesystem::path& path) {
+  const std::string file = path.string();
+  const std::string data = read_file(path);
+  Lines lines{data};
+  std::string_view line;
+  const auto [format, elements] = parse_ply_header(lines, file);
   const auto vit = std::find_if(elements.begin(), elements.end(),
                                 [](const PlyElement& e) { return e.name == "vertex"; });
   if (vit == elements.end()) throw Error("the PLY header has no vertex element", file);
@@ -396,7 +466,7 @@ PointCloud read_ply(const std::filesystem::path& path) {
   if (layout.normals()) cloud.normals.reserve(reserve);
   std::vector<double> values(vertex.properties.size(), 0.0);
 
-  if (format == Format::ascii) {
+  if (format == PlyFormat::ascii) {
     for (const auto& e : elements) {
       const bool is_vertex = &e == &vertex;
       for (std::uint64_t r = 0; r < e.count; ++r) {
@@ -432,7 +502,7 @@ PointCloud read_ply(const std::filesystem::path& path) {
       if (is_vertex) break;
     }
   } else {
-    const bool big = format == Format::be;
+    const bool big = format == PlyFormat::be;
     const auto* p = reinterpret_cast<const unsigned char*>(data.data()) + lines.pos;
     const auto* end = reinterpret_cast<const unsigned char*>(data.data()) + data.size();
     for (const auto& e : elements) {
@@ -443,16 +513,8 @@ PointCloud read_ply(const std::filesystem::path& path) {
         for (std::size_t k = 0; k < e.properties.size(); ++k) {
           const auto& prop = e.properties[k];
           if (prop.list) {
-            const std::size_t cs = scalar_size(prop.count_type);
-            if (static_cast<std::size_t>(end - p) < cs)
+            if (!skip_binary_list(p, end, prop, big, file, where))
               throw Error("the file ends inside element '" + e.name + "'", file, where);
-            const double c = load(p, prop.count_type, big);
-            p += cs;
-            if (!(c >= 0) || c > 4294967295.0) throw Error("list length out of range", file, where);
-            const auto bytes = static_cast<std::uint64_t>(c) * scalar_size(prop.type);
-            if (static_cast<std::uint64_t>(end - p) < bytes)
-              throw Error("the file ends inside element '" + e.name + "'", file, where);
-            p += bytes;
             continue;
           }
           const std::size_t sz = scalar_size(prop.type);

@@ -38,6 +38,11 @@ void write_pcd(const std::filesystem::path& path, const PointCloud& cloud,
 /// Read by extension (.ply / .pcd); other extensions are recognised by the file's first line.
 PointCloud read_cloud(const std::filesystem::path& path);
 PointCloud read_ply(const std::filesystem::path& path);
+/// Walk a whole PLY file's header and records (every element, not only vertices), checking that
+/// each element count and list length fits the bytes that follow; throws ts::Error naming the
+/// file and the line or record. Mesh import runs it before handing PLY to Assimp, which sizes
+/// arrays from those counts unchecked.
+void check_ply_structure(const std::string& data, const std::string& file);
 PointCloud read_pcd(const std::filesystem::path& path);
 
 }  // namespace ts::io
