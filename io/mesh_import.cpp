@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <sstream>
 #include <iterator>
 #include <unordered_map>
 
@@ -247,9 +248,10 @@ void check_ply_header(const std::string& bytes, const std::string& name) {
 }
 
 /// Assimp (5.2) allocates OFF vertex and face arrays from the counts in the header without
-/// checking them against the file (a 70-byte file asked for 53 GB): each record takes at least
-/// two bytes ("0\n"), so counts beyond half the bytes after them are refused first.
-void check_off_header(const std::string& bytes, const std::string& name) {
+/// checking them against the file (a 70-byte file asked for 53 GB), and crashes on some face
+/// lines: the whole file is walked first. Counts beyond half the bytes after them are refused
+/// at once (each record takes at least two bytes, "0\n").
+void check_off_structure(const std::string& bytes, const std::string& name) {
   std::size_t pos = bytes.find_first_not_of(" \t\r\n");
   if (pos == std::string::npos) return;
   const std::size_t token_end = std::min(bytes.find_first_of(" \t\r\n", pos), bytes.size());
@@ -280,6 +282,56 @@ void check_off_header(const std::string& bytes, const std::string& name) {
       throw Error("OFF header declares " + texts[k] + " " + what[k] + ", more than the " + std::to_string(bytes.size() - pos) +
                       " bytes after it can hold",
                   name, std::string("header, ") + what[k]);
+
+  // The records, one a line (empty lines skipped): each vertex three numbers; each face
+  // a count of 1 to 9 (Assimp's OFF reader drops larger polygons and crashed on a face line
+  // holding fewer indices than it declares) and that many indices below the vertex count.
+  pos = bytes.find('\n', pos);   // rest of the counts line (the edge count)
+  const auto n_vertices = static_cast<std::uint64_t>(counts[0]), n_faces = static_cast<std::uint64_t>(counts[1]);
+  std::uint64_t record = 0;
+  while (record < n_vertices + n_faces) {
+    if (pos == std::string::npos || pos + 1 >= bytes.size())
+      throw Error("the file ends after " + std::to_string(std::min(record, n_vertices)) + " of " +
+                      std::to_string(n_vertices) + " vertices and " +
+                      std::to_string(record > n_vertices ? record - n_vertices : 0) + " of " +
+                      std::to_string(n_faces) + " faces",
+                  name, record < n_vertices ? "vertices" : "faces");
+    const std::size_t start = pos + 1;
+    pos = bytes.find('\n', start);
+    std::string text = bytes.substr(start, (pos == std::string::npos ? bytes.size() : pos) - start);
+    if (!text.empty() && text.back() == '\r') text.pop_back();
+    if (text.empty()) continue;   // Assimp skips empty lines only: a comment or blank line is a record
+    std::istringstream line(text);
+    const bool vertex = record < n_vertices;
+    std::string where = vertex ? "vertex " : "face ";
+    where += std::to_string(vertex ? record : record - n_vertices);
+    ++record;
+    std::string first;
+    line >> first;
+    if (vertex) {
+      double y = 0, z = 0;
+      char* end = nullptr;
+      (void)std::strtod(first.c_str(), &end);
+      if (*end != '\0' || !(line >> y >> z)) throw Error("a vertex needs three numbers", name, where);
+      continue;
+    }
+    unsigned long long n = 0;
+    char* end = nullptr;
+    n = std::strtoull(first.c_str(), &end, 10);
+    if (*end != '\0' || first[0] == '-' || n < 1 || n > 9)
+      throw Error("a face's vertex count must be 1 to 9 (Assimp's OFF reader), not '" + first.substr(0, 20) + "'",
+                  name, where);
+    for (unsigned long long k = 0; k < n; ++k) {
+      std::string index;
+      unsigned long long i = 0;
+      if (line >> index) i = std::strtoull(index.c_str(), &end, 10);
+      if (index.empty() || *end != '\0' || index[0] == '-' || i >= n_vertices)
+        throw Error("face declares " + std::to_string(n) + " vertices; index " + std::to_string(k) + " ('" +
+                        index.substr(0, 20) + "') is missing or not one of the " + std::to_string(n_vertices) +
+                        " vertices",
+                    name, where);
+    }
+  }
 }
 
 }  // namespace
@@ -295,7 +347,7 @@ ImportedMesh import_mesh(const std::filesystem::path& file, const MeshImportSett
   const std::string name = file.string();
   const std::string bytes = read_bytes(file);
   check_ply_header(bytes, name);
-  check_off_header(bytes, name);
+  check_off_structure(bytes, name);
   Assimp::Importer importer;
   configure(importer);
   // From the file (not memory) so formats with companion files (OBJ + MTL, glTF + BIN) work.
@@ -311,7 +363,7 @@ ImportedMesh import_mesh_from_memory(const std::string& bytes, const std::string
   if (!hint.empty() && hint[0] == '.') hint.erase(0, 1);
   if (bytes.empty()) throw Error("mesh file is empty", name);
   check_ply_header(bytes, name);
-  check_off_header(bytes, name);
+  check_off_structure(bytes, name);
   Assimp::Importer importer;
   configure(importer);
   const aiScene* scene =
