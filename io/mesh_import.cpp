@@ -251,14 +251,19 @@ void check_ply_header(const std::string& bytes, const std::string& name) {
 /// checking them against the file (a 70-byte file asked for 53 GB), and crashes on some face
 /// lines: the whole file is walked first. Counts beyond half the bytes after them are refused
 /// at once (each record takes at least two bytes, "0\n").
-void check_off_structure(const std::string& bytes, const std::string& name) {
+void check_off_structure(const std::string& bytes, const std::string& name, const std::string& extension) {
   std::size_t pos = bytes.find_first_not_of(" \t\r\n");
   if (pos == std::string::npos) return;
   const std::size_t token_end = std::min(bytes.find_first_of(" \t\r\n", pos), bytes.size());
   std::string keyword = bytes.substr(pos, token_end - pos);
   for (char& c : keyword) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-  if (keyword.size() < 3 || keyword.size() > 8 || keyword.compare(keyword.size() - 3, 3, "OFF") != 0) return;
-  pos = token_end;
+  const bool keyword_off = keyword.size() >= 3 && keyword.size() <= 8 && keyword.compare(keyword.size() - 3, 3, "OFF") == 0;
+  std::string ext = extension;
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  // Assimp chooses its OFF reader by the keyword or by the extension; without the keyword it
+  // takes the first numbers of the file as the counts.
+  if (!keyword_off && ext != "off" && ext != ".off") return;
+  if (keyword_off) pos = token_end;
   double counts[2] = {0, 0};
   std::string texts[2];
   for (int k = 0; k < 2; ++k) {
@@ -347,7 +352,7 @@ ImportedMesh import_mesh(const std::filesystem::path& file, const MeshImportSett
   const std::string name = file.string();
   const std::string bytes = read_bytes(file);
   check_ply_header(bytes, name);
-  check_off_structure(bytes, name);
+  check_off_structure(bytes, name, file.extension().string());
   Assimp::Importer importer;
   configure(importer);
   // From the file (not memory) so formats with companion files (OBJ + MTL, glTF + BIN) work.
@@ -363,7 +368,7 @@ ImportedMesh import_mesh_from_memory(const std::string& bytes, const std::string
   if (!hint.empty() && hint[0] == '.') hint.erase(0, 1);
   if (bytes.empty()) throw Error("mesh file is empty", name);
   check_ply_header(bytes, name);
-  check_off_structure(bytes, name);
+  check_off_structure(bytes, name, hint);
   Assimp::Importer importer;
   configure(importer);
   const aiScene* scene =

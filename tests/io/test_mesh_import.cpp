@@ -233,6 +233,9 @@ TEST_CASE("mesh import: an OFF header declaring more vertices or faces than the 
                        doctest::Contains("declares 90000 vertices"), ts::Error);
   CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("COFF\n4 90000 0\n" + body, "v.off"),
                        doctest::Contains("(v.off, header, faces)"), ts::Error);
+  // Without the keyword, Assimp reads a .off file's first numbers as the counts (4 GB asked).
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("041875966818443 1243\n3 0 3 2\n3 1 2 3\n", "k.off"),
+                       doctest::Contains("declares 041875966818443 vertices"), ts::Error);
 }
 
 TEST_CASE("mesh import: OFF records are checked before Assimp reads them") {
