@@ -243,8 +243,13 @@ namespace {
 /// Assimp (5.2) loops forever on a PLY header cut short and sizes arrays from element counts
 /// and list lengths it has not checked against the file (26 GB from one ascii face line): PLY
 /// is walked whole by Touchstone's own reader first.
-void check_ply_header(const std::string& bytes, const std::string& name) {
-  if (bytes.compare(0, 3, "ply") == 0) check_ply_structure(bytes, name);
+/// Assimp takes a file for PLY by its extension or by a magic word in any case ("Ply"), so
+/// both send it through the check (which wants the exact first line "ply").
+void check_ply_header(const std::string& bytes, const std::string& name, const std::string& extension) {
+  std::string head = bytes.substr(0, 3), ext = extension;
+  for (char& c : head) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (head == "ply" || ext == "ply" || ext == ".ply") check_ply_structure(bytes, name);
 }
 
 /// Assimp (5.2) allocates OFF vertex and face arrays from the counts in the header without
@@ -351,7 +356,7 @@ bool is_mesh_extension(const std::string& extension) {
 ImportedMesh import_mesh(const std::filesystem::path& file, const MeshImportSettings& settings) {
   const std::string name = file.string();
   const std::string bytes = read_bytes(file);
-  check_ply_header(bytes, name);
+  check_ply_header(bytes, name, file.extension().string());
   check_off_structure(bytes, name, file.extension().string());
   Assimp::Importer importer;
   configure(importer);
@@ -367,7 +372,7 @@ ImportedMesh import_mesh_from_memory(const std::string& bytes, const std::string
   std::string hint = std::filesystem::path(name).extension().string();
   if (!hint.empty() && hint[0] == '.') hint.erase(0, 1);
   if (bytes.empty()) throw Error("mesh file is empty", name);
-  check_ply_header(bytes, name);
+  check_ply_header(bytes, name, hint);
   check_off_structure(bytes, name, hint);
   Assimp::Importer importer;
   configure(importer);
