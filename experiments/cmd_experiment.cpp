@@ -141,10 +141,15 @@ int run_experiment(const ExperimentOptions& o) {
   try {
     engine = experiments::make_recognition_engine(config, experiments::open_database(o.db), threads, note);
   } catch (const Error& e) {
-    // An unknown object: name the database and the flag (or key) that listed it.
+    // An unknown object: name where it was listed (the --objects flag, or the configuration
+    // file's key) and the database that lacks it.
     if (!e.file().empty() || (e.field() != "objects" && e.field() != "database")) throw;
     const bool flag = e.field() == "objects" && !o.objects.empty();
-    throw Error(e.message(), o.db, flag ? "--objects" : e.field());
+    if (flag || o.config_file.empty()) throw Error(e.message(), o.db, flag ? "--objects" : e.field());
+    std::string message = e.message();
+    const std::string lacks = "(not in the database)";
+    if (const auto at = message.find(lacks); at != std::string::npos) message.replace(at, lacks.size(), "(not in the database " + o.db + ")");
+    throw Error(message, o.config_file, e.field());
   }
   const io::RunStoreHeader& header = engine->header();
   const std::filesystem::path out = o.out;

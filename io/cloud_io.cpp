@@ -740,7 +740,7 @@ PointCloud read_pcd(const std::filesystem::path& path) {
     if (record > 0 && available / record < *points)
       throw Error("the file is truncated: " + std::to_string(*points) + " points need " +
                       std::to_string(needed) + " bytes of data, found " + std::to_string(available),
-                  file);
+                  file, "DATA");
     for (std::uint64_t r = 0; r < *points; ++r) {
       const unsigned char* rec = body + r * record;
       for (int k = 0; k < n_used; ++k) {

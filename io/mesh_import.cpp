@@ -319,10 +319,15 @@ void check_off_structure(const std::string& bytes, const std::string& name, cons
     std::string first;
     line >> first;
     if (vertex) {
-      double y = 0, z = 0;
-      char* end = nullptr;
-      (void)std::strtod(first.c_str(), &end);
-      if (*end != '\0' || !(line >> y >> z)) throw Error("a vertex needs three numbers", name, where);
+      // Three finite numbers: Assimp reads "nan" or "inf" as 0 and would place the vertex there.
+      std::string ys, zs;
+      line >> ys >> zs;
+      for (const std::string* t : {&first, &ys, &zs}) {
+        char* end = nullptr;
+        const double v = std::strtod(t->c_str(), &end);
+        if (t->empty() || *end != '\0' || !std::isfinite(v))
+          throw Error("a vertex needs three finite numbers, not '" + t->substr(0, 20) + "'", name, where);
+      }
       continue;
     }
     unsigned long long n = 0;

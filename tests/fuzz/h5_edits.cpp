@@ -3,6 +3,7 @@
 #include <hdf5.h>
 
 #include <algorithm>
+#include <stdexcept>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -207,6 +208,67 @@ void apply_h5_edits(const std::filesystem::path& base, const std::filesystem::pa
     }
   }
   H5Fclose(file);
+}
+
+namespace {
+/// The file opened read-write, closed at scope exit.
+struct Rw {
+  hid_t id;
+  explicit Rw(const std::filesystem::path& f) : id(H5Fopen(f.c_str(), H5F_ACC_RDWR, H5P_DEFAULT)) {
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+    if (id < 0) throw std::runtime_error("cannot open " + f.string());
+  }
+  ~Rw() { H5Fclose(id); }
+  Rw(const Rw&) = delete;
+  Rw& operator=(const Rw&) = delete;
+};
+
+void replace_attribute(hid_t file, const std::string& object, const std::string& name, hid_t type, const void* value) {
+  if (H5Aexists_by_name(file, object.c_str(), name.c_str(), H5P_DEFAULT) > 0)
+    H5Adelete_by_name(file, object.c_str(), name.c_str(), H5P_DEFAULT);
+  hid_t space = H5Screate(H5S_SCALAR);
+  hid_t a = H5Acreate_by_name(file, object.c_str(), name.c_str(), type, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  H5Sclose(space);
+  if (a < 0) throw std::runtime_error("cannot create the attribute " + object + "@" + name);
+  const herr_t w = H5Awrite(a, type, value);
+  H5Aclose(a);
+  if (w < 0) throw std::runtime_error("cannot write the attribute " + object + "@" + name);
+}
+}  // namespace
+
+void h5_redeclare(const std::filesystem::path& file, const std::string& dataset, const std::vector<std::uint64_t>& dims) {
+  Rw f(file);
+  const Item it{dataset, ""};
+  hid_t type = -1;
+  std::vector<hsize_t> old;
+  if (!shape_of(f.id, it, type, old)) throw std::runtime_error("no dataset " + dataset);
+  recreate(f.id, it, type, std::vector<hsize_t>(dims.begin(), dims.end()));
+  H5Tclose(type);
+  if (H5Lexists(f.id, dataset.c_str(), H5P_DEFAULT) <= 0) throw std::runtime_error("cannot redeclare " + dataset);
+}
+
+void h5_set_number(const std::filesystem::path& file, const std::string& object, const std::string& name, double value) {
+  Rw f(file);
+  replace_attribute(f.id, object, name, H5T_NATIVE_DOUBLE, &value);
+}
+
+void h5_set_text(const std::filesystem::path& file, const std::string& object, const std::string& name,
+                 const std::string& value) {
+  Rw f(file);
+  hid_t type = H5Tcopy(H5T_C_S1);
+  H5Tset_size(type, H5T_VARIABLE);
+  const char* p = value.c_str();
+  replace_attribute(f.id, object, name, type, &p);
+  H5Tclose(type);
+}
+
+void h5_remove(const std::filesystem::path& file, const std::string& path) {
+  Rw f(file);
+  const auto at = path.find('@');
+  const herr_t r = at == std::string::npos
+                       ? H5Ldelete(f.id, path.c_str(), H5P_DEFAULT)
+                       : H5Adelete_by_name(f.id, path.substr(0, at).c_str(), path.substr(at + 1).c_str(), H5P_DEFAULT);
+  if (r < 0) throw std::runtime_error("cannot remove " + path);
 }
 
 }  // namespace ts::fuzz

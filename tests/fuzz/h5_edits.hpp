@@ -16,11 +16,22 @@
 #include <cstdint>
 #include <filesystem>
 #include <span>
+#include <string>
+#include <vector>
 
 namespace ts::fuzz {
 
 /// Copy `base` to `out` and apply `script` to the copy. Edits that HDF5 refuses are skipped.
 void apply_h5_edits(const std::filesystem::path& base, const std::filesystem::path& out,
                     std::span<const std::uint8_t> script);
+
+/// Named edits of one file (the bad-input catalogue's crafted stores), each through the HDF5 API:
+/// redeclare a dataset with other dimensions (chunked, nothing written: fill values), set a
+/// numeric attribute (replacing it, whatever its type), write a string attribute, remove a
+/// dataset, group or attribute ("path@name"). Each throws std::runtime_error if HDF5 refuses.
+void h5_redeclare(const std::filesystem::path& file, const std::string& dataset, const std::vector<std::uint64_t>& dims);
+void h5_set_number(const std::filesystem::path& file, const std::string& object, const std::string& name, double value);
+void h5_set_text(const std::filesystem::path& file, const std::string& object, const std::string& name, const std::string& value);
+void h5_remove(const std::filesystem::path& file, const std::string& path);
 
 }  // namespace ts::fuzz
