@@ -226,7 +226,9 @@ TEST_CASE("bad logs: one clear error naming the file and the field") {
       {"over range", "/grasps/tactile[0][0][20]"},
       {"nan signal", "/grasps/tactile[0][0][20]"},
   };
-  for (const auto& [defect, field] : cases) {
+  for (const auto& c : cases) {
+    const std::string& defect = c.first;   // (not a structured binding: clang 14 cannot capture one in INFO)
+    const std::string& field = c.second;
     INFO(defect);
     const auto p = dir / "bad.h5";
     write_by_hand(p, defect);
