@@ -97,7 +97,8 @@ TEST_CASE("mesh measurements: unit cube area, volume and winding") {
 
 TEST_CASE("mesh topology: closed, open and non-manifold meshes") {
   for (const auto& [name, m] : test_meshes()) {
-    CAPTURE(name);
+    const std::string label = name;   // (clang 14 cannot capture a structured binding)
+    CAPTURE(label);
     const auto topo = mesh_topology(m);
     CHECK(topo.boundary_edges == 0);
     CHECK(topo.nonmanifold_edges == 0);
@@ -121,7 +122,8 @@ TEST_CASE("mesh topology: closed, open and non-manifold meshes") {
 
 TEST_CASE("MeshIndex raycast agrees with brute force on random rays") {
   for (const auto& [name, m] : test_meshes()) {
-    CAPTURE(name);
+    const std::string label = name;   // (clang 14 cannot capture a structured binding)
+    CAPTURE(label);
     const MeshIndex index(m);
     Rng rng(11);
     int hits = 0;
@@ -152,7 +154,8 @@ TEST_CASE("MeshIndex raycast agrees with brute force on random rays") {
 
 TEST_CASE("MeshIndex raycast does not slip through shared edges and vertices") {
   for (const auto& [name, m] : test_meshes()) {
-    CAPTURE(name);
+    const std::string label = name;   // (clang 14 cannot capture a structured binding)
+    CAPTURE(label);
     const MeshIndex index(m);
     const Vec3 c = mesh_bounds(m).center();
     int misses = 0, tested = 0;
@@ -198,7 +201,8 @@ TEST_CASE("MeshIndex raycast does not slip through shared edges and vertices") {
 
 TEST_CASE("MeshIndex closest point agrees with brute force") {
   for (const auto& [name, m] : test_meshes()) {
-    CAPTURE(name);
+    const std::string label = name;   // (clang 14 cannot capture a structured binding)
+    CAPTURE(label);
     const MeshIndex index(m);
     Rng rng(5);
     for (int i = 0; i < 2000; ++i) {

@@ -58,7 +58,8 @@ TEST_CASE("scanner: sphere and cube are covered, on the surface, with outward no
   for (const auto& [name, mesh] :
        {std::pair<std::string, Mesh>{"sphere", test::make_sphere(0.1, 4)},
         std::pair<std::string, Mesh>{"cube", test::make_box(Vec3(0.1, 0.1, 0.1), 3)}}) {
-    CAPTURE(name);
+    const std::string label = name;   // (clang 14 cannot capture a structured binding)
+    CAPTURE(label);
     const MeshIndex index(mesh);
     const ScanResult r = scan_mesh(index, s, 7);
     CHECK(r.coverage >= 0.99);
@@ -128,7 +129,8 @@ TEST_CASE("scan_view returns exactly the first hits of its parallel rays") {
        {std::pair<std::string, Mesh>{"sphere", test::make_sphere(0.1, 4)},
         std::pair<std::string, Mesh>{"torus", test::make_torus(0.07, 0.03, 64, 32)},
         std::pair<std::string, Mesh>{"cube", test::make_box(Vec3(0.1, 0.1, 0.1), 3)}}) {
-    CAPTURE(name);
+    const std::string label = name;   // (clang 14 cannot capture a structured binding)
+    CAPTURE(label);
     const MeshIndex index(mesh);
     for (int k = 0; k < 3; ++k) {
       // Random directions, and an axis-aligned one for the cube (its side faces seen edge-on).
