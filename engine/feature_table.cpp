@@ -149,8 +149,8 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
     }
     m.features += fs.size();
   };
-  // Objects are read in order (the store reads serially), k-d ordered in parallel, appended in
-  // order: the same table for any thread count, with a few objects in flight at a time.
+  // Objects are read and k-d ordered in parallel, appended in order: the same table for any
+  // thread count, with a few objects in flight at a time.
   std::size_t next = 0;
   const auto tokens = static_cast<std::size_t>(2 * std::max(1, tbb::this_task_arena::max_concurrency()));
   tbb::parallel_pipeline(
@@ -165,12 +165,12 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
             }
             auto L = std::make_shared<Loaded>();
             L->o = next++;
-            L->fs = db.load_features(L->o).features;
             return L;
           }) &
           tbb::make_filter<std::shared_ptr<Loaded>, std::shared_ptr<Loaded>>(
               tbb::filter_mode::parallel,
-              [](std::shared_ptr<Loaded> L) {
+              [&db](std::shared_ptr<Loaded> L) {
+                L->fs = db.load_features(L->o).features;  // the reads take turns, inflating does not
                 L->of.resize(L->fs.size());
                 L->idx.resize(L->fs.size());
                 for (std::size_t i = 0; i < L->fs.size(); ++i)

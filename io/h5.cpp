@@ -4,10 +4,14 @@
 #include "io/atomic_file.hpp"
 
 #include <hdf5.h>
+#include <libdeflate.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cctype>
 #include <cstring>
+#include <memory>
 #include <numeric>
 #include <type_traits>
 
@@ -499,6 +503,138 @@ void Group::write_strings(const std::string& name, const std::vector<std::string
 }
 
 namespace {
+/// The compressed chunks of a dataset, as stored, for inflate_chunks.
+struct RawChunks {
+  std::size_t element = 0;       ///< bytes of one value
+  std::size_t row_bytes = 0;     ///< bytes of one row (dimension 0)
+  std::size_t chunk_rows = 0;    ///< rows of one chunk
+  std::size_t rows = 0;          ///< rows of the dataset
+  bool shuffle = false;          ///< byte-shuffled before deflate
+  std::vector<std::vector<unsigned char>> chunks;  ///< chunk k holds rows from k * chunk_rows
+};
+
+/// Reads the chunks of `ds` as stored (H5Dread_chunk) when its layout is the one this project
+/// writes: chunked along dimension 0 only, filters [shuffle,] deflate, the file type equal to
+/// `mem_type`, every chunk allocated and filtered, their sizes within the deflate bound and
+/// within the storage the file declares. Returns false otherwise (nothing is trusted; H5Dread
+/// then reads the dataset). Call under the lock.
+bool read_raw_chunks(hid_t ds, hid_t mem_type, std::size_t element, const Shape& s, RawChunks& raw) {
+  raw = RawChunks{};
+  if (s.empty() || s[0] == 0) return false;
+  Id dcpl(H5Dget_create_plist(ds));
+  if (!dcpl.valid() || H5Pget_layout(dcpl.get()) != H5D_CHUNKED) return false;
+  const int rank = static_cast<int>(s.size());
+  std::vector<hsize_t> cdims(s.size());
+  if (rank > 32 || H5Pget_chunk(dcpl.get(), rank, cdims.data()) != rank || cdims[0] == 0) return false;
+  std::uint64_t row = element;
+  for (std::size_t k = 1; k < s.size(); ++k) {
+    if (cdims[k] != s[k]) return false;
+    row *= s[k];
+  }
+  const int nf = H5Pget_nfilters(dcpl.get());
+  if (nf < 1 || nf > 2) return false;
+  for (int i = 0; i < nf; ++i) {
+    unsigned flags = 0, config = 0;
+    std::size_t nelem = 8;
+    unsigned cd[8];
+    char fname[64];
+    const H5Z_filter_t f = H5Pget_filter2(dcpl.get(), static_cast<unsigned>(i), &flags, &nelem, cd, sizeof fname, fname, &config);
+    if (f != (i + 1 == nf ? H5Z_FILTER_DEFLATE : H5Z_FILTER_SHUFFLE)) return false;
+  }
+  Id ftype(H5Dget_type(ds));
+  if (!ftype.valid() || H5Tequal(ftype.get(), mem_type) <= 0) return false;
+  constexpr std::uint64_t kMaxChunk = std::uint64_t{64} << 20, kMaxChunks = std::uint64_t{1} << 20;
+  const std::uint64_t chunk_rows = cdims[0];
+  if (row > kMaxChunk || chunk_rows > kMaxChunk / row) return false;
+  const std::uint64_t chunk_bytes = chunk_rows * row;
+  const std::uint64_t n = (s[0] + chunk_rows - 1) / chunk_rows;
+  if (n > kMaxChunks) return false;
+  const std::uint64_t bound = chunk_bytes + chunk_bytes / 1000 + 64;  // zlib's worst expansion
+  const std::uint64_t stored = H5Dget_storage_size(ds);
+  std::uint64_t total = 0;
+  raw.chunks.resize(n);
+  std::vector<hsize_t> offset(s.size(), 0);
+  for (std::uint64_t k = 0; k < n; ++k) {
+    offset[0] = k * chunk_rows;
+    hsize_t bytes = 0;
+    if (H5Dget_chunk_storage_size(ds, offset.data(), &bytes) < 0 || bytes == 0 || bytes > bound ||
+        (total += bytes) > stored) {
+      raw.chunks.clear();
+      return false;
+    }
+    raw.chunks[k].resize(bytes);
+    std::uint32_t skipped = 0;
+    if (H5Dread_chunk(ds, H5P_DEFAULT, offset.data(), &skipped, raw.chunks[k].data()) < 0 || skipped != 0) {
+      raw.chunks.clear();
+      return false;
+    }
+  }
+  raw.element = element;
+  raw.row_bytes = row;
+  raw.chunk_rows = chunk_rows;
+  raw.rows = s[0];
+  raw.shuffle = nf == 2;
+  return true;
+}
+
+/// HDF5's shuffle filter undone: byte j of value i is stored at j * count + i.
+template <std::size_t E>
+void unshuffle_fixed(const unsigned char* __restrict a, unsigned char* __restrict b, std::size_t count) {
+  for (std::size_t i = 0; i < count; ++i)
+    for (std::size_t j = 0; j < E; ++j) b[i * E + j] = a[j * count + i];
+}
+
+void unshuffle(const unsigned char* a, unsigned char* b, std::size_t bytes, std::size_t element) {
+  const std::size_t count = bytes / element;
+  switch (element) {
+    case 2: unshuffle_fixed<2>(a, b, count); break;
+    case 4: unshuffle_fixed<4>(a, b, count); break;
+    case 8: unshuffle_fixed<8>(a, b, count); break;
+    default:
+      for (std::size_t j = 0; j < element; ++j)
+        for (std::size_t i = 0; i < count; ++i) b[i * element + j] = a[j * count + i];
+  }
+  std::memcpy(b + count * element, a + count * element, bytes - count * element);  // as HDF5: the rest as is
+}
+
+/// Inflates (libdeflate) and unshuffles the chunks of `raw` into `out` (`bytes` = rows x
+/// row_bytes), in parallel over chunks; needs no lock. False when a chunk does not inflate to
+/// exactly one chunk's bytes.
+bool inflate_chunks(const RawChunks& raw, unsigned char* out, std::size_t bytes) {
+  if (bytes != raw.rows * raw.row_bytes) return false;
+  const std::size_t chunk_bytes = raw.chunk_rows * raw.row_bytes;
+  std::atomic<bool> ok{true};
+  tbb::parallel_for(std::size_t{0}, raw.chunks.size(), [&](std::size_t k) {
+    struct Freer {
+      void operator()(libdeflate_decompressor* d) const { libdeflate_free_decompressor(d); }
+    };
+    thread_local std::unique_ptr<libdeflate_decompressor, Freer> d(libdeflate_alloc_decompressor());
+    thread_local std::vector<unsigned char> a, b;
+    if (!d) {
+      ok = false;
+      return;
+    }
+    a.resize(chunk_bytes);
+    std::size_t got = 0;
+    if (libdeflate_zlib_decompress(d.get(), raw.chunks[k].data(), raw.chunks[k].size(), a.data(), chunk_bytes, &got) !=
+            LIBDEFLATE_SUCCESS ||
+        got != chunk_bytes) {
+      ok = false;
+      return;
+    }
+    const unsigned char* src = a.data();
+    if (raw.shuffle && raw.element > 1) {
+      b.resize(chunk_bytes);
+      unshuffle(a.data(), b.data(), chunk_bytes, raw.element);
+      src = b.data();
+    }
+    const std::size_t first = k * raw.chunk_rows;
+    const std::size_t rows = std::min(raw.chunk_rows, raw.rows - first);
+    std::memcpy(out + first * raw.row_bytes, src, rows * raw.row_bytes);
+  });
+  return ok;
+}
+
 /// Never trust a size read from a file: the declared shape must not overflow, and the values it
 /// declares must be backed by the bytes the file stores for them (zlib cannot compress better
 /// than about 1 000:1; the writers here never leave chunks unallocated). Checked before any
@@ -529,17 +665,32 @@ Shape Group::shape(const std::string& name) const {
 
 template <class T>
 std::vector<T> Group::read(const std::string& name, const ShapeSpec& expected, Shape* actual) const {
-  Guard g;
   const std::string field = child_path(name);
-  if (!node_) throw Error("HDF5 group used before it was opened", "", field);
-  Id ds = open_dataset(*node_, name);
-  check_type<T>(*node_, ds.get(), field, "dataset");
-  const Shape s = dataset_shape(*node_, ds.get(), field);
-  check_shape(*node_, field, s, expected);
-  check_declared_size(*node_, ds.get(), field, s, sizeof(T));
-  std::vector<T> out(product(s));
-  if (!out.empty() && H5Dread(ds.get(), TypeOf<T>::mem(), H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()) < 0)
-    node_->fail(field, "cannot read the dataset");
+  std::vector<T> out;
+  Shape s;
+  RawChunks raw;
+  {
+    Guard g;
+    if (!node_) throw Error("HDF5 group used before it was opened", "", field);
+    Id ds = open_dataset(*node_, name);
+    check_type<T>(*node_, ds.get(), field, "dataset");
+    s = dataset_shape(*node_, ds.get(), field);
+    check_shape(*node_, field, s, expected);
+    check_declared_size(*node_, ds.get(), field, s, sizeof(T));
+    out.resize(product(s));
+    // Deflated chunks are read as stored and inflated below, outside the lock, so that threads
+    // loading objects inflate in parallel; any other layout is read by HDF5 itself.
+    if (!out.empty() && !read_raw_chunks(ds.get(), TypeOf<T>::mem(), sizeof(T), s, raw) &&
+        H5Dread(ds.get(), TypeOf<T>::mem(), H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()) < 0)
+      node_->fail(field, "cannot read the dataset");
+  }
+  if (!raw.chunks.empty() && !inflate_chunks(raw, reinterpret_cast<unsigned char*>(out.data()), out.size() * sizeof(T))) {
+    // A chunk that does not inflate to its declared size: let HDF5 read it and say what it finds.
+    Guard g;
+    Id ds = open_dataset(*node_, name);
+    if (H5Dread(ds.get(), TypeOf<T>::mem(), H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()) < 0)
+      node_->fail(field, "cannot read the dataset");
+  }
   if (actual) *actual = s;
   return out;
 }

@@ -371,3 +371,121 @@ TEST_CASE("atomic output: two outputs to one target in one process never share a
   ts::io::AtomicOutput c(dir / "sub.bin");
   CHECK_THROWS_WITH_AS(c.commit(), doctest::Contains("sub.bin"), ts::Error);
 }
+
+namespace {
+
+/// Values of every row distinct and every byte varied, so that a misplaced byte, row or chunk
+/// shows.
+template <class T>
+std::vector<T> pattern(std::size_t n) {
+  std::vector<T> v(n);
+  for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<T>((i * 2654435761u) % 30011u) - static_cast<T>(1000);
+  return v;
+}
+
+/// The dataset as libhdf5 itself reads it (H5Dread through its own filter pipeline).
+template <class T>
+std::vector<T> hdf5_read(const fs::path& path, const char* name, hid_t mem_type, std::size_t n) {
+  std::vector<T> out(n);
+  const hid_t f = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+  const hid_t ds = H5Dopen2(f, name, H5P_DEFAULT);
+  const herr_t r = H5Dread(ds, mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data());
+  H5Dclose(ds);
+  H5Fclose(f);
+  REQUIRE(r >= 0);
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("h5: deflated chunks read as stored and inflated in parallel give exactly HDF5's values") {
+  // Group::read inflates the chunks of a [shuffle,] deflate dataset itself (outside the global
+  // lock); the oracle is the data written and libhdf5's own H5Dread of the same file.
+  TempDir dir("h5");
+  const auto p = dir / "z.h5";
+  const std::size_t rows = 1000;  // 7 chunks of 150 rows: the last one partial
+  const auto i16 = pattern<std::int16_t>(rows * 64);
+  const auto f32 = pattern<float>(rows * 33);
+  const auto i32 = pattern<std::int32_t>(rows * 3);
+  const auto f64 = pattern<double>(rows * 3);
+  {
+    auto f = h5::File::create(p);
+    auto r = f.root();
+    for (const bool shuffle : {true, false}) {
+      const h5::Storage st{.deflate = 6, .shuffle = shuffle, .chunk_rows = 150};
+      const std::string s = shuffle ? "s_" : "n_";
+      r.write(s + "i16", i16.data(), {rows, 64}, st);
+      r.write(s + "f32", f32.data(), {rows, 33}, st);
+      r.write(s + "i32", i32.data(), {rows, 3}, st);
+      r.write(s + "f64", f64.data(), {rows, 3}, st);
+    }
+    r.write("one_chunk", f64.data(), {5, 3}, h5::Storage{.deflate = 1});
+    f.close();
+  }
+  const auto oracle_s = hdf5_read<float>(p, "s_f32", H5T_NATIVE_FLOAT, f32.size());
+  const auto oracle_n = hdf5_read<float>(p, "n_f32", H5T_NATIVE_FLOAT, f32.size());
+  CHECK(oracle_s == f32);
+  const auto f = h5::File::open(p);
+  const auto r = f.root();
+  for (const std::string s : {"s_", "n_"}) {
+    CAPTURE(s);
+    CHECK(r.read<std::int16_t>(s + "i16", {h5::kAny, 64}) == i16);
+    CHECK(r.read<float>(s + "f32", {h5::kAny, 33}) == f32);
+    CHECK(r.read<std::int32_t>(s + "i32", {h5::kAny, 3}) == i32);
+    CHECK(r.read<double>(s + "f64", {h5::kAny, 3}) == f64);
+    CHECK(r.read<float>(s + "f32", {h5::kAny, 33}) == (s == "s_" ? oracle_s : oracle_n));
+  }
+  CHECK(r.read<double>("one_chunk", {5, 3}) == std::vector<double>(f64.begin(), f64.begin() + 15));
+
+  // Many threads at once (thread-local decompressors, chunks inflated in parallel).
+  std::vector<int> ok(6, 0);
+  std::vector<std::thread> threads;
+  for (int k = 0; k < 6; ++k)
+    threads.emplace_back([&, k] {
+      bool good = true;
+      for (int rep = 0; rep < 10; ++rep)
+        good = good && (k % 2 ? r.read<std::int16_t>("s_i16", {h5::kAny, 64}) == i16
+                              : r.read<float>("n_f32", {h5::kAny, 33}) == f32);
+      ok[k] = good;
+    });
+  for (auto& t : threads) t.join();
+  CHECK(ok == std::vector<int>(6, 1));
+}
+
+TEST_CASE("h5: a damaged deflated chunk is one clear error, and other filters are read by HDF5") {
+  TempDir dir("h5");
+  const auto p = dir / "d.h5";
+  const auto v = pattern<float>(600 * 33);
+  {
+    auto f = h5::File::create(p);
+    f.root().write("good", v.data(), {600, 33}, h5::Storage{.deflate = 4, .chunk_rows = 200});
+    f.root().write("bad", v.data(), {600, 33}, h5::Storage{.deflate = 4, .chunk_rows = 200});
+    f.close();
+  }
+  {  // chunk 1 of "bad" replaced by bytes that are no zlib stream; a fletcher32 dataset beside
+    const hid_t f = H5Fopen(p.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+    const hid_t ds = H5Dopen2(f, "bad", H5P_DEFAULT);
+    std::vector<unsigned char> junk(700, 0x5a);
+    const hsize_t offset[2] = {200, 0};
+    REQUIRE(H5Dwrite_chunk(ds, H5P_DEFAULT, 0, offset, junk.size(), junk.data()) >= 0);
+    H5Dclose(ds);
+    const hsize_t dims[2] = {600, 33}, chunk[2] = {64, 33};
+    const hid_t space = H5Screate_simple(2, dims, nullptr);
+    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    H5Pset_chunk(dcpl, 2, chunk);
+    H5Pset_fletcher32(dcpl);
+    H5Pset_deflate(dcpl, 3);
+    const hid_t ds2 = H5Dcreate2(f, "checked", H5T_IEEE_F32LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+    REQUIRE(H5Dwrite(ds2, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data()) >= 0);
+    H5Dclose(ds2);
+    H5Pclose(dcpl);
+    H5Sclose(space);
+    H5Fclose(f);
+  }
+  const auto f = h5::File::open(p);
+  const auto r = f.root();
+  CHECK(r.read<float>("good", {h5::kAny, 33}) == v);
+  CHECK_THROWS_WITH_AS(r.read<float>("bad", {h5::kAny, 33}), doctest::Contains("/bad"), ts::Error);
+  CHECK_THROWS_WITH_AS(r.read<float>("bad", {h5::kAny, 33}), doctest::Contains("d.h5"), ts::Error);
+  CHECK(r.read<float>("checked", {h5::kAny, 33}) == v);
+}
