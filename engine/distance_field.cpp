@@ -279,11 +279,17 @@ inline bool trilinear(const Level& L, const Vec3& x, double& out, Vec3* grad = n
       if (raw[n] == CompactGrid::kInactive) return false;
     }
   } else {
+    // Corners in 2, 4 or 8 bricks: each brick looked up once (an axis crosses into the next
+    // brick where the cell sits on its last voxel).
+    const int ax = (i & 3) == 3, ay = (j & 3) == 3, az = (k & 3) == 3;
+    const std::int16_t* bp[2][2][2];
+    for (int a = 0; a <= ax; ++a)
+      for (int bb = 0; bb <= ay; ++bb)
+        for (int c = 0; c <= az; ++c)
+          if (!(bp[a][bb][c] = L.brick(i + a, j + bb, k + c))) return false;
     for (int n = 0; n < 8; ++n) {
-      const int a = i + (n & 1), bb = j + ((n >> 1) & 1), c = k + ((n >> 2) & 1);
-      const std::int16_t* b = L.brick(a, bb, c);
-      if (!b) return false;
-      raw[n] = b[in_brick(a, bb, c)];
+      const int dx = n & 1, dy = (n >> 1) & 1, dz = (n >> 2) & 1;
+      raw[n] = bp[dx & ax][dy & ay][dz & az][in_brick(i + dx, j + dy, k + dz)];
       if (raw[n] == CompactGrid::kInactive) return false;
     }
   }

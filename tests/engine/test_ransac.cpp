@@ -222,5 +222,37 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
       }
     }
   }
+  // A mask per query (searched object-major): each query gets exactly its own objects' w
+  // nearest, objects ascending; an empty mask means every object.
+  {
+    std::vector<std::vector<std::uint8_t>> masks(queries.size());
+    for (std::size_t q = 0; q < queries.size(); ++q)
+      if (q % 4 != 3) masks[q] = {std::uint8_t(q % 2), std::uint8_t(q % 3 == 0), 1};
+    const std::size_t w = 90;
+    std::vector<std::vector<Neighbour>> one, two;
+    tbb::task_arena a1(1), a2(2);
+    a1.execute([&] { one = table.knn_per_object(queries, w, masks); });
+    a2.execute([&] { two = table.knn_per_object(queries, w, masks); });
+    for (std::size_t q = 0; q < queries.size(); ++q) {
+      std::vector<Neighbour> expect;
+      for (std::uint32_t o = 0; o < 3; ++o) {
+        if (!masks[q].empty() && !masks[q][o]) continue;
+        std::vector<std::pair<float, std::uint32_t>> oracle;
+        for (std::uint32_t r : real)
+          if (rows[r].first == o) oracle.emplace_back(distance_of(r, queries[q]), r);
+        std::sort(oracle.begin(), oracle.end());
+        for (std::size_t i = 0; i < std::min(w, oracle.size()); ++i)
+          expect.push_back({oracle[i].second, static_cast<double>(oracle[i].first)});
+      }
+      CAPTURE(q);
+      REQUIRE(one[q].size() == expect.size());
+      REQUIRE(two[q].size() == expect.size());
+      for (std::size_t i = 0; i < expect.size(); ++i) {
+        CHECK(one[q][i].index == expect[i].index);
+        CHECK(one[q][i].sq_distance == expect[i].sq_distance);
+        CHECK(two[q][i].index == one[q][i].index);
+      }
+    }
+  }
   CHECK(FeatureTable::shared(db).get() == FeatureTable::shared(db).get());
 }
