@@ -178,6 +178,21 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     }
     return d;
   };
+  // The oracle of knn_per_object: each object's w nearest rows, objects ascending (an empty
+  // mask: every object).
+  auto per_object_oracle = [&](const Feature& query, std::size_t w, const std::vector<std::uint8_t>& mask) {
+    std::vector<Neighbour> expect;
+    for (std::uint32_t o = 0; o < 3; ++o) {
+      if (!mask.empty() && !mask[o]) continue;
+      std::vector<std::pair<float, std::uint32_t>> oracle;
+      for (std::uint32_t r : real)
+        if (rows[r].first == o) oracle.emplace_back(distance_of(r, query), r);
+      std::sort(oracle.begin(), oracle.end());
+      for (std::size_t i = 0; i < std::min(w, oracle.size()); ++i)
+        expect.push_back({oracle[i].second, static_cast<double>(oracle[i].first)});
+    }
+    return expect;
+  };
   for (std::size_t w : {1u, 50u, 700u, 20000u}) {
     std::vector<std::vector<Neighbour>> one, two;
     tbb::task_arena a1(1), a2(2);
@@ -204,15 +219,7 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     a1.execute([&] { one = table.knn_per_object(queries, w); });
     a2.execute([&] { two = table.knn_per_object(queries, w); });
     for (std::size_t q = 0; q < queries.size(); ++q) {
-      std::vector<Neighbour> expect;
-      for (std::uint32_t o = 0; o < 3; ++o) {
-        std::vector<std::pair<float, std::uint32_t>> oracle;
-        for (std::uint32_t r : real)
-          if (rows[r].first == o) oracle.emplace_back(distance_of(r, queries[q]), r);
-        std::sort(oracle.begin(), oracle.end());
-        for (std::size_t i = 0; i < std::min(w, oracle.size()); ++i)
-          expect.push_back({oracle[i].second, static_cast<double>(oracle[i].first)});
-      }
+      const std::vector<Neighbour> expect = per_object_oracle(queries[q], w, {});
       REQUIRE(one[q].size() == expect.size());
       REQUIRE(two[q].size() == expect.size());
       for (std::size_t i = 0; i < expect.size(); ++i) {
@@ -234,16 +241,7 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     a1.execute([&] { one = table.knn_per_object(queries, w, masks); });
     a2.execute([&] { two = table.knn_per_object(queries, w, masks); });
     for (std::size_t q = 0; q < queries.size(); ++q) {
-      std::vector<Neighbour> expect;
-      for (std::uint32_t o = 0; o < 3; ++o) {
-        if (!masks[q].empty() && !masks[q][o]) continue;
-        std::vector<std::pair<float, std::uint32_t>> oracle;
-        for (std::uint32_t r : real)
-          if (rows[r].first == o) oracle.emplace_back(distance_of(r, queries[q]), r);
-        std::sort(oracle.begin(), oracle.end());
-        for (std::size_t i = 0; i < std::min(w, oracle.size()); ++i)
-          expect.push_back({oracle[i].second, static_cast<double>(oracle[i].first)});
-      }
+      const std::vector<Neighbour> expect = per_object_oracle(queries[q], w, masks[q]);
       CAPTURE(q);
       REQUIRE(one[q].size() == expect.size());
       REQUIRE(two[q].size() == expect.size());
