@@ -105,11 +105,14 @@ PrunedSet prune(const Database& db, const FeatureSearch& search, const std::vect
   set.x.resize(n);
   set.y.resize(n);
   set.z.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const Vec3& p = db.keypoints(set.items[i].object).coarse.points[set.items[i].point];
-    set.x[i] = static_cast<float>(p.x());
-    set.y[i] = static_cast<float>(p.y());
-    set.z[i] = static_cast<float>(p.z());
+  for (const auto& [object, b, e] : set.ranges) {
+    const std::vector<Vec3>& points = db.keypoints(object).coarse.points;
+    for (std::uint32_t i = b; i < e; ++i) {
+      const Vec3& p = points[set.items[i].point];
+      set.x[i] = static_cast<float>(p.x());
+      set.y[i] = static_cast<float>(p.y());
+      set.z[i] = static_cast<float>(p.z());
+    }
   }
   return set;
 }
@@ -355,10 +358,10 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
         Triplet& t = trip[jobs[k][0]];
         for (int j = 0; j < 3; ++j) t.pruned[j] = prune(db, search, nearest[jobs[k][1] + j], allowed);
         // Registration draws its first feature among objects that all three sets reach.
-        for (std::uint32_t i = 0; i < t.pruned[0].items.size(); ++i) {
-          const std::uint32_t o = t.pruned[0].items[i].object;
+        for (const auto& [o, b, e] : t.pruned[0].ranges) {
           const auto r2 = t.pruned[1].range_of(o), r3 = t.pruned[2].range_of(o);
-          if (r2.second > r2.first && r3.second > r3.first) t.first.push_back(i);
+          if (r2.second > r2.first && r3.second > r3.first)
+            for (std::uint32_t i = b; i < e; ++i) t.first.push_back(i);
         }
       }
     });
