@@ -39,10 +39,9 @@ class TopK {
 
   bool full() const { return heap_.size() == k_; }
   std::size_t size() const { return heap_.size(); }
-  /// Bound for the tree's pruning: +inf until full, then just above the k-th distance.
-  double bound() const {
-    return full() ? tie_bound(heap_.front().sq_distance) : std::numeric_limits<double>::max();
-  }
+  /// Bound for the tree's pruning: +inf until full, then just above the k-th distance (kept
+  /// up to date by add: the trees ask for it at every node).
+  double bound() const { return bound_; }
   void add(double d, std::uint32_t i) {
     if (k_ == 0) return;
     if (!full()) {
@@ -52,7 +51,10 @@ class TopK {
       std::pop_heap(heap_.begin(), heap_.end(), less);
       heap_.back() = {i, d};
       std::push_heap(heap_.begin(), heap_.end(), less);
+    } else {
+      return;
     }
+    if (full()) bound_ = tie_bound(heap_.front().sq_distance);
   }
   std::vector<Neighbour> sorted() && {
     std::sort_heap(heap_.begin(), heap_.end(), less);
@@ -65,6 +67,7 @@ class TopK {
   }
   std::size_t k_;
   std::vector<Neighbour> heap_;
+  double bound_ = std::numeric_limits<double>::max();
 };
 
 void sort_neighbours(std::vector<Neighbour>& v) {
@@ -108,6 +111,30 @@ class NanoKnnSet {
 
  private:
   TopK top_;
+};
+
+/// nanoflann result set: the nearest by (distance, index), as NanoKnnSet(1) without a heap.
+class NanoNearestSet {
+ public:
+  using DistanceType = double;
+  using IndexType = std::uint32_t;
+  bool full() const { return found_; }
+  std::size_t size() const { return found_ ? 1 : 0; }
+  double worstDist() const { return bound_; }
+  bool addPoint(double d, std::uint32_t i) {
+    if (!found_ || before(d, i, best_.sq_distance, best_.index)) {
+      best_ = {i, d};
+      found_ = true;
+      bound_ = tie_bound(d);
+    }
+    return true;
+  }
+  const Neighbour& best() const { return best_; }
+
+ private:
+  bool found_ = false;
+  Neighbour best_{0, std::numeric_limits<double>::infinity()};
+  double bound_ = std::numeric_limits<double>::max();
 };
 
 /// nanoflann result set: everything with sq_distance <= r2 (inclusive, unlike nanoflann's own).
@@ -174,9 +201,11 @@ std::span<const Vec3> KdTree3::points() const {
 }
 
 Neighbour KdTree3::nearest(const Vec3& q) const {
-  auto r = knn(q, 1);
-  if (r.empty()) return {0, std::numeric_limits<double>::infinity()};
-  return r.front();
+  if (!impl_ || !impl_->tree) return {0, std::numeric_limits<double>::infinity()};
+  NanoNearestSet set;
+  const double qv[3] = {q.x(), q.y(), q.z()};
+  impl_->tree->findNeighbors(set, qv, nanoflann::SearchParams());
+  return set.full() ? set.best() : Neighbour{0, std::numeric_limits<double>::infinity()};
 }
 
 std::vector<Neighbour> KdTree3::knn(const Vec3& q, std::size_t k) const {
