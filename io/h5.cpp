@@ -8,7 +8,6 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cctype>
 #include <cstring>
 #include <memory>
@@ -598,28 +597,25 @@ void unshuffle(const unsigned char* a, unsigned char* b, std::size_t bytes, std:
 }
 
 /// Inflates (libdeflate) and unshuffles the chunks of `raw` into `out` (`bytes` = rows x
-/// row_bytes), in parallel over chunks; needs no lock. False when a chunk does not inflate to
-/// exactly one chunk's bytes.
-bool inflate_chunks(const RawChunks& raw, unsigned char* out, std::size_t bytes) {
-  if (bytes != raw.rows * raw.row_bytes) return false;
+/// row_bytes), in parallel over chunks; needs no lock. Returns -1, or the first chunk that is
+/// not a zlib stream of exactly one chunk's bytes.
+std::int64_t inflate_chunks(const RawChunks& raw, unsigned char* out, std::size_t bytes) {
+  if (bytes != raw.rows * raw.row_bytes) throw Error("inflate_chunks: output size mismatch");
   const std::size_t chunk_bytes = raw.chunk_rows * raw.row_bytes;
-  std::atomic<bool> ok{true};
+  std::vector<std::uint8_t> failed(raw.chunks.size(), 0);
   tbb::parallel_for(std::size_t{0}, raw.chunks.size(), [&](std::size_t k) {
     struct Freer {
       void operator()(libdeflate_decompressor* d) const { libdeflate_free_decompressor(d); }
     };
     thread_local std::unique_ptr<libdeflate_decompressor, Freer> d(libdeflate_alloc_decompressor());
     thread_local std::vector<unsigned char> a, b;
-    if (!d) {
-      ok = false;
-      return;
-    }
+    if (!d) throw std::bad_alloc();
     a.resize(chunk_bytes);
     std::size_t got = 0;
     if (libdeflate_zlib_decompress(d.get(), raw.chunks[k].data(), raw.chunks[k].size(), a.data(), chunk_bytes, &got) !=
             LIBDEFLATE_SUCCESS ||
         got != chunk_bytes) {
-      ok = false;
+      failed[k] = 1;
       return;
     }
     const unsigned char* src = a.data();
@@ -632,7 +628,8 @@ bool inflate_chunks(const RawChunks& raw, unsigned char* out, std::size_t bytes)
     const std::size_t rows = std::min(raw.chunk_rows, raw.rows - first);
     std::memcpy(out + first * raw.row_bytes, src, rows * raw.row_bytes);
   });
-  return ok;
+  const auto bad = std::find(failed.begin(), failed.end(), 1);
+  return bad == failed.end() ? -1 : static_cast<std::int64_t>(bad - failed.begin());
 }
 
 /// Never trust a size read from a file: the declared shape must not overflow, and the values it
@@ -684,12 +681,13 @@ std::vector<T> Group::read(const std::string& name, const ShapeSpec& expected, S
         H5Dread(ds.get(), TypeOf<T>::mem(), H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()) < 0)
       node_->fail(field, "cannot read the dataset");
   }
-  if (!raw.chunks.empty() && !inflate_chunks(raw, reinterpret_cast<unsigned char*>(out.data()), out.size() * sizeof(T))) {
-    // A chunk that does not inflate to its declared size: let HDF5 read it and say what it finds.
-    Guard g;
-    Id ds = open_dataset(*node_, name);
-    if (H5Dread(ds.get(), TypeOf<T>::mem(), H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()) < 0)
-      node_->fail(field, "cannot read the dataset");
+  if (!raw.chunks.empty()) {
+    const std::int64_t bad = inflate_chunks(raw, reinterpret_cast<unsigned char*>(out.data()), out.size() * sizeof(T));
+    if (bad >= 0)  // (libhdf5 itself would return whatever a short stream gives, unnoticed)
+      node_->fail(field, "cannot read the dataset: its chunk at row " + std::to_string(bad * raw.chunk_rows) +
+                             " is not a deflate stream of the chunk's " + std::to_string(raw.chunk_rows * raw.row_bytes) +
+                             " bytes (damaged data)",
+                  false);
   }
   if (actual) *actual = s;
   return out;

@@ -5,6 +5,7 @@
 
 #include <doctest/doctest.h>
 #include <hdf5.h>
+#include <zlib.h>
 
 #include <chrono>
 #include <csignal>
@@ -460,6 +461,7 @@ TEST_CASE("h5: a damaged deflated chunk is one clear error, and other filters ar
     auto f = h5::File::create(p);
     f.root().write("good", v.data(), {600, 33}, h5::Storage{.deflate = 4, .chunk_rows = 200});
     f.root().write("bad", v.data(), {600, 33}, h5::Storage{.deflate = 4, .chunk_rows = 200});
+    f.root().write("short", v.data(), {600, 33}, h5::Storage{.deflate = 4, .shuffle = false, .chunk_rows = 200});
     f.close();
   }
   {  // chunk 1 of "bad" replaced by bytes that are no zlib stream; a fletcher32 dataset beside
@@ -469,6 +471,14 @@ TEST_CASE("h5: a damaged deflated chunk is one clear error, and other filters ar
     const hsize_t offset[2] = {200, 0};
     REQUIRE(H5Dwrite_chunk(ds, H5P_DEFAULT, 0, offset, junk.size(), junk.data()) >= 0);
     H5Dclose(ds);
+    // "short": chunk 0 a valid zlib stream of 1 000 bytes where the chunk holds 200 x 33 floats
+    const hid_t ds3 = H5Dopen2(f, "short", H5P_DEFAULT);
+    std::vector<unsigned char> plain(1000, 7), packed(2000);
+    uLongf packed_size = packed.size();
+    REQUIRE(compress2(packed.data(), &packed_size, plain.data(), plain.size(), 6) == Z_OK);
+    const hsize_t zero[2] = {0, 0};
+    REQUIRE(H5Dwrite_chunk(ds3, H5P_DEFAULT, 0, zero, packed_size, packed.data()) >= 0);
+    H5Dclose(ds3);
     const hsize_t dims[2] = {600, 33}, chunk[2] = {64, 33};
     const hid_t space = H5Screate_simple(2, dims, nullptr);
     const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
@@ -487,5 +497,6 @@ TEST_CASE("h5: a damaged deflated chunk is one clear error, and other filters ar
   CHECK(r.read<float>("good", {h5::kAny, 33}) == v);
   CHECK_THROWS_WITH_AS(r.read<float>("bad", {h5::kAny, 33}), doctest::Contains("/bad"), ts::Error);
   CHECK_THROWS_WITH_AS(r.read<float>("bad", {h5::kAny, 33}), doctest::Contains("d.h5"), ts::Error);
+  CHECK_THROWS_WITH_AS(r.read<float>("short", {h5::kAny, 33}), doctest::Contains("/short"), ts::Error);
   CHECK(r.read<float>("checked", {h5::kAny, 33}) == v);
 }
