@@ -261,14 +261,9 @@ struct Level {
   }
 };
 
-/// Trilinear interpolation at index-space point x when all 8 corners are active.
-inline bool trilinear(const Level& L, const Vec3& x, double& out, Vec3* grad = nullptr) {
-  const double fx = std::floor(x.x()), fy = std::floor(x.y()), fz = std::floor(x.z());
-  constexpr double kLimit = 1e9;   // keep far points out of int32 index range
-  if (!(std::abs(fx) < kLimit && std::abs(fy) < kLimit && std::abs(fz) < kLimit)) return false;
-  const int i = static_cast<int>(fx), j = static_cast<int>(fy), k = static_cast<int>(fz);
-  const double tx = x.x() - fx, ty = x.y() - fy, tz = x.z() - fz;
-  int raw[8];
+/// The 8 corner values of index cell (i, j, k) (corner n at offset (n & 1, n >> 1 & 1, n >> 2
+/// & 1)), or false when some corner is missing or inactive.
+inline bool corners(const Level& L, int i, int j, int k, int raw[8]) {
   if ((i & 3) != 3 && (j & 3) != 3 && (k & 3) != 3) {
     // All 8 corners in one brick (27 of 64 cells): offsets a*16 + b*4 + c.
     const std::int16_t* b = L.brick(i, j, k);
@@ -293,6 +288,12 @@ inline bool trilinear(const Level& L, const Vec3& x, double& out, Vec3* grad = n
       if (raw[n] == CompactGrid::kInactive) return false;
     }
   }
+  return true;
+}
+
+/// The trilinear interpolant of a cell's corner values at fractions (tx, ty, tz), and its
+/// analytic gradient (per index unit) when asked.
+inline double interpolate(const Level& L, const int raw[8], double tx, double ty, double tz, Vec3* grad) {
   double v[8];
   for (int n = 0; n < 8; ++n) v[n] = raw[n] * L.grid.quantum;
   const double x00 = v[0] + tx * (v[1] - v[0]);
@@ -301,15 +302,45 @@ inline bool trilinear(const Level& L, const Vec3& x, double& out, Vec3* grad = n
   const double x11 = v[6] + tx * (v[7] - v[6]);
   const double y0 = x00 + ty * (x10 - x00);
   const double y1 = x01 + ty * (x11 - x01);
-  out = y0 + tz * (y1 - y0);
   if (grad) {
-    // The analytic gradient of the trilinear interpolant (per index unit).
     const double dx00 = v[1] - v[0], dx10 = v[3] - v[2], dx01 = v[5] - v[4], dx11 = v[7] - v[6];
     const double dx0 = dx00 + ty * (dx10 - dx00), dx1 = dx01 + ty * (dx11 - dx01);
     (*grad)[0] = dx0 + tz * (dx1 - dx0);
     (*grad)[1] = (x10 - x00) + tz * ((x11 - x01) - (x10 - x00));
     (*grad)[2] = y1 - y0;
   }
+  return y0 + tz * (y1 - y0);
+}
+
+/// The last fine cell read by a batch of queries and its corners: the finite-difference probes
+/// of ICP (a point and three points 0.5 mm from it) mostly fall in one cell.
+struct CellCache {
+  bool valid = false, ok = false;
+  int i = 0, j = 0, k = 0;
+  int raw[8];
+};
+
+/// Trilinear interpolation at index-space point x when all 8 corners are active.
+inline bool trilinear(const Level& L, const Vec3& x, double& out, Vec3* grad = nullptr,
+                      CellCache* cache = nullptr) {
+  const double fx = std::floor(x.x()), fy = std::floor(x.y()), fz = std::floor(x.z());
+  constexpr double kLimit = 1e9;   // keep far points out of int32 index range
+  if (!(std::abs(fx) < kLimit && std::abs(fy) < kLimit && std::abs(fz) < kLimit)) return false;
+  const int i = static_cast<int>(fx), j = static_cast<int>(fy), k = static_cast<int>(fz);
+  const double tx = x.x() - fx, ty = x.y() - fy, tz = x.z() - fz;
+  int own[8];
+  const int* raw = own;
+  if (cache) {
+    if (!(cache->valid && cache->i == i && cache->j == j && cache->k == k)) {
+      cache->ok = corners(L, i, j, k, cache->raw);
+      cache->valid = true, cache->i = i, cache->j = j, cache->k = k;
+    }
+    if (!cache->ok) return false;
+    raw = cache->raw;
+  } else if (!corners(L, i, j, k, own)) {
+    return false;
+  }
+  out = interpolate(L, raw, tx, ty, tz, grad);
   return true;
 }
 
@@ -322,9 +353,9 @@ struct DistanceField::Impl {
   double coarse_margin = 0.0;
   Eigen::AlignedBox3d coarse_box;   // object frame, spanned by the coarse voxel centres
 
-  double query(const Vec3& p) const {
+  double query(const Vec3& p, CellCache* cache = nullptr) const {
     double d;
-    if (trilinear(fine, p * fine.inv_voxel, d)) return d;
+    if (trilinear(fine, p * fine.inv_voxel, d, nullptr, cache)) return d;
     if (coarse_box.contains(p) && trilinear(coarse, p * coarse.inv_voxel, d)) return d;
     if (!finite(p)) return std::numeric_limits<double>::infinity();
     return std::sqrt(coarse_box.squaredExteriorDistance(p)) + coarse_margin;
@@ -609,7 +640,8 @@ void DistanceField::distances(const Vec3* pts, std::size_t n, const Pose& T_obje
     std::fill(out, out + n, std::numeric_limits<double>::infinity());
     return;
   }
-  for (std::size_t i = 0; i < n; ++i) out[i] = impl_->query(T_object_query * pts[i]);
+  CellCache cache;
+  for (std::size_t i = 0; i < n; ++i) out[i] = impl_->query(T_object_query * pts[i], &cache);
 }
 
 void DistanceField::distances_gradients(const Vec3* pts, std::size_t n, const Pose& T_object_query,

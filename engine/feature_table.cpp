@@ -344,12 +344,7 @@ std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(
   // Each search writes its own slot; the slots are concatenated per query, objects ascending.
   const std::vector<BlockRange> all = object_ranges(m, {});
   std::vector<std::uint32_t> object_of(all.size());
-  std::vector<std::int64_t> group_of;  // object -> its group (block range), or -1
-  for (std::size_t g = 0; g < all.size(); ++g) {
-    object_of[g] = m.refs[all[g].b0 * kBlock].object;
-    if (object_of[g] >= group_of.size()) group_of.resize(object_of[g] + 1, -1);
-    group_of[object_of[g]] = static_cast<std::int64_t>(g);
-  }
+  for (std::size_t g = 0; g < all.size(); ++g) object_of[g] = m.refs[all[g].b0 * kBlock].object;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs;  // (query, group), query-major
   std::vector<std::size_t> first(queries.size() + 1, 0);        // pairs of query q: [first[q], first[q+1])
   for (std::size_t q = 0; q < queries.size(); ++q) {
@@ -366,17 +361,25 @@ std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(
   for (std::size_t g = 0; g < all.size(); ++g)
     if (!by_group[g].empty()) busy.push_back(static_cast<std::uint32_t>(g));
   std::vector<std::vector<Neighbour>> slot(pairs.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, busy.size(), 1), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<std::pair<float, std::uint32_t>> order;
-    std::vector<Item> cand;
-    for (std::size_t k = range.begin(); k != range.end(); ++k) {
-      const std::uint32_t g = busy[k];
-      for (const std::uint32_t p : by_group[g]) {
-        slot[p].reserve(w);
-        search_blocks(m, queries[pairs[p].first].data(), all[g], w, max_blocks, order, cand, slot[p]);
-      }
-    }
-  });
+  auto search = [&](std::size_t p, std::vector<std::pair<float, std::uint32_t>>& order, std::vector<Item>& cand) {
+    slot[p].reserve(w);
+    search_blocks(m, queries[pairs[p].first].data(), all[pairs[p].second], w, max_blocks, order, cand, slot[p]);
+  };
+  const auto threads = static_cast<std::size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+  if (busy.size() >= 4 * threads) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, busy.size(), 1), [&](const tbb::blocked_range<std::size_t>& range) {
+      std::vector<std::pair<float, std::uint32_t>> order;
+      std::vector<Item> cand;
+      for (std::size_t k = range.begin(); k != range.end(); ++k)
+        for (const std::uint32_t p : by_group[busy[k]]) search(p, order, cand);
+    });
+  } else {  // too few objects to keep the threads busy: each search its own task
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pairs.size(), 1), [&](const tbb::blocked_range<std::size_t>& range) {
+      std::vector<std::pair<float, std::uint32_t>> order;
+      std::vector<Item> cand;
+      for (std::size_t p = range.begin(); p != range.end(); ++p) search(p, order, cand);
+    });
+  }
   tbb::parallel_for(std::size_t{0}, queries.size(), [&](std::size_t q) {
     std::size_t n = 0;
     for (std::size_t p = first[q]; p < first[q + 1]; ++p) n += slot[p].size();

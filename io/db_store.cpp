@@ -492,8 +492,10 @@ std::size_t DbReader::find(const std::string& name) const {
   return size();
 }
 
+// The loads below take no lock of their own: each h5 call takes the HDF5 lock, and the object
+// groups are opened once, with the file, so threads loading different objects inflate their
+// datasets at the same time (h5::Group::read).
 ObjectFeatures DbReader::load_features(std::size_t i) const {
-  std::lock_guard<std::recursive_mutex> lock(h5::mutex());
   const auto& g = impl_->group(i);
   const std::size_t n = impl_->infos[i].coarse_points;
   ObjectFeatures out;
@@ -510,12 +512,10 @@ ObjectFeatures DbReader::load_features(std::size_t i) const {
 }
 
 PointCloud DbReader::load_coarse(std::size_t i) const {
-  std::lock_guard<std::recursive_mutex> lock(h5::mutex());
   return read_cloud(impl_->group(i), "coarse", impl_->infos[i].coarse_points);
 }
 
 PointCloud DbReader::load_fine(std::size_t i) const {
-  std::lock_guard<std::recursive_mutex> lock(h5::mutex());
   return read_cloud(impl_->group(i), "fine", impl_->infos[i].fine_points);
 }
 
@@ -526,7 +526,6 @@ DistanceField DbReader::load_field(std::size_t i) const {
   double margin = 0.0;
   std::string where;
   {
-    std::lock_guard<std::recursive_mutex> lock(h5::mutex());
     const auto field = impl_->group(i).open_group("field");
     where = field.path();
     is_signed = field.int_attribute("signed") != 0;
@@ -541,7 +540,7 @@ DistanceField DbReader::load_field(std::size_t i) const {
       coarse = read_sparse(field, "coarse");
     }
   }
-  // Building the levels needs no HDF5: outside the lock, so other threads can read meanwhile.
+  // Building the levels needs no HDF5.
   try {
     if (impl_->schema >= 2)
       return DistanceField::from_compact(std::move(fine_c), std::move(coarse_c), is_signed, margin);

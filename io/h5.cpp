@@ -6,6 +6,7 @@
 #include <hdf5.h>
 #include <libdeflate.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cctype>
@@ -530,15 +531,19 @@ bool read_raw_chunks(hid_t ds, hid_t mem_type, std::size_t element, const Shape&
     if (cdims[k] != s[k]) return false;
     row *= s[k];
   }
+  // Partial edge chunks stored unfiltered would not inflate: HDF5 reads those files.
+  unsigned chunk_opts = 0;
+  if (H5Pget_chunk_opts(dcpl.get(), &chunk_opts) < 0 || chunk_opts != 0) return false;
   const int nf = H5Pget_nfilters(dcpl.get());
   if (nf < 1 || nf > 2) return false;
   for (int i = 0; i < nf; ++i) {
     unsigned flags = 0, config = 0;
     std::size_t nelem = 8;
-    unsigned cd[8];
+    unsigned cd[8] = {};
     char fname[64];
     const H5Z_filter_t f = H5Pget_filter2(dcpl.get(), static_cast<unsigned>(i), &flags, &nelem, cd, sizeof fname, fname, &config);
     if (f != (i + 1 == nf ? H5Z_FILTER_DEFLATE : H5Z_FILTER_SHUFFLE)) return false;
+    if (f == H5Z_FILTER_SHUFFLE && (nelem < 1 || cd[0] != element)) return false;  // shuffled by another size
   }
   Id ftype(H5Dget_type(ds));
   if (!ftype.valid() || H5Tequal(ftype.get(), mem_type) <= 0) return false;
@@ -603,30 +608,38 @@ std::int64_t inflate_chunks(const RawChunks& raw, unsigned char* out, std::size_
   if (bytes != raw.rows * raw.row_bytes) throw Error("inflate_chunks: output size mismatch");
   const std::size_t chunk_bytes = raw.chunk_rows * raw.row_bytes;
   std::vector<std::uint8_t> failed(raw.chunks.size(), 0);
-  tbb::parallel_for(std::size_t{0}, raw.chunks.size(), [&](std::size_t k) {
-    struct Freer {
-      void operator()(libdeflate_decompressor* d) const { libdeflate_free_decompressor(d); }
-    };
-    thread_local std::unique_ptr<libdeflate_decompressor, Freer> d(libdeflate_alloc_decompressor());
-    thread_local std::vector<unsigned char> a, b;
-    if (!d) throw std::bad_alloc();
-    a.resize(chunk_bytes);
-    std::size_t got = 0;
-    if (libdeflate_zlib_decompress(d.get(), raw.chunks[k].data(), raw.chunks[k].size(), a.data(), chunk_bytes, &got) !=
-            LIBDEFLATE_SUCCESS ||
-        got != chunk_bytes) {
-      failed[k] = 1;
-      return;
-    }
-    const unsigned char* src = a.data();
-    if (raw.shuffle && raw.element > 1) {
-      b.resize(chunk_bytes);
-      unshuffle(a.data(), b.data(), chunk_bytes, raw.element);
-      src = b.data();
-    }
-    const std::size_t first = k * raw.chunk_rows;
-    const std::size_t rows = std::min(raw.chunk_rows, raw.rows - first);
-    std::memcpy(out + first * raw.row_bytes, src, rows * raw.row_bytes);
+  // Isolated: a caller may hold the HDF5 lock, and a thread waiting here must not pick up an
+  // unrelated task that could wait for that lock.
+  tbb::this_task_arena::isolate([&] {
+    tbb::parallel_for(std::size_t{0}, raw.chunks.size(), [&](std::size_t k) {
+      struct Freer {
+        void operator()(libdeflate_decompressor* d) const { libdeflate_free_decompressor(d); }
+      };
+      thread_local std::unique_ptr<libdeflate_decompressor, Freer> d;
+      thread_local std::vector<unsigned char> a, b;
+      if (!d) d.reset(libdeflate_alloc_decompressor());
+      if (!d) throw std::bad_alloc();
+      a.resize(chunk_bytes);
+      std::size_t got = 0;
+      if (libdeflate_zlib_decompress(d.get(), raw.chunks[k].data(), raw.chunks[k].size(), a.data(), chunk_bytes, &got) !=
+              LIBDEFLATE_SUCCESS ||
+          got != chunk_bytes) {
+        failed[k] = 1;
+        return;
+      }
+      const unsigned char* src = a.data();
+      if (raw.shuffle && raw.element > 1) {
+        b.resize(chunk_bytes);
+        unshuffle(a.data(), b.data(), chunk_bytes, raw.element);
+        src = b.data();
+      }
+      const std::size_t first = k * raw.chunk_rows;
+      const std::size_t rows = std::min(raw.chunk_rows, raw.rows - first);
+      std::memcpy(out + first * raw.row_bytes, src, rows * raw.row_bytes);
+      constexpr std::size_t kKeep = std::size_t{4} << 20;  // a crafted huge chunk is not kept
+      if (a.capacity() > kKeep) std::vector<unsigned char>().swap(a);
+      if (b.capacity() > kKeep) std::vector<unsigned char>().swap(b);
+    });
   });
   const auto bad = std::find(failed.begin(), failed.end(), 1);
   return bad == failed.end() ? -1 : static_cast<std::int64_t>(bad - failed.begin());

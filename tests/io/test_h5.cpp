@@ -500,3 +500,34 @@ TEST_CASE("h5: a damaged deflated chunk is one clear error, and other filters ar
   CHECK_THROWS_WITH_AS(r.read<float>("short", {h5::kAny, 33}), doctest::Contains("/short"), ts::Error);
   CHECK(r.read<float>("checked", {h5::kAny, 33}) == v);
 }
+
+TEST_CASE("h5: a deflated dataset whose partial edge chunk is stored unfiltered reads as HDF5 reads it") {
+  // H5D_CHUNK_DONT_FILTER_PARTIAL_CHUNKS (other writers, file format 1.10): the fast path must
+  // leave such a dataset to HDF5, not take the raw edge chunk for a damaged zlib stream.
+  TempDir dir("h5");
+  const auto p = dir / "partial.h5";
+  const auto v = pattern<float>(5 * 3);
+  {
+    const hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
+    REQUIRE(H5Pset_libver_bounds(fapl, H5F_LIBVER_V110, H5F_LIBVER_LATEST) >= 0);
+    const hid_t f = H5Fcreate(p.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl);
+    REQUIRE(f >= 0);
+    const hsize_t dims[2] = {5, 3}, chunk[2] = {4, 3};
+    const hid_t space = H5Screate_simple(2, dims, nullptr);
+    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+    H5Pset_chunk(dcpl, 2, chunk);
+    H5Pset_shuffle(dcpl);
+    H5Pset_deflate(dcpl, 4);
+    REQUIRE(H5Pset_chunk_opts(dcpl, H5D_CHUNK_DONT_FILTER_PARTIAL_CHUNKS) >= 0);
+    const hid_t ds = H5Dcreate2(f, "v", H5T_IEEE_F32LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+    REQUIRE(ds >= 0);
+    REQUIRE(H5Dwrite(ds, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data()) >= 0);
+    H5Dclose(ds);
+    H5Pclose(dcpl);
+    H5Sclose(space);
+    H5Fclose(f);
+    H5Pclose(fapl);
+  }
+  const auto f = h5::File::open(p);
+  CHECK(f.root().read<float>("v", {5, 3}) == v);
+}
