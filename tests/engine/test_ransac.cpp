@@ -193,6 +193,22 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     }
     return expect;
   };
+  // knn_per_object with 1 thread (one) and 2 threads (two) against that oracle, query by query.
+  auto check_per_object = [&](const std::vector<std::vector<Neighbour>>& one,
+                              const std::vector<std::vector<Neighbour>>& two, std::size_t w,
+                              const std::vector<std::vector<std::uint8_t>>& masks) {
+    for (std::size_t q = 0; q < queries.size(); ++q) {
+      const std::vector<Neighbour> expect = per_object_oracle(queries[q], w, masks.empty() ? std::vector<std::uint8_t>{} : masks[q]);
+      CAPTURE(q);
+      REQUIRE(one[q].size() == expect.size());
+      REQUIRE(two[q].size() == expect.size());
+      for (std::size_t i = 0; i < expect.size(); ++i) {
+        CHECK(one[q][i].index == expect[i].index);
+        CHECK(one[q][i].sq_distance == expect[i].sq_distance);
+        CHECK(two[q][i].index == one[q][i].index);
+      }
+    }
+  };
   for (std::size_t w : {1u, 50u, 700u, 20000u}) {
     std::vector<std::vector<Neighbour>> one, two;
     tbb::task_arena a1(1), a2(2);
@@ -218,16 +234,7 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     tbb::task_arena a1(1), a2(2);
     a1.execute([&] { one = table.knn_per_object(queries, w); });
     a2.execute([&] { two = table.knn_per_object(queries, w); });
-    for (std::size_t q = 0; q < queries.size(); ++q) {
-      const std::vector<Neighbour> expect = per_object_oracle(queries[q], w, {});
-      REQUIRE(one[q].size() == expect.size());
-      REQUIRE(two[q].size() == expect.size());
-      for (std::size_t i = 0; i < expect.size(); ++i) {
-        CHECK(one[q][i].index == expect[i].index);
-        CHECK(one[q][i].sq_distance == expect[i].sq_distance);
-        CHECK(two[q][i].index == one[q][i].index);
-      }
-    }
+    check_per_object(one, two, w, {});
   }
   // A mask per query (searched object-major): each query gets exactly its own objects' w
   // nearest, objects ascending; an empty mask means every object.
@@ -240,17 +247,7 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     tbb::task_arena a1(1), a2(2);
     a1.execute([&] { one = table.knn_per_object(queries, w, masks); });
     a2.execute([&] { two = table.knn_per_object(queries, w, masks); });
-    for (std::size_t q = 0; q < queries.size(); ++q) {
-      const std::vector<Neighbour> expect = per_object_oracle(queries[q], w, masks[q]);
-      CAPTURE(q);
-      REQUIRE(one[q].size() == expect.size());
-      REQUIRE(two[q].size() == expect.size());
-      for (std::size_t i = 0; i < expect.size(); ++i) {
-        CHECK(one[q][i].index == expect[i].index);
-        CHECK(one[q][i].sq_distance == expect[i].sq_distance);
-        CHECK(two[q][i].index == one[q][i].index);
-      }
-    }
+    check_per_object(one, two, w, masks);
   }
   CHECK(FeatureTable::shared(db).get() == FeatureTable::shared(db).get());
 }

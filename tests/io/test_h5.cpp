@@ -14,6 +14,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 #include <filesystem>
+#include <functional>
 #include <thread>
 
 namespace fs = std::filesystem;
@@ -397,6 +398,23 @@ std::vector<T> hdf5_read(const fs::path& path, const char* name, hid_t mem_type,
   return out;
 }
 
+/// A [rows, 33] float dataset written with the C API, chunked by chunk_rows, with the filters
+/// `filters` sets on its creation property list (as another writer would make it).
+void write_floats_with(hid_t file, const char* name, const std::vector<float>& v, hsize_t chunk_rows,
+                       const std::function<void(hid_t)>& filters) {
+  const hsize_t dims[2] = {v.size() / 33, 33}, chunk[2] = {chunk_rows, 33};
+  const hid_t space = H5Screate_simple(2, dims, nullptr);
+  const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+  H5Pset_chunk(dcpl, 2, chunk);
+  filters(dcpl);
+  const hid_t ds = H5Dcreate2(file, name, H5T_IEEE_F32LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+  REQUIRE(ds >= 0);
+  REQUIRE(H5Dwrite(ds, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data()) >= 0);
+  H5Dclose(ds);
+  H5Pclose(dcpl);
+  H5Sclose(space);
+}
+
 }  // namespace
 
 TEST_CASE("h5: deflated chunks read as stored and inflated in parallel give exactly HDF5's values") {
@@ -479,17 +497,10 @@ TEST_CASE("h5: a damaged deflated chunk is one clear error, and other filters ar
     const hsize_t zero[2] = {0, 0};
     REQUIRE(H5Dwrite_chunk(ds3, H5P_DEFAULT, 0, zero, packed_size, packed.data()) >= 0);
     H5Dclose(ds3);
-    const hsize_t dims[2] = {600, 33}, chunk[2] = {64, 33};
-    const hid_t space = H5Screate_simple(2, dims, nullptr);
-    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
-    H5Pset_chunk(dcpl, 2, chunk);
-    H5Pset_fletcher32(dcpl);
-    H5Pset_deflate(dcpl, 3);
-    const hid_t ds2 = H5Dcreate2(f, "checked", H5T_IEEE_F32LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
-    REQUIRE(H5Dwrite(ds2, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data()) >= 0);
-    H5Dclose(ds2);
-    H5Pclose(dcpl);
-    H5Sclose(space);
+    write_floats_with(f, "checked", v, 64, [](hid_t dcpl) {
+      H5Pset_fletcher32(dcpl);
+      H5Pset_deflate(dcpl, 3);
+    });
     H5Fclose(f);
   }
   const auto f = h5::File::open(p);
@@ -506,28 +517,20 @@ TEST_CASE("h5: a deflated dataset whose partial edge chunk is stored unfiltered 
   // leave such a dataset to HDF5, not take the raw edge chunk for a damaged zlib stream.
   TempDir dir("h5");
   const auto p = dir / "partial.h5";
-  const auto v = pattern<float>(5 * 3);
+  const auto v = pattern<float>(5 * 33);
   {
     const hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
     REQUIRE(H5Pset_libver_bounds(fapl, H5F_LIBVER_V110, H5F_LIBVER_LATEST) >= 0);
     const hid_t f = H5Fcreate(p.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl);
     REQUIRE(f >= 0);
-    const hsize_t dims[2] = {5, 3}, chunk[2] = {4, 3};
-    const hid_t space = H5Screate_simple(2, dims, nullptr);
-    const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
-    H5Pset_chunk(dcpl, 2, chunk);
-    H5Pset_shuffle(dcpl);
-    H5Pset_deflate(dcpl, 4);
-    REQUIRE(H5Pset_chunk_opts(dcpl, H5D_CHUNK_DONT_FILTER_PARTIAL_CHUNKS) >= 0);
-    const hid_t ds = H5Dcreate2(f, "v", H5T_IEEE_F32LE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
-    REQUIRE(ds >= 0);
-    REQUIRE(H5Dwrite(ds, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data()) >= 0);
-    H5Dclose(ds);
-    H5Pclose(dcpl);
-    H5Sclose(space);
+    write_floats_with(f, "v", v, 4, [](hid_t dcpl) {
+      H5Pset_shuffle(dcpl);
+      H5Pset_deflate(dcpl, 4);
+      REQUIRE(H5Pset_chunk_opts(dcpl, H5D_CHUNK_DONT_FILTER_PARTIAL_CHUNKS) >= 0);
+    });
     H5Fclose(f);
     H5Pclose(fapl);
   }
   const auto f = h5::File::open(p);
-  CHECK(f.root().read<float>("v", {5, 3}) == v);
+  CHECK(f.root().read<float>("v", {5, 33}) == v);
 }
