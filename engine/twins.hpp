@@ -32,6 +32,10 @@ struct TwinSettings {
   double offset_sigma = 0.003;      ///< m, per-grasp arm offset prior (per axis)
   std::size_t fit_points = 64;      ///< contacts per grasp in the offset fit
   int iterations = 5;               ///< Gauss-Newton iterations of the offset fit
+  /// Pose refinement under V: alternate a Gauss-Newton step of the pose on the shifted
+  /// contacts with a new offset fit, at most this many times, while V falls (0: V at the
+  /// hypothesis's own pose, which ICP fitted without the offsets).
+  int refine = 0;
   /// Pose transfer: each step the leading hypothesis's pose is also tried on the `transfer`
   /// other objects whose keypoints fit the contacts best at that pose (the shortlist's
   /// screening), refined by ICP and evaluated like new hypotheses, so that a look-alike of the

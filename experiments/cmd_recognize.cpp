@@ -120,6 +120,7 @@ std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& 
           {"prune_blocks", double(s.ransac.prune_blocks)},
           {"object_draws", double(s.ransac.object_draws)},
           {"twins", double(s.twins.rivals)},
+          {"twins_refine", double(s.twins.refine)},
           {"transfer", double(s.twins.transfer)},
           {"shortlist", double(s.shortlist.objects)},
           {"min_spacing", s.ransac.min_spacing},
@@ -600,6 +601,12 @@ void register_recognize(CLI::App& app) {
                                 "with per-grasp offsets (0: off; tactile logs only)")
                     ->group(g)
                     ->check(CLI::Range(0, 1000));
+  auto* twins_refine = sub->add_option("--twins-refine", s.twins.refine,
+                                       "Extension: the near-twin verification refines each rival's pose and per-grasp "
+                                       "offsets together under its likelihood, at most this many Gauss-Newton steps "
+                                       "(0: each rival judged at its own pose)")
+                           ->group(g)
+                           ->check(CLI::Range(0, 100));
   auto* transfer = sub->add_option("--transfer", s.twins.transfer,
                                    "Extension: each step the leading hypothesis's pose is also tried on this many "
                                    "other objects that fit the contacts best there, refined and evaluated (0: off; "
@@ -665,6 +672,7 @@ void register_recognize(CLI::App& app) {
       {shortlist, [](RecognizerSettings& r, const RecognizerSettings& i) { r.shortlist = i.shortlist; }},
       {object_draws, [](RecognizerSettings& r, const RecognizerSettings& i) { r.ransac.object_draws = i.ransac.object_draws; }},
       {twins, [](RecognizerSettings& r, const RecognizerSettings& i) { r.twins.rivals = i.twins.rivals; }},
+      {twins_refine, [](RecognizerSettings& r, const RecognizerSettings& i) { r.twins.refine = i.twins.refine; }},
       {transfer, [](RecognizerSettings& r, const RecognizerSettings& i) {
          r.twins.transfer = i.twins.transfer;
          r.twins.transfer_min_database = i.twins.transfer_min_database;

@@ -232,6 +232,12 @@ const std::vector<KeyDef>& key_defs() {
     add("twins.transfer", true,
         [](auto& c, auto& in, auto& x) { c.params.twins_transfer = int_at_least(in, 0, x); },
         [](auto& c) { return opt(c.params.twins_transfer); });
+    add("twins.refine", true,
+        [](auto& c, auto& in, auto& x) { c.params.twins_refine = int_at_least(in, 0, x); },
+        [](auto& c) { return opt(c.params.twins_refine); });
+    add("twins.max_gap", true,
+        [=](auto& c, auto& in, auto& x) { c.params.twins_max_gap = number_in(in, 0, inf, x); },
+        [](auto& c) { return opt(c.params.twins_max_gap); });
     add("shortlist.objects", true,
         [](auto& c, auto& in, auto& x) { c.params.shortlist = int_at_least(in, 0, x); },
         [](auto& c) { return opt(c.params.shortlist); });

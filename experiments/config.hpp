@@ -29,6 +29,8 @@
 //   ransac.object_draws (extension: objects drawn per triplet for per-object pruning; 0: all),
 //   twins.rivals (extension: near-twin verification, leading objects compared; 0: off),
 //   twins.transfer (extension: the leader's pose tried on this many look-alike objects; 0: off),
+//   twins.refine (near-twin verification: pose refinements under V; 0: off),
+//   twins.max_gap (near-twin verification: ln wt gap within which objects compete),
 //   icp.iterations     method parameters; unset means the recognizer's default
 //   memory_budget_mb   resident object geometry (MB, 0: no limit); default: the recognizer's
 //   schedule           runs | steps        parallel over runs (throughput) or inside each step
@@ -75,6 +77,8 @@ struct MethodParams {
   std::optional<int> object_draws;      ///< per-object pruning: objects drawn per triplet (0: all)
   std::optional<int> twins;             ///< near-twin verification: leading objects compared (0: off)
   std::optional<int> twins_transfer;    ///< pose transfer to look-alikes of the leader (0: off)
+  std::optional<int> twins_refine;      ///< near-twin verification: pose refinements under V
+  std::optional<double> twins_max_gap;  ///< near-twin verification: competing ln wt gap
 };
 
 struct SweepAxis {

@@ -165,6 +165,8 @@ RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
   }
   if (p.object_draws) s.ransac.object_draws = static_cast<std::size_t>(*p.object_draws);
   if (p.twins) s.twins.rivals = static_cast<std::size_t>(*p.twins);
+  if (p.twins_refine) s.twins.refine = *p.twins_refine;
+  if (p.twins_max_gap) s.twins.max_gap = *p.twins_max_gap;
   if (p.twins_transfer) {  // asked for explicitly: on any database
     s.twins.transfer = static_cast<std::size_t>(*p.twins_transfer);
     s.twins.transfer_min_database = 0;

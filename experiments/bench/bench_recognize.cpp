@@ -133,6 +133,7 @@ void set_param(RecognizerSettings& s, const std::string& kv) {
   }
   else if (k == "object_draws") s.ransac.object_draws = static_cast<std::size_t>(v);
   else if (k == "twins") s.twins.rivals = static_cast<std::size_t>(v);
+  else if (k == "twins_refine") s.twins.refine = static_cast<int>(v);
   else if (k == "transfer") {  // asked for explicitly: on any database
     s.twins.transfer = static_cast<std::size_t>(v);
     s.twins.transfer_min_database = 0;
@@ -189,8 +190,8 @@ int main(int argc, char** argv) {
                 db.size(), method.c_str(), grasps, noise.c_str());
     std::printf("parameters: n_p %zu, psi %.2f, N %d, R %d, W %zu, W per object %zu, refine_new %d (pool %zu, "
                 "%zu per object), dedupe %d, free inside %d, d_outlier %.3f, lambda %.3f, res_free %.3f, "
-                "normal_tol %.1f deg, ICP %s (%d it, %zu pts), object draws %zu, shortlist %zu, twins %zu, "
-                "prune blocks %zu\n",
+                "normal_tol %.1f deg, ICP %s (%d it, %zu pts), object draws %zu, shortlist %zu, twins %zu "
+                "(refine %d), transfer %zu (databases above %zu objects), prune blocks %zu\n",
                 rs.n_p, rs.psi, rs.ransac.triplets, rs.ransac.registrations, rs.ransac.prune_w,
                 rs.ransac.prune_per_object, int(rs.refine_new), rs.refine_pool, rs.new_per_object,
                 int(rs.dedupe), int(rs.evaluate.free_inside_penalty),
@@ -199,7 +200,7 @@ int main(int argc, char** argv) {
                 : rs.icp.metric == IcpMetric::point_to_plane ? "point-to-plane"
                                                              : "point-to-point",
                 rs.icp.max_iterations, rs.icp.max_points, rs.ransac.object_draws, rs.shortlist.objects,
-                rs.twins.rivals, rs.ransac.prune_blocks);
+                rs.twins.rivals, rs.twins.refine, rs.twins.transfer, rs.twins.transfer_min_database, rs.ransac.prune_blocks);
     const double s_obj_max = largest_object_extent(db);
 
     auto t0 = std::chrono::steady_clock::now();

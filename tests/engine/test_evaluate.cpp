@@ -377,6 +377,27 @@ TEST_CASE("Near-twin verification: the box beats its 10 % stretched twin that Eq
     // the truth's V is what its noise explains: 8 x 3 offset terms of (2/3)^2 and 600
     // residual terms of (0.3/1)^2, about 65 expected
     CHECK(v_box < 130.0);
+
+    // A hypothesis 1.5 mm and 1.5 degrees off (as ICP without the offsets leaves one): the
+    // offsets absorb most of it, not all (V above the truth's); refined under V (the pose and
+    // the offsets together) it comes back to the truth's V, and the twin, refined the same
+    // way, still loses.
+    Pose off = Pose::Identity();
+    off.linear() = Eigen::AngleAxisd(1.5 * EIGEN_PI / 180.0, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+    off.translation() = Vec3(0.0015, -0.0008, 0.0005);
+    TwinSettings refined = ts;
+    refined.refine = 8;
+    const double v_off = twin_score(sc, box, off, ts);
+    const double v_off_refined = twin_score(sc, box, off, refined);
+    const double v_twin_refined = twin_score(sc, twin, off, refined);
+    CAPTURE(v_box);
+    CAPTURE(v_off);
+    CAPTURE(v_off_refined);
+    CAPTURE(v_twin_refined);
+    CHECK(v_off > v_box + 5.0);
+    CHECK(v_off_refined < v_box + 1.0);
+    CHECK(v_off_refined <= twin_score(sc, box, Pose::Identity(), refined) + 1.0);
+    CHECK(v_box < v_twin_refined - 5.0);
   }
   // No grasp groups: no verdict.
   CHECK(std::isinf(twin_score(make_scene({Vec3(0.04, 0, 0)}), box, Pose::Identity(), ts)));
