@@ -169,27 +169,35 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     std::sort(sorted.begin(), sorted.end());
     CHECK(std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end());
   }
-  auto distance_of = [&](std::uint32_t r, const Feature& q) {
-    const Feature f = db.load_features(rows[r].first).features[rows[r].second];
-    float d = 0.0f;
-    for (int k = 0; k < kFeatureDim; ++k) {
-      const float e = f[k] - q[k];
-      d += e * e;
+  // The oracle: per query, every real row by (squared distance, row), computed once (each
+  // object's features loaded once: the sanitizer builds run this test too).
+  std::vector<std::vector<Feature>> features_of;
+  for (std::uint32_t o = 0; o < 3; ++o) features_of.push_back(db.load_features(o).features);
+  std::vector<std::vector<std::pair<float, std::uint32_t>>> sorted_rows(queries.size());
+  for (std::size_t q = 0; q < queries.size(); ++q) {
+    for (std::uint32_t r : real) {
+      const Feature& f = features_of[rows[r].first][rows[r].second];
+      float d = 0.0f;
+      for (int k = 0; k < kFeatureDim; ++k) {
+        const float e = f[k] - queries[q][k];
+        d += e * e;
+      }
+      sorted_rows[q].emplace_back(d, r);
     }
-    return d;
-  };
+    std::sort(sorted_rows[q].begin(), sorted_rows[q].end());
+  }
   // The oracle of knn_per_object: each object's w nearest rows, objects ascending (an empty
   // mask: every object).
-  auto per_object_oracle = [&](const Feature& query, std::size_t w, const std::vector<std::uint8_t>& mask) {
+  auto per_object_oracle = [&](std::size_t q, std::size_t w, const std::vector<std::uint8_t>& mask) {
     std::vector<Neighbour> expect;
     for (std::uint32_t o = 0; o < 3; ++o) {
       if (!mask.empty() && !mask[o]) continue;
-      std::vector<std::pair<float, std::uint32_t>> oracle;
-      for (std::uint32_t r : real)
-        if (rows[r].first == o) oracle.emplace_back(distance_of(r, query), r);
-      std::sort(oracle.begin(), oracle.end());
-      for (std::size_t i = 0; i < std::min(w, oracle.size()); ++i)
-        expect.push_back({oracle[i].second, static_cast<double>(oracle[i].first)});
+      std::size_t taken = 0;
+      for (auto it = sorted_rows[q].begin(); it != sorted_rows[q].end() && taken < w; ++it)
+        if (rows[it->second].first == o) {
+          expect.push_back({it->second, static_cast<double>(it->first)});
+          ++taken;
+        }
     }
     return expect;
   };
@@ -198,7 +206,7 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
                               const std::vector<std::vector<Neighbour>>& two, std::size_t w,
                               const std::vector<std::vector<std::uint8_t>>& masks) {
     for (std::size_t q = 0; q < queries.size(); ++q) {
-      const std::vector<Neighbour> expect = per_object_oracle(queries[q], w, masks.empty() ? std::vector<std::uint8_t>{} : masks[q]);
+      const std::vector<Neighbour> expect = per_object_oracle(q, w, masks.empty() ? std::vector<std::uint8_t>{} : masks[q]);
       CAPTURE(q);
       REQUIRE(one[q].size() == expect.size());
       REQUIRE(two[q].size() == expect.size());
@@ -215,9 +223,7 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     a1.execute([&] { one = table.knn(queries, w); });
     a2.execute([&] { two = table.knn(queries, w); });
     for (std::size_t q = 0; q < queries.size(); ++q) {
-      std::vector<std::pair<float, std::uint32_t>> oracle;
-      for (std::uint32_t r : real) oracle.emplace_back(distance_of(r, queries[q]), r);
-      std::sort(oracle.begin(), oracle.end());
+      const auto& oracle = sorted_rows[q];
       const std::size_t k = std::min(w, real.size());
       REQUIRE(one[q].size() == k);
       for (std::size_t i = 0; i < k; ++i) {
