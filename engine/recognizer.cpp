@@ -286,8 +286,22 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
     for (const Hypothesis& h : state_) held.push_back(h.object);
     const Shortlist sl = shortlist_objects(scene, db_, cands, held, s_.shortlist);
     if (sl.active) {
+      if (watching) {
+        Funnel& f = *res.watched;
+        f.shortlisted = f.candidates > 0 && sl.mask[*watch_];
+        std::vector<Candidate> own;
+        for (const Candidate& c : cands) if (c.object == *watch_) own.push_back(c);
+        if (!own.empty()) {   // diagnostics: how far its best candidate was from the cut
+          const std::vector<double> e = screen_candidates(scene, db_, own, s_.shortlist);
+          f.screen_score = *std::min_element(e.begin(), e.end());
+          const std::vector<double> all = screen_objects(scene, db_, cands, s_.shortlist);
+          f.screen_rank = 1 + static_cast<std::size_t>(std::count_if(all.begin(), all.end(), [&](double v) {
+            return v < f.screen_score; }));
+        }
+        const std::size_t last = std::min(s_.shortlist.objects, sl.ranked.size());
+        if (last > 0) f.screen_cut = sl.best[sl.ranked[last - 1]];
+      }
       std::erase_if(cands, [&](const Candidate& c) { return !sl.mask[c.object]; });
-      if (watching) res.watched->shortlisted = res.watched->candidates > 0 && sl.mask[*watch_];
       for (std::uint32_t o = 0; o < sl.mask.size(); ++o)
         if (sl.mask[o]) res.shortlist.push_back(o);
     }
@@ -415,6 +429,10 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
     std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
       return fit[a] != fit[b] ? fit[a] < fit[b] : a < b;
     });
+    if (watching) {
+      const auto at = std::find(order.begin(), order.end(), *watch_);
+      res.watched->transfer_rank = at == order.end() ? 0 : static_cast<std::size_t>(at - order.begin()) + 1;
+    }
     if (order.size() > s_.twins.transfer) order.resize(s_.twins.transfer);
     if (watching) res.watched->transferred = std::find(order.begin(), order.end(), *watch_) != order.end();
     res.times.shortlist_s += seconds_since(t0);

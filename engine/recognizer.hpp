@@ -106,6 +106,13 @@ struct Funnel {
   std::size_t candidates = 0;     ///< RANSAC registrations on it
   bool shortlisted = false;       ///< some of them went on to ICP and evaluation
   bool transferred = false;       ///< pose transfer moved the leader's pose onto it
+  double screen_score = -1.0;     ///< the shortlist's screening score of its best candidate
+                                  ///< (lower is better; -1: no candidate or no shortlist)
+  double screen_cut = -1.0;       ///< the score the shortlist's last kept object reached
+  std::size_t screen_rank = 0;    ///< rank (1 = best) of its best candidate among the objects'
+                                  ///< best (0: no candidate or no shortlist)
+  std::size_t transfer_rank = 0;  ///< its rank (1 = best) in pose transfer's screening at the
+                                  ///< leader's pose; 0: not screened or no fit
   std::size_t hypotheses = 0;     ///< its hypotheses in the state after the step
 };
 

@@ -314,6 +314,8 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
       const Funnel& f = *r.watched;
       st["truth_funnel"] = {{"searched", f.searched},       {"candidates", f.candidates},
                             {"shortlisted", f.shortlisted}, {"transferred", f.transferred},
+                            {"transfer_rank", f.transfer_rank}, {"screen_score", f.screen_score},
+                            {"screen_cut", f.screen_cut}, {"screen_rank", f.screen_rank},
                             {"hypotheses", f.hypotheses}};
     }
     st["geometry_loads"] = r.geometry_loads;

@@ -308,6 +308,37 @@ TEST_CASE("Watching an object reports where it stood in the search and changes n
     if (!g.searched) CHECK(g.candidates == 0);
     CHECK(g.shortlisted == (g.candidates > 0));
   }
+  for (const auto& r : b) {   // no shortlist, no transfer: no screening diagnostics
+    CHECK(r.watched->screen_rank == 0);
+    CHECK(r.watched->screen_score == -1.0);
+    CHECK(r.watched->transfer_rank == 0);
+  }
+  // With a shortlist of 2 objects: the watched object's screening rank and score, consistent
+  // with the shortlist's cut and with what it kept.
+  RecognizerSettings two = fast();
+  two.shortlist.objects = 2;
+  two.shortlist.min_database = 0;
+  Recognizer listed(db, two);
+  listed.watch(static_cast<std::uint32_t>(wedge));
+  std::size_t ranked = 0;
+  for (const auto& r : explore(listed, wedge, T, 6, 15, 0.0005, 0.0002)) {
+    const Funnel& f = *r.watched;
+    if (f.candidates == 0 || r.shortlist.empty()) {   // no candidate, or nothing left out
+      CHECK(f.screen_rank == 0);
+      continue;
+    }
+    ++ranked;
+    CHECK(f.screen_rank >= 1);
+    CHECK(f.screen_score >= 0.0);
+    CHECK(f.screen_score <= 1.0);
+    if (f.screen_rank <= 2) {
+      CHECK(f.shortlisted);
+      CHECK(f.screen_score <= f.screen_cut);
+    } else {
+      CHECK(f.screen_score >= f.screen_cut);
+    }
+  }
+  CHECK(ranked > 0);
   // Once the contacts are wider than the pebble it is not even searched.
   REQUIRE(c.back().objects_allowed < db.size());
   CHECK_FALSE(c.back().watched->searched);
