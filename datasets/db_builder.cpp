@@ -18,6 +18,7 @@
 #include <mutex>
 #include <optional>
 #include <set>
+#include <tuple>
 
 namespace ts::datasets {
 
@@ -157,6 +158,45 @@ MeshInput input_from_path(const std::string& path, const std::string& name) {
   return in;
 }
 
+namespace {
+
+void check_congruence_settings(const CongruenceSettings& s, const std::string& file) {
+  if (!(s.tolerance > 0.0) || !std::isfinite(s.tolerance))
+    throw Error("the congruence tolerance must be a positive number (a fraction of the object size, e.g. 0.01), not " +
+                    std::to_string(s.tolerance),
+                file, "--congruence-tolerance");
+}
+
+}  // namespace
+
+CongruenceOutcome database_congruence(const io::DbReader& db, const std::vector<const Mesh*>& added,
+                                      const CongruenceSettings& settings, bool reuse) {
+  check_congruence_settings(settings, db.path());
+  const std::size_t old_n = db.size(), n = old_n + added.size();
+  auto mesh_of = [&](std::size_t i) { return i < old_n ? db.load_mesh(i) : *added[i - old_n]; };
+  CongruenceOutcome out;
+  out.record.settings = settings;
+  const io::CongruenceRecord* old = db.congruence();
+  out.reused = reuse && old && old->settings.tolerance == settings.tolerance &&
+               old->settings.samples == settings.samples && old->settings.seed == settings.seed;
+  const auto t0 = Clock::now();
+  out.record.signatures.resize(n);
+  const std::size_t first = out.reused ? old_n : 0;
+  if (out.reused) std::copy(old->signatures.begin(), old->signatures.end(), out.record.signatures.begin());
+  tbb::parallel_for(first, n, [&](std::size_t i) { out.record.signatures[i] = surface_signature(mesh_of(i)); });
+  out.signature_s = seconds_since(t0);
+  out.record.pairs = find_congruent_pairs(out.record.signatures, mesh_of, first, settings, &out.stats);
+  if (out.reused) {
+    std::vector<CongruentPair> all = old->pairs;
+    all.insert(all.end(), out.record.pairs.begin(), out.record.pairs.end());
+    std::sort(all.begin(), all.end(), [](const CongruentPair& x, const CongruentPair& y) {
+      return std::tie(x.a, x.b) < std::tie(y.a, y.b);
+    });
+    out.record.pairs = std::move(all);
+  }
+  return out;
+}
+
 BuildResult build_one(const MeshInput& input, const DatabaseSettings& settings, std::uint64_t seed,
                       const std::string* bytes) {
   if (!bytes) check_exists(input);
@@ -272,6 +312,7 @@ BuildReport build_database(const std::vector<MeshInput>& given, const std::files
     if (!(in.units > 0.0)) in.units = settings.units;
   const std::size_t n = inputs.size();
   if (n == 0) throw Error("no objects to build", out.string());
+  check_congruence_settings(settings.congruence, out.string());
   {
     std::set<std::string> names;
     for (const auto& in : inputs) {
@@ -316,6 +357,7 @@ BuildReport build_database(const std::vector<MeshInput>& given, const std::files
   report.resumed = n - todo.size();
 
   // 4. Build what is missing, each object written to its part as it finishes.
+  std::vector<ShapeSignature> signatures(n);
   std::mutex progress_mutex;
   BuildProgress progress;
   progress.total = n;
@@ -328,6 +370,7 @@ BuildReport build_database(const std::vector<MeshInput>& given, const std::files
       BuildResult r = build_imported(inputs[i], std::move(im), settings.database,
                                      io::object_seed(settings.seed, inputs[i].name));
       io::write_database(parts / part_name(i), {{&r.object, r.seed}}, settings.database, settings.seed, settings.write);
+      signatures[i] = surface_signature(r.object.mesh);
       std::lock_guard<std::mutex> lock(progress_mutex);
       report.times.import_s += import_s[i];
       report.times.scan_s += r.object.timings.scan_s;
@@ -349,11 +392,28 @@ BuildReport build_database(const std::vector<MeshInput>& given, const std::files
   }
   members.clear();
 
-  // 5. Merge, in input order; then the parts go.
-  t0 = Clock::now();
+  // 5. Congruent objects: signatures of the resumed parts from their meshes, then the pairs
+  //    (meshes read back from the parts as the geometric checks need them).
   std::vector<std::filesystem::path> files;
   for (std::size_t i = 0; i < n; ++i) files.push_back(parts / part_name(i));
-  io::merge_databases(files, out, settings.database, settings.seed);
+  {
+    auto mesh_of = [&](std::size_t i) { return io::DbReader(files[i]).load_mesh(0); };
+    const auto tc = Clock::now();
+    std::vector<bool> built(n, false);
+    for (std::size_t i : todo) built[i] = true;
+    tbb::parallel_for(std::size_t{0}, n, [&](std::size_t i) {
+      if (!built[i]) signatures[i] = surface_signature(mesh_of(i));
+    });
+    auto& c = report.congruence;
+    c.signature_s = seconds_since(tc);
+    c.record.settings = settings.congruence;
+    c.record.signatures = signatures;
+    c.record.pairs = find_congruent_pairs(signatures, mesh_of, 0, settings.congruence, &c.stats);
+  }
+
+  // 6. Merge, in input order; then the parts go.
+  t0 = Clock::now();
+  io::merge_databases(files, out, settings.database, settings.seed, &report.congruence.record);
   {
     io::DbReader db(out);
     for (std::size_t i = 0; i < n; ++i) {

@@ -85,6 +85,16 @@ struct BuildSettings {
   /// Called after each object is built, under a lock, from the thread that built it; may be
   /// empty.
   std::function<void(const BuildProgress&)> progress;
+  /// Congruent objects: found after the objects are built and stored with them.
+  CongruenceSettings congruence;
+};
+
+/// What a congruence search over a database found, and what it cost.
+struct CongruenceOutcome {
+  io::CongruenceRecord record;
+  CongruenceSearchStats stats;      ///< the pair search (prefilter and geometric checks)
+  double signature_s = 0.0;         ///< wall time of the signatures (meshes read when needed)
+  bool reused = false;              ///< the old objects' signatures and pairs were kept
 };
 
 /// An imported and built object, with what the import noticed.
@@ -103,11 +113,20 @@ struct BuildReport {
   std::vector<double> coverage;
   std::size_t resumed = 0;                           ///< objects kept from a stopped build
   BuildTimes times;                                  ///< of the objects built by this run
+  CongruenceOutcome congruence;                      ///< stored in the database
 };
 
 /// Import one mesh (bytes already read when `bytes` is given) and build it with `seed`.
 BuildResult build_one(const MeshInput& input, const DatabaseSettings& settings, std::uint64_t seed,
                       const std::string* bytes = nullptr);
+
+/// The congruence record of `db` with `added` objects appended (object-frame meshes, in order;
+/// empty for the database as it is). With `reuse` and a record of the same settings in `db`, the
+/// old objects' signatures and pairs are kept and only the pairs of the added objects are
+/// searched; otherwise every object's signature is computed from its mesh and every pair
+/// searched. Throws ts::Error for a tolerance that is not positive.
+CongruenceOutcome database_congruence(const io::DbReader& db, const std::vector<const Mesh*>& added,
+                                      const CongruenceSettings& settings, bool reuse);
 
 /// Build every input and write the database to `out` (atomically). Throws the error of the
 /// first failing input (in input order); `out` is not written then. A mesh that does not import

@@ -250,45 +250,52 @@ bool search_axis(const Checker& ck, const SymmetrySettings& s, const Vec3& axis,
 /// map the extreme point p1 and a second extreme point p2 onto every pair (q1, q2) with the same
 /// radii and the same angle, and test the rotations this defines.
 void search_generic(const Checker& ck, const std::vector<Vec3>& points, std::vector<Mat3>& group) {
-  const Vec3 c = ck.centre();
-  const double tol = ck.tolerance();
+  std::vector<Vec3> centred;
+  centred.reserve(points.size());
+  for (const Vec3& p : points) centred.push_back(p - ck.centre());
+  for (const Mat3& R : extreme_pair_rotations(centred, centred, ck.tolerance())) try_candidate(ck, group, R);
+}
+
+}  // namespace
+
+std::vector<Mat3> extreme_pair_rotations(const std::vector<Vec3>& source, const std::vector<Vec3>& target, double tol) {
+  std::vector<Mat3> out;
   std::size_t i1 = 0;
   double r1 = -1.0;
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const double r = (points[i] - c).norm();
+  for (std::size_t i = 0; i < source.size(); ++i) {
+    const double r = source[i].norm();
     if (r > r1) { r1 = r; i1 = i; }
   }
-  if (r1 <= 2.0 * tol) return;
-  const Vec3 u1 = points[i1] - c;
-  std::size_t i2 = points.size();
+  if (r1 <= 2.0 * tol) return out;
+  const Vec3 u1 = source[i1];
+  std::size_t i2 = source.size();
   double best = -1.0;
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const Vec3 v = points[i] - c;
+  for (std::size_t i = 0; i < source.size(); ++i) {
+    const Vec3& v = source[i];
     const double r = v.norm();
     if (r <= 2.0 * tol) continue;
     const double cosang = u1.dot(v) / (r1 * r);
     const double score = r * std::sqrt(std::max(0.0, 1.0 - cosang * cosang));  // distance from axis u1
     if (score > best) { best = score; i2 = i; }
   }
-  if (i2 == points.size() || best <= 2.0 * tol) return;
-  const Vec3 u2 = points[i2] - c;
+  if (i2 == source.size() || best <= 2.0 * tol) return out;
+  const Vec3 u2 = source[i2];
   const double r2 = u2.norm();
   const double ang12 = std::acos(std::clamp(u1.dot(u2) / (r1 * r2), -1.0, 1.0));
 
   // Greedy subsampling (at spacing tol, index order: deterministic) of the points whose radius
   // matches, capped.
   auto shell = [&](double r0) {
-    std::vector<Vec3> out;
-    for (const Vec3& p : points) {
-      const Vec3 v = p - c;
+    std::vector<Vec3> q;
+    for (const Vec3& v : target) {
       if (std::abs(v.norm() - r0) > tol) continue;
       bool near = false;
-      for (const Vec3& q : out)
-        if ((q - v).squaredNorm() < tol * tol) { near = true; break; }
-      if (!near) out.push_back(v);
-      if (out.size() >= 240) break;
+      for (const Vec3& w : q)
+        if ((w - v).squaredNorm() < tol * tol) { near = true; break; }
+      if (!near) q.push_back(v);
+      if (q.size() >= 240) break;
     }
-    return out;
+    return q;
   };
   const std::vector<Vec3> Q1 = shell(r1), Q2 = shell(r2);
   const double ang_tol = 2.0 * tol / std::min(r1, r2);
@@ -299,13 +306,11 @@ void search_generic(const Checker& ck, const std::vector<Vec3>& points, std::vec
       if (std::abs(a - ang12) > ang_tol) continue;
       const std::array<Vec3, 3> dst{Vec3::Zero(), v1, v2};
       const RigidFit fit = kabsch(src, dst);
-      if (!fit.valid) continue;
-      try_candidate(ck, group, fit.T_target_source.linear());
+      if (fit.valid) out.push_back(fit.T_target_source.linear());
     }
   }
+  return out;
 }
-
-}  // namespace
 
 SymmetryGroup find_symmetries(const std::vector<Vec3>& points, const KdTree3& tree,
                               const SymmetrySettings& s) {

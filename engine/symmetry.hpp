@@ -53,6 +53,14 @@ struct SymmetryGroup {
   }
 };
 
+/// Rotations about the origin that carry the extreme pair of `source` onto every pair of `target`
+/// with the same radii and angle (within `tol`): source's farthest point p1 and the point p2
+/// farthest from the line through p1 (both beyond 2 tol from the origin), target's points at
+/// those radii greedily thinned to one per tol (at most 240 each), index order (deterministic).
+/// Points are relative to the centre of rotation. For shapes whose principal axes say nothing
+/// (a cube, a regular octahedron): self-registration here, congruence (engine/congruence.hpp).
+std::vector<Mat3> extreme_pair_rotations(const std::vector<Vec3>& source, const std::vector<Vec3>& target, double tol);
+
 /// Find the symmetries of a model sampled by `points` (object frame), with `tree` built over
 /// the same points. Deterministic.
 SymmetryGroup find_symmetries(const std::vector<Vec3>& points, const KdTree3& tree,

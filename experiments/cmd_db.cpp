@@ -1,4 +1,4 @@
-// `touchstone db build|add|info|export`: the object database (README "The object database",
+// `touchstone db build|add|info|classes|export`: the object database (README "The object database",
 // io/FORMAT_DB.md).
 #include "experiments/cli_common.hpp"
 
@@ -10,13 +10,16 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cctype>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 namespace ts::cli {
@@ -93,6 +96,81 @@ std::string fixed(double v, int digits) {
   return s.str();
 }
 
+// --- congruent objects -----------------------------------------------------------------------
+/// The --congruence-tolerance option of db build, add and classes.
+CLI::Option* add_congruence_option(CLI::App* sub, double& tolerance, bool with_default) {
+  auto* opt = sub->add_option("--congruence-tolerance", tolerance,
+                              "Congruent objects: largest surface distance after a rigid motion, as a fraction of the "
+                              "object size (twice its largest distance from its surface centroid)");
+  if (with_default) opt->capture_default_str();
+  return opt;
+}
+
+/// One clear error for a tolerance that is not positive (CLI11 would print its own usage text).
+void check_tolerance(double tolerance, const std::string& file) {
+  if (!(tolerance > 0.0) || !std::isfinite(tolerance))
+    throw Error("--congruence-tolerance must be a positive number (a fraction of the object size, e.g. 0.01), not " +
+                    (std::ostringstream() << tolerance).str(),
+                file, "--congruence-tolerance");
+}
+
+std::vector<std::string> names_of(const std::vector<std::size_t>& members, const std::vector<std::string>& names) {
+  std::vector<std::string> out;
+  for (std::size_t i : members) out.push_back(names.at(i));
+  return out;
+}
+
+/// {"known", "tolerance", "classes": [[names]], "mirror_pairs": [{"a", "b", "distance"}]}.
+json congruence_json(const io::CongruenceRecord* c, const std::vector<std::string>& names) {
+  json j;
+  j["known"] = c != nullptr;
+  if (!c) return j;
+  j["tolerance"] = c->settings.tolerance;
+  json classes = json::array();
+  for (const auto& members : c->classes()) classes.push_back(names_of(members, names));
+  j["classes"] = classes;
+  json mirrors = json::array();
+  for (const auto& p : c->mirrors())
+    mirrors.push_back({{"a", names.at(p.a)}, {"b", names.at(p.b)}, {"distance", p.distance}});
+  j["mirror_pairs"] = mirrors;
+  return j;
+}
+
+/// Lines for people: the classes, the mirror pairs, or that none were found / none are known.
+std::string congruence_text(const io::CongruenceRecord* c, const std::vector<std::string>& names) {
+  if (!c) return "congruent objects: not known (a database written before they were recorded; `touchstone db classes` finds them)\n";
+  std::ostringstream s;
+  const auto classes = c->classes();
+  const auto mirrors = c->mirrors();
+  s << "congruent objects (tolerance " << c->settings.tolerance << " of the size): ";
+  if (classes.empty()) s << "none\n";
+  else s << classes.size() << (classes.size() == 1 ? " class\n" : " classes\n");
+  for (const auto& members : classes) {
+    s << " ";
+    for (const auto& n : names_of(members, names)) s << " " << n;
+    double worst = 0.0;
+    for (const auto& p : c->pairs)
+      if (p.kind == Congruence::congruent && std::find(members.begin(), members.end(), p.a) != members.end())
+        worst = std::max(worst, p.distance);
+    s << "  (largest surface distance " << fixed(100.0 * worst, 3) << " % of the size)\n";
+  }
+  s << "mirror images: " << (mirrors.empty() ? "none\n" : std::to_string(mirrors.size()) + "\n");
+  for (const auto& p : mirrors)
+    s << "  " << names.at(p.a) << " / " << names.at(p.b) << "  (" << fixed(100.0 * p.distance, 3) << " %)\n";
+  return s.str();
+}
+
+std::vector<std::string> object_names(const io::DbReader& db) {
+  std::vector<std::string> names;
+  for (std::size_t i = 0; i < db.size(); ++i) names.push_back(db.info(i).name);
+  return names;
+}
+
+json congruence_stats_json(const datasets::CongruenceOutcome& c) {
+  return {{"candidates", c.stats.candidates}, {"shapes_prepared", c.stats.prepared}, {"signatures_s", c.signature_s},
+          {"search_s", c.stats.seconds},    {"reused", c.reused}};
+}
+
 // --- db build --------------------------------------------------------------------------------
 struct BuildOptions {
   CommonOptions common;
@@ -100,6 +178,7 @@ struct BuildOptions {
   bool units_given = false;
   DatabaseSettings settings;
   int deflate = io::DbWriteSettings{}.deflate;
+  double congruence_tolerance = CongruenceSettings{}.tolerance;
 };
 
 /// The --units option (m, cm, mm, in) of db build and db add.
@@ -122,6 +201,8 @@ int run_build(const BuildOptions& o) {
               << o.settings.max_extent << " m)\n";
   bs.seed = o.common.seed;
   bs.write.deflate = o.deflate;
+  check_tolerance(o.congruence_tolerance, o.manifest.empty() ? o.meshes : o.manifest);
+  bs.congruence.tolerance = o.congruence_tolerance;
   const bool tty = stderr_is_terminal();
   // Progress with the time left: a line kept up to date on a terminal, else a line per tenth.
   auto next_tenth = std::make_shared<std::size_t>(1);
@@ -150,7 +231,10 @@ int run_build(const BuildOptions& o) {
             << "    scan          " << fixed(t.scan_s, 2) << "\n"
             << "    features      " << fixed(t.features_s, 2) << "\n"
             << "    field         " << fixed(t.field_s, 2) << "\n"
-            << "    write         " << fixed(t.write_s, 2) << "\n";
+            << "    write         " << fixed(t.write_s, 2) << "\n"
+            << "  congruent objects: " << report.congruence.stats.candidates << " candidate pairs checked in "
+            << fixed(report.congruence.signature_s + report.congruence.stats.seconds, 2) << " s\n"
+            << congruence_text(&report.congruence.record, report.names);
   if (o.common.json) {
     json j;
     j["out"] = o.out;
@@ -162,6 +246,8 @@ int run_build(const BuildOptions& o) {
     j["warnings"] = warnings;
     j["times_s"] = {{"read", t.read_s},         {"import", t.import_s}, {"scan", t.scan_s}, {"features", t.features_s},
                     {"field", t.field_s},       {"write", t.write_s},   {"wall", t.wall_s}};
+    j["congruence"] = congruence_json(&report.congruence.record, report.names);
+    j["congruence"]["search"] = congruence_stats_json(report.congruence);
     j["threads"] = threads;
     j["machine"] = machine_description();
     std::cout << j.dump(2) << '\n';
@@ -174,6 +260,7 @@ struct AddOptions {
   CommonOptions common;
   bool seed_given = false;
   std::string db, mesh, name, units = "m";
+  std::optional<double> congruence_tolerance;   ///< unset: the database's, else the default
 };
 
 int run_add(const AddOptions& o) {
@@ -182,6 +269,7 @@ int run_add(const AddOptions& o) {
   DatabaseSettings settings;
   std::uint64_t seed = 0;
   std::size_t before = 0;
+  if (o.congruence_tolerance) check_tolerance(*o.congruence_tolerance, o.db);
   {
     io::DbReader db(o.db);
     if (db.find(input.name) < db.size())
@@ -194,7 +282,18 @@ int run_add(const AddOptions& o) {
   }
   auto result = datasets::build_one(input, settings, seed);
   print_warnings(input.name, result.warnings, input.display());
-  io::append_to_database(o.db, {{&result.object, seed}});
+  datasets::CongruenceOutcome congruence;
+  std::vector<std::string> names;
+  {
+    io::DbReader db(o.db);
+    CongruenceSettings cs;
+    if (db.congruence()) cs = db.congruence()->settings;
+    if (o.congruence_tolerance) cs.tolerance = *o.congruence_tolerance;
+    congruence = datasets::database_congruence(db, {&result.object.mesh}, cs, true);
+    names = object_names(db);
+    names.push_back(input.name);
+  }
+  io::append_to_database(o.db, {{&result.object, seed}}, {}, &congruence.record);
   if (o.common.json) {
     json j;
     j["db"] = o.db;
@@ -202,11 +301,56 @@ int run_add(const AddOptions& o) {
     j["objects"] = before + 1;
     j["fine_points"] = result.object.fine.size();
     j["coarse_points"] = result.object.features.coarse.size();
+    j["congruence"] = congruence_json(&congruence.record, names);
+    j["congruence"]["search"] = congruence_stats_json(congruence);
     std::cout << j.dump(2) << '\n';
   } else {
     std::cout << "added " << input.name << " to " << o.db << " (" << before + 1 << " objects): "
               << result.object.fine.size() << " fine points, " << result.object.features.coarse.size()
-              << " coarse points, coverage " << fixed(100.0 * result.object.info.coverage, 1) << " %\n";
+              << " coarse points, coverage " << fixed(100.0 * result.object.info.coverage, 1) << " %\n"
+              << congruence_text(&congruence.record, names);
+  }
+  return 0;
+}
+
+// --- db classes ------------------------------------------------------------------------------
+struct ClassesOptions {
+  CommonOptions common;
+  std::string db;
+  double congruence_tolerance = CongruenceSettings{}.tolerance;
+  bool dry_run = false;
+};
+
+int run_classes(const ClassesOptions& o) {
+  check_tolerance(o.congruence_tolerance, o.db);
+  datasets::CongruenceOutcome c;
+  std::vector<std::string> names;
+  {
+    io::DbReader db(o.db);
+    CongruenceSettings cs;
+    cs.tolerance = o.congruence_tolerance;
+    c = datasets::database_congruence(db, {}, cs, false);
+    names = object_names(db);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!o.dry_run) io::write_congruence(o.db, c.record);
+  const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (o.common.json) {
+    json j;
+    j["db"] = o.db;
+    j["written"] = !o.dry_run;
+    j["objects"] = names.size();
+    j["congruence"] = congruence_json(&c.record, names);
+    j["congruence"]["search"] = congruence_stats_json(c);
+    j["congruence"]["search"]["write_s"] = write_s;
+    j["threads"] = thread_count(o.common);
+    j["machine"] = machine_description();
+    std::cout << j.dump(2) << '\n';
+  } else {
+    std::cout << names.size() << " objects, " << c.stats.candidates << " candidate pairs checked: signatures "
+              << fixed(c.signature_s, 2) << " s, pairs " << fixed(c.stats.seconds, 2) << " s"
+              << (o.dry_run ? " (dry run: nothing written)" : ", written in " + fixed(write_s, 2) + " s") << "\n"
+              << congruence_text(&c.record, names);
   }
   return 0;
 }
@@ -239,6 +383,7 @@ int run_info(const InfoOptions& o) {
     }
     j["objects"] = objects;
     j["params"] = params_json(db.settings(), db.build_seed());
+    j["congruence"] = congruence_json(db.congruence(), object_names(db));
     std::cout << j.dump(2) << '\n';
     return 0;
   }
@@ -267,7 +412,8 @@ int run_info(const InfoOptions& o) {
             << " m, coarse voxel " << s.scan.coarse_voxel << " m; fpfh: normal radius " << s.fpfh.normal_radius
             << " m, feature radius " << s.fpfh.feature_radius << " m (" << db.feature_dim()
             << " bins); field: voxel " << s.field.fine_voxel << " m, coarse voxel " << s.field.coarse_voxel
-            << " m; seed " << db.build_seed() << "\n\n"
+            << " m; seed " << db.build_seed() << "\n"
+            << congruence_text(db.congruence(), object_names(db)) << "\n"
             << table.str();
   return 0;
 }
@@ -312,7 +458,7 @@ int run_export(const ExportOptions& o) {
 }  // namespace
 
 void register_db(CLI::App& app) {
-  auto* db = app.add_subcommand("db", "Object database: build, add, info, export");
+  auto* db = app.add_subcommand("db", "Object database: build, add, info, classes, export");
   db->require_subcommand(1);
 
   {
@@ -324,6 +470,7 @@ void register_db(CLI::App& app) {
     src->require_option(1);
     sub->add_option("--out", o->out, "Output database (HDF5)")->required();
     add_build_parameters(sub, o->settings, o->deflate);
+    add_congruence_option(sub, o->congruence_tolerance, true);
     auto* units = add_units_option(sub, o->units);
     add_common(sub, o->common);
     sub->callback([o, units] {
@@ -338,6 +485,9 @@ void register_db(CLI::App& app) {
     sub->add_option("mesh", o->mesh, "Mesh file, or ARCHIVE:MEMBER")->required();
     sub->add_option("--name", o->name, "Object name (default: the file name without extension)");
     add_units_option(sub, o->units);
+    sub->add_option("--congruence-tolerance", o->congruence_tolerance,
+                    "Congruent objects: as db build (default: the database's own, else 0.01); another value than the "
+                    "database's searches every pair again");
     add_common(sub, o->common);
     sub->callback([o, sub] {
       o->seed_given = sub->get_option("--seed")->count() > 0;
@@ -350,6 +500,17 @@ void register_db(CLI::App& app) {
     sub->add_option("db", o->db, "Database (HDF5)")->required();
     add_common(sub, o->common);
     sub->callback([o] { run_command(o->common, [o] { return run_info(*o); }); });
+  }
+  {
+    auto o = std::make_shared<ClassesOptions>();
+    auto* sub = db->add_subcommand("classes",
+                                   "Find congruent objects and mirror images (every pair) and store them in the database "
+                                   "(written to a copy that replaces it when complete)");
+    sub->add_option("db", o->db, "Database (HDF5)")->required();
+    add_congruence_option(sub, o->congruence_tolerance, true);
+    sub->add_flag("--dry-run", o->dry_run, "Report the classes without writing them");
+    add_common(sub, o->common);
+    sub->callback([o] { run_command(o->common, [o] { return run_classes(*o); }); });
   }
   {
     auto o = std::make_shared<ExportOptions>();

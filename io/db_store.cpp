@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <optional>
 #include <set>
 
 namespace ts::io {
@@ -231,6 +233,86 @@ void write_object(h5::Group objects, const StoredObject& stored, const DbWriteSe
   write_compact(field, "coarse", o.field.coarse_compact(), st, file);
 }
 
+// --- congruence ------------------------------------------------------------------------------
+constexpr int kSignatureColumns = 4;   // size, spread[0..2]
+
+void write_congruence_group(h5::Group root, const CongruenceRecord& c, std::size_t objects, const std::string& file) {
+  if (c.signatures.size() != objects)
+    throw Error("congruence record has " + std::to_string(c.signatures.size()) + " signatures for " +
+                    std::to_string(objects) + " objects",
+                file, "/congruence/signatures");
+  auto g = root.create_group("congruence");
+  g.set_attribute("tolerance", c.settings.tolerance);
+  g.set_attribute("samples", static_cast<std::int64_t>(c.settings.samples));
+  g.set_attribute("seed", static_cast<std::int64_t>(c.settings.seed));
+  std::vector<double> sig;
+  for (const auto& x : c.signatures) sig.insert(sig.end(), {x.size, x.spread[0], x.spread[1], x.spread[2]});
+  g.write("signatures", sig.data(), {c.signatures.size(), static_cast<std::uint64_t>(kSignatureColumns)});
+  std::vector<std::int64_t> pairs, kind;
+  std::vector<double> distance, motion;
+  for (const auto& p : c.pairs) {
+    pairs.insert(pairs.end(), {static_cast<std::int64_t>(p.a), static_cast<std::int64_t>(p.b)});
+    kind.push_back(static_cast<std::int64_t>(p.kind));
+    distance.push_back(p.distance);
+    for (int r = 0; r < 3; ++r)
+      for (int k = 0; k < 3; ++k) motion.push_back(p.linear(r, k));
+    for (int r = 0; r < 3; ++r) motion.push_back(p.translation[r]);
+  }
+  g.write("pairs", pairs.data(), {c.pairs.size(), 2});
+  g.write("kind", kind);
+  g.write("distance", distance);
+  g.write("motion", motion.data(), {c.pairs.size(), 12});
+}
+
+CongruenceRecord read_congruence_group(const h5::Group& root, std::size_t objects) {
+  const auto g = root.open_group("congruence");
+  const std::string& file = g.file();
+  CongruenceRecord c;
+  c.settings.tolerance = g.double_attribute("tolerance");
+  if (!(c.settings.tolerance > 0.0) || !std::isfinite(c.settings.tolerance))
+    throw Error("congruence tolerance must be a positive number", file, g.path() + "@tolerance");
+  const auto samples = g.int_attribute("samples");
+  if (samples < 1) throw Error("congruence samples must be positive", file, g.path() + "@samples");
+  c.settings.samples = static_cast<std::size_t>(samples);
+  c.settings.seed = static_cast<std::uint64_t>(g.int_attribute("seed"));
+  const auto sig = g.read<double>("signatures", {static_cast<std::int64_t>(objects), kSignatureColumns});
+  for (std::size_t i = 0; i < objects; ++i) {
+    ShapeSignature x;
+    x.size = sig[kSignatureColumns * i];
+    for (std::size_t k = 0; k < 3; ++k) x.spread[k] = sig[kSignatureColumns * i + 1 + k];
+    if (!std::isfinite(x.size) || !std::isfinite(x.spread[0]) || !std::isfinite(x.spread[1]) || !std::isfinite(x.spread[2]))
+      throw Error("non-finite value in row " + std::to_string(i), file, g.child_path("signatures"));
+    c.signatures.push_back(x);
+  }
+  h5::Shape shape;
+  const auto pairs = g.read<std::int64_t>("pairs", {h5::kAny, 2}, &shape);
+  const auto rows = static_cast<std::int64_t>(shape[0]);
+  const auto kind = g.read<std::int64_t>("kind", {rows});
+  const auto distance = g.read<double>("distance", {rows});
+  const auto motion = g.read<double>("motion", {rows, 12});
+  for (std::size_t k = 0; k < shape[0]; ++k) {
+    const std::int64_t a = pairs[2 * k], b = pairs[2 * k + 1];
+    if (a < 0 || b <= a || b >= static_cast<std::int64_t>(objects))
+      throw Error("row " + std::to_string(k) + " is not a pair of objects a < b < " + std::to_string(objects), file,
+                  g.child_path("pairs"));
+    if (kind[k] != static_cast<std::int64_t>(Congruence::congruent) && kind[k] != static_cast<std::int64_t>(Congruence::mirror))
+      throw Error("row " + std::to_string(k) + " is neither 1 (congruent) nor 2 (mirror image)", file, g.child_path("kind"));
+    if (!(distance[k] >= 0.0) || !std::isfinite(distance[k]))
+      throw Error("row " + std::to_string(k) + " is not a non-negative number", file, g.child_path("distance"));
+    CongruentPair p{static_cast<std::uint32_t>(a), static_cast<std::uint32_t>(b), static_cast<Congruence>(kind[k]), distance[k]};
+    for (int r = 0; r < 3; ++r) {
+      for (int q = 0; q < 3; ++q) p.linear(r, q) = motion[12 * k + 3 * r + q];
+      p.translation[r] = motion[12 * k + 9 + r];
+    }
+    if (!p.linear.allFinite() || !finite(p.translation) ||
+        (p.linear * p.linear.transpose() - Mat3::Identity()).norm() > 1e-6)
+      throw Error("row " + std::to_string(k) + " is not a rigid motion (orthogonal 3 x 3 and a finite translation)", file,
+                  g.child_path("motion"));
+    c.pairs.push_back(p);
+  }
+  return c;
+}
+
 void check_unique(const std::vector<StoredObject>& objects, std::set<std::string> names, const std::string& file) {
   for (const auto& s : objects) {
     if (!s.object) throw Error("no object to write", file);
@@ -281,6 +363,42 @@ std::vector<SettingValue> settings_values(const DatabaseSettings& s) {
   return out;
 }
 
+std::vector<std::vector<std::size_t>> CongruenceRecord::classes() const {
+  return congruence_classes(signatures.size(), pairs);
+}
+
+std::vector<CongruentPair> CongruenceRecord::mirrors() const {
+  std::vector<CongruentPair> out;
+  for (const auto& p : pairs)
+    if (p.kind == Congruence::mirror) out.push_back(p);
+  return out;
+}
+
+std::vector<std::size_t> CongruenceRecord::class_of(std::size_t i) const {
+  for (auto& members : classes())
+    if (std::find(members.begin(), members.end(), i) != members.end()) return members;
+  return {i};
+}
+
+bool CongruenceRecord::same_class(std::size_t i, std::size_t j) const {
+  if (i == j) return true;
+  const auto members = class_of(i);
+  return std::find(members.begin(), members.end(), j) != members.end();
+}
+
+std::optional<Eigen::Affine3d> CongruenceRecord::motion(std::size_t from, std::size_t to) const {
+  for (const auto& p : pairs) {
+    if (p.kind != Congruence::congruent) continue;
+    Eigen::Affine3d T = Eigen::Affine3d::Identity();
+    T.linear() = p.linear;
+    T.translation() = p.translation;
+    if (p.a == from && p.b == to) return T;
+    if (p.a == to && p.b == from) return T.inverse(Eigen::Isometry);
+  }
+  if (from == to) return Eigen::Affine3d::Identity();
+  return std::nullopt;
+}
+
 std::uint64_t object_seed(std::uint64_t build_seed, const std::string& name) {
   std::uint64_t h = 0xcbf29ce484222325ULL;  // FNV-1a of the name
   for (unsigned char c : name) h = (h ^ c) * 0x100000001b3ULL;
@@ -308,7 +426,8 @@ void write_root(h5::Group& root, const DatabaseSettings& settings, std::uint64_t
 }  // namespace
 
 void write_database(const std::filesystem::path& path, const std::vector<StoredObject>& objects,
-                    const DatabaseSettings& settings, std::uint64_t build_seed, const DbWriteSettings& write) {
+                    const DatabaseSettings& settings, std::uint64_t build_seed, const DbWriteSettings& write,
+                    const CongruenceRecord* congruence) {
   const std::string file = path.string();
   check_unique(objects, {}, file);
   AtomicOutput out(path);
@@ -324,13 +443,14 @@ void write_database(const std::filesystem::path& path, const std::vector<StoredO
       order.push_back(s.object->info.name);
     }
     root.write_strings("order", order);
+    if (congruence) write_congruence_group(root, *congruence, order.size(), file);
     f.close();
   }
   out.commit();
 }
 
 void merge_databases(const std::vector<std::filesystem::path>& parts, const std::filesystem::path& path,
-                     const DatabaseSettings& settings, std::uint64_t build_seed) {
+                     const DatabaseSettings& settings, std::uint64_t build_seed, const CongruenceRecord* congruence) {
   const std::string file = path.string();
   AtomicOutput out(path);
   {
@@ -354,23 +474,42 @@ void merge_databases(const std::vector<std::filesystem::path>& parts, const std:
       order.push_back(names_in[0]);
     }
     root.write_strings("order", order);
+    if (congruence) write_congruence_group(root, *congruence, order.size(), file);
     f.close();
   }
   out.commit();
 }
 
-void append_to_database(const std::filesystem::path& path, const std::vector<StoredObject>& objects,
-                        const DbWriteSettings& write) {
+namespace {
+/// Edit a copy of the database at `path` (under the HDF5 lock) that replaces it when `edit`
+/// succeeded; any failure leaves the database as it was.
+void edit_copy(const std::filesystem::path& path, const std::string& what, const std::function<void(h5::Group&)>& edit) {
   const std::string file = path.string();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) throw Error("database does not exist", file);
   AtomicOutput out(path);
   std::filesystem::copy_file(path, out.temp_path(), std::filesystem::copy_options::overwrite_existing, ec);
-  if (ec) throw Error("cannot copy the database to append to it: " + ec.message(), file);
+  if (ec) throw Error("cannot copy the database to " + what + ": " + ec.message(), file);
   {
     std::lock_guard<std::recursive_mutex> lock(h5::mutex());
     auto f = h5::File::open(out.temp_path(), h5::File::Access::read_write, file);
     auto root = f.root();
+    edit(root);
+    f.close();
+  }
+  out.commit();
+}
+
+void replace_congruence_group(h5::Group& root, const CongruenceRecord& congruence, std::size_t objects) {
+  if (root.has_group("congruence")) root.remove("congruence");
+  write_congruence_group(root, congruence, objects, root.file());
+}
+}  // namespace
+
+void append_to_database(const std::filesystem::path& path, const std::vector<StoredObject>& objects,
+                        const DbWriteSettings& write, const CongruenceRecord* congruence) {
+  const std::string file = path.string();
+  edit_copy(path, "append to it", [&](h5::Group& root) {
     check_root(root, true);
     auto order = root.read_strings("order");
     check_unique(objects, std::set<std::string>(order.begin(), order.end()), file);
@@ -381,9 +520,15 @@ void append_to_database(const std::filesystem::path& path, const std::vector<Sto
     }
     root.remove("order");
     root.write_strings("order", order);
-    f.close();
-  }
-  out.commit();
+    if (congruence) replace_congruence_group(root, *congruence, order.size());
+  });
+}
+
+void write_congruence(const std::filesystem::path& path, const CongruenceRecord& congruence) {
+  edit_copy(path, "update it", [&](h5::Group& root) {
+    check_root(root, false);
+    replace_congruence_group(root, congruence, root.read_strings("order").size());
+  });
 }
 
 // --- reader ----------------------------------------------------------------------------------
@@ -398,6 +543,7 @@ struct DbReader::Impl {
   std::vector<std::uint64_t> seeds;
   std::vector<std::size_t> vertices, faces;
   std::vector<h5::Group> groups;
+  std::optional<CongruenceRecord> congruence;
 
   const h5::Group& group(std::size_t i) const {
     if (i >= groups.size())
@@ -456,6 +602,8 @@ DbReader::DbReader(const std::filesystem::path& path) : impl_(std::make_unique<I
     throw Error("/objects holds " + std::to_string(objects.children().size()) + " objects but /order lists " +
                     std::to_string(order.size()),
                 d.path, "/order");
+  // Databases written before congruence was recorded have no group: no classes known.
+  if (root.has_group("congruence")) d.congruence = read_congruence_group(root, order.size());
 }
 
 DbReader::~DbReader() {
@@ -484,6 +632,10 @@ std::size_t DbReader::mesh_vertices(std::size_t i) const {
 std::size_t DbReader::mesh_faces(std::size_t i) const {
   impl_->group(i);
   return impl_->faces[i];
+}
+
+const CongruenceRecord* DbReader::congruence() const {
+  return impl_->congruence ? &*impl_->congruence : nullptr;
 }
 
 std::size_t DbReader::find(const std::string& name) const {

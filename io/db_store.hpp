@@ -12,11 +12,13 @@
 //   mutex, so a DbReader may be used from many threads.
 #pragma once
 
+#include "engine/congruence.hpp"
 #include "engine/database.hpp"
 
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -38,6 +40,26 @@ struct StoredObject {
   std::uint64_t seed = 0;
 };
 
+/// Congruent objects as a database records them (group /congruence, io/FORMAT_DB.md): every
+/// object's shape signature (in /order order) and the congruent and mirror-image pairs found with
+/// `settings`. Databases written before it have none: no classes known.
+struct CongruenceRecord {
+  CongruenceSettings settings;
+  std::vector<ShapeSignature> signatures;   ///< one per object, database order
+  std::vector<CongruentPair> pairs;         ///< sorted by (a, b); indices in database order
+  /// Classes of congruent objects (ts::congruence_classes of the pairs).
+  std::vector<std::vector<std::size_t>> classes() const;
+  /// Mirror-image pairs.
+  std::vector<CongruentPair> mirrors() const;
+  /// The members of object i's class (ascending), or {i} when it is congruent to no other.
+  std::vector<std::size_t> class_of(std::size_t i) const;
+  /// Whether objects i and j are congruent (i == j included).
+  bool same_class(std::size_t i, std::size_t j) const;
+  /// The motion of a congruent pair that carries object `from`'s frame into object `to`'s
+  /// (x_to = T * x_from), when the pair was checked directly; nullopt otherwise.
+  std::optional<Eigen::Affine3d> motion(std::size_t from, std::size_t to) const;
+};
+
 /// Object names become HDF5 group names: non-empty, no '/', not "." or "..", no control
 /// characters, no leading or trailing blanks. Throws ts::Error naming `file` and `field`.
 void check_object_name(const std::string& name, const std::string& file = {},
@@ -45,21 +67,28 @@ void check_object_name(const std::string& name, const std::string& file = {},
 
 /// Write a whole database (atomically). Names must be unique. `build_seed` is the --seed of
 /// the build (each object's own seed is stored with it).
+/// `congruence` (may be null: none recorded) covers the objects in the given order.
 void write_database(const std::filesystem::path& path, const std::vector<StoredObject>& objects,
                     const DatabaseSettings& settings, std::uint64_t build_seed,
-                    const DbWriteSettings& write = {});
+                    const DbWriteSettings& write = {}, const CongruenceRecord* congruence = nullptr);
 
 /// One database from single-object databases (`db build`'s parts, written as objects finish),
 /// in the given order: each part's object is copied as stored (no recompression). Every part
 /// must hold exactly one object, of this program's schema; `settings` and `build_seed` are the
 /// database's /params. Written atomically, like write_database.
 void merge_databases(const std::vector<std::filesystem::path>& parts, const std::filesystem::path& path,
-                     const DatabaseSettings& settings, std::uint64_t build_seed);
+                     const DatabaseSettings& settings, std::uint64_t build_seed,
+                     const CongruenceRecord* congruence = nullptr);
 
 /// Append objects to an existing database (built with the database's settings). The original
-/// file is replaced only when everything succeeded.
+/// file is replaced only when everything succeeded. `congruence` (when not null) replaces the
+/// database's record and must cover the old objects and the new ones.
 void append_to_database(const std::filesystem::path& path, const std::vector<StoredObject>& objects,
-                        const DbWriteSettings& write = {});
+                        const DbWriteSettings& write = {}, const CongruenceRecord* congruence = nullptr);
+
+/// Replace (or add) the congruence record of an existing database: written to a copy that
+/// replaces the original only when complete, so a failure leaves the database as it was.
+void write_congruence(const std::filesystem::path& path, const CongruenceRecord& congruence);
 
 class DbReader final : public ObjectSource {
  public:
@@ -88,6 +117,8 @@ class DbReader final : public ObjectSource {
   std::uint64_t object_seed(std::size_t i) const;
   std::size_t mesh_vertices(std::size_t i) const;
   std::size_t mesh_faces(std::size_t i) const;
+  /// The congruence record, or null for a database written without one (no classes known).
+  const CongruenceRecord* congruence() const;
 
  private:
   struct Impl;

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <map>
 #include <numbers>
+#include <utility>
 
 namespace ts::test {
 
@@ -21,6 +22,29 @@ inline Mesh box_mesh(const Vec3& lo, const Vec3& hi) {
     m.faces.emplace_back(q[0], q[1], q[2]);
     m.faces.emplace_back(q[0], q[2], q[3]);
   }
+  return m;
+}
+
+/// A chiral solid (no rotation maps it onto its mirror image): a cube [-2, 2]^3 and three
+/// separate bars of different lengths along +x (9), +y (6) and +z (3).
+inline Mesh chiral_mesh() {
+  Mesh m;
+  for (const auto& [lo, hi] : {std::pair{Vec3(-2, -2, -2), Vec3(2, 2, 2)}, std::pair{Vec3(3, -1.5, -1.5), Vec3(12, 1.5, 1.5)},
+                               std::pair{Vec3(-1.5, 3, -1.5), Vec3(1.5, 9, 1.5)}, std::pair{Vec3(-1.5, -1.5, 3), Vec3(1.5, 1.5, 6)}}) {
+    const Mesh b = box_mesh(lo, hi);
+    const int base = static_cast<int>(m.vertices.size());
+    m.vertices.insert(m.vertices.end(), b.vertices.begin(), b.vertices.end());
+    for (const auto& f : b.faces) m.faces.emplace_back(f + Eigen::Vector3i::Constant(base));
+  }
+  return m;
+}
+
+/// The mesh moved by x -> L x + t (L orthogonal); faces flipped when L is a reflection, so they
+/// stay wound outward.
+inline Mesh moved_mesh(Mesh m, const Mat3& L, const Vec3& t) {
+  for (auto& v : m.vertices) v = L * v + t;
+  if (L.determinant() < 0.0)
+    for (auto& f : m.faces) std::swap(f[1], f[2]);
   return m;
 }
 

@@ -1,6 +1,7 @@
 // `touchstone db ...` end to end: the built program on small generated meshes.
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
+#include "io/h5.hpp"
 #include "mesh_fixtures.hpp"
 #include "cli_run.hpp"
 #include "temp_dir.hpp"
@@ -14,6 +15,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <numbers>
 #include <thread>
 #include <filesystem>
 
@@ -282,4 +284,96 @@ TEST_CASE("cli db: build killed at random instants resumes to the same bytes, ne
   }
   REQUIRE(fs::exists(dir / "killed.h5"));
   CHECK(ts::test::read_bytes(dir / "killed.h5") == clean);
+}
+
+TEST_CASE("cli db: congruent objects and mirror images are found by build and add, listed by info, added by classes") {
+  // At true size (--scale keep, cm): the chiral fixture, the same solid turned and moved, its
+  // mirror image, a copy 5 % longer along x, and a box.
+  TempDir dir("cli");
+  fs::create_directories(dir / "meshes");
+  const ts::Mesh arm = ts::test::chiral_mesh();
+  const ts::Mat3 turn = (Eigen::AngleAxisd(0.5 * std::numbers::pi, ts::Vec3::UnitZ()) *
+                         Eigen::AngleAxisd(0.5 * std::numbers::pi, ts::Vec3::UnitX())).toRotationMatrix();
+  ts::test::write_off(dir / "meshes/arm.off", arm);
+  ts::test::write_off(dir / "meshes/arm_turned.off", ts::test::moved_mesh(arm, turn, {5, -3, 2}));
+  ts::test::write_off(dir / "meshes/arm_mirror.off", ts::test::moved_mesh(arm, ts::Vec3(-1, 1, 1).asDiagonal(), {0, 0, 0}));
+  ts::test::write_off(dir / "meshes/arm_long.off", ts::test::moved_mesh(arm, ts::Vec3(1.05, 1, 1).asDiagonal(), {0, 0, 0}));
+  ts::test::write_off(dir / "meshes/box.off", ts::test::box_mesh({0, 0, 0}, {9, 6, 3}));
+  const std::string keep = " --scale keep --units cm";
+  auto build = touchstone(dir, "db build --meshes meshes --out c.h5 --json" + keep + kFast);
+  REQUIRE_MESSAGE(build.code == 0, build.err);
+  const auto expect_classes = [](const nlohmann::json& c, const nlohmann::json& classes) {
+    CHECK(c["known"] == true);
+    CHECK(c["tolerance"] == 0.01);
+    CHECK(c["classes"] == classes);
+    REQUIRE(c["mirror_pairs"].size() == 2);
+    CHECK(c["mirror_pairs"][0]["a"] == "arm");
+    CHECK(c["mirror_pairs"][0]["b"] == "arm_mirror");
+    CHECK(c["mirror_pairs"][1]["a"] == "arm_mirror");
+    CHECK(c["mirror_pairs"][1]["b"] == "arm_turned");
+  };
+  const auto pair = nlohmann::json::array({nlohmann::json::array({"arm", "arm_turned"})});
+  expect_classes(nlohmann::json::parse(build.out)["congruence"], pair);
+  CHECK(build.err.find("  arm arm_turned  (largest surface distance") != std::string::npos);
+
+  const auto info = touchstone(dir, "db info c.h5 --json");
+  REQUIRE(info.code == 0);
+  expect_classes(nlohmann::json::parse(info.out)["congruence"], pair);
+  const auto human = touchstone(dir, "db info c.h5");
+  CHECK(human.out.find("congruent objects (tolerance 0.01 of the size): 1 class\n  arm arm_turned") != std::string::npos);
+  CHECK(human.out.find("mirror images: 2\n  arm / arm_mirror") != std::string::npos);
+
+  // db add: only the new object's pairs are searched; it joins the class.
+  ts::test::write_off(dir / "copy.off", ts::test::moved_mesh(arm, turn.transpose(), {-1, 0, 7}));
+  const auto add = touchstone(dir, "db add c.h5 copy.off --name arm_copy --units cm --json");
+  REQUIRE_MESSAGE(add.code == 0, add.err);
+  const auto added = nlohmann::json::parse(add.out)["congruence"];
+  CHECK(added["search"]["reused"] == true);
+  CHECK(added["classes"] == nlohmann::json::array({nlohmann::json::array({"arm", "arm_turned", "arm_copy"})}));
+  CHECK(added["mirror_pairs"].size() == 3);
+
+  // A tolerance <= 0: one error line naming the flag, nothing written.
+  const auto before = ts::test::read_bytes(dir / "c.h5");
+  for (const std::string& cmd : {"db build --meshes meshes --out bad.h5 --congruence-tolerance 0" + keep,
+                                 std::string("db add c.h5 meshes/box.off --name box2 --congruence-tolerance -0.5"),
+                                 std::string("db classes c.h5 --congruence-tolerance 0")}) {
+    CAPTURE(cmd);
+    const auto r = touchstone(dir, cmd);
+    CHECK(r.code == 1);
+    CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+    CHECK(r.err.find("--congruence-tolerance must be a positive number") != std::string::npos);
+  }
+  CHECK_FALSE(fs::exists(dir / "bad.h5"));
+  CHECK(ts::test::read_bytes(dir / "c.h5") == before);
+
+  // A database written before classes were recorded: opens, no classes known; db classes adds
+  // them (the objects untouched), and a larger tolerance takes the stretched copy in too.
+  fs::copy_file(dir / "c.h5", dir / "old.h5");
+  {
+    auto f = ts::io::h5::File::open(dir / "old.h5", ts::io::h5::File::Access::read_write);
+    f.root().remove("congruence");
+    f.close();
+  }
+  const auto old_info = touchstone(dir, "db info old.h5 --json");
+  REQUIRE(old_info.code == 0);
+  CHECK(nlohmann::json::parse(old_info.out)["congruence"] == nlohmann::json({{"known", false}}));
+  CHECK(touchstone(dir, "db info old.h5").out.find("congruent objects: not known") != std::string::npos);
+  const auto dry = touchstone(dir, "db classes old.h5 --dry-run --json");
+  REQUIRE_MESSAGE(dry.code == 0, dry.err);
+  CHECK(nlohmann::json::parse(dry.out)["written"] == false);
+  CHECK(nlohmann::json::parse(touchstone(dir, "db info old.h5 --json").out)["congruence"]["known"] == false);
+  const auto classes = touchstone(dir, "db classes old.h5 --json");
+  REQUIRE_MESSAGE(classes.code == 0, classes.err);
+  CHECK(nlohmann::json::parse(classes.out)["congruence"]["classes"] == added["classes"]);
+  {
+    ts::io::DbReader a(dir / "c.h5"), b(dir / "old.h5");
+    REQUIRE(b.congruence() != nullptr);
+    CHECK(a.congruence()->pairs.size() == b.congruence()->pairs.size());
+    CHECK(a.load_fine(2).points == b.load_fine(2).points);
+  }
+  const auto loose = touchstone(dir, "db classes old.h5 --congruence-tolerance 0.05 --json");
+  REQUIRE(loose.code == 0);
+  CHECK(nlohmann::json::parse(loose.out)["congruence"]["classes"] ==
+        nlohmann::json::array({nlohmann::json::array({"arm", "arm_long", "arm_turned", "arm_copy"})}));
+  CHECK_FALSE(leftovers(dir.path()));
 }

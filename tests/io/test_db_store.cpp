@@ -376,3 +376,84 @@ TEST_CASE("db store: concurrent loads from one reader") {
   for (auto& t : threads) t.join();
   CHECK(ok == std::vector<int>(4, 1));
 }
+
+TEST_CASE("db store: the congruence record round-trips; databases without one open with no classes known") {
+  TempDir dir("db");
+  std::vector<ts::BuiltObject> objects;
+  for (const char* name : {"a", "b", "c"}) objects.push_back(synthetic_object(name, objects.size() + 1));
+  ts::io::write_database(dir / "old.h5", stored(objects), custom_settings(), 5);
+  {
+    ts::io::DbReader old(dir / "old.h5");   // written without a record (as before it existed)
+    CHECK(old.congruence() == nullptr);
+  }
+  ts::io::CongruenceRecord rec;
+  rec.settings.tolerance = 0.02;
+  rec.settings.samples = 500;
+  for (int i = 0; i < 3; ++i) rec.signatures.push_back({0.2 + i, {0.01, 0.02 + i, 0.05}});
+  rec.pairs = {{0, 2, ts::Congruence::congruent, 1e-5}, {1, 2, ts::Congruence::mirror, 0.003}};
+  ts::io::write_database(dir / "new.h5", stored(objects), custom_settings(), 5, {}, &rec);
+  auto check_record = [&](const ts::io::DbReader& db) {
+    const auto* c = db.congruence();
+    REQUIRE(c != nullptr);
+    CHECK(c->settings.tolerance == 0.02);
+    CHECK(c->settings.samples == 500);
+    REQUIRE(c->signatures.size() == 3);
+    CHECK(c->signatures[2].size == 2.2);
+    CHECK(c->signatures[2].spread[1] == 2.02);
+    REQUIRE(c->pairs.size() == 2);
+    CHECK(c->pairs[1].kind == ts::Congruence::mirror);
+    CHECK(c->pairs[1].distance == 0.003);
+    CHECK(c->classes() == std::vector<std::vector<std::size_t>>{{0, 2}});
+    REQUIRE(c->mirrors().size() == 1);
+    CHECK(c->mirrors()[0].a == 1);
+  };
+  check_record(ts::io::DbReader(dir / "new.h5"));
+  // Added to the old database in place (on a copy): the objects' bytes are untouched.
+  ts::io::write_congruence(dir / "old.h5", rec);
+  check_record(ts::io::DbReader(dir / "old.h5"));
+  {
+    ts::io::DbReader db(dir / "old.h5");
+    check_same(db, 1, objects[1]);
+  }
+  // A record that does not cover every object is refused, and the file stays as it was.
+  const auto before = ts::test::read_bytes(dir / "old.h5");
+  auto short_rec = rec;
+  short_rec.signatures.pop_back();
+  CHECK_THROWS_WITH_AS(ts::io::write_congruence(dir / "old.h5", short_rec), doctest::Contains("2 signatures for 3 objects"),
+                       ts::Error);
+  CHECK(ts::test::read_bytes(dir / "old.h5") == before);
+  // Appending replaces the record.
+  auto d = synthetic_object("d", 9);
+  auto rec4 = rec;
+  rec4.signatures.push_back({0.5, {0.1, 0.2, 0.3}});
+  rec4.pairs.push_back({0, 3, ts::Congruence::congruent, 0.0});
+  ts::io::append_to_database(dir / "new.h5", stored_one(d), {}, &rec4);
+  {
+    ts::io::DbReader db(dir / "new.h5");
+    REQUIRE(db.congruence() != nullptr);
+    CHECK(db.congruence()->classes() == std::vector<std::vector<std::size_t>>{{0, 2, 3}});
+  }
+  // Damaged records name the file and the dataset.
+  auto edit = [&](const std::function<void(h5::Group&)>& change) {
+    fs::copy_file(dir / "new.h5", dir / "bad.h5", fs::copy_options::overwrite_existing);
+    {
+      auto f = h5::File::open(dir / "bad.h5", h5::File::Access::read_write);
+      auto g = f.root().open_group("congruence");
+      change(g);
+      f.close();
+    }
+  };
+  edit([](h5::Group& g) {
+    g.remove("kind");
+    g.write("kind", std::vector<std::int64_t>{1, 2, 7});
+  });
+  CHECK_THROWS_WITH_AS(ts::io::DbReader(dir / "bad.h5"), doctest::Contains("/congruence/kind"), ts::Error);
+  edit([](h5::Group& g) {
+    g.remove("pairs");
+    const std::vector<std::int64_t> p = {0, 2, 1, 2, 3, 4};   // object 4 does not exist
+    g.write("pairs", p.data(), {3, 2});
+  });
+  CHECK_THROWS_WITH_AS(ts::io::DbReader(dir / "bad.h5"), doctest::Contains("not a pair of objects"), ts::Error);
+  edit([](h5::Group& g) { g.set_attribute("tolerance", 0.0); });
+  CHECK_THROWS_WITH_AS(ts::io::DbReader(dir / "bad.h5"), doctest::Contains("/congruence@tolerance"), ts::Error);
+}
