@@ -159,7 +159,16 @@ struct Context {
   const Database& db;
   double largest = 0.0;          ///< m, diagonal of the largest database object
   SymmetryCache& symmetries;     ///< thread-safe
+  const io::CongruenceRecord* congruence = nullptr;   ///< the database's classes (null: not known)
 };
+
+/// The names of object i's congruent class (itself alone when in none, or when none are known).
+nlohmann::ordered_json class_json(const Context& c, std::size_t i) {
+  nlohmann::ordered_json names = nlohmann::ordered_json::array();
+  for (std::size_t k : c.congruence ? c.congruence->class_of(i) : std::vector<std::size_t>{i})
+    names.push_back(c.db.info(k).name);
+  return names;
+}
 
 /// One input's outcome.
 struct InputRun {
@@ -298,6 +307,16 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     st["time_s"] = r.times.total_s;
     // extensions
     st["correct"] = s.correct ? nlohmann::ordered_json(*s.correct) : nullptr;
+    // The named object's class of congruent objects (no touch tells them apart), and whether the
+    // answer lies in the true object's class.
+    st["object_class"] = r.valid ? class_json(c, r.best.object) : nullptr;
+    if (s.correct) {
+      const std::size_t truth = c.db.find(run.truth_name);
+      st["correct_class"] = r.valid && truth < c.db.size() &&
+                            (c.congruence ? c.congruence->same_class(r.best.object, truth) : r.best.object == truth);
+    } else {
+      st["correct_class"] = nullptr;
+    }
     st["symmetric_position_error_m"] =
         number_or_null(e ? std::optional(e->symmetric_position_m) : std::nullopt);
     st["log_weight"] = r.valid ? nlohmann::ordered_json(r.best.log_weight) : nullptr;
@@ -349,6 +368,7 @@ void add_shared_json(nlohmann::ordered_json& j, const Context& c) {
   j["seed"] = c.rs.seed;
   j["threads"] = thread_count(c.o.common);
   j["machine"] = machine_description();
+  j["congruent_classes_known"] = c.congruence != nullptr;   // else "object_class" is the object alone
   nlohmann::ordered_json p;
   for (const auto& [name, value] : params_of(c.rs, c.o.contact_voxel)) p[name] = value;
   j["params"] = p;
@@ -379,6 +399,14 @@ void print_table(const Context& c, const InputRun& run) {
                 num(e.has_value(), e ? e->orientation_deg : 0, "%.1f").c_str(),
                 num(e.has_value(), e ? e->symmetric_orientation_deg : 0, "%.1f").c_str(),
                 r.times.total_s);
+  }
+  if (!run.results.empty() && run.results.back().valid) {
+    const auto members = class_json(c, run.results.back().best.object);
+    if (members.size() > 1) {
+      std::cout << "note: congruent objects, no touch tells them apart:";
+      for (const auto& n : members) std::cout << ' ' << n.get<std::string>();
+      std::cout << '\n';
+    }
   }
   if (!run.results.empty() && run.results.back().pose_ambiguous)
     std::cout << "? the contacts leave " << run.results.back().unobservable_dof
@@ -529,7 +557,7 @@ int run_recognize(const RecognizeOptions& o) {
   double largest = 0.0;
   for (std::size_t i = 0; i < db.size(); ++i) largest = std::max(largest, db.info(i).extent.norm());
   SymmetryCache symmetries;
-  const Context c{o, rs, db, largest, symmetries};
+  const Context c{o, rs, db, largest, symmetries, source->congruence()};
   if (many) return recognize_many(c, inputs, outs);
 
   const InputRun run = recognize_one(c, inputs.front(), o.out, stderr_is_terminal() && !o.common.json);

@@ -184,6 +184,7 @@ StepSummary summarize_step(int step, std::span<const StepSample> samples,
   std::vector<double> pos, ori, sym, ms, times;
   for (const StepSample& s : samples) {
     times.push_back(s.time_s);
+    if (s.correct || s.correct_class) ++out.correct_class;
     if (!s.correct) continue;
     ++out.correct;
     pos.push_back(s.position_error_m);
@@ -194,6 +195,9 @@ StepSummary summarize_step(int step, std::span<const StepSample> samples,
   out.recognition_rate =
       out.runs == 0 ? 0.0 : static_cast<double>(out.correct) / static_cast<double>(out.runs);
   out.recognition_rate_ci95 = wilson_interval(out.correct, out.runs);
+  out.recognition_rate_class =
+      out.runs == 0 ? 0.0 : static_cast<double>(out.correct_class) / static_cast<double>(out.runs);
+  out.recognition_rate_class_ci95 = wilson_interval(out.correct_class, out.runs);
   out.position_m = summarize_errors(pos, bounds.position_m);
   out.orientation_rad = summarize_errors(ori, bounds.orientation_rad);
   out.symmetric_orientation_rad = summarize_errors(sym, bounds.orientation_rad);

@@ -92,6 +92,9 @@ struct StepSample {
   double symmetric_orientation_error_rad = 0.0;
   double mssd_m = 0.0;
   double time_s = 0.0;                        ///< wall time of the step
+  /// The best hypothesis is congruent with the true object (in its class of congruent objects,
+  /// which no touch can tell apart); a correct sample counts as such whatever this says.
+  bool correct_class = false;
 };
 
 /// Summary of one error over the runs that recognized the right object (as in the paper,
@@ -112,6 +115,9 @@ struct StepSummary {
   std::size_t correct = 0;
   double recognition_rate = 0.0;              ///< correct / runs (0 when runs == 0)
   Interval recognition_rate_ci95;             ///< Wilson
+  std::size_t correct_class = 0;              ///< runs right within the true object's class
+  double recognition_rate_class = 0.0;        ///< correct_class / runs (class-aware; >= the strict rate)
+  Interval recognition_rate_class_ci95;       ///< Wilson
   ErrorSummary position_m, orientation_rad, symmetric_orientation_rad, mssd_m;
   std::optional<double> time_s_median, time_s_p95, time_s_mean;  ///< over all runs
 };

@@ -513,6 +513,17 @@ EngineDatabase open_database(const std::filesystem::path& path) {
   db.description["schema_version"] = reader->schema_version();
   db.description["build_seed"] = reader->build_seed();
   db.description["max_extent_m"] = reader->settings().max_extent;
+  // Classes of congruent objects (names), which reports count class-aware rates with; absent
+  // when the database recorded none.
+  if (const io::CongruenceRecord* c = reader->congruence()) {
+    nlohmann::ordered_json classes = nlohmann::ordered_json::array();
+    for (const auto& members : c->classes()) {
+      nlohmann::ordered_json names = nlohmann::ordered_json::array();
+      for (std::size_t i : members) names.push_back(reader->info(i).name);
+      classes.push_back(names);
+    }
+    db.description["congruent_classes"] = classes;
+  }
   return db;
 }
 

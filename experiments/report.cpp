@@ -45,9 +45,40 @@ void put_error(J& j, const std::string& prefix, const ErrorSummary& e, double sc
   j[prefix + "_mean_bounded_ci95"] = interval(e.bounded_mean_ci95, scale);
 }
 
+/// Classes of congruent objects of the store's database (header database_json
+/// "congruent_classes", names): object name -> class number. Empty when none are known.
+using ClassMap = std::map<std::string, std::size_t>;
+
+ClassMap class_map(const io::RunStoreHeader& h) {
+  ClassMap out;
+  const J db = J::parse(h.database_json, nullptr, false);
+  if (!db.is_object() || !db.contains("congruent_classes") || !db["congruent_classes"].is_array()) return out;
+  std::size_t k = 0;
+  for (const auto& members : db["congruent_classes"]) {
+    if (!members.is_array()) continue;
+    for (const auto& name : members)
+      if (name.is_string()) out[name.get<std::string>()] = k;
+    ++k;
+  }
+  return out;
+}
+
+/// The step's answer lies in the explored object's class (strictly right answers included).
+bool correct_in_class(const io::RunStoreHeader& h, const io::RunRecord& r, const io::RunStepRecord& s,
+                      const ClassMap& classes) {
+  if (s.correct) return true;
+  if (s.best_object < 0 || static_cast<std::size_t>(s.best_object) >= h.database_objects.size() ||
+      static_cast<std::size_t>(r.object) >= h.objects.size())
+    return false;
+  const auto a = classes.find(h.database_objects[static_cast<std::size_t>(s.best_object)]);
+  const auto b = classes.find(h.objects[static_cast<std::size_t>(r.object)]);
+  return a != classes.end() && b != classes.end() && a->second == b->second;
+}
+
 /// Per-step JSON rows for a set of runs (all of the same step count).
-J per_step_json(const std::vector<const io::RunRecord*>& runs, int steps,
-                const std::vector<std::string>& stages, const ErrorBounds& bounds) {
+J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunRecord*>& runs, int steps,
+                const ErrorBounds& bounds, const ClassMap& classes) {
+  const std::vector<std::string>& stages = h.stages;
   J rows = J::array();
   for (int k = 0; k < steps; ++k) {
     std::vector<StepSample> samples;
@@ -56,7 +87,7 @@ J per_step_json(const std::vector<const io::RunRecord*>& runs, int steps,
     for (const io::RunRecord* r : runs) {
       const io::RunStepRecord& s = r->steps[static_cast<std::size_t>(k)];
       samples.push_back({s.correct, s.position_error_m, s.orientation_error_rad,
-                         s.symmetric_orientation_error_rad, s.mssd_m, s.time_s});
+                         s.symmetric_orientation_error_rad, s.mssd_m, s.time_s, correct_in_class(h, *r, s, classes)});
       for (std::size_t i = 0; i < stages.size() && i < s.stage_times_s.size(); ++i)
         stage_times[i].push_back(s.stage_times_s[i]);
       posterior.push_back(s.posterior_true);
@@ -69,6 +100,12 @@ J per_step_json(const std::vector<const io::RunRecord*>& runs, int steps,
     row["correct"] = m.correct;
     row["recognition_rate"] = m.recognition_rate;
     row["recognition_rate_ci95"] = J::array({m.recognition_rate_ci95.lo, m.recognition_rate_ci95.hi});
+    // Class-aware: an answer congruent with the true object counts as right (the strict rate
+    // above is kept as it was).
+    row["correct_class"] = m.correct_class;
+    row["recognition_rate_class"] = m.recognition_rate_class;
+    row["recognition_rate_class_ci95"] =
+        J::array({m.recognition_rate_class_ci95.lo, m.recognition_rate_class_ci95.hi});
     // The interface's keys first, then the rest.
     row["position_error_m_median"] = opt(m.position_m.median);
     row["orientation_error_deg_median"] = opt(m.orientation_rad.median, kDeg);
@@ -113,6 +150,9 @@ J summary_json(const J& per_step, const std::vector<const io::RunRecord*>& runs)
   // Step 20 is where the paper quotes its figures (Sections 5.5, 5.7.2).
   const std::size_t k20 = std::min<std::size_t>(20, per_step.size()) - 1;
   s["recognition_rate_step20"] = per_step[k20]["recognition_rate"];
+  s["recognition_rate_class_final"] = last["recognition_rate_class"];
+  s["recognition_rate_class_final_ci95"] = last["recognition_rate_class_ci95"];
+  s["recognition_rate_class_step20"] = per_step[k20]["recognition_rate_class"];
   s["position_error_m_median_final"] = last["position_error_m_median"];
   s["orientation_error_deg_median_final"] = last["orientation_error_deg_median"];
   s["symmetric_orientation_error_deg_median_final"] = last["symmetric_orientation_error_deg_median"];
@@ -139,8 +179,9 @@ VariantJson variant_json(const io::RunStoreContents& store, int variant, const E
       all.push_back(&r);
       by_object[static_cast<std::size_t>(r.object)].push_back(&r);
     }
+  const ClassMap classes = class_map(h);
   VariantJson v;
-  v.per_step = per_step_json(all, h.steps, h.stages, bounds);
+  v.per_step = per_step_json(h, all, h.steps, bounds, classes);
   v.summary = summary_json(v.per_step, all);
   v.per_object = J::array();
   for (std::size_t o = 0; o < h.objects.size(); ++o) {
@@ -148,7 +189,7 @@ VariantJson variant_json(const io::RunStoreContents& store, int variant, const E
     J obj;
     obj["object"] = h.objects[o];
     obj["runs"] = by_object[o].size();
-    obj["per_step"] = per_step_json(by_object[o], h.steps, h.stages, bounds);
+    obj["per_step"] = per_step_json(h, by_object[o], h.steps, bounds, classes);
     obj["summary"] = summary_json(obj["per_step"], by_object[o]);
     v.per_object.push_back(obj);
   }
@@ -187,6 +228,12 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
   st["database"] = parse_or_text(h.database_json);
   st["versions"] = versions;
   out["store"] = st;
+  // The classes the class-aware rates count with (null: the store's database recorded none, so
+  // the class-aware rates equal the strict ones).
+  {
+    const J& db = st["database"];
+    out["congruent_classes"] = db.is_object() && db.contains("congruent_classes") ? db["congruent_classes"] : J(nullptr);
+  }
 
   std::vector<VariantJson> vj;
   for (std::size_t v = 0; v < variants; ++v) {
@@ -252,14 +299,15 @@ std::string fmt(const J& v, double scale, int precision, const char* missing = "
 std::string pct(const J& v) { return fmt(v, 100.0, 0); }
 
 void print_steps(const J& per_step, std::ostream& out) {
-  out << "  step   rate  95% CI       pos med  pos p95  ori med  sym-ori  time med  time p95\n"
-         "         (%)   (%)          (mm)     (mm)     (deg)    med(deg) (s)       (s)\n";
+  out << "  step   rate  95% CI       class  pos med  pos p95  ori med  sym-ori  time med  time p95\n"
+         "         (%)   (%)          (%)    (mm)     (mm)     (deg)    med(deg) (s)       (s)\n";
   for (const auto& r : per_step) {
     std::ostringstream ci;
     ci << pct(r["recognition_rate_ci95"][0]) << "-" << pct(r["recognition_rate_ci95"][1]);
     out << "  " << std::setw(4) << r["step"].get<int>() << "  " << std::setw(5)
         << pct(r["recognition_rate"]) << "  " << std::left << std::setw(11) << ci.str()
-        << std::right << "  " << std::setw(7) << fmt(r["position_error_m_median"], 1000, 1)
+        << std::right << "  " << std::setw(5) << pct(r.value("recognition_rate_class", J(nullptr)))
+        << "  " << std::setw(7) << fmt(r["position_error_m_median"], 1000, 1)
         << "  " << std::setw(7) << fmt(r["position_error_m_p95"], 1000, 1) << "  "
         << std::setw(7) << fmt(r["orientation_error_deg_median"], 1, 1) << "  " << std::setw(7)
         << fmt(r["symmetric_orientation_error_deg_median"], 1, 1) << "  " << std::setw(8)
@@ -295,6 +343,20 @@ void print_objects(const J& per_object, std::ostream& out) {
   }
 }
 
+void print_classes(const J& report, std::ostream& out) {
+  const J& c = report.value("congruent_classes", J(nullptr));
+  if (!c.is_array()) {
+    out << "  congruent classes of the database: not known (the class rate is the strict one)\n";
+    return;
+  }
+  out << "  congruent classes of the database: " << (c.empty() ? "none" : "");
+  for (std::size_t k = 0; k < c.size(); ++k) {
+    out << (k ? "; " : "");
+    for (std::size_t i = 0; i < c[k].size(); ++i) out << (i ? " = " : "") << c[k][i].get<std::string>();
+  }
+  out << "\n";
+}
+
 }  // namespace
 
 /// "@20", or "@K" when the runs have fewer than 20 steps (the summary's step-20 column).
@@ -327,8 +389,10 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
       out << "No completed runs yet.\n";
       return;
     }
-    out << "\nAll objects, per step (errors over runs that recognized the object):\n";
+    out << "\nAll objects, per step (errors over runs that recognized the object; class: the rate when an "
+           "answer congruent with the true object counts as right):\n";
     print_steps(report["per_step"], out);
+    print_classes(report, out);
     out << "\nPer object:\n";
     print_objects(report["per_object"], out);
     return;

@@ -25,6 +25,9 @@ struct ReportSettings {
 /// "threads", "machine"}. per_step / per_object describe the first variant (the only one
 /// without a sweep); "variants" repeats them for every variant of a sweep.
 /// Orientation errors are in degrees, positions in metres; undefined values are null.
+/// Recognition rates come strict ("recognition_rate": the explored object itself) and
+/// class-aware ("recognition_rate_class": an object congruent with it counts too, by the classes
+/// the store's database recorded, "congruent_classes"; null: none known, the two agree).
 nlohmann::ordered_json report_json(const io::RunStoreContents& store, const ReportSettings& settings,
                                    const std::string& store_path = {});
 

@@ -488,3 +488,43 @@ TEST_CASE("cli recognize, several inputs: refusals before any work") {
     }
   }
 }
+
+TEST_CASE("cli recognize: each answer's class of congruent objects, and whether it lies in the true object's class") {
+  test::TempDir dir("cli_rec");
+  const auto db = make_db(dir);
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 4 --noise ideal --seed 4 --out log.h5").code == 0);
+  // No classes recorded: each answer is its own class.
+  const Run plain = touchstone(dir, "recognize --db db.h5 --log log.h5 --json" + kFast);
+  REQUIRE_MESSAGE(plain.code == 0, plain.err);
+  const auto jp = nlohmann::json::parse(plain.out);
+  CHECK(jp["congruent_classes_known"] == false);
+  for (const auto& s : jp["steps"]) {
+    if (s["object"].is_null()) continue;
+    CHECK(s["object_class"] == nlohmann::json::array({s["object"]}));
+    CHECK(s["correct_class"] == s["correct"]);
+  }
+  // A record that declares wedge congruent with every other object: every answer is right by
+  // class, and names the whole database as its class.
+  io::CongruenceRecord rec;
+  std::size_t n = 0, wedge = 0;
+  {
+    io::DbReader reader(db);
+    n = reader.size();
+    wedge = reader.find("wedge");
+  }
+  rec.signatures.resize(n);
+  for (std::size_t i = 0; i < n; ++i)
+    if (i != wedge) rec.pairs.push_back({static_cast<std::uint32_t>(std::min(i, wedge)), static_cast<std::uint32_t>(std::max(i, wedge))});
+  std::sort(rec.pairs.begin(), rec.pairs.end(), [](const auto& x, const auto& y) { return x.a != y.a ? x.a < y.a : x.b < y.b; });
+  io::write_congruence(db, rec);
+  const Run twin = touchstone(dir, "recognize --db db.h5 --log log.h5 --json" + kFast);
+  REQUIRE_MESSAGE(twin.code == 0, twin.err);
+  const auto jt = nlohmann::json::parse(twin.out);
+  CHECK(jt["congruent_classes_known"] == true);
+  REQUIRE_FALSE(jt["steps"].back()["object"].is_null());
+  for (const auto& s : jt["steps"]) {
+    if (s["object"].is_null()) continue;
+    CHECK(s["object_class"].size() == n);
+    CHECK(s["correct_class"] == true);
+  }
+}

@@ -207,3 +207,17 @@ TEST_CASE("Pareto front: cheaper or better, never dominated") {
     CHECK(dominated == (std::find(f.begin(), f.end(), i) == f.end()));
   }
 }
+
+TEST_CASE("Class-aware recognition rate: a twin in the true object's class counts, the strict rate does not") {
+  // Three runs: right, the congruent twin, another object.
+  std::vector<StepSample> s(3);
+  s[0].correct = true;
+  s[1].correct_class = true;
+  const StepSummary m = summarize_step(20, s);
+  CHECK(m.correct == 1);
+  CHECK(m.recognition_rate == doctest::Approx(1.0 / 3));
+  CHECK(m.correct_class == 2);
+  CHECK(m.recognition_rate_class == doctest::Approx(2.0 / 3));
+  CHECK(m.recognition_rate_class_ci95.lo == doctest::Approx(wilson_interval(2, 3).lo));
+  CHECK(m.position_m.n == 1);   // errors over the strictly right runs only
+}

@@ -127,3 +127,31 @@ TEST_CASE("Plots are written by the plot script") {
   const auto sweep = write_plots(report_json(synthetic(3), {}, "run.h5"), dir / "sweep");
   CHECK(sweep.size() == 5);
 }
+
+TEST_CASE("Report: class-aware rates count an answer congruent with the true object; the strict rates stay") {
+  // Wrong answers are `bunny`; with `sphere` and `bunny` congruent, every sphere run is right
+  // class-aware: step 1 cube 1 of 4 + sphere 4 of 4, step 3 cube 3 + sphere 4 (strict: 2 and 6
+  // of 8).
+  auto store = synthetic();
+  const auto plain = report_json(store, {}, "run.h5");
+  CHECK(plain["congruent_classes"].is_null());
+  for (const auto& row : plain["per_step"]) CHECK(row["recognition_rate_class"] == row["recognition_rate"]);
+  store.header.database_json = R"({"congruent_classes": [["sphere", "bunny"]]})";
+  const auto j = report_json(store, {}, "run.h5");
+  CHECK(j["congruent_classes"] == nlohmann::json::parse(R"([["sphere", "bunny"]])"));
+  CHECK(j["per_step"][0]["recognition_rate"].get<double>() == doctest::Approx(2.0 / 8));
+  CHECK(j["per_step"][0]["correct_class"] == 5);
+  CHECK(j["per_step"][0]["recognition_rate_class"].get<double>() == doctest::Approx(5.0 / 8));
+  CHECK(j["per_step"][0]["recognition_rate_class_ci95"][0].get<double>() == doctest::Approx(wilson_interval(5, 8).lo));
+  CHECK(j["per_step"][2]["recognition_rate"].get<double>() == doctest::Approx(6.0 / 8));
+  CHECK(j["per_step"][2]["recognition_rate_class"].get<double>() == doctest::Approx(7.0 / 8));
+  CHECK(j["summary"]["recognition_rate_final"].get<double>() == doctest::Approx(6.0 / 8));
+  CHECK(j["summary"]["recognition_rate_class_final"].get<double>() == doctest::Approx(7.0 / 8));
+  // Errors stay over the strictly right runs.
+  CHECK(j["per_step"][0]["position_error_m_median"] == plain["per_step"][0]["position_error_m_median"]);
+  CHECK(j["per_object"][1]["per_step"][0]["recognition_rate_class"].get<double>() == doctest::Approx(1.0));
+  CHECK(j["per_object"][0]["per_step"][0]["recognition_rate_class"].get<double>() == doctest::Approx(0.25));
+  std::ostringstream text;
+  print_report(j, text);
+  CHECK(text.str().find("congruent classes of the database: sphere = bunny") != std::string::npos);
+}
