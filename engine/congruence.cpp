@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numbers>
 #include <numeric>
 
 namespace ts {
@@ -276,10 +277,35 @@ std::pair<Motion, double> best_of(const CongruenceShape& a, const CongruenceShap
   return {fine, two_way_distance(a, b, fine, size, stop)};
 }
 
-bool distinct_spreads(const ShapeSignature& s) {
-  for (std::size_t k = 0; k + 1 < 3; ++k)
-    if (s.spread[k + 1] - s.spread[k] <= 0.15 * s.spread[k + 1]) return false;
-  return true;
+/// Which principal axes a signature defines: all three (their spreads differ by more than 15 %),
+/// only one (the other two alike: a disc, a nut, a bar of square section; returns its index),
+/// or none (a cube, a regular octahedron, a sphere).
+enum class Axes { three, one, none };
+Axes defined_axes(const ShapeSignature& s, int* unique) {
+  auto alike = [&](std::size_t i, std::size_t j) { return s.spread[j] - s.spread[i] <= 0.15 * s.spread[j]; };
+  const bool a01 = alike(0, 1), a12 = alike(1, 2);
+  if (a01 && a12) return Axes::none;
+  if (!a01 && !a12) return Axes::three;
+  *unique = a01 ? 2 : 0;
+  return Axes::one;
+}
+
+/// Candidate rotations for shapes with one defined axis: a's axis onto b's (both signs), then
+/// every turn about it in 3 degree steps; and the same after a reflection through a plane that
+/// holds a's axis (the mirror-image candidates).
+void sweep_candidates(const CongruenceShape& a, const CongruenceShape& b, int unique, std::vector<Mat3>& out) {
+  const Vec3 ua = a.axes().col(unique).normalized(), ub = b.axes().col(unique).normalized();
+  const Vec3 n = ua.unitOrthogonal();
+  const Mat3 reflect = Mat3::Identity() - 2.0 * n * n.transpose();
+  constexpr int kSteps = 120;
+  for (double sign : {1.0, -1.0}) {
+    const Mat3 R0 = Eigen::Quaterniond::FromTwoVectors(ua, sign * ub).toRotationMatrix();
+    for (int k = 0; k < kSteps; ++k) {
+      const Mat3 R = Eigen::AngleAxisd(2.0 * std::numbers::pi * k / kSteps, ub).toRotationMatrix() * R0;
+      out.push_back(R);
+      out.push_back(R * reflect);
+    }
+  }
 }
 
 }  // namespace
@@ -290,13 +316,16 @@ CongruenceMatch compare_shapes(const CongruenceShape& a, const CongruenceShape& 
   if (!(size > 0.0) || a.sample().empty() || b.sample().empty()) return out;
   const double eps = s.tolerance * size;
   std::vector<Mat3> rotations;
-  if (distinct_spreads(a.signature()) && distinct_spreads(b.signature())) {
-    axis_candidates(a, b, rotations);
-  } else {
+  // Principal axes always; where either shape leaves them (partly) undefined, the candidates of
+  // its kind too.
+  axis_candidates(a, b, rotations);
+  int unique_a = -1, unique_b = -1;
+  const Axes axes_a = defined_axes(a.signature(), &unique_a), axes_b = defined_axes(b.signature(), &unique_b);
+  if (axes_a == Axes::one || axes_b == Axes::one) sweep_candidates(a, b, axes_a == Axes::one ? unique_a : unique_b, rotations);
+  if (axes_a == Axes::none || axes_b == Axes::none) {
     const Mat3 mirror = Vec3(-1.0, 1.0, 1.0).asDiagonal();
     extreme_candidates(a.vertices(), b.vertices(), Mat3::Identity(), eps, rotations);
     extreme_candidates(a.vertices(), b.vertices(), mirror, eps, rotations);
-    axis_candidates(a, b, rotations);
   }
   const auto quick = stride(a.sample(), 128);
   const auto fit_a = stride(a.sample(), 300), fit_b = stride(b.sample(), 300);
@@ -352,7 +381,25 @@ std::vector<CongruentPair> find_congruent_pairs(const std::vector<ShapeSignature
         candidates.emplace_back(static_cast<std::uint32_t>(std::min(i, j)), static_cast<std::uint32_t>(std::max(i, j)));
     }
   }
-  std::sort(candidates.begin(), candidates.end());
+  // Grouped by connected component of the candidate graph (near-twins come in clusters), so that
+  // a batch holds whole clusters and an object is prepared once unless its cluster is larger
+  // than a batch; by (a, b) within a cluster.
+  {
+    std::vector<std::size_t> parent(n);
+    std::iota(parent.begin(), parent.end(), std::size_t{0});
+    auto root = [&](std::size_t x) {
+      while (parent[x] != x) x = parent[x] = parent[parent[x]];
+      return x;
+    };
+    for (const auto& [a, b] : candidates) {
+      const std::size_t x = root(a), y = root(b);
+      if (x != y) parent[std::max(x, y)] = std::min(x, y);
+    }
+    std::sort(candidates.begin(), candidates.end(), [&](const auto& p, const auto& q) {
+      const std::size_t rp = root(p.first), rq = root(q.first);
+      return rp != rq ? rp < rq : p < q;
+    });
+  }
   // 2. Batches of consecutive candidates over at most batch_objects objects: shapes prepared in
   //    parallel, pairs compared in parallel, each into its own slot.
   std::vector<CongruenceMatch> match(candidates.size());
@@ -387,6 +434,9 @@ std::vector<CongruentPair> find_congruent_pairs(const std::vector<ShapeSignature
     if (match[k].kind != Congruence::none)
       out.push_back({candidates[k].first, candidates[k].second, match[k].kind, match[k].distance(), match[k].linear,
                      match[k].translation});
+  std::sort(out.begin(), out.end(), [](const CongruentPair& x, const CongruentPair& y) {
+    return x.a != y.a ? x.a < y.a : x.b < y.b;
+  });
   if (stats) {
     stats->candidates = candidates.size();
     stats->prepared = prepared;

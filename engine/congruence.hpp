@@ -12,10 +12,12 @@
 //     than 2.5 eps or a spread by more than 1.5 eps are not compared (eps = tolerance x the
 //     larger size).
 //  2. Alignment: centroids onto each other; rotations from the principal axes (every sign choice:
-//     proper ones for congruence, improper ones for mirror images) when the three spreads are
-//     distinct, else (a cube, a regular octahedron, a body of revolution) from registering two
-//     extreme surface points of one object onto every pair of the other's with the same radii
-//     and angle, against the other object and against its reflection.
+//     proper ones for congruence, improper ones for mirror images); when two spreads are alike
+//     (a flange, a nut: one axis defined), the defined axes onto each other and every turn about
+//     them in 3 degree steps (and reflected); when all three are (a cube, a regular octahedron),
+//     from registering two extreme vertices of one object onto every pair of the other's with the
+//     same radii and angle, against the other object and against its reflection. Candidates are
+//     ranked by the distances of a few surface points.
 //  3. Refinement: point-to-point ICP of a surface sample onto the exact closest points of the
 //     other mesh.
 //  4. Check: the largest distance, both ways, of each surface sample to the other mesh (exact

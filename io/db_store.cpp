@@ -703,7 +703,8 @@ DistanceField DbReader::load_field(std::size_t i) const {
 }
 
 Mesh DbReader::load_mesh(std::size_t i) const {
-  std::lock_guard<std::recursive_mutex> lock(h5::mutex());
+  // No lock of its own either (see above): meshes of different objects inflate in parallel
+  // (the congruence search reads thousands).
   const auto& g = impl_->group(i);
   Mesh out;
   out.vertices = read_vec3(g, "mesh/vertices", impl_->vertices[i]);

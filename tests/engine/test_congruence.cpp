@@ -100,6 +100,30 @@ TEST_CASE("Congruence: a regular octahedron turned by 45 degrees (no principal a
   CHECK(s.proper_distance > 0.03);
 }
 
+TEST_CASE("Congruence: a flat pinwheel (two spreads alike: one axis defined) turned about any axis, and its mirror image") {
+  // A 10 x 10 x 1 cm plate with four tabs on its top face in a pinwheel: a 4-fold turn maps it
+  // onto itself, no reflection does; its principal axes in the plate's plane are undefined.
+  std::vector<Mesh> parts{box(0.05, 0.05, 0.005)};
+  for (int k = 0; k < 4; ++k) {
+    const Mat3 turn = Eigen::AngleAxisd(k * std::numbers::pi / 2, Vec3::UnitZ()).toRotationMatrix();
+    parts.push_back(moved(box_mesh(Vec3(0.01, 0.035, 0.005), Vec3(0.05, 0.05, 0.015)), turn, Vec3::Zero()));
+  }
+  Mesh wheel;
+  for (const Mesh& p : parts) {
+    const int base = static_cast<int>(wheel.vertices.size());
+    wheel.vertices.insert(wheel.vertices.end(), p.vertices.begin(), p.vertices.end());
+    for (const auto& f : p.faces) wheel.faces.emplace_back(f + Eigen::Vector3i::Constant(base));
+  }
+  const Mat3 R = Eigen::AngleAxisd(0.3, Vec3(0.2, -1, 0.4).normalized()).toRotationMatrix() *
+                 Eigen::AngleAxisd(1.234, Vec3::UnitZ()).toRotationMatrix();   // 1.234 rad: no 3 degree step
+  const auto turned = compare_meshes(wheel, moved(wheel, R, Vec3(0.2, 0, 0)));
+  CHECK(turned.kind == Congruence::congruent);
+  CHECK(turned.proper_distance < 1e-4);
+  const auto mirrored = compare_meshes(wheel, moved(wheel, R * Vec3(1, 1, -1).asDiagonal(), Vec3::Zero()));
+  CHECK(mirrored.kind == Congruence::mirror);
+  CHECK(mirrored.mirror_distance < 1e-4);
+}
+
 TEST_CASE("Congruence: pairs over many objects and their classes") {
   const Mesh c = chiral();
   const std::vector<Mesh> meshes = {c,                                                    // 0
