@@ -4,6 +4,7 @@
 // before (an existing output untouched, a database given to `db add` byte for byte the same,
 // nothing half-written left behind).
 #include "fuzz/h5_edits.hpp"
+#include "io/db_store.hpp"
 
 #include "cli_run.hpp"
 #include "temp_dir.hpp"
@@ -51,6 +52,13 @@ const std::string kPcdHead = "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4
 const std::string kPlyHead = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
 const std::string kOff = "OFF\n4 4 6\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n";
 const std::string kFaces = "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+
+/// A congruence record (no pairs) added to a copied database, for edits of /congruence.
+void with_congruence(const fs::path& f) {
+  ts::io::CongruenceRecord rec;
+  rec.signatures.resize(ts::io::DbReader(f).size());
+  ts::io::write_congruence(f, rec);
+}
 
 std::vector<Case> catalogue() {
   const std::string cloud = "recognize --db {db} --cloud {in} --out {out}";
@@ -121,6 +129,10 @@ std::vector<Case> catalogue() {
        "box_db.h5", "db info {in}", "feature_dim"},
       {"database: object order names a missing object", "g.h5", "", [](const fs::path& f) { ts::fuzz::h5_remove(f, "/objects/box"); },
        "box_db.h5", "simulate --db {in} --object box --grasps 1 --out {out}", "box"},
+      {"database: congruence tolerance of 0", "j.h5", "", [](const fs::path& f) { with_congruence(f); ts::fuzz::h5_set_number(f, "/congruence", "tolerance", 0.0); },
+       "box_db.h5", "db info {in}", "/congruence@tolerance"},
+      {"database: 2^40 congruent pairs declared", "k.h5", "", [](const fs::path& f) { with_congruence(f); ts::fuzz::h5_redeclare(f, "/congruence/pairs", {std::uint64_t{1} << 40, 2}); },
+       "box_db.h5", "db info {in}", "/congruence/"},
       {"run store: 2^40 steps declared", "h.h5", "", [](const fs::path& f) { ts::fuzz::h5_redeclare(f, "/steps/weight", {std::uint64_t{1} << 40}); },
        "box_1_run.h5", "report {in}", "/steps/weight"},
       {"run store: runs table missing", "i.h5", "", [](const fs::path& f) { ts::fuzz::h5_remove(f, "/runs/object"); },
