@@ -120,15 +120,29 @@ std::vector<std::string> names_of(const std::vector<std::size_t>& members, const
   return out;
 }
 
-/// {"known", "tolerance", "classes": [[names]], "mirror_pairs": [{"a", "b", "distance"}]}.
+/// The largest distance of the congruent pairs within a class (relative to the size).
+double largest_distance(const io::CongruenceRecord& c, const std::vector<std::size_t>& members) {
+  double worst = 0.0;
+  for (const auto& p : c.pairs)
+    if (p.kind == Congruence::congruent && std::find(members.begin(), members.end(), p.a) != members.end())
+      worst = std::max(worst, p.distance);
+  return worst;
+}
+
+/// {"known", "tolerance", "classes": [[names]], "class_largest_distance": [...],
+///  "mirror_pairs": [{"a", "b", "distance"}]}.
 json congruence_json(const io::CongruenceRecord* c, const std::vector<std::string>& names) {
   json j;
   j["known"] = c != nullptr;
   if (!c) return j;
   j["tolerance"] = c->settings.tolerance;
-  json classes = json::array();
-  for (const auto& members : c->classes()) classes.push_back(names_of(members, names));
+  json classes = json::array(), largest = json::array();
+  for (const auto& members : c->classes()) {
+    classes.push_back(names_of(members, names));
+    largest.push_back(largest_distance(*c, members));
+  }
   j["classes"] = classes;
+  j["class_largest_distance"] = largest;   // per class: its pairs' largest distance (of the size)
   json mirrors = json::array();
   for (const auto& p : c->mirrors())
     mirrors.push_back({{"a", names.at(p.a)}, {"b", names.at(p.b)}, {"distance", p.distance}});
@@ -148,11 +162,7 @@ std::string congruence_text(const io::CongruenceRecord* c, const std::vector<std
   for (const auto& members : classes) {
     s << " ";
     for (const auto& n : names_of(members, names)) s << " " << n;
-    double worst = 0.0;
-    for (const auto& p : c->pairs)
-      if (p.kind == Congruence::congruent && std::find(members.begin(), members.end(), p.a) != members.end())
-        worst = std::max(worst, p.distance);
-    s << "  (largest surface distance " << fixed(100.0 * worst, 3) << " % of the size)\n";
+    s << "  (largest surface distance " << fixed(100.0 * largest_distance(*c, members), 3) << " % of the size)\n";
   }
   s << "mirror images: " << (mirrors.empty() ? "none\n" : std::to_string(mirrors.size()) + "\n");
   for (const auto& p : mirrors)

@@ -306,6 +306,8 @@ TEST_CASE("cli db: congruent objects and mirror images are found by build and ad
     CHECK(c["known"] == true);
     CHECK(c["tolerance"] == 0.01);
     CHECK(c["classes"] == classes);
+    REQUIRE(c["class_largest_distance"].size() == classes.size());
+    CHECK(c["class_largest_distance"][0].get<double>() < 1e-4);   // the same solid, moved
     REQUIRE(c["mirror_pairs"].size() == 2);
     CHECK(c["mirror_pairs"][0]["a"] == "arm");
     CHECK(c["mirror_pairs"][0]["b"] == "arm_mirror");
