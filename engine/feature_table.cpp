@@ -1,4 +1,5 @@
 #include "engine/feature_table.hpp"
+#include "engine/target_clones.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -26,7 +27,7 @@ struct Item {
 inline bool before(const Item& a, const Item& b) { return a.d < b.d || (a.d == b.d && a.row < b.row); }
 
 /// Squared distances of one block's rows to query q (rows dims-major: blk[d * kBlock + r]).
-__attribute__((target_clones("avx2", "default")))
+TS_TARGET_CLONES
 void block_distances(const float* __restrict blk, const float* __restrict q, float* __restrict out) {
   for (std::size_t r = 0; r < kBlock; ++r) out[r] = 0.0f;
   for (int d = 0; d < kDim; ++d) {
@@ -198,7 +199,7 @@ namespace {
 /// Squared distance from query qv to block b's bounding box, shrunk by 1e-5 so that it never
 /// exceeds a row's distance as block_distances computes it in float (either sum of 33 squares
 /// is within about 4e-6 of the exact one, relatively).
-__attribute__((target_clones("avx2", "default")))
+TS_TARGET_CLONES
 float block_bound(const float* __restrict lo, const float* __restrict hi, const float* __restrict qv) {
   float s2 = 0.0f;
   for (int k = 0; k < kDim; ++k) {

@@ -1,6 +1,7 @@
 #include "engine/ransac.hpp"
 
 #include "engine/kabsch.hpp"
+#include "engine/target_clones.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -46,7 +47,7 @@ struct PrunedSet {
 };
 
 /// in[j - b] = 1 when the squared distance of item j to c lies in [lo, hi] (vectorized scan).
-__attribute__((target_clones("avx2", "default")))
+TS_TARGET_CLONES
 void shell_mask(const float* __restrict x, const float* __restrict y, const float* __restrict z,
                 std::uint32_t n, float cx, float cy, float cz, float lo, float hi,
                 std::uint8_t* __restrict in) {
