@@ -286,20 +286,19 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
     for (const Hypothesis& h : state_) held.push_back(h.object);
     const Shortlist sl = shortlist_objects(scene, db_, cands, held, s_.shortlist);
     if (sl.active) {
-      if (watching) {
+      if (watching) {   // diagnostics (not timed): how far its best candidate was from the cut
+        const auto t_diag = Clock::now();
         Funnel& f = *res.watched;
         f.shortlisted = f.candidates > 0 && sl.mask[*watch_];
-        std::vector<Candidate> own;
-        for (const Candidate& c : cands) if (c.object == *watch_) own.push_back(c);
-        if (!own.empty()) {   // diagnostics: how far its best candidate was from the cut
-          const std::vector<double> e = screen_candidates(scene, db_, own, s_.shortlist);
-          f.screen_score = *std::min_element(e.begin(), e.end());
+        if (f.candidates > 0) {   // every object's exact best score (no early stop)
           const std::vector<double> all = screen_objects(scene, db_, cands, s_.shortlist);
+          f.screen_score = all[*watch_];
           f.screen_rank = 1 + static_cast<std::size_t>(std::count_if(all.begin(), all.end(), [&](double v) {
             return v < f.screen_score; }));
         }
         const std::size_t last = std::min(s_.shortlist.objects, sl.ranked.size());
         if (last > 0) f.screen_cut = sl.best[sl.ranked[last - 1]];
+        t0 += Clock::now() - t_diag;
       }
       std::erase_if(cands, [&](const Candidate& c) { return !sl.mask[c.object]; });
       for (std::uint32_t o = 0; o < sl.mask.size(); ++o)
