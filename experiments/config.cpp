@@ -135,6 +135,11 @@ const std::vector<KeyDef>& key_defs() {
         [](auto& c) { return J(c.steps); });
     add("pool", false, [](auto& c, auto& in, auto& x) { c.pool = int_at_least(in, 1, x); },
         [](auto& c) { return J(c.pool); });
+    // protocol: independent (default; a pose and pool per run) | shared_pool (the paper's: a
+    // pose and pool per object). Not sweepable: variants share their runs' grasps.
+    add("protocol", false,
+        [](auto& c, auto& in, auto& x) { c.protocol = choice(in, {"independent", "shared_pool"}, x); },
+        [](auto& c) { return J(c.protocol); });
     add("method", true,
         [](auto& c, auto& in, auto& x) {
           c.method = choice(in, {"bricpsf", "batch-ransac", "ransac-icp", "ransac-icp-fs"}, x);

@@ -10,7 +10,11 @@
 //   database_size      int >= 1            first the explored objects, then database order
 //   runs               int >= 1            exploration runs per object (paper: 20 or 50)
 //   steps              int >= 1            exploration steps (grasps) per run (paper: 40)
-//   pool               int >= steps        simulated grasps per object (Section 5.1: >= 50)
+//   pool               int >= steps        simulated grasps per pool (Section 5.1: >= 50)
+//   protocol           independent | shared_pool   (default independent) what a run shares:
+//                      independent: each run simulates its own object pose and pool of `pool`
+//                      grasps from its own seed (runs are independent samples); shared_pool: the
+//                      paper's protocol, one pose and pool per object that its runs draw from
 //   method             bricpsf | batch-ransac | ransac-icp | ransac-icp-fs
 //   preset             improved (default) | paper: the defaults of the method parameters
 //                      (paper: Section 4-5 exactly; improved: Touchstone's extensions, see
@@ -95,6 +99,9 @@ struct ExperimentConfig {
   int runs = 20;
   int steps = 40;
   int pool = 50;
+  /// "independent" (each run its own object pose and grasp pool) | "shared_pool" (the paper's
+  /// protocol: one pose and pool per object, shared by its runs)
+  std::string protocol = "independent";
   std::string method = "bricpsf";
   std::string preset = "improved";      ///< paper | improved: the defaults the params start from
   std::string noise = "underwater";

@@ -22,6 +22,30 @@ Interval wilson_interval(std::size_t successes, std::size_t trials, double z) {
   return {lo, hi};
 }
 
+Interval cluster_bootstrap_interval(std::span<const ClusterCounts> clusters, std::size_t resamples,
+                                    std::uint64_t seed, double level) {
+  if (resamples == 0) throw Error("a bootstrap needs at least one resample", {}, "resamples");
+  if (!(level > 0.0 && level < 1.0)) throw Error("confidence level outside (0, 1)", {}, "level");
+  std::vector<ClusterCounts> used;
+  for (const ClusterCounts& c : clusters) {
+    if (c.successes > c.trials) throw Error("more successes than trials", {}, "cluster_bootstrap");
+    if (c.trials > 0) used.push_back(c);
+  }
+  if (used.empty()) return {0.0, 1.0};
+  Rng rng(seed);
+  std::vector<double> rates(resamples);
+  for (double& rate : rates) {
+    std::size_t successes = 0, trials = 0;
+    for (std::size_t k = 0; k < used.size(); ++k) {
+      const ClusterCounts& c = used[rng.index(used.size())];
+      successes += c.successes;
+      trials += c.trials;
+    }
+    rate = static_cast<double>(successes) / static_cast<double>(trials);
+  }
+  return {*quantile(rates, 0.5 * (1.0 - level)), *quantile(rates, 0.5 * (1.0 + level))};
+}
+
 std::optional<double> quantile(std::span<const double> values, double p) {
   if (values.empty()) return std::nullopt;
   if (!(p >= 0.0 && p <= 1.0)) throw Error("quantile level outside [0, 1]", {}, "p");

@@ -11,6 +11,7 @@
 #include "engine/core.hpp"
 
 #include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <span>
 #include <vector>
@@ -30,6 +31,28 @@ struct Interval {
 /// Wilson score interval for `successes` out of `trials` at normal quantile z (default 95 %).
 /// trials == 0 gives [0, 1] (nothing is known). Always inside [0, 1].
 Interval wilson_interval(std::size_t successes, std::size_t trials, double z = kZ95);
+
+/// Successes and trials of one cluster of runs (the runs of one explored object).
+struct ClusterCounts {
+  std::size_t successes = 0;
+  std::size_t trials = 0;
+};
+
+/// Resamples of the cluster bootstrap in reports (a fixed seed: the same store gives the same
+/// interval).
+constexpr std::size_t kBootstrapResamples = 2000;
+constexpr std::uint64_t kBootstrapSeed = 0x626f6f74ULL;  // "boot"
+
+/// Percentile cluster bootstrap of a pooled rate (sum of successes / sum of trials): `resamples`
+/// times, draw as many clusters as there are, with replacement, from Rng(seed); the interval is
+/// the (1 - level) / 2 and (1 + level) / 2 quantiles (type 7) of the resampled rates. Runs of one
+/// cluster may be correlated (they share an object; under the shared-pool protocol also its pose
+/// and grasps); clusters are assumed independent. Clusters without trials are ignored; none
+/// left gives [0, 1]. Deterministic for a given seed. Throws ts::Error when a cluster has more
+/// successes than trials or resamples is 0.
+Interval cluster_bootstrap_interval(std::span<const ClusterCounts> clusters,
+                                    std::size_t resamples = kBootstrapResamples,
+                                    std::uint64_t seed = kBootstrapSeed, double level = 0.95);
 
 // --- Order statistics and means ------------------------------------------------------------------
 

@@ -37,6 +37,7 @@ double seconds_since(Clock::time_point t) {
 }
 
 constexpr std::uint64_t kPoolStream = 0x706f6f6cULL;  // "pool"
+constexpr std::uint64_t kRunPoolStream = 0x72706f6cULL;  // "rpol": a run's own pool (independent)
 constexpr std::uint64_t kRecognizerStream = 0x72656367ULL;  // "recg"
 
 /// A database restricted to some objects of another (study 4 and 7: smaller databases from the
@@ -74,6 +75,7 @@ struct VariantData {
   ExperimentConfig config;
   std::size_t group = 0;                       ///< DatabaseGroup index
   std::string pool_key;                        ///< what determines the grasp pools
+  bool shared_pool = false;                    ///< protocol "shared_pool": one pool per object
   datasets::SimulatorSettings simulation;      ///< without grasps count and seed
   RecognizerSettings recognizer;
 };
@@ -235,6 +237,7 @@ class RecognitionEngine final : public RunEngine {
       d.group = it->second;
       d.simulation = simulation_settings(v.config);
       d.pool_key = pool_key(d.simulation);
+      d.shared_pool = v.config.protocol == "shared_pool";
       d.recognizer = rs;
       variants_.push_back(std::move(d));
       labels_.push_back(v.label);
@@ -272,12 +275,13 @@ class RecognitionEngine final : public RunEngine {
   const io::RunStoreHeader& header() const override { return header_; }
 
   void prepare(const std::vector<RunTask>& tasks) override {
-    // Pools: one per (noise/sensor setting, explored object) that some task needs.
+    // Shared pools (protocol shared_pool): one per (noise/sensor setting, explored object) that
+    // some task needs, simulated here. Independent runs simulate their own grasps in run().
     std::set<std::pair<std::string, int>> needed;
     std::set<std::size_t> groups;
     for (const RunTask& t : tasks) {
       const VariantData& v = variants_[static_cast<std::size_t>(t.variant)];
-      needed.insert({v.pool_key, t.object});
+      if (v.shared_pool) needed.insert({v.pool_key, t.object});
       groups.insert(v.group);
     }
     std::vector<std::pair<std::string, int>> todo;
@@ -287,14 +291,15 @@ class RecognitionEngine final : public RunEngine {
       if (note_) note_("Simulating " + std::to_string(todo.size()) + " grasp pool(s) of " +
                        std::to_string(config_.pool) + " grasps...");
       std::map<std::string, const VariantData*> by_key;
-      for (const VariantData& v : variants_) by_key.emplace(v.pool_key, &v);
+      for (const VariantData& v : variants_)
+        if (v.shared_pool) by_key.emplace(v.pool_key, &v);
       std::vector<datasets::SimulationResult> results(todo.size());
       const auto start = Clock::now();
       tbb::parallel_for(std::size_t{0}, todo.size(), [&](std::size_t i) {
         const auto& [key, object] = todo[i];
         datasets::SimulatorSettings s = by_key.at(key)->simulation;
         const std::string& name = explored_[static_cast<std::size_t>(object)];
-        s.seed = Rng(config_.seed, kPoolStream, name_hash(name)).next();
+        s.seed = pool_seed(config_.seed, name, std::nullopt);
         datasets::Simulator sim(db_.load_mesh(explored_file_[static_cast<std::size_t>(object)]),
                                 name, Gripper(), s);
         results[i] = sim.run();
@@ -356,7 +361,6 @@ class RecognitionEngine final : public RunEngine {
     const VariantData& v = variants_.at(static_cast<std::size_t>(task.variant));
     const DatabaseGroup& group = groups_[v.group];
     const std::string& name = explored_.at(static_cast<std::size_t>(task.object));
-    const TactileLog& pool = pools_.at({v.pool_key, task.object});
     const ObjectTruthModel& model = *truth_models_.at(task.object);
     const std::size_t file_index = explored_file_[static_cast<std::size_t>(task.object)];
     const std::uint32_t local_true = group.to_local.at(file_index);
@@ -366,25 +370,10 @@ class RecognitionEngine final : public RunEngine {
     rec.object = task.object;
     rec.run = task.run;
     rec.grasps = draw_grasps(config_.seed, name, task.run, v.config.pool, v.config.steps);
-    rec.truth = pool.truth->object_pose;
-
-    // The run's log: the drawn grasps of the pool, in order.
-    TactileLog log;
-    log.object = pool.object;
-    log.noise = pool.noise;
-    log.seed = pool.seed;
-    log.gripper = pool.gripper;
-    log.pads = pool.pads;
-    log.gains = pool.gains;
-    LogGroundTruth truth;
-    truth.object_pose = pool.truth->object_pose;
-    for (std::int32_t g : rec.grasps) {
-      const auto gi = static_cast<std::size_t>(g);
-      log.grasps.push_back(pool.grasps.at(gi));
-      if (gi < pool.truth->arm_poses.size()) truth.arm_poses.push_back(pool.truth->arm_poses[gi]);
-      if (gi < pool.truth->joints.size()) truth.joints.push_back(pool.truth->joints[gi]);
-    }
-    log.truth = std::move(truth);
+    // The run's log: the drawn grasps of its pool, in order.
+    TactileLog log = v.shared_pool ? log_from_pool(pools_.at({v.pool_key, task.object}), rec.grasps)
+                                   : simulate_run_log(v, task, rec.grasps);
+    rec.truth = log.truth->object_pose;
 
     RecognizerSettings rs = v.recognizer;
     rs.seed = Rng(config_.seed, kRecognizerStream, name_hash(name), static_cast<std::uint64_t>(task.run)).next();
@@ -456,9 +445,59 @@ class RecognitionEngine final : public RunEngine {
   io::RunStoreHeader header_;
   std::map<std::pair<std::string, int>, TactileLog> pools_;
   std::map<int, std::unique_ptr<ObjectTruthModel>> truth_models_;
+
+  /// The drawn grasps of a shared pool, in the order drawn.
+  static TactileLog log_from_pool(const TactileLog& pool, const std::vector<std::int32_t>& grasps) {
+    TactileLog log;
+    log.object = pool.object;
+    log.noise = pool.noise;
+    log.seed = pool.seed;
+    log.gripper = pool.gripper;
+    log.pads = pool.pads;
+    log.gains = pool.gains;
+    LogGroundTruth truth;
+    truth.object_pose = pool.truth->object_pose;
+    for (std::int32_t g : grasps) {
+      const auto gi = static_cast<std::size_t>(g);
+      log.grasps.push_back(pool.grasps.at(gi));
+      if (gi < pool.truth->arm_poses.size()) truth.arm_poses.push_back(pool.truth->arm_poses[gi]);
+      if (gi < pool.truth->joints.size()) truth.joints.push_back(pool.truth->joints[gi]);
+    }
+    log.truth = std::move(truth);
+    return log;
+  }
+
+  /// Protocol "independent": the run's own pool (object pose, gains, `pool` grasps) from its own
+  /// seed; only the drawn grasps are simulated (a grasp depends on the seed and its index alone,
+  /// so this equals picking them from the whole simulated pool). Nothing outlives the run.
+  TactileLog simulate_run_log(const VariantData& v, const RunTask& task,
+                              const std::vector<std::int32_t>& grasps) const {
+    const auto object = static_cast<std::size_t>(task.object);
+    const std::string& name = explored_.at(object);
+    datasets::SimulatorSettings s = v.simulation;
+    s.seed = pool_seed(config_.seed, name, task.run);
+    s.grasps = 0;  // run() below gives the log's header (pose, gains) without grasps
+    datasets::Simulator sim(db_.load_mesh(explored_file_.at(object)), name, Gripper(), s);
+    TactileLog log = sim.run().log;
+    if (!log.truth) throw Error("the simulator gave no ground truth", {}, name);
+    std::vector<datasets::Simulator::Grasp> drawn(grasps.size());
+    tbb::parallel_for(std::size_t{0}, grasps.size(),
+                      [&](std::size_t i) { drawn[i] = sim.grasp(static_cast<std::size_t>(grasps[i])); });
+    for (auto& g : drawn) {
+      log.grasps.push_back(std::move(g.measured));
+      log.truth->arm_poses.push_back(g.true_arm_pose);
+      log.truth->joints.push_back(std::move(g.true_joints));
+    }
+    return log;
+  }
 };
 
 }  // namespace
+
+std::uint64_t pool_seed(std::uint64_t seed, const std::string& object, std::optional<int> run) {
+  if (!run) return Rng(seed, kPoolStream, name_hash(object)).next();
+  return Rng(seed, kRunPoolStream, name_hash(object), static_cast<std::uint64_t>(*run)).next();
+}
 
 const std::vector<std::string>& recognition_stages() {
   static const std::vector<std::string> stages{"fusion", "prepare", "prune", "register",

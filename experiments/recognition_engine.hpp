@@ -1,14 +1,19 @@
 // The real RunEngine: simulated grasp pools (datasets/simulator) explored by the recognizer
 // (engine/recognizer), scored against the simulator's ground truth.
 //
-// Per explored object and noise setting, one pool of `pool` random grasps is simulated once
-// (Section 5.1: the object stays fixed, the hand grasps it at random places). A run draws
-// `steps` distinct grasps from the pool in random order (Section 5.2), fuses them step by step
-// (engine/fusion: cumulative contacts and free space) and runs the recognizer on each step.
+// A pool is an object at a random pose and `pool` random grasps on it (Section 5.1: the object
+// stays fixed, the hand grasps it at random places). A run draws `steps` distinct grasps from a
+// pool in random order (Section 5.2), fuses them step by step (engine/fusion: cumulative
+// contacts and free space) and runs the recognizer on each step. Protocol (config `protocol`):
+//   independent (default): every run has its own pool, simulated lazily inside the run (only
+//     the drawn grasps; nothing is kept), so runs are independent samples of pose and grasps;
+//   shared_pool (the paper's): one pool per explored object and noise setting, simulated once
+//     in prepare(); the runs of an object share its pose and grasps and differ only in order.
 //
-// Seeds: the pool of an object comes from (seed, object name); a run's grasp order and its
-// recognizer stream from (seed, object name, run). They do not depend on the variant, so sweep
-// variants compare on the same grasps (common random numbers), nor on which other objects an
+// Seeds: a shared pool comes from (seed, object name), an independent run's pool from (seed,
+// object name, run) on another stream (pool_seed); a run's grasp order and its recognizer
+// stream from (seed, object name, run). They do not depend on the variant, so sweep variants
+// compare on the same grasps (common random numbers), nor on which other objects an
 // experiment explores.
 #pragma once
 
@@ -21,6 +26,7 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 
 namespace ts::experiments {
@@ -47,6 +53,10 @@ std::string source_fingerprint(const ObjectSource& source);
 std::unique_ptr<RunEngine> make_recognition_engine(const ExperimentConfig& config,
                                                    EngineDatabase database, int threads,
                                                    std::function<void(const std::string&)> note = {});
+
+/// The simulator seed of a pool: the object's shared pool (run = nullopt, protocol shared_pool)
+/// or run `run`'s own pool (protocol independent).
+std::uint64_t pool_seed(std::uint64_t seed, const std::string& object, std::optional<int> run);
 
 /// Names of the per-stage timing columns the recognition engine records.
 const std::vector<std::string>& recognition_stages();

@@ -16,6 +16,7 @@
 #include <iomanip>
 #include <map>
 #include <numbers>
+#include <set>
 #include <ostream>
 #include <sstream>
 
@@ -75,12 +76,15 @@ bool correct_in_class(const io::RunStoreHeader& h, const io::RunRecord& r, const
   return a != classes.end() && b != classes.end() && a->second == b->second;
 }
 
-/// Per-step JSON rows for a set of runs (all of the same step count).
+/// Per-step JSON rows for a set of runs (all of the same step count). `clustered`: the runs span
+/// several explored objects, so rates also get the cluster bootstrap over objects (null in the
+/// rows of one object).
 J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunRecord*>& runs, int steps,
-                const ErrorBounds& bounds, const ClassMap& classes) {
+                const ErrorBounds& bounds, const ClassMap& classes, bool clustered) {
   const std::vector<std::string>& stages = h.stages;
   J rows = J::array();
   for (int k = 0; k < steps; ++k) {
+    std::map<int, ClusterCounts> strict_by_object, class_by_object;
     std::vector<StepSample> samples;
     std::vector<std::vector<double>> stage_times(stages.size());
     std::vector<double> posterior, hyps, contacts;
@@ -88,6 +92,12 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
       const io::RunStepRecord& s = r->steps[static_cast<std::size_t>(k)];
       samples.push_back({s.correct, s.position_error_m, s.orientation_error_rad,
                          s.symmetric_orientation_error_rad, s.mssd_m, s.time_s, correct_in_class(h, *r, s, classes)});
+      ClusterCounts& strict = strict_by_object[r->object];
+      ClusterCounts& in_class = class_by_object[r->object];
+      ++strict.trials;
+      ++in_class.trials;
+      strict.successes += samples.back().correct ? 1 : 0;
+      in_class.successes += samples.back().correct || samples.back().correct_class ? 1 : 0;
       for (std::size_t i = 0; i < stages.size() && i < s.stage_times_s.size(); ++i)
         stage_times[i].push_back(s.stage_times_s[i]);
       posterior.push_back(s.posterior_true);
@@ -100,12 +110,22 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
     row["correct"] = m.correct;
     row["recognition_rate"] = m.recognition_rate;
     row["recognition_rate_ci95"] = J::array({m.recognition_rate_ci95.lo, m.recognition_rate_ci95.hi});
+    // The cluster bootstrap over explored objects (see "intervals" in the report).
+    auto bootstrap = [&](const std::map<int, ClusterCounts>& by_object) {
+      if (!clustered) return J(nullptr);
+      std::vector<ClusterCounts> c;
+      for (const auto& [object, counts] : by_object) c.push_back(counts);
+      const Interval i = cluster_bootstrap_interval(c);
+      return J::array({i.lo, i.hi});
+    };
+    row["recognition_rate_cluster_ci95"] = bootstrap(strict_by_object);
     // Class-aware: an answer congruent with the true object counts as right (the strict rate
     // above is kept as it was).
     row["correct_class"] = m.correct_class;
     row["recognition_rate_class"] = m.recognition_rate_class;
     row["recognition_rate_class_ci95"] =
         J::array({m.recognition_rate_class_ci95.lo, m.recognition_rate_class_ci95.hi});
+    row["recognition_rate_class_cluster_ci95"] = bootstrap(class_by_object);
     // The interface's keys first, then the rest.
     row["position_error_m_median"] = opt(m.position_m.median);
     row["orientation_error_deg_median"] = opt(m.orientation_rad.median, kDeg);
@@ -150,9 +170,12 @@ J summary_json(const J& per_step, const std::vector<const io::RunRecord*>& runs)
   // Step 20 is where the paper quotes its figures (Sections 5.5, 5.7.2).
   const std::size_t k20 = std::min<std::size_t>(20, per_step.size()) - 1;
   s["recognition_rate_step20"] = per_step[k20]["recognition_rate"];
+  s["recognition_rate_step20_ci95"] = per_step[k20]["recognition_rate_ci95"];
+  s["recognition_rate_step20_cluster_ci95"] = per_step[k20]["recognition_rate_cluster_ci95"];
   s["recognition_rate_class_final"] = last["recognition_rate_class"];
   s["recognition_rate_class_final_ci95"] = last["recognition_rate_class_ci95"];
   s["recognition_rate_class_step20"] = per_step[k20]["recognition_rate_class"];
+  s["recognition_rate_class_step20_cluster_ci95"] = per_step[k20]["recognition_rate_class_cluster_ci95"];
   s["position_error_m_median_final"] = last["position_error_m_median"];
   s["orientation_error_deg_median_final"] = last["orientation_error_deg_median"];
   s["symmetric_orientation_error_deg_median_final"] = last["symmetric_orientation_error_deg_median"];
@@ -181,7 +204,9 @@ VariantJson variant_json(const io::RunStoreContents& store, int variant, const E
     }
   const ClassMap classes = class_map(h);
   VariantJson v;
-  v.per_step = per_step_json(h, all, h.steps, bounds, classes);
+  std::set<int> objects;
+  for (const io::RunRecord* r : all) objects.insert(r->object);
+  v.per_step = per_step_json(h, all, h.steps, bounds, classes, objects.size() > 1);
   v.summary = summary_json(v.per_step, all);
   v.per_object = J::array();
   for (std::size_t o = 0; o < h.objects.size(); ++o) {
@@ -189,7 +214,7 @@ VariantJson variant_json(const io::RunStoreContents& store, int variant, const E
     J obj;
     obj["object"] = h.objects[o];
     obj["runs"] = by_object[o].size();
-    obj["per_step"] = per_step_json(h, by_object[o], h.steps, bounds, classes);
+    obj["per_step"] = per_step_json(h, by_object[o], h.steps, bounds, classes, false);
     obj["summary"] = summary_json(obj["per_step"], by_object[o]);
     v.per_object.push_back(obj);
   }
@@ -233,6 +258,30 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
   {
     const J& db = st["database"];
     out["congruent_classes"] = db.is_object() && db.contains("congruent_classes") ? db["congruent_classes"] : J(nullptr);
+  }
+
+  // What the runs share and what each interval assumes (stores written before the protocol key
+  // were made with the shared pool, the only protocol then).
+  const std::string protocol = config.is_object() && config.contains("protocol") && config["protocol"].is_string()
+                                   ? config["protocol"].get<std::string>()
+                                   : "shared_pool";
+  {
+    J iv;
+    iv["protocol"] = protocol;
+    iv["runs_share"] = protocol == "shared_pool"
+                           ? "the runs of an object share its object pose and grasp pool (the paper's "
+                             "protocol) and differ only in the order grasps are drawn"
+                           : "nothing but the object: each run has its own object pose and grasp pool";
+    iv["wilson"] = "recognition_rate_ci95 and recognition_rate_class_ci95: Wilson score 95 %, assumes "
+                   "every run independent; too narrow when runs of an object are correlated (always "
+                   "under shared_pool, and across objects of unequal difficulty)";
+    iv["cluster_bootstrap"] = "recognition_rate_cluster_ci95 and recognition_rate_class_cluster_ci95: "
+                              "percentile bootstrap over explored objects (" +
+                              std::to_string(kBootstrapResamples) +
+                              " resamples, fixed seed), assumes only that objects are independent "
+                              "(null for a single object)";
+    iv["bootstrap_resamples"] = kBootstrapResamples;
+    out["intervals"] = iv;
   }
 
   std::vector<VariantJson> vj;
@@ -299,13 +348,17 @@ std::string fmt(const J& v, double scale, int precision, const char* missing = "
 std::string pct(const J& v) { return fmt(v, 100.0, 0); }
 
 void print_steps(const J& per_step, std::ostream& out) {
-  out << "  step   rate  95% CI       class  pos med  pos p95  ori med  sym-ori  time med  time p95\n"
-         "         (%)   (%)          (%)    (mm)     (mm)     (deg)    med(deg) (s)       (s)\n";
+  out << "  step   rate  Wilson   obj-boot  class  pos med  pos p95  ori med  sym-ori  time med  time p95\n"
+         "         (%)   (%)      (%)       (%)    (mm)     (mm)     (deg)    med(deg) (s)       (s)\n";
+  auto range = [](const J& ci) {
+    if (!ci.is_array()) return std::string("-");
+    return pct(ci[0]) + "-" + pct(ci[1]);
+  };
   for (const auto& r : per_step) {
-    std::ostringstream ci;
-    ci << pct(r["recognition_rate_ci95"][0]) << "-" << pct(r["recognition_rate_ci95"][1]);
     out << "  " << std::setw(4) << r["step"].get<int>() << "  " << std::setw(5)
-        << pct(r["recognition_rate"]) << "  " << std::left << std::setw(11) << ci.str()
+        << pct(r["recognition_rate"]) << "  " << std::left << std::setw(7)
+        << range(r["recognition_rate_ci95"]) << "  " << std::setw(8)
+        << range(r.value("recognition_rate_cluster_ci95", J(nullptr)))
         << std::right << "  " << std::setw(5) << pct(r.value("recognition_rate_class", J(nullptr)))
         << "  " << std::setw(7) << fmt(r["position_error_m_median"], 1000, 1)
         << "  " << std::setw(7) << fmt(r["position_error_m_p95"], 1000, 1) << "  "
@@ -357,6 +410,19 @@ void print_classes(const J& report, std::ostream& out) {
   out << "\n";
 }
 
+void print_intervals(const J& report, std::ostream& out) {
+  const J& iv = report.value("intervals", J(nullptr));
+  if (!iv.is_object()) return;
+  const bool shared = iv.value("protocol", std::string()) == "shared_pool";
+  out << "  runs: protocol " << iv.value("protocol", std::string("?"))
+      << (shared ? " (the runs of an object share its pose and grasp pool)"
+                 : " (each run its own object pose and grasp pool)")
+      << "\n  intervals (95 %): Wilson assumes every run independent"
+      << (shared ? " (they are not: too narrow)" : "")
+      << "; obj-boot resamples the explored objects (" << iv.value("bootstrap_resamples", 0)
+      << " resamples), assuming only objects independent\n";
+}
+
 }  // namespace
 
 /// "@20", or "@K" when the runs have fewer than 20 steps (the summary's step-20 column).
@@ -393,6 +459,7 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
            "answer congruent with the true object counts as right):\n";
     print_steps(report["per_step"], out);
     print_classes(report, out);
+    print_intervals(report, out);
     out << "\nPer object:\n";
     print_objects(report["per_object"], out);
     return;

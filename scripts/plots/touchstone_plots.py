@@ -102,13 +102,21 @@ def plot_recognition(report, out, written):
         lo, hi = band(rows, "recognition_rate_ci95", 100)
         c = COLORS[i % len(COLORS)]
         ax.fill_between(x, lo, hi, color=c, alpha=0.18, linewidth=0)
+        # The cluster bootstrap over objects (absent in old reports, null for one object).
+        blo, bhi = band(rows, "recognition_rate_cluster_ci95", 100)
+        if np.isfinite(blo).any():
+            ax.plot(x, blo, color=c, linestyle=":", linewidth=0.9)
+            ax.plot(x, bhi, color=c, linestyle=":", linewidth=0.9)
         ax.plot(x, y, color=c, marker="o", markersize=2.5, label=label)
     ax.set_xlabel("exploration step (grasps)")
     ax.set_ylabel("recognition rate (%)")
     ax.set_ylim(-2, 102)
     ax.set_xlim(left=0.5)
     ax.set_title(subtitle(report))
-    ax.legend(loc="lower right", frameon=False, title="shaded: Wilson 95 % CI", title_fontsize=7)
+    protocol = report.get("intervals", {}).get("protocol", "shared_pool")
+    ax.legend(loc="lower right", frameon=False, title_fontsize=7,
+              title=f"protocol {protocol}\nshaded: Wilson 95 % (runs independent)\n"
+                    "dotted: bootstrap over objects 95 %")
     finish(fig, os.path.join(out, "recognition_rate.png"), written)
 
 

@@ -134,6 +134,10 @@ TEST_CASE("Impossible values and unknown keys name the key") {
   CHECK(load_error("objects = [\"a\", \"a\"]\n").second == "objects");
   CHECK(load_error("runs = 3\nruns = 4\n").second == "runs");
   CHECK(load_error("steps = 60\n").second == "pool");  // default pool 50 < 60 steps
+  auto pr = load_error("protocol = shared\n");
+  CHECK(pr.second == "protocol");
+  CHECK(pr.first.find("independent,shared_pool") != std::string::npos);
+  CHECK(load_error("[sweep]\nprotocol = [\"independent\", \"shared_pool\"]\n").second == "sweep.protocol");
 
   auto u = load_error("[ransac]\ntriplet = 15\n");
   CHECK(u.second == "ransac.triplet");
@@ -237,6 +241,12 @@ TEST_CASE("Canonical JSON and the first result-determining difference") {
   CHECK(j.at("runs") == 20);
   CHECK(j.at("ransac.triplets").is_null());
   CHECK_FALSE(j.contains("ransac.samples"));  // derived key, not stored twice
+  // Independent runs by default; the protocol determines results (a resumed store cannot mix).
+  CHECK(j.at("protocol") == "independent");
+  ExperimentConfig d = a;
+  set_key(d, "protocol", {"shared_pool"});
+  CHECK(d.protocol == "shared_pool");
+  CHECK(first_difference(to_json(a), to_json(d)) == "protocol");
 }
 
 TEST_CASE("Every study configuration of experiments/studies parses") {

@@ -221,3 +221,46 @@ TEST_CASE("Class-aware recognition rate: a twin in the true object's class count
   CHECK(m.recognition_rate_class_ci95.lo == doctest::Approx(wilson_interval(2, 3).lo));
   CHECK(m.position_m.n == 1);   // errors over the strictly right runs only
 }
+
+TEST_CASE("Cluster bootstrap resamples objects, not runs") {
+  // 20 objects x 10 runs; every run of an object has the same outcome (15 objects always right,
+  // 5 always wrong). Resampling objects gives the rate K / 20, K ~ Binomial(20, 0.75), whose
+  // 2.5 % and 97.5 % quantiles are 11 and 18-19 (P(K <= 10) = 0.014, P(K <= 11) = 0.041,
+  // P(K <= 18) = 0.976): [0.55, 0.90-0.95]. Resampling the 200 runs would give about
+  // 0.75 +- 0.06, as the Wilson interval does.
+  std::vector<ClusterCounts> objects;
+  for (int i = 0; i < 20; ++i) objects.push_back({i < 15 ? 10u : 0u, 10u});
+  const Interval b = cluster_bootstrap_interval(objects);
+  CHECK(std::abs(b.lo - 0.55) < 1e-9);
+  CHECK(b.hi >= 0.90 - 1e-12);
+  CHECK(b.hi <= 0.95 + 1e-12);
+  const Interval w = wilson_interval(150, 200);
+  CHECK(w.lo > 0.68);
+  CHECK(w.hi < 0.81);
+  CHECK(b.hi - b.lo > 2.5 * (w.hi - w.lo));
+
+  // Deterministic for a seed; another seed draws other resamples.
+  const Interval again = cluster_bootstrap_interval(objects);
+  CHECK(again.lo == b.lo);
+  CHECK(again.hi == b.hi);
+
+  // One run per object: the ordinary bootstrap of a proportion, close to the normal interval
+  // 0.5 +- 1.96 sqrt(0.25 / 400) = 0.5 +- 0.049.
+  std::vector<ClusterCounts> single;
+  for (int i = 0; i < 400; ++i) single.push_back({i % 2 == 0 ? 1u : 0u, 1u});
+  const Interval s = cluster_bootstrap_interval(single, 4000, 11);
+  CHECK(std::abs(s.lo - 0.451) < 0.012);
+  CHECK(std::abs(s.hi - 0.549) < 0.012);
+
+  // Pooled rate over clusters of different sizes; empty clusters ignored; edges.
+  std::vector<ClusterCounts> uneven{{30, 30}, {30, 30}, {0, 0}};
+  const Interval u = cluster_bootstrap_interval(uneven);
+  CHECK(u.lo == 1.0);
+  CHECK(u.hi == 1.0);
+  std::vector<ClusterCounts> none{{0, 0}};
+  CHECK(cluster_bootstrap_interval(none).lo == 0.0);
+  CHECK(cluster_bootstrap_interval(none).hi == 1.0);
+  std::vector<ClusterCounts> bad{{3, 2}};
+  CHECK_THROWS_AS(cluster_bootstrap_interval(bad), Error);
+  CHECK_THROWS_AS(cluster_bootstrap_interval(objects, 0), Error);
+}

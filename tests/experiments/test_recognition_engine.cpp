@@ -1,6 +1,7 @@
 // The real engine (simulator + recognizer) on a small in-memory database: complete, consistent
 // records; the same results for 1 and 2 threads and after an interruption.
 #include "engine/recognition_fixture.hpp"
+#include "datasets/simulator.hpp"
 #include "experiments/recognition_engine.hpp"
 #include "temp_dir.hpp"
 
@@ -75,6 +76,19 @@ void check_same_results(const std::vector<io::RunRecord>& a, const std::vector<i
   }
 }
 
+/// The object pose a simulator places `object` at with this seed (the oracle of a run's truth).
+Pose simulated_pose(const EngineDatabase& db, const std::string& object, std::uint64_t seed) {
+  for (std::size_t i = 0; i < db.source->size(); ++i)
+    if (db.source->info(i).name == object) {
+      datasets::SimulatorSettings s;
+      s.seed = seed;
+      s.grasps = 0;
+      return datasets::Simulator(db.load_mesh(i), object, Gripper(), s).object_pose();
+    }
+  FAIL("no object " << object);
+  return Pose::Identity();
+}
+
 }  // namespace
 
 TEST_CASE("Recognition engine: consistent records, thread-count and resume independent") {
@@ -90,9 +104,14 @@ TEST_CASE("Recognition engine: consistent records, thread-count and resume indep
   const auto serial = run_all(*engine, c, dir / "serial.h5", 1, false);
   REQUIRE(serial.size() == 4);
   long contacts = 0;
+  const EngineDatabase db = small_database();
   for (const auto& r : serial) {
     CHECK(r.grasps.size() == 3);
-    CHECK(r.truth.isApprox(serial[r.object == 0 ? 0 : 2].truth, 0.0));  // one pool per object
+    // Independent runs (the default protocol): each run's object pose is its own pool's, from
+    // (seed, object, run); the two runs of an object differ.
+    const std::string& name = h.objects[static_cast<std::size_t>(r.object)];
+    CHECK(r.truth.isApprox(simulated_pose(db, name, pool_seed(3, name, r.run)), 1e-9));
+    CHECK_FALSE(r.truth.isApprox(serial[r.object == 0 ? 1 - r.run : 3 - r.run].truth, 1e-6));
     for (const auto& s : r.steps) {
       CHECK(s.best_object >= -1);
       CHECK(s.best_object < 6);
@@ -153,4 +172,37 @@ TEST_CASE("Recognition engine: database subsets and unknown objects") {
     CHECK(e.field() == "objects");
     CHECK(e.message().find("teapot") != std::string::npos);
   }
+}
+
+TEST_CASE("Recognition engine: the paper's shared pool as an option; protocols never mix") {
+  test::TempDir dir("engine");
+  ExperimentConfig c = small_config();
+  set_key(c, "objects", {"nut"});
+  set_key(c, "runs", {"3"});
+  set_key(c, "protocol", {"shared_pool"});
+  const EngineDatabase db = small_database();
+  auto engine = make_recognition_engine(c, small_database(), 2);
+  const auto serial = run_all(*engine, c, dir / "shared1.h5", 1, false);
+  REQUIRE(serial.size() == 3);
+  // One pool per object: every run has the pose of the object's shared pool, and the runs
+  // differ only in the grasps they draw.
+  const Pose shared = simulated_pose(db, "nut", pool_seed(3, "nut", std::nullopt));
+  for (const auto& r : serial) CHECK(r.truth.isApprox(shared, 1e-9));
+  CHECK(serial[0].grasps != serial[1].grasps);
+  CHECK_FALSE(shared.isApprox(simulated_pose(db, "nut", pool_seed(3, "nut", 0)), 1e-6));
+  const auto parallel = run_all(*engine, c, dir / "shared2.h5", 2, true);
+  check_same_results(serial, parallel);
+
+  // A store of one protocol is not resumed under the other (nothing is written to it).
+  ExperimentConfig independent = c;
+  set_key(independent, "protocol", {"independent"});
+  auto other = make_recognition_engine(independent, small_database(), 1);
+  try {
+    check_resumable(io::RunStore::read_header(dir / "shared1.h5"), other->header(), "shared1.h5");
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.field() == "protocol");
+    CHECK(e.file() == "shared1.h5");
+  }
+  CHECK(io::RunStore::read(dir / "shared1.h5").runs.size() == 3);
 }

@@ -155,3 +155,63 @@ TEST_CASE("Report: class-aware rates count an answer congruent with the true obj
   print_report(j, text);
   CHECK(text.str().find("congruent classes of the database: sphere = bunny") != std::string::npos);
 }
+
+TEST_CASE("Report: recognition rates get a cluster bootstrap over objects and say what each interval assumes") {
+  // 10 objects x 4 runs x 1 step: objects 0-5 always right, 6-9 always wrong (all runs of an
+  // object alike, the correlation the Wilson interval ignores).
+  io::RunStoreContents c;
+  auto& h = c.header;
+  h.config_json = R"({"name":"clustered","runs":4,"steps":1,"protocol":"independent"})";
+  h.database_json = "{}";
+  h.versions_json = "{}";
+  h.steps = 1;
+  h.variant_labels = {""};
+  h.variant_configs = {"{}"};
+  for (int o = 0; o < 10; ++o) {
+    h.objects.push_back("o" + std::to_string(o));
+    h.database_objects.push_back("o" + std::to_string(o));
+  }
+  std::vector<ClusterCounts> expected;
+  for (int o = 0; o < 10; ++o) {
+    expected.push_back({o < 6 ? 4u : 0u, 4u});
+    for (int r = 0; r < 4; ++r) {
+      io::RunRecord rec;
+      rec.object = o;
+      rec.run = r;
+      rec.grasps = {0};
+      io::RunStepRecord s;
+      s.correct = o < 6;
+      s.best_object = s.correct ? o : (o + 1) % 10;
+      rec.steps.push_back(s);
+      c.runs.push_back(rec);
+    }
+  }
+  c.complete = true;
+  auto j = report_json(c, {});
+  const auto& row = j["per_step"][0];
+  CHECK(row["recognition_rate"].get<double>() == doctest::Approx(0.6));
+  const Interval boot = cluster_bootstrap_interval(expected);
+  CHECK(row["recognition_rate_cluster_ci95"][0].get<double>() == boot.lo);
+  CHECK(row["recognition_rate_cluster_ci95"][1].get<double>() == boot.hi);
+  CHECK(row["recognition_rate_class_cluster_ci95"] == row["recognition_rate_cluster_ci95"]);
+  // Resampling 10 objects spreads far wider than 40 independent runs would.
+  const double wilson = row["recognition_rate_ci95"][1].get<double>() - row["recognition_rate_ci95"][0].get<double>();
+  CHECK(boot.hi - boot.lo > 1.3 * wilson);
+  CHECK(j["summary"]["recognition_rate_step20_cluster_ci95"] == row["recognition_rate_cluster_ci95"]);
+  CHECK(j["per_object"][0]["per_step"][0]["recognition_rate_cluster_ci95"].is_null());  // one object
+  CHECK(j["intervals"]["protocol"] == "independent");
+  CHECK(j["intervals"]["bootstrap_resamples"] == kBootstrapResamples);
+  std::ostringstream text;
+  print_report(j, text);
+  CHECK(text.str().find("obj-boot") != std::string::npos);
+  CHECK(text.str().find("protocol independent") != std::string::npos);
+  CHECK(text.str().find("Wilson assumes every run independent;") != std::string::npos);
+
+  // A store written before the protocol key was made with the shared pool.
+  h.config_json = R"({"name":"old","runs":4,"steps":1})";
+  j = report_json(c, {});
+  CHECK(j["intervals"]["protocol"] == "shared_pool");
+  std::ostringstream old;
+  print_report(j, old);
+  CHECK(old.str().find("Wilson assumes every run independent (they are not: too narrow)") != std::string::npos);
+}
