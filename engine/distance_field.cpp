@@ -65,10 +65,14 @@ struct MeshAdapter {
 
 using Grid = openvdb::FloatGrid;
 
+/// meshToVolume in index space: the grid's values are distances in voxels (multiply by the
+/// voxel size). A transform of the voxel size itself would give metres, but OpenVDB refuses
+/// scales whose cube is below 3e-15 (voxels under 14 micrometres: objects of a few millimetres
+/// with scaled parameters), throwing ArithmeticError.
 Grid::Ptr run_mesh_to_volume(const Mesh& mesh, double voxel, float ext_band, float int_band,
                              bool is_signed) {
   const MeshAdapter adapter{mesh, 1.0 / voxel};
-  const auto transform = openvdb::math::Transform::createLinearTransform(voxel);
+  const auto transform = openvdb::math::Transform::createLinearTransform(1.0);
   // No renormalization: it smooths the values near self-intersections, and the values are
   // replaced by exact distances anyway.
   const int flags = openvdb::tools::DISABLE_RENORMALIZATION |
@@ -81,6 +85,9 @@ Grid::Ptr run_mesh_to_volume(const Mesh& mesh, double voxel, float ext_band, flo
   return grid;
 }
 
+/// The active values of meshToVolume's band after its voxel values were replaced by exact
+/// distances in metres; active tiles (not expected in a narrow band) keep meshToVolume's
+/// value, in voxels, and are converted here.
 SparseGrid to_sparse(const Grid& grid, double voxel) {
   SparseGrid s;
   s.voxel = voxel;
@@ -90,10 +97,11 @@ SparseGrid to_sparse(const Grid& grid, double voxel) {
     if (it.isVoxelValue()) {
       const auto c = it.getCoord();
       cells.push_back({{c.x(), c.y(), c.z()}, *it});
-    } else {   // active tile: every voxel it covers
+    } else {   // active tile: every voxel it covers (its value still in voxels, see below)
       openvdb::CoordBBox box;
       it.getBoundingBox(box);
-      for (auto c = box.begin(); c; ++c) cells.push_back({{(*c).x(), (*c).y(), (*c).z()}, *it});
+      const auto v = static_cast<float>(*it * voxel);
+      for (auto c = box.begin(); c; ++c) cells.push_back({{(*c).x(), (*c).y(), (*c).z()}, v});
     }
   }
   std::sort(cells.begin(), cells.end(),
@@ -536,7 +544,7 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
     for (auto it = band->cbeginValueOn(); it; ++it)
       if (it.isVoxelValue()) {
         coords.push_back(it.getCoord());
-        values.push_back(*it);
+        values.push_back(static_cast<float>(*it * fv));   // voxels -> metres
       }
     const double reach = (s.fine_band_voxels + 1.0) * fv;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, coords.size(), 256), [&](const auto& range) {

@@ -3,6 +3,7 @@
 #include "engine/kabsch.hpp"
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <cmath>
@@ -20,25 +21,37 @@ struct Pair {
   std::uint32_t model;     ///< index into the fine cloud
 };
 
+using Matrix6 = Eigen::Matrix<double, 6, 6>;
+
+Vec3 centroid(const std::vector<Vec3>& y) {
+  Vec3 c = Vec3::Zero();
+  for (const Vec3& p : y) c += p;
+  return c / static_cast<double>(y.size());
+}
+
+/// H = sum J J^T with J = [(y - c) x n; n]: the point-to-plane normal matrix about c.
+Matrix6 normal_matrix(const std::vector<Vec3>& y, const std::vector<Vec3>& n, const Vec3& c,
+                      const std::vector<Vec3>* z = nullptr, Eigen::Matrix<double, 6, 1>* g = nullptr) {
+  Matrix6 H = Matrix6::Zero();
+  for (std::size_t i = 0; i < y.size(); ++i) {
+    Eigen::Matrix<double, 6, 1> J;
+    J.head<3>() = (y[i] - c).cross(n[i]);
+    J.tail<3>() = n[i];
+    H.noalias() += J * J.transpose();
+    if (g) g->noalias() += J * n[i].dot(y[i] - (*z)[i]);
+  }
+  return H;
+}
+
 /// One Gauss-Newton step of point-to-plane ICP in the object frame: the small motion
 /// (omega, v) about the centroid c of the moved contacts y that minimizes
 /// sum (n . (y + omega x (y - c) + v - z))^2. Returns false when the system is degenerate.
 bool plane_step(const std::vector<Vec3>& y, const std::vector<Vec3>& z, const std::vector<Vec3>& n,
                 Pose& delta) {
   const std::size_t m = y.size();
-  Vec3 c = Vec3::Zero();
-  for (const Vec3& p : y) c += p;
-  c /= static_cast<double>(m);
-  Eigen::Matrix<double, 6, 6> H = Eigen::Matrix<double, 6, 6>::Zero();
+  const Vec3 c = centroid(y);
   Eigen::Matrix<double, 6, 1> g = Eigen::Matrix<double, 6, 1>::Zero();
-  for (std::size_t i = 0; i < m; ++i) {
-    Eigen::Matrix<double, 6, 1> J;
-    J.head<3>() = (y[i] - c).cross(n[i]);
-    J.tail<3>() = n[i];
-    const double r = n[i].dot(y[i] - z[i]);
-    H.noalias() += J * J.transpose();
-    g.noalias() += J * r;
-  }
+  Matrix6 H = normal_matrix(y, n, c, &z, &g);
   // A little damping keeps directions the contacts do not constrain (a flat patch) still.
   const double mu = 1e-9 * H.trace() + 1e-300;
   H.diagonal().array() += mu;
@@ -67,117 +80,152 @@ bool plane_step(const std::vector<Vec3>& y, const std::vector<Vec3>& z, const st
   return true;
 }
 
-}  // namespace
-
-IcpResult icp(const Scene& scene, const ObjectGeometry& geo, const Pose& T_init,
-              const IcpSettings& s) {
-  IcpResult res;
-  res.T_scene_object = T_init;
-  const std::size_t C = scene.ordered.size();
-  const std::size_t m = s.max_points == 0 ? C : std::min(C, s.max_points);
-  const bool use_field = s.metric == IcpMetric::field && !geo.field.empty();
-  const bool plane = use_field || (s.metric != IcpMetric::point_to_point && geo.fine.has_normals());
-  if (m < 3 || (use_field ? geo.field.empty() : geo.tree.size() < 3) || !T_init.matrix().allFinite()) return res;
-  res.valid = true;
-  const double gate2 = s.max_correspondence > 0.0 ? s.max_correspondence * s.max_correspondence
-                                                  : std::numeric_limits<double>::infinity();
-  const double min_rot = s.min_rotation_deg * std::numbers::pi / 180.0;
-  const double trim = std::clamp(s.trim_fraction, 0.0, 1.0);
-  const std::span<const Vec3> model = geo.tree.points();
-
-  std::vector<Pair> pairs(m);
-  std::vector<Vec3> src, dst, nrm;
-  // Field metric: per contact the moved point y, its distance d and gradient direction n.
-  std::vector<Vec3> probe, ys, ns;
-  std::vector<double> dist;
-  const double h = s.gradient_step;
-  const double far = geo.field.empty() ? 0.0 : geo.field.coarse_margin();
-  if (use_field) {
-    probe.resize(4 * m);
-    dist.resize(4 * m);
-    ys.resize(m);
-    ns.resize(m);
+/// The pairs of one ICP iteration: the first max_points contacts of the scene's evaluation
+/// order, moved into the object frame by the pose, paired with the object (nearest fine point
+/// and its normal, or the distance field's closest-point estimate), gated and trimmed.
+class Pairing {
+ public:
+  Pairing(const Scene& scene, const ObjectGeometry& geo, const IcpSettings& s)
+      : scene_(scene), geo_(geo), s_(s) {
+    const std::size_t C = scene.ordered.size();
+    m_ = s.max_points == 0 ? C : std::min(C, s.max_points);
+    use_field_ = s.metric == IcpMetric::field && !geo.field.empty();
+    plane_ = use_field_ || (s.metric != IcpMetric::point_to_point && geo.fine.has_normals());
+    usable_ = m_ >= 3 && (use_field_ ? !geo.field.empty() : geo.tree.size() >= 3);
+    gate2_ = s.max_correspondence > 0.0 ? s.max_correspondence * s.max_correspondence
+                                        : std::numeric_limits<double>::infinity();
+    trim_ = std::clamp(s.trim_fraction, 0.0, 1.0);
+    far_ = geo.field.empty() ? 0.0 : geo.field.coarse_margin();
+    pairs_.resize(m_);
+    if (use_field_) {
+      probe_.resize(4 * m_);
+      dist_.resize(4 * m_);
+      ys_.resize(m_);
+      ns_.resize(m_);
+    }
+    src.reserve(m_);
+    dst.reserve(m_);
+    nrm.reserve(m_);
   }
-  src.reserve(m);
-  dst.reserve(m);
-  nrm.reserve(m);
-  Pose T = T_init;
-  double prev_rms = 0.0;
-  int stalled = 0;
-  for (int it = 0; it < s.max_iterations; ++it) {
+
+  bool usable() const { return usable_; }
+  /// Point-to-plane (or field) pairs: src are contacts in the object frame, dst the paired
+  /// surface points, nrm their normals. Point-to-point: src model points, dst contacts.
+  bool plane() const { return plane_; }
+  bool field() const { return use_field_; }
+
+  /// Pair the contacts at T (T_scene_object); returns the sum of the squared distances.
+  double collect(const Pose& T) {
     const Pose T_os = T.inverse();
-    if (use_field) {
+    const std::size_t m = m_;
+    const double h = s_.gradient_step;
+    if (use_field_) {
       for (std::size_t i = 0; i < m; ++i) {
-        const Vec3 y = T_os * scene.ordered[i];
-        ys[i] = y;
-        Vec3* q = &probe[4 * i];
+        const Vec3 y = T_os * scene_.ordered[i];
+        ys_[i] = y;
+        Vec3* q = &probe_[4 * i];
         q[0] = y;
         for (int a = 0; a < 3; ++a) {
           q[1 + a] = y;
           q[1 + a][a] += h;
         }
       }
-      geo.field.distances(probe.data(), probe.size(), Pose::Identity(), dist.data());
+      geo_.field.distances(probe_.data(), probe_.size(), Pose::Identity(), dist_.data());
       for (std::size_t i = 0; i < m; ++i) {
-        const double* d = &dist[4 * i];
+        const double* d = &dist_[4 * i];
         const Vec3 g((d[1] - d[0]) / h, (d[2] - d[0]) / h, (d[3] - d[0]) / h);
         const double gn = g.norm();
-        const bool usable = std::abs(d[0]) < far && gn > 0.5 && g.allFinite();
-        ns[i] = usable ? Vec3(g / gn) : Vec3::Zero();
-        // pairs[i].d2: squared distance; unusable contacts sort last and are never fitted
-        pairs[i] = {usable ? d[0] * d[0] : std::numeric_limits<double>::infinity(),
-                    static_cast<std::uint32_t>(i), 0};
+        const bool usable = std::abs(d[0]) < far_ && gn > 0.5 && g.allFinite();
+        ns_[i] = usable ? Vec3(g / gn) : Vec3::Zero();
+        // pairs_[i].d2: squared distance; unusable contacts sort last and are never fitted
+        pairs_[i] = {usable ? d[0] * d[0] : std::numeric_limits<double>::infinity(),
+                     static_cast<std::uint32_t>(i), 0};
       }
     } else {
       for (std::size_t i = 0; i < m; ++i) {
-        const Neighbour nb = geo.tree.nearest(T_os * scene.ordered[i]);
-        pairs[i] = {nb.sq_distance, static_cast<std::uint32_t>(i), nb.index};
+        const Neighbour nb = geo_.tree.nearest(T_os * scene_.ordered[i]);
+        pairs_[i] = {nb.sq_distance, static_cast<std::uint32_t>(i), nb.index};
       }
     }
     std::size_t keep = m;
-    if (trim < 1.0) {
-      keep = std::min(m, std::max<std::size_t>(3, static_cast<std::size_t>(std::ceil(trim * double(m)))));
+    if (trim_ < 1.0) {
+      keep = std::min(m, std::max<std::size_t>(3, static_cast<std::size_t>(std::ceil(trim_ * double(m)))));
       auto by_distance = [](const Pair& a, const Pair& b) {
         return a.d2 < b.d2 || (a.d2 == b.d2 && a.contact < b.contact);
       };
-      std::nth_element(pairs.begin(), pairs.begin() + (keep - 1), pairs.end(), by_distance);
-      std::sort(pairs.begin(), pairs.begin() + keep,
+      std::nth_element(pairs_.begin(), pairs_.begin() + (keep - 1), pairs_.end(), by_distance);
+      std::sort(pairs_.begin(), pairs_.begin() + keep,
                 [](const Pair& a, const Pair& b) { return a.contact < b.contact; });  // fixed order
     }
     src.clear();
     dst.clear();
     nrm.clear();
+    const std::span<const Vec3> model = geo_.tree.points();
     double sq = 0.0;
     for (std::size_t j = 0; j < keep; ++j) {
-      const Pair& p = pairs[j];
-      if (p.d2 > gate2 || !std::isfinite(p.d2)) continue;
+      const Pair& p = pairs_[j];
+      if (p.d2 > gate2_ || !std::isfinite(p.d2)) continue;
       sq += p.d2;
-      if (use_field) {
+      if (use_field_) {
         // closest-point estimate z = y - d n, so that n . (y - z) = d (signed distance)
         const std::uint32_t i = p.contact;
-        const double d = dist[4 * i];
-        src.push_back(ys[i]);
-        nrm.push_back(ns[i]);
-        dst.push_back(ys[i] - d * ns[i]);
+        const double d = dist_[4 * i];
+        src.push_back(ys_[i]);
+        nrm.push_back(ns_[i]);
+        dst.push_back(ys_[i] - d * ns_[i]);
         continue;
       }
-      if (plane) {
-        src.push_back(T_os * scene.ordered[p.contact]);  // contact in the object frame
-        nrm.push_back(geo.fine.normals[p.model]);
+      if (plane_) {
+        src.push_back(T_os * scene_.ordered[p.contact]);  // contact in the object frame
+        nrm.push_back(geo_.fine.normals[p.model]);
       } else {
         src.push_back(model[p.model]);
       }
-      dst.push_back(plane ? model[p.model] : scene.ordered[p.contact]);
+      dst.push_back(plane_ ? model[p.model] : scene_.ordered[p.contact]);
     }
+    return sq;
+  }
+
+  std::vector<Vec3> src, dst, nrm;
+
+ private:
+  const Scene& scene_;
+  const ObjectGeometry& geo_;
+  const IcpSettings& s_;
+  std::size_t m_ = 0;
+  bool use_field_ = false, plane_ = false, usable_ = false;
+  double gate2_ = 0.0, trim_ = 1.0, far_ = 0.0;
+  std::vector<Pair> pairs_;
+  // Field metric: per contact the moved point y, its distance d and gradient direction n.
+  std::vector<Vec3> probe_, ys_, ns_;
+  std::vector<double> dist_;
+};
+
+}  // namespace
+
+IcpResult icp(const Scene& scene, const ObjectGeometry& geo, const Pose& T_init,
+              const IcpSettings& s) {
+  IcpResult res;
+  res.T_scene_object = T_init;
+  Pairing pairing(scene, geo, s);
+  if (!pairing.usable() || !T_init.matrix().allFinite()) return res;
+  res.valid = true;
+  const double min_rot = s.min_rotation_deg * std::numbers::pi / 180.0;
+  const std::vector<Vec3>&src = pairing.src, &dst = pairing.dst, &nrm = pairing.nrm;
+  Pose T = T_init;
+  double prev_rms = 0.0;
+  int stalled = 0;
+  for (int it = 0; it < s.max_iterations; ++it) {
+    const double sq = pairing.collect(T);
     res.iterations = it + 1;
     if (src.size() < 3) break;
     res.pairs = src.size();
     res.rms = std::sqrt(sq / static_cast<double>(src.size()));
     Pose delta;  // the update, as a motion of the scene frame
-    if (plane) {
+    if (pairing.plane()) {
       Pose d_obj;
       if (!plane_step(src, dst, nrm, d_obj)) break;
-      const Pose T_new = (d_obj * T_os).inverse();
+      const Pose T_new = (d_obj * T.inverse()).inverse();
       delta = T_new * T.inverse();
       T = T_new;
     } else {
@@ -209,6 +257,44 @@ IcpResult icp(const Scene& scene, const ObjectGeometry& geo, const Pose& T_init,
   }
   res.T_scene_object = T;
   return res;
+}
+
+IcpSystem icp_system(const Scene& scene, const ObjectGeometry& geo, const Pose& T,
+                     const IcpSettings& settings) {
+  IcpSystem out;
+  IcpSettings s = settings;
+  if (s.metric == IcpMetric::point_to_point) s.metric = IcpMetric::point_to_plane;
+  Pairing pairing(scene, geo, s);
+  if (!pairing.usable() || !pairing.plane() || !T.matrix().allFinite()) return out;
+  pairing.collect(T);
+  const std::vector<Vec3>& y = pairing.src;
+  const std::vector<Vec3>& n = pairing.nrm;
+  out.pairs = y.size();
+  if (y.size() < 6) return out;
+  const Vec3 c = centroid(y);
+  double spread2 = 0.0;
+  for (const Vec3& p : y) spread2 += (p - c).squaredNorm();
+  out.radius = std::sqrt(spread2 / static_cast<double>(y.size()));
+  const Matrix6 H = normal_matrix(y, n, c);
+  const auto condition = [](const Matrix6& A, int* small) {
+    const Eigen::SelfAdjointEigenSolver<Matrix6> es(A, Eigen::EigenvaluesOnly);
+    const Eigen::Matrix<double, 6, 1> ev = es.eigenvalues();  // ascending
+    const double top = ev(5);
+    if (!(top > 0.0) || !std::isfinite(top)) return kIcpSingular;
+    if (small) *small = static_cast<int>((ev.array() < 0.01 * top).count());
+    return ev(0) * kIcpSingular <= top ? kIcpSingular : top / ev(0);
+  };
+  out.condition_raw = condition(H, nullptr);
+  if (out.radius > 0.0) {
+    // Rotation parameters as motions at the contacts' radius: J' = diag(1/r, 1) J.
+    Eigen::Matrix<double, 6, 1> d;
+    d << Vec3::Constant(1.0 / out.radius), Vec3::Ones();
+    out.condition = condition(d.asDiagonal() * H * d.asDiagonal(), &out.unobservable_dof);
+  } else {
+    out.condition = kIcpSingular;
+  }
+  out.valid = out.condition < kIcpSingular;
+  return out;
 }
 
 }  // namespace ts

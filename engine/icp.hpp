@@ -46,4 +46,27 @@ struct IcpResult {
 IcpResult icp(const Scene& scene, const ObjectGeometry& geometry, const Pose& T_init,
               const IcpSettings& settings);
 
+/// Conditions at or above this mean a singular system (an eigenvalue at rounding level or 0).
+constexpr double kIcpSingular = 1e16;
+
+/// The point-to-plane normal equations H x = -g (H = sum J J^T, J = [(y - c) x n; n], c the
+/// centroid of the paired contacts y, n the object's normals) that one ICP iteration would
+/// solve at a pose, and how well they are conditioned. Diagnostics only: icp() is unchanged.
+struct IcpSystem {
+  std::size_t pairs = 0;        ///< contacts paired (as icp() pairs them: gate, trim, field band)
+  double radius = 0.0;          ///< m, RMS distance of the paired contacts from their centroid
+  double condition = kIcpSingular;  ///< largest / smallest eigenvalue of H with the rotation
+                                ///< columns divided by `radius` (unitless, the same for a
+                                ///< scaled copy of the scene and object); capped at
+                                ///< kIcpSingular, which it also is without a system
+  double condition_raw = kIcpSingular;  ///< the same of H as solved (metres, radians), capped
+  int unobservable_dof = 6;     ///< eigenvalues of the unitless H below 0.01 x the largest
+  bool valid = false;           ///< at least 6 pairs with normals (otherwise H is singular)
+};
+
+/// The system at T_scene_object (point-to-point settings are treated as point-to-plane, with
+/// the fine cloud's normals). Deterministic; thread-safe. Never NaN or infinite.
+IcpSystem icp_system(const Scene& scene, const ObjectGeometry& geometry,
+                     const Pose& T_scene_object, const IcpSettings& settings);
+
 }  // namespace ts

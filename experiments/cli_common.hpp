@@ -53,5 +53,6 @@ void register_tactile(CLI::App& app);     // simulate, log info|export
 void register_recognize(CLI::App& app);   // recognize
 void register_experiment(CLI::App& app);  // experiment, report
 void register_catalogue(CLI::App& app);   // catalogue
+void register_stress(CLI::App& app);      // stress
 
 }  // namespace ts::cli

@@ -1,0 +1,176 @@
+// Study 10 (stiff and extreme cases, `touchstone stress`): the configuration's errors, and a
+// reduced study whose outcomes are known: a dive 1 000 km from the origin answers as at the
+// origin, a single flat patch is flagged, three contacts give no answer, nothing is NaN.
+#include "experiments/stress.hpp"
+#include "cli_run.hpp"
+#include "temp_dir.hpp"
+
+#include "io/result_store.hpp"
+
+#include <doctest/doctest.h>
+#include <tbb/task_arena.h>
+
+#include <cmath>
+#include <fstream>
+#include <limits>
+
+using namespace ts;
+using namespace ts::experiments;
+
+namespace {
+
+
+/// The error a configuration gives (empty: none).
+std::pair<std::string, std::string> config_error(const test::TempDir& dir, const std::string& text) {
+  const auto file = dir / "study.toml";
+  test::write_text(file, text);
+  try {
+    load_stress_study(file);
+  } catch (const Error& e) {
+    return {e.file(), e.field()};
+  }
+  return {};
+}
+
+}  // namespace
+
+TEST_CASE("Stress study configuration: cases over a baseline, errors name the file and the key") {
+  test::TempDir dir("stress");
+  const auto file = dir / "study.toml";
+  test::write_text(file, "runs = 3\n[baseline]\ngrasps = 4\ncontacts = 20\n"
+                   "[cases]\nbase = \"\"\nfar = \"distance_m=1e6, arm_noise_m=0\"\n");
+  const StressStudy s = load_stress_study(file);
+  CHECK(s.runs == 3);
+  REQUIRE(s.cases.size() == 2);
+  CHECK(s.cases[0].name == "base");
+  CHECK(s.cases[0].grasps == 4);
+  CHECK(s.cases[1].distance_m == 1e6);
+  CHECK(s.cases[1].arm_noise_m == 0.0);
+  CHECK(s.cases[1].contacts == 20);  // from the baseline
+
+  CHECK(config_error(dir, "[baseline]\nsize = 0.1\n[cases]\na = \"\"\n").second == "size");
+  CHECK(config_error(dir, "[cases]\na = \"contacts=0\"\n").second == "contacts");
+  CHECK(config_error(dir, "[cases]\na = \"contacts=2.5\"\n").second == "contacts");
+  CHECK(config_error(dir, "[cases]\na = \"arm_noise_m=-1\"\n").second == "arm_noise_m");
+  CHECK(config_error(dir, "[cases]\na = \"flat\"\n").second == "cases.a");
+  CHECK(config_error(dir, "runs = 0\n[cases]\na = \"\"\n").second == "runs");
+  CHECK(config_error(dir, "runs = 2\n").second == "cases");
+  CHECK(config_error(dir, "[cases]\na = \"distance_m=nan\"\n").second == "distance_m");
+  const auto [where, key] = config_error(dir, "[cases]\na = \"grasps=200, contacts=100000\"\n");
+  CHECK(where.find("study.toml") != std::string::npos);
+  CHECK(key == "contacts");
+}
+
+TEST_CASE("The shipped study 10 covers the brief's ranges") {
+  // Apart from experiments/studies/*.toml, which are experiment configurations.
+  const StressStudy s = load_stress_study(std::filesystem::path(TS_SOURCE_DIR) / "experiments" /
+                                          "studies" / "stress" / "study10_extreme.toml");
+  double smallest = 1e9, largest = 0, farthest = 0, arm = 0;
+  long fewest = 1000000000, most = 0;
+  bool dup = false, line = false, flat = false, rod = false;
+  for (const StressCase& c : s.cases) {
+    smallest = std::min(smallest, c.size_m);
+    largest = std::max(largest, c.size_m);
+    farthest = std::max(farthest, c.distance_m);
+    arm = std::max(arm, c.arm_noise_m);
+    fewest = std::min(fewest, long(c.grasps) * c.contacts);
+    most = std::max(most, long(c.grasps) * c.contacts);
+    dup = dup || c.duplicates > 1;
+    line = line || c.collinear_m > 0.0;
+    flat = flat || (c.flat && c.grasps == 1);
+    rod = rod || (c.rod_length_m >= 2.0 && c.rod_section_m <= 0.01);
+  }
+  CHECK(smallest <= 0.01);
+  CHECK(largest >= 2.0);
+  CHECK(farthest >= 1e6);
+  CHECK(arm >= 0.02);
+  CHECK(fewest <= 3);
+  CHECK(most >= 5000);
+  CHECK(dup);
+  CHECK(line);
+  CHECK(flat);
+  CHECK(rod);
+}
+
+TEST_CASE("Stress study, reduced: far dives answer as at the origin; degenerate contacts flagged") {
+  test::TempDir dir("stress");
+  StressStudy study;
+  study.runs = 2;
+  StressCase base;
+  base.grasps = 5;
+  base.contacts = 30;
+  StressCase far = base, flat = base, three = base;
+  base.name = "base";
+  far.name = "far";
+  far.distance_m = 1e6;
+  flat.name = "flat";
+  flat.flat = true;
+  flat.grasps = 1;
+  flat.contacts = 60;
+  three.name = "three";
+  three.grasps = 1;
+  three.contacts = 3;
+  study.cases = {base, far, flat, three};
+  std::vector<StressCaseResult> results;
+  for (std::size_t i = 0; i < study.cases.size(); ++i) results.push_back(run_stress_case(study, i, dir.path()));
+
+  // 1 000 km away: the same contacts up to the rounding of their coordinates (1e-10 m), so the
+  // same answers, errors within a micrometre.
+  for (int r = 0; r < study.runs; ++r) {
+    const StressRun &a = results[0].runs[r], &b = results[1].runs[r];
+    INFO("run " << r << " object " << a.object);
+    CHECK(a.object == b.object);
+    REQUIRE(a.valid);
+    REQUIRE(b.valid);
+    CHECK(a.correct == b.correct);
+    CHECK(std::abs(a.position_error_m - b.position_error_m) < 1e-6);
+    CHECK(std::abs(a.orientation_error_deg - b.orientation_error_deg) < 1e-3);
+    CHECK(a.contacts == b.contacts);
+  }
+  CHECK(results[0].runs[0].correct);  // the wedge, at 5 noisy grasps
+  // One flat patch: rotation about its normal and the translations in its plane unobservable.
+  for (const StressRun& r : results[2].runs) {
+    CHECK(r.ambiguous);
+    CHECK(r.unobservable_dof >= 3);
+  }
+  // Three contacts: nothing to recognize, said so.
+  for (const StressRun& r : results[3].runs) {
+    CHECK_FALSE(r.valid);
+    CHECK(r.ambiguous);
+    CHECK(r.contacts == 3);
+  }
+  // Every step and every stored result finite; the stores are there and hold the runs.
+  for (const StressCaseResult& c : results)
+    for (int r = 0; r < study.runs; ++r) {
+      CHECK(c.runs[r].finite);
+      CHECK(c.runs[r].non_finite.empty());
+      const io::ResultData d = io::read_result(dir / (c.config.name + "-" + std::to_string(r) + ".h5"));
+      CHECK(static_cast<int>(d.steps.size()) == c.config.grasps);
+      CHECK(d.header.truth_object == c.runs[r].object);
+    }
+  nlohmann::ordered_json j = stress_json(study, results);
+  CHECK(first_non_finite(j).empty());
+  CHECK(j["cases"][2]["flagged_ambiguous"] == 2);
+  j["cases"][1]["per_run"][0]["position_error_m"] = std::numeric_limits<double>::infinity();
+  CHECK(first_non_finite(j) == "/cases/1/per_run/0/position_error_m");
+  CHECK(stress_table(results).find("| far | 15 cm | 1000 km |") != std::string::npos);
+
+  // The same results on one thread.
+  tbb::task_arena one(1);
+  const StressCaseResult again = one.execute([&] { return run_stress_case(study, 1, {}); });
+  for (int r = 0; r < study.runs; ++r) {
+    CHECK(again.runs[r].position_error_m == results[1].runs[r].position_error_m);
+    CHECK(again.runs[r].condition == results[1].runs[r].condition);
+  }
+}
+
+TEST_CASE("touchstone stress: a bad configuration is one error naming the file and the key") {
+  test::TempDir dir("stress_cli");
+  test::write_text(dir / "s.toml", "[cases]\nsmall = \"size_m=0.00001\"\n");
+  const test::CliRun r = test::touchstone(dir, "stress --config s.toml");
+  CHECK(r.code == 1);
+  CHECK(r.err.find("touchstone: error:") == 0);
+  CHECK(r.err.find("s.toml") != std::string::npos);
+  CHECK(r.err.find("size_m") != std::string::npos);
+  CHECK(r.out.empty());
+}
