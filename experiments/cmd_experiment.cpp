@@ -1,5 +1,7 @@
 // `touchstone experiment` and `touchstone report`: run an experiment into a run store (resumable)
-// and report it as tables, the interface's JSON, and figures.
+// and report it as tables, the interface's JSON, and figures. `touchstone calibrate`: fit the
+// step confidence (experiments/calibration.hpp) on run stores.
+#include "experiments/calibration.hpp"
 #include "experiments/cli_common.hpp"
 #include "experiments/config.hpp"
 #include "experiments/driver.hpp"
@@ -7,11 +9,14 @@
 #include "experiments/report.hpp"
 #include "io/run_store.hpp"
 
+#include <algorithm>
 #include <csignal>
+#include <optional>
 #include <cmath>
 #include <cstdio>
 #include <iomanip>
 #include <iostream>
+#include <limits>
 #include <sstream>
 
 namespace ts::cli {
@@ -31,8 +36,44 @@ struct ExperimentOptions {
 
 struct ReportOptions {
   CommonOptions common;
-  std::string store, plots;
+  std::string store, plots, calibration, runs;
 };
+
+struct CalibrateOptions {
+  CommonOptions common;
+  std::vector<std::string> stores;
+  std::string out, runs;
+};
+
+/// --runs A:B, the runs A <= run < B of every object ("" : all).
+struct RunRange {
+  int first = 0, end = std::numeric_limits<int>::max();
+  bool has(int run) const { return run >= first && run < end; }
+  bool all() const { return first == 0 && end == std::numeric_limits<int>::max(); }
+};
+
+RunRange parse_runs(const std::string& text) {
+  RunRange r;
+  if (text.empty()) return r;
+  const auto colon = text.find(':');
+  auto number = [&](const std::string& t) {
+    std::size_t used = 0;
+    int v = -1;
+    try {
+      v = std::stoi(t, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (t.empty() || used != t.size() || v < 0)
+      throw Error("--runs expects A:B, the runs A <= run < B (got '" + text + "')", {}, "--runs");
+    return v;
+  };
+  if (colon == std::string::npos) throw Error("--runs expects A:B (got '" + text + "')", {}, "--runs");
+  r.first = number(text.substr(0, colon));
+  r.end = number(text.substr(colon + 1));
+  if (r.end <= r.first) throw Error("--runs A:B needs A < B (got '" + text + "')", {}, "--runs");
+  return r;
+}
 
 // --- Ctrl-C: finish cleanly (runs in flight are dropped, the store stays consistent) ---------
 std::atomic<bool> g_stop{false};
@@ -205,9 +246,106 @@ int run_experiment(const ExperimentOptions& o) {
   return 0;
 }
 
+/// The database fingerprint a run store's header records ("" when none).
+std::string store_fingerprint(const io::RunStoreHeader& h) {
+  const auto db = nlohmann::ordered_json::parse(h.database_json, nullptr, false);
+  return db.is_object() && db.contains("fingerprint") && db["fingerprint"].is_string()
+             ? db["fingerprint"].get<std::string>()
+             : std::string();
+}
+
 int run_report(const ReportOptions& o) {
-  const io::RunStoreContents contents = io::RunStore::read(o.store);
-  emit_report(contents, {}, o.store, o.common.json, o.plots);
+  io::RunStoreContents contents = io::RunStore::read(o.store);
+  const RunRange range = parse_runs(o.runs);
+  if (!range.all())   // only these runs (e.g. those a calibration was not fitted on)
+    std::erase_if(contents.runs, [&](const io::RunRecord& r) { return !range.has(r.run); });
+  experiments::ReportSettings rs;
+  std::optional<experiments::Calibration> calibration;
+  if (!o.calibration.empty()) {
+    calibration = experiments::read_calibration(o.calibration, store_fingerprint(contents.header));
+    rs.calibration = &*calibration;
+    rs.calibration_path = o.calibration;
+  }
+  emit_report(contents, rs, o.store, o.common.json, o.plots);
+  return 0;
+}
+
+/// Fit the confidence models on every step of the stores' runs (their features and outcomes).
+int run_calibrate(const CalibrateOptions& o) {
+  const auto& names = experiments::confidence_feature_names();
+  std::vector<std::vector<double>> rows;
+  std::vector<int> object_right, pose_right;
+  std::string fingerprint;
+  nlohmann::ordered_json sources = nlohmann::ordered_json::array();
+  const RunRange range = parse_runs(o.runs);
+  for (const std::string& path : o.stores) {
+    io::RunStoreContents c = io::RunStore::read(path);
+    std::erase_if(c.runs, [&](const io::RunRecord& r) { return !range.has(r.run); });
+    const std::string fp = store_fingerprint(c.header);
+    if (fp.empty()) throw Error("the run store records no database fingerprint", path, "/header/database");
+    if (fingerprint.empty()) fingerprint = fp;
+    if (fp != fingerprint)
+      throw Error("the run store explored another database than " + o.stores.front() +
+                  " (fingerprints differ): a calibration is for one database", path, "/header/database");
+    std::vector<std::size_t> cols;
+    for (const std::string& f : names) {
+      const auto& v = c.header.step_values;
+      const auto it = std::find(v.begin(), v.end(), "feature." + f);
+      if (it == v.end())
+        throw Error("the run store has no per-step feature '" + f + "' (written by an older build?)", path,
+                    "/header/step_values");
+      cols.push_back(static_cast<std::size_t>(it - v.begin()));
+    }
+    std::size_t steps = 0;
+    for (const io::RunRecord& r : c.runs)
+      for (const io::RunStepRecord& s : r.steps) {
+        std::vector<double> f;
+        for (std::size_t k : cols) f.push_back(s.values.at(k));
+        rows.push_back(std::move(f));
+        object_right.push_back(s.correct ? 1 : 0);
+        pose_right.push_back(s.correct && s.position_error_m < 0.01 ? 1 : 0);
+        ++steps;
+      }
+    const auto config = nlohmann::ordered_json::parse(c.header.config_json, nullptr, false);
+    nlohmann::ordered_json src;
+    src["store"] = path;
+    src["seed"] = config.is_object() ? config.value("seed", nlohmann::ordered_json(nullptr)) : nullptr;
+    src["protocol"] = config.is_object() ? config.value("protocol", nlohmann::ordered_json("shared_pool")) : nullptr;
+    src["objects"] = c.header.objects.size();
+    src["runs"] = c.runs.size();
+    src["run_range"] = range.all() ? nlohmann::ordered_json("all")
+                                   : nlohmann::ordered_json::array({range.first, range.end});
+    src["step_answers"] = steps;
+    sources.push_back(src);
+  }
+  if (rows.empty()) throw Error("the run stores hold no runs to fit on", o.stores.front(), "/runs");
+  experiments::Calibration cal;
+  cal.database_fingerprint = fingerprint;
+  cal.features = names;
+  cal.object = experiments::fit_logistic(rows, object_right);
+  cal.pose = experiments::fit_logistic(rows, pose_right);
+  cal.provenance["fitted_on"] = sources;
+  cal.provenance["step_answers"] = rows.size();
+  experiments::write_calibration(o.out, cal);
+  // In-sample calibration (the fit's own data; judge it on other runs with `report --calibration`).
+  std::vector<double> po, pp;
+  for (const auto& f : rows) {
+    po.push_back(cal.object_confidence(f));
+    pp.push_back(cal.pose_confidence(f));
+  }
+  const auto a = experiments::confidence_calibration(po, object_right);
+  const auto b = experiments::confidence_calibration(pp, pose_right);
+  nlohmann::ordered_json j = experiments::to_json(cal);
+  j["in_sample"] = {{"object_ece", a.ece}, {"object_brier", a.brier}, {"pose_ece", b.ece}, {"pose_brier", b.brier}};
+  if (o.common.json) {
+    std::cout << j.dump(1) << "\n";
+  } else {
+    std::cout << "Calibration written to " << o.out << ": " << rows.size() << " step answers of "
+              << o.stores.size() << " run store(s); in-sample object ECE " << std::fixed
+              << std::setprecision(3) << a.ece << ", Brier " << a.brier << "; pose ECE " << b.ece
+              << ", Brier " << b.brier << " (judge it on other runs: touchstone report STORE "
+                 "--calibration " << o.out << ")\n";
+  }
   return 0;
 }
 
@@ -253,8 +391,23 @@ void register_experiment(CLI::App& app) {
   CLI::App* r = app.add_subcommand("report", "Report a run store: tables, JSON (--json), figures (--plots)");
   r->add_option("store", ro->store, "Run store (HDF5) written by `touchstone experiment`")->required();
   r->add_option("--plots", ro->plots, "Write the figures (PNG) into this folder");
+  r->add_option("--runs", ro->runs,
+                "Report only the runs A <= run < B of every object (A:B), e.g. those a calibration "
+                "was not fitted on");
+  r->add_option("--calibration", ro->calibration,
+                "Confidence calibration file (touchstone calibrate): the confidences are recomputed "
+                "from the store's features and judged against its outcomes (ECE, Brier, reliability)");
   add_common(r, ro->common);
   r->callback([ro] { run_command(ro->common, [ro] { return run_report(*ro); }); });
+
+  auto co = std::make_shared<CalibrateOptions>();
+  CLI::App* cb = app.add_subcommand(
+      "calibrate", "Fit the step confidence (object right; pose within 1 cm) on run stores' steps");
+  cb->add_option("stores", co->stores, "Run stores (HDF5) of simulated runs of one database")->required();
+  cb->add_option("--out", co->out, "Calibration file to write (JSON)")->required();
+  cb->add_option("--runs", co->runs, "Fit on the runs A <= run < B of every object only (A:B)");
+  add_common(cb, co->common);
+  cb->callback([co] { run_command(co->common, [co] { return run_calibrate(*co); }); });
 }
 
 }  // namespace ts::cli

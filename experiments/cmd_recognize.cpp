@@ -2,7 +2,9 @@
 // tactile log (or from a plain contact cloud as a single step without free space). Several
 // logs or clouds (or a folder of clouds) are recognized in parallel in one process, sharing
 // the loaded database; each input gets its own recognizer with the seed it would have alone.
+#include "experiments/calibration.hpp"
 #include "experiments/cli_common.hpp"
+#include "experiments/recognition_engine.hpp"
 
 #include "engine/feature_table.hpp"
 #include "engine/free_cloud.hpp"
@@ -45,6 +47,7 @@ namespace fs = std::filesystem;
 struct RecognizeOptions {
   CommonOptions common;
   std::string db, out, ground_truth, object;
+  std::string calibration;           ///< --calibration: the confidence model (touchstone calibrate)
   std::vector<std::string> logs, clouds;  ///< --log files; --cloud files or folders
   bool batch = false;                ///< several inputs (or a folder): per-input output
   std::string method = "bricpsf";
@@ -160,6 +163,7 @@ struct Context {
   double largest = 0.0;          ///< m, diagonal of the largest database object
   SymmetryCache& symmetries;     ///< thread-safe
   const io::CongruenceRecord* congruence = nullptr;   ///< the database's classes (null: not known)
+  const experiments::Calibration* calibration = nullptr;  ///< --calibration (null: none)
 };
 
 /// The names of object i's congruent class (itself alone when in none, or when none are known).
@@ -180,6 +184,7 @@ struct InputRun {
   std::vector<double> fusion_time;
   std::string written;           ///< the result file written ("" : none)
   std::string error;             ///< several inputs: why this one failed ("" : it did not)
+  bool truth_outside = false;    ///< the log's object is not in the database (open set)
 };
 
 /// The whole recognition of one input with its own recognizer (the context's seed), the result
@@ -206,11 +211,13 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
     if (log->truth) run.truth_pose = log->truth->object_pose;
     run.truth_name = log->object;
     if (!run.truth_name.empty()) {
+      // An object outside the database (the open-set case) is recognized and scored: naming any
+      // database object is then wrong.
       const std::size_t i = db.find(run.truth_name);
-      if (i == db.size())
-        throw Error("the log's object '" + run.truth_name + "' is not in the database " + o.db, in.path,
-                    "/object");
-      truth_object = i;
+      if (i < db.size())
+        truth_object = i;
+      else
+        run.truth_outside = true;
     }
   } else {
     single = io::read_cloud(in.path);
@@ -266,6 +273,7 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
                     in.path, log ? "/grasps" : "points");
     }
     run.stored.push_back(io::to_result_step(r, truth_object, run.truth_pose, sym));
+    if (run.truth_outside) run.stored.back().correct = !r.valid;
     run.results.push_back(std::move(r));
     if (progress) std::fprintf(stderr, "\rstep %d/%d", k, K);
   }
@@ -298,6 +306,14 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     st["object"] = r.valid ? nlohmann::ordered_json(c.db.info(r.best.object).name) : nullptr;
     st["weight"] = r.valid ? nlohmann::ordered_json(r.best.weight) : nullptr;
     st["posterior"] = r.valid ? nlohmann::ordered_json(r.posterior) : nullptr;
+    // Calibrated: P(the named object is right), P(and its position within 1 cm) (--calibration).
+    if (c.calibration) {
+      const std::vector<double> f = experiments::confidence_features(r);
+      st["confidence"] = {{"object", c.calibration->object_confidence(f)},
+                          {"pose", c.calibration->pose_confidence(f)}};
+    } else {
+      st["confidence"] = nullptr;
+    }
     st["pose"] = r.valid ? pose_json(r.best.pose) : nullptr;
     const auto e = s.error;
     st["position_error_m"] = number_or_null(e ? std::optional(e->position_m) : std::nullopt);
@@ -360,6 +376,7 @@ nlohmann::ordered_json input_json(const Context& c, const InputRun& run, bool wi
   if (with_database) j["database"] = c.o.db;
   j["input"] = run.in.path;
   j["truth_object"] = run.truth_name.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(run.truth_name);
+  j["truth_in_database"] = run.truth_name.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(!run.truth_outside);
   return j;
 }
 
@@ -557,7 +574,10 @@ int run_recognize(const RecognizeOptions& o) {
   double largest = 0.0;
   for (std::size_t i = 0; i < db.size(); ++i) largest = std::max(largest, db.info(i).extent.norm());
   SymmetryCache symmetries;
-  const Context c{o, rs, db, largest, symmetries, source->congruence()};
+  std::optional<experiments::Calibration> calibration;   // fitted for this database, or an error
+  if (!o.calibration.empty())
+    calibration = experiments::read_calibration(o.calibration, experiments::file_fingerprint(*source));
+  const Context c{o, rs, db, largest, symmetries, source->congruence(), calibration ? &*calibration : nullptr};
   if (many) return recognize_many(c, inputs, outs);
 
   const InputRun run = recognize_one(c, inputs.front(), o.out, stderr_is_terminal() && !o.common.json);
@@ -598,6 +618,9 @@ void register_recognize(CLI::App& app) {
                   "Text file with the true 4x4 row-major object->world matrix")
       ->check(CLI::ExistingFile);
   sub->add_option("--object", o->object, "Name of the touched object (ground truth), if known");
+  sub->add_option("--calibration", o->calibration,
+                  "Confidence calibration of this database (touchstone calibrate): each step's JSON "
+                  "gets \"confidence\" {object, pose}");
 
   sub->add_option("--preset", o->preset,
                   "improved (default): Touchstone's extensions (per-object feature pruning, free "

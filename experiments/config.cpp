@@ -252,6 +252,9 @@ const std::vector<KeyDef>& key_defs() {
     add("icp.iterations", true,
         [](auto& c, auto& in, auto& x) { c.params.icp_iterations = int_at_least(in, 0, x); },
         [](auto& c) { return opt(c.params.icp_iterations); });
+    // calibration: a confidence calibration file (JSON, `touchstone calibrate`); "" none.
+    add("calibration", false, [](auto& c, auto& in, auto& x) { c.calibration = single(in, x); },
+        [](auto& c) { return J(c.calibration); });
     add("schedule", false,
         [](auto& c, auto& in, auto& x) { c.schedule = choice(in, {"runs", "steps"}, x); },
         [](auto& c) { return J(c.schedule); });

@@ -37,6 +37,8 @@
 //   twins.max_gap (near-twin verification: ln wt gap within which objects compete),
 //   icp.iterations     method parameters; unset means the recognizer's default
 //   memory_budget_mb   resident object geometry (MB, 0: no limit); default: the recognizer's
+//   calibration        path | ""          confidence calibration file (touchstone calibrate);
+//                                          "" (default): confidences not computed (NaN)
 //   schedule           runs | steps        parallel over runs (throughput) or inside each step
 //                                          (latency); never changes results
 //   sweep.<key> = [v1, v2, ...]            one variant per combination (cartesian product, the
@@ -110,6 +112,7 @@ struct ExperimentConfig {
   std::uint64_t seed = 1;
   MethodParams params;
   std::string schedule = "runs";
+  std::string calibration;              ///< confidence calibration file; "": none
   std::optional<double> memory_budget_mb;  ///< resident object geometry (MB); unset: the default
   std::vector<SweepAxis> sweep;
 };

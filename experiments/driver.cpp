@@ -103,6 +103,9 @@ void check_resumable(const io::RunStoreHeader& stored, const io::RunStoreHeader&
                 "is left untouched)", path, "objects");
   if (stored.stages != now.stages)
     throw Error("the run store was written by a build with other timing stages", path, "/header/stages");
+  if (stored.step_values != now.step_values)
+    throw Error("the run store was written by a build that records other per-step values", path,
+                "/header/step_values");
 }
 
 std::uint64_t name_hash(const std::string& name) {

@@ -46,6 +46,46 @@ Interval cluster_bootstrap_interval(std::span<const ClusterCounts> clusters, std
   return {*quantile(rates, 0.5 * (1.0 - level)), *quantile(rates, 0.5 * (1.0 + level))};
 }
 
+ConfidenceCalibration confidence_calibration(std::span<const double> confidence,
+                                             std::span<const int> outcome, std::size_t bins) {
+  if (confidence.size() != outcome.size())
+    throw Error("confidences and outcomes differ in number", {}, "confidence");
+  if (bins == 0) throw Error("a reliability diagram needs at least one bin", {}, "bins");
+  ConfidenceCalibration out;
+  out.bins.resize(bins);
+  for (std::size_t b = 0; b < bins; ++b) {
+    out.bins[b].lo = static_cast<double>(b) / static_cast<double>(bins);
+    out.bins[b].hi = static_cast<double>(b + 1) / static_cast<double>(bins);
+  }
+  out.n = confidence.size();
+  if (out.n == 0) return out;
+  std::vector<double> sum_conf(bins, 0.0), sum_right(bins, 0.0);
+  for (std::size_t i = 0; i < out.n; ++i) {
+    const double c = confidence[i];
+    if (!(c >= 0.0 && c <= 1.0)) throw Error("a confidence outside [0, 1]", {}, "confidence");
+    const double y = outcome[i] != 0 ? 1.0 : 0.0;
+    const std::size_t b = std::min(bins - 1, static_cast<std::size_t>(c * static_cast<double>(bins)));
+    ++out.bins[b].n;
+    sum_conf[b] += c;
+    sum_right[b] += y;
+    out.brier += (c - y) * (c - y);
+    out.mean_confidence += c;
+    out.accuracy += y;
+  }
+  const double n = static_cast<double>(out.n);
+  out.brier /= n;
+  out.mean_confidence /= n;
+  out.accuracy /= n;
+  for (std::size_t b = 0; b < bins; ++b) {
+    ReliabilityBin& r = out.bins[b];
+    if (r.n == 0) continue;
+    r.mean_confidence = sum_conf[b] / static_cast<double>(r.n);
+    r.accuracy = sum_right[b] / static_cast<double>(r.n);
+    out.ece += static_cast<double>(r.n) / n * std::abs(r.accuracy - r.mean_confidence);
+  }
+  return out;
+}
+
 std::optional<double> quantile(std::span<const double> values, double p) {
   if (values.empty()) return std::nullopt;
   if (!(p >= 0.0 && p <= 1.0)) throw Error("quantile level outside [0, 1]", {}, "p");

@@ -54,6 +54,29 @@ Interval cluster_bootstrap_interval(std::span<const ClusterCounts> clusters,
                                     std::size_t resamples = kBootstrapResamples,
                                     std::uint64_t seed = kBootstrapSeed, double level = 0.95);
 
+// --- Calibration of a confidence -------------------------------------------------------------------
+
+struct ReliabilityBin {
+  double lo = 0.0, hi = 0.0;         ///< confidence range [lo, hi) (the last bin includes 1)
+  std::size_t n = 0;                 ///< predictions in the bin
+  double mean_confidence = 0.0;      ///< 0 when n == 0
+  double accuracy = 0.0;             ///< share right; 0 when n == 0
+};
+
+struct ConfidenceCalibration {
+  std::size_t n = 0;
+  double ece = 0.0;                  ///< expected calibration error: sum_b n_b / n |acc_b - conf_b|
+  double brier = 0.0;                ///< mean (confidence - outcome)^2
+  double mean_confidence = 0.0, accuracy = 0.0;
+  std::vector<ReliabilityBin> bins;  ///< equal-width bins over [0, 1] (the reliability diagram)
+};
+
+/// ECE, Brier score and reliability diagram of confidences in [0, 1] against 0/1 outcomes.
+/// Empty input gives n = 0 and zeros. Throws ts::Error for sizes that differ, a confidence
+/// outside [0, 1] or non-finite, or bins == 0.
+ConfidenceCalibration confidence_calibration(std::span<const double> confidence,
+                                             std::span<const int> outcome, std::size_t bins = 10);
+
 // --- Order statistics and means ------------------------------------------------------------------
 
 /// Quantile p in [0, 1] by linear interpolation between order statistics (Hyndman & Fan type 7,

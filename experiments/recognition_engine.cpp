@@ -1,6 +1,7 @@
 #include "experiments/recognition_engine.hpp"
 
 #include "datasets/simulator.hpp"
+#include "experiments/calibration.hpp"
 #include "engine/feature_table.hpp"
 #include "engine/fusion.hpp"
 #include "engine/pose_error.hpp"
@@ -248,6 +249,10 @@ class RecognitionEngine final : public RunEngine {
     header_.config_json = to_json(config).dump();
     nlohmann::ordered_json db = db_.description;
     if (!db.is_object() || !db.contains("fingerprint")) db["fingerprint"] = source_fingerprint(*reader_);
+    // The confidence model, fitted for this database (checked: another database's or version's
+    // file is an error naming the file and the key).
+    if (!config.calibration.empty())
+      calibration_ = read_calibration(config.calibration, db["fingerprint"].get<std::string>());
     header_.database_json = db.dump();
     nlohmann::ordered_json ver;
     ver["touchstone"] = TS_VERSION;
@@ -270,6 +275,7 @@ class RecognitionEngine final : public RunEngine {
     header_.objects = explored_;
     header_.database_objects = names;
     header_.stages = recognition_stages();
+    header_.step_values = recognition_step_values();
   }
 
   const io::RunStoreHeader& header() const override { return header_; }
@@ -416,6 +422,12 @@ class RecognitionEngine final : public RunEngine {
       }
       for (double p : sr.posteriors)
         if (p > 0.0) s.posterior_entropy -= p * std::log(p);
+      // The confidences (NaN without a calibration) and the features they come from.
+      const std::vector<double> features = confidence_features(sr);
+      const double nan = std::numeric_limits<double>::quiet_NaN();
+      s.values = {calibration_ ? calibration_->object_confidence(features) : nan,
+                  calibration_ ? calibration_->pose_confidence(features) : nan};
+      s.values.insert(s.values.end(), features.begin(), features.end());
       const PoseError e = pose_error(s.pose, rec.truth, &model.symmetry);
       s.position_error_m = e.position_m;
       s.orientation_error_rad = e.orientation_deg * std::numbers::pi / 180.0;
@@ -445,6 +457,7 @@ class RecognitionEngine final : public RunEngine {
   io::RunStoreHeader header_;
   std::map<std::pair<std::string, int>, TactileLog> pools_;
   std::map<int, std::unique_ptr<ObjectTruthModel>> truth_models_;
+  std::optional<Calibration> calibration_;
 
   /// The drawn grasps of a shared pool, in the order drawn.
   static TactileLog log_from_pool(const TactileLog& pool, const std::vector<std::int32_t>& grasps) {
@@ -499,6 +512,15 @@ std::uint64_t pool_seed(std::uint64_t seed, const std::string& object, std::opti
   return Rng(seed, kRunPoolStream, name_hash(object), static_cast<std::uint64_t>(*run)).next();
 }
 
+const std::vector<std::string>& recognition_step_values() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> n{"confidence_object", "confidence_pose"};
+    for (const std::string& f : confidence_feature_names()) n.push_back("feature." + f);
+    return n;
+  }();
+  return names;
+}
+
 const std::vector<std::string>& recognition_stages() {
   static const std::vector<std::string> stages{"fusion", "prepare", "prune", "register",
                                                "icp", "evaluate", "other"};
@@ -533,6 +555,16 @@ std::string source_fingerprint(const ObjectSource& source) {
   return h.hex_digest();
 }
 
+std::string file_fingerprint(const io::DbReader& reader) {
+  // The content fingerprint plus the build seeds: a rebuilt database with other seeds is another
+  // database even when its names and sizes agree.
+  io::Sha256 h;
+  h.update(source_fingerprint(reader));
+  h.update(std::to_string(reader.schema_version()) + " " + std::to_string(reader.build_seed()));
+  for (std::size_t i = 0; i < reader.size(); ++i) h.update(" " + std::to_string(reader.object_seed(i)));
+  return h.hex_digest();
+}
+
 EngineDatabase open_database(const std::filesystem::path& path) {
   auto reader = std::make_shared<io::DbReader>(path);
   EngineDatabase db;
@@ -541,13 +573,7 @@ EngineDatabase open_database(const std::filesystem::path& path) {
   std::error_code ec;
   const auto absolute = std::filesystem::absolute(path, ec);
   db.description["path"] = ec ? path.string() : absolute.string();
-  // The content fingerprint plus the build seeds: a rebuilt database with other seeds is another
-  // database even when its names and sizes agree.
-  io::Sha256 h;
-  h.update(source_fingerprint(*reader));
-  h.update(std::to_string(reader->schema_version()) + " " + std::to_string(reader->build_seed()));
-  for (std::size_t i = 0; i < reader->size(); ++i) h.update(" " + std::to_string(reader->object_seed(i)));
-  db.description["fingerprint"] = h.hex_digest();
+  db.description["fingerprint"] = file_fingerprint(*reader);
   db.description["objects"] = reader->size();
   db.description["schema_version"] = reader->schema_version();
   db.description["build_seed"] = reader->build_seed();

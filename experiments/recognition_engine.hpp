@@ -29,6 +29,10 @@
 #include <optional>
 #include <string>
 
+namespace ts::io {
+class DbReader;
+}
+
 namespace ts::experiments {
 
 /// The database an experiment uses: objects for the recognizer, meshes for the simulator, and
@@ -46,6 +50,9 @@ EngineDatabase memory_database(std::vector<BuiltObject> objects, const DatabaseS
 /// SHA-256 over what determines an object source's content: settings, names, mesh checksums,
 /// scales and point counts.
 std::string source_fingerprint(const ObjectSource& source);
+/// A database file's fingerprint (run stores and calibration files record it): the source's plus
+/// the schema version and build seeds.
+std::string file_fingerprint(const io::DbReader& reader);
 
 /// Resolve the configuration's objects for every variant against `database` and build the run
 /// store header. Throws ts::Error for an unknown object (naming the key). `threads` is recorded;
@@ -57,6 +64,11 @@ std::unique_ptr<RunEngine> make_recognition_engine(const ExperimentConfig& confi
 /// The simulator seed of a pool: the object's shared pool (run = nullopt, protocol shared_pool)
 /// or run `run`'s own pool (protocol independent).
 std::uint64_t pool_seed(std::uint64_t seed, const std::string& object, std::optional<int> run);
+
+/// Names of the per-step values the recognition engine records: "confidence_object" and
+/// "confidence_pose" (NaN without a calibration), then "feature.<name>" for every confidence
+/// feature (experiments/calibration.hpp), which `touchstone calibrate` fits on.
+const std::vector<std::string>& recognition_step_values();
 
 /// Names of the per-stage timing columns the recognition engine records.
 const std::vector<std::string>& recognition_stages();

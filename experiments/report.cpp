@@ -1,6 +1,7 @@
 #include "experiments/report.hpp"
 
 #include "engine/core.hpp"
+#include "experiments/calibration.hpp"
 #include "io/atomic_file.hpp"
 
 #include <spawn.h>
@@ -190,10 +191,102 @@ J summary_json(const J& per_step, const std::vector<const io::RunRecord*>& runs)
 }
 
 struct VariantJson {
-  J per_step, per_object, summary;
+  J per_step, per_object, summary, confidence;
 };
 
-VariantJson variant_json(const io::RunStoreContents& store, int variant, const ErrorBounds& bounds) {
+J bins_json(const ConfidenceCalibration& c) {
+  J out = J::array();
+  for (const ReliabilityBin& b : c.bins)
+    out.push_back({{"lo", b.lo}, {"hi", b.hi}, {"n", b.n}, {"mean_confidence", b.mean_confidence},
+                   {"accuracy", b.accuracy}});
+  return out;
+}
+
+/// Calibration of the confidences per step (ECE, Brier, reliability): those the store recorded,
+/// or recomputed from its features with `calibration`. Null when there are none.
+J confidence_json(const io::RunStoreHeader& h, const std::vector<const io::RunRecord*>& runs,
+                  const ReportSettings& settings) {
+  auto column = [&](const std::string& name) {
+    const auto it = std::find(h.step_values.begin(), h.step_values.end(), name);
+    return it == h.step_values.end() ? -1 : static_cast<int>(it - h.step_values.begin());
+  };
+  const int object_col = column("confidence_object"), pose_col = column("confidence_pose");
+  std::vector<int> feature_cols;
+  if (settings.calibration) {
+    for (const std::string& f : settings.calibration->features) {
+      feature_cols.push_back(column("feature." + f));
+      if (feature_cols.back() < 0)
+        throw Error("the run store has no feature '" + f + "' to apply the calibration to",
+                    settings.calibration_path, "features");
+    }
+  } else if (object_col < 0 || pose_col < 0) {
+    return nullptr;
+  }
+  const int steps = h.steps;
+  std::vector<double> all_object, all_pose;
+  std::vector<int> all_object_right, all_pose_right;
+  J rows = J::array();
+  J at20 = nullptr;
+  for (int k = 0; k < steps; ++k) {
+    std::vector<double> obj, pose;
+    std::vector<int> obj_right, pose_right;
+    for (const io::RunRecord* r : runs) {
+      const io::RunStepRecord& s = r->steps[static_cast<std::size_t>(k)];
+      double co = 0.0, cp = 0.0;
+      if (settings.calibration) {
+        std::vector<double> f;
+        for (int c : feature_cols) f.push_back(s.values.at(static_cast<std::size_t>(c)));
+        co = settings.calibration->object_confidence(f);
+        cp = settings.calibration->pose_confidence(f);
+      } else {
+        co = s.values.at(static_cast<std::size_t>(object_col));
+        cp = s.values.at(static_cast<std::size_t>(pose_col));
+      }
+      if (!std::isfinite(co) || !std::isfinite(cp)) continue;  // recorded without a calibration
+      obj.push_back(co);
+      pose.push_back(cp);
+      obj_right.push_back(s.correct ? 1 : 0);
+      pose_right.push_back(s.correct && s.position_error_m < 0.01 ? 1 : 0);
+    }
+    if (obj.empty()) return nullptr;
+    const ConfidenceCalibration a = confidence_calibration(obj, obj_right);
+    const ConfidenceCalibration b = confidence_calibration(pose, pose_right);
+    J row;
+    row["step"] = k + 1;
+    row["n"] = a.n;
+    row["object_confidence_mean"] = a.mean_confidence;
+    row["object_accuracy"] = a.accuracy;
+    row["object_ece"] = a.ece;
+    row["object_brier"] = a.brier;
+    row["pose_confidence_mean"] = b.mean_confidence;
+    row["pose_accuracy"] = b.accuracy;
+    row["pose_ece"] = b.ece;
+    row["pose_brier"] = b.brier;
+    rows.push_back(row);
+    if (k + 1 == std::min(20, steps)) at20 = J{{"object", bins_json(a)}, {"pose", bins_json(b)}};
+    all_object.insert(all_object.end(), obj.begin(), obj.end());
+    all_pose.insert(all_pose.end(), pose.begin(), pose.end());
+    all_object_right.insert(all_object_right.end(), obj_right.begin(), obj_right.end());
+    all_pose_right.insert(all_pose_right.end(), pose_right.begin(), pose_right.end());
+  }
+  const ConfidenceCalibration a = confidence_calibration(all_object, all_object_right);
+  const ConfidenceCalibration b = confidence_calibration(all_pose, all_pose_right);
+  J out;
+  out["source"] = settings.calibration ? "recomputed from the stored features with " + settings.calibration_path
+                                       : std::string("recorded by the experiment");
+  out["object_outcome"] = "the named object is the explored object (strict)";
+  out["pose_outcome"] = "the named object is right and its position error is below 1 cm";
+  out["bins"] = a.bins.size();
+  out["per_step"] = rows;
+  out["all_steps"] = {{"n", a.n}, {"object_ece", a.ece}, {"object_brier", a.brier}, {"pose_ece", b.ece},
+                      {"pose_brier", b.brier}, {"object_reliability", bins_json(a)},
+                      {"pose_reliability", bins_json(b)}};
+  out["step20_reliability"] = at20;
+  return out;
+}
+
+VariantJson variant_json(const io::RunStoreContents& store, int variant, const ReportSettings& settings) {
+  const ErrorBounds& bounds = settings.bounds;
   const auto& h = store.header;
   std::vector<const io::RunRecord*> all;
   std::vector<std::vector<const io::RunRecord*>> by_object(h.objects.size());
@@ -208,6 +301,7 @@ VariantJson variant_json(const io::RunStoreContents& store, int variant, const E
   for (const io::RunRecord* r : all) objects.insert(r->object);
   v.per_step = per_step_json(h, all, h.steps, bounds, classes, objects.size() > 1);
   v.summary = summary_json(v.per_step, all);
+  v.confidence = confidence_json(h, all, settings);
   v.per_object = J::array();
   for (std::size_t o = 0; o < h.objects.size(); ++o) {
     if (by_object[o].empty()) continue;
@@ -292,11 +386,12 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
       vj.push_back({J::array(), J::array(), nullptr});
       continue;
     }
-    vj.push_back(variant_json(store, static_cast<int>(v), settings.bounds));
+    vj.push_back(variant_json(store, static_cast<int>(v), settings));
   }
   out["per_step"] = vj.empty() ? J::array() : vj[0].per_step;
   out["per_object"] = vj.empty() ? J::array() : vj[0].per_object;
   out["summary"] = vj.empty() ? J(nullptr) : vj[0].summary;
+  out["confidence"] = vj.empty() ? J(nullptr) : vj[0].confidence;
 
   if (variants > 1) {
     J list = J::array();
@@ -419,8 +514,37 @@ void print_intervals(const J& report, std::ostream& out) {
                  : " (each run its own object pose and grasp pool)")
       << "\n  intervals (95 %): Wilson assumes every run independent"
       << (shared ? " (they are not: too narrow)" : "")
-      << "; obj-boot resamples the explored objects (" << iv.value("bootstrap_resamples", 0)
+      << ";\n    obj-boot resamples the explored objects (" << iv.value("bootstrap_resamples", 0)
       << " resamples), assuming only objects independent\n";
+}
+
+void print_confidence(const J& report, std::ostream& out) {
+  const J& c = report.value("confidence", J(nullptr));
+  if (!c.is_object()) {
+    out << "  confidence: not calibrated (experiment or report with a calibration file: "
+           "`touchstone calibrate`)\n";
+    return;
+  }
+  out << "\nConfidence (" << c["source"].get<std::string>()
+      << "): calibration against the outcomes, per step\n"
+         "  step  object: mean  right  ECE    Brier   pose (< 1 cm): mean  right  ECE    Brier\n";
+  const J& rows = c["per_step"];
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const int step = rows[i]["step"].get<int>();
+    if (!(step == 1 || step == 5 || step == 10 || step == 20 || step % 10 == 0 || i + 1 == rows.size())) continue;
+    const J& r = rows[i];
+    out << "  " << std::setw(4) << step << "  " << std::setw(12) << fmt(r["object_confidence_mean"], 1, 3)
+        << "  " << std::setw(5) << fmt(r["object_accuracy"], 1, 3) << "  " << std::setw(5)
+        << fmt(r["object_ece"], 1, 3) << "  " << std::setw(6) << fmt(r["object_brier"], 1, 3) << "  "
+        << std::setw(19) << fmt(r["pose_confidence_mean"], 1, 3) << "  " << std::setw(5)
+        << fmt(r["pose_accuracy"], 1, 3) << "  " << std::setw(5) << fmt(r["pose_ece"], 1, 3) << "  "
+        << std::setw(6) << fmt(r["pose_brier"], 1, 3) << "\n";
+  }
+  const J& a = c["all_steps"];
+  out << "  all steps (" << a["n"].get<std::size_t>() << " step answers): object ECE "
+      << fmt(a["object_ece"], 1, 3) << ", Brier " << fmt(a["object_brier"], 1, 3) << "; pose ECE "
+      << fmt(a["pose_ece"], 1, 3) << ", Brier " << fmt(a["pose_brier"], 1, 3) << " ("
+      << c["bins"].get<std::size_t>() << " equal-width bins)\n";
 }
 
 }  // namespace
@@ -460,6 +584,7 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
     print_steps(report["per_step"], out);
     print_classes(report, out);
     print_intervals(report, out);
+    print_confidence(report, out);
     out << "\nPer object:\n";
     print_objects(report["per_object"], out);
     return;

@@ -15,8 +15,14 @@
 
 namespace ts::experiments {
 
+struct Calibration;
+
 struct ReportSettings {
   ErrorBounds bounds;          ///< the paper's 4 cm / 1 rad
+  /// Recompute the confidences from the store's features with this model (e.g. one fitted on
+  /// other runs); null: the confidences the store recorded (if any).
+  const Calibration* calibration = nullptr;
+  std::string calibration_path;  ///< reported as the confidences' source
   int threads = 0;             ///< reported "threads" (the experiment's); 0: from the store
   std::string machine;         ///< reported "machine"; empty: from the store
 };

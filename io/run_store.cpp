@@ -90,6 +90,7 @@ void write_header(h5::Group root, const RunStoreHeader& h) {
   hg.write_strings("objects", h.objects);
   hg.write_strings("database_objects", h.database_objects);
   hg.write_strings("stages", h.stages);
+  if (!h.step_values.empty()) hg.write_strings("step_values", h.step_values);
 
   const std::uint64_t steps = static_cast<std::uint64_t>(h.steps);
   h5::Group runs = root.create_group("runs");
@@ -107,6 +108,7 @@ void write_header(h5::Group root, const RunStoreHeader& h) {
   for (const char* n : kStepDoubles) st.create_extendible<double>(n, {});
   st.create_extendible<double>("pose", {7});
   if (!h.stages.empty()) st.create_extendible<double>("stage_times_s", {h.stages.size()});
+  if (!h.step_values.empty()) st.create_extendible<double>("values", {h.step_values.size()});
 }
 
 RunStoreHeader parse_header(const h5::File& file) {
@@ -136,6 +138,8 @@ RunStoreHeader parse_header(const h5::File& file) {
   h.objects = hg.read_strings("objects");
   h.database_objects = hg.read_strings("database_objects");
   h.stages = hg.read_strings("stages");
+  // Optional (stores written before the per-step values have none).
+  if (hg.has_dataset("step_values")) h.step_values = hg.read_strings("step_values");
   if (h.variant_labels.empty() || h.variant_labels.size() != h.variant_configs.size())
     throw Error("variant labels and configurations differ in number", file.name(), "/header/variant_configs");
   return h;
@@ -152,6 +156,8 @@ void append_runs(h5::Group root, const RunStoreHeader& h, const std::vector<RunR
   for (const char* n : kStepInts) first_row = std::max(first_row, st.shape(n).at(0));
   for (const char* n : {"correct", "pose"}) first_row = std::max(first_row, st.shape(n).at(0));
   if (S) first_row = std::max(first_row, st.shape("stage_times_s").at(0));
+  const std::size_t V = h.step_values.size();
+  if (V) first_row = std::max(first_row, st.shape("values").at(0));
   auto pad_to = [&](const char* name, auto zero) {
     using T = decltype(zero);
     const h5::Shape s = st.shape(name);
@@ -167,13 +173,14 @@ void append_runs(h5::Group root, const RunStoreHeader& h, const std::vector<RunR
   for (const char* n : kStepDoubles) pad_to(n, 0.0);
   pad_to("pose", 0.0);
   if (S) pad_to("stage_times_s", 0.0);
+  if (V) pad_to("values", 0.0);
 
   const std::size_t m = runs.size() * steps;
   std::vector<std::int32_t> step_col(m);
   std::vector<std::uint8_t> correct(m);
   std::vector<std::vector<std::int32_t>> ints(std::size(kStepInts), std::vector<std::int32_t>(m));
   std::vector<std::vector<double>> dbls(std::size(kStepDoubles), std::vector<double>(m));
-  std::vector<double> pose(7 * m), stages(S * m);
+  std::vector<double> pose(7 * m), stages(S * m), values(V * m);
   std::size_t row = 0;
   for (const RunRecord& r : runs) {
     if (r.steps.size() != steps || r.grasps.size() != steps)
@@ -182,6 +189,8 @@ void append_runs(h5::Group root, const RunStoreHeader& h, const std::vector<RunR
       RunStepRecord s = r.steps[k];
       if (s.stage_times_s.size() != S)
         throw Error("a step must have one timing per stage", root.file(), "/steps/stage_times_s");
+      if (s.values.size() != V)
+        throw Error("a step must have one value per name of /header/step_values", root.file(), "/steps/values");
       step_col[row] = static_cast<std::int32_t>(k + 1);
       correct[row] = s.correct ? 1 : 0;
       for (std::size_t c = 0; c < std::size(kStepInts); ++c) ints[c][row] = step_int(s, static_cast<int>(c));
@@ -191,6 +200,7 @@ void append_runs(h5::Group root, const RunStoreHeader& h, const std::vector<RunR
       std::copy(p.begin(), p.end(), pose.begin() + static_cast<std::ptrdiff_t>(7 * row));
       std::copy(s.stage_times_s.begin(), s.stage_times_s.end(),
                 stages.begin() + static_cast<std::ptrdiff_t>(S * row));
+      std::copy(s.values.begin(), s.values.end(), values.begin() + static_cast<std::ptrdiff_t>(V * row));
     }
   }
   st.append("step", step_col.data(), m);
@@ -199,6 +209,7 @@ void append_runs(h5::Group root, const RunStoreHeader& h, const std::vector<RunR
   for (std::size_t c = 0; c < std::size(kStepDoubles); ++c) st.append(kStepDoubles[c], dbls[c].data(), m);
   st.append("pose", pose.data(), m);
   if (S) st.append("stage_times_s", stages.data(), m);
+  if (V) st.append("values", values.data(), m);
 
   // Run rows last: they commit the step rows above. The shortest /runs column decides how
   // many runs are committed, so write the key columns last. Columns left uneven by an
@@ -273,10 +284,14 @@ std::vector<RunRecord> read_runs(const h5::File& file, const RunStoreHeader& h,
   auto pose = st.read<double>("pose", {h5::kAny, 7});
   std::vector<double> stage;
   if (S) stage = st.read<double>("stage_times_s", {h5::kAny, static_cast<std::int64_t>(S)});
+  const std::size_t V = h.step_values.size();
+  std::vector<double> values;
+  if (V) values = st.read<double>("values", {h5::kAny, static_cast<std::int64_t>(V)});
   std::size_t m = std::min({step_col.size(), correct.size(), pose.size() / 7});
   for (const auto& c : ints) m = std::min(m, c.size());
   for (const auto& c : dbls) m = std::min(m, c.size());
   if (S) m = std::min(m, stage.size() / S);
+  if (V) m = std::min(m, values.size() / V);
 
   std::vector<RunRecord> out;
   std::vector<std::size_t> source;
@@ -308,6 +323,8 @@ std::vector<RunRecord> read_runs(const h5::File& file, const RunStoreHeader& h,
       s.pose = pose_from(&pose[7 * row]);
       s.stage_times_s.assign(stage.begin() + static_cast<std::ptrdiff_t>(S * row),
                              stage.begin() + static_cast<std::ptrdiff_t>(S * (row + 1)));
+      s.values.assign(values.begin() + static_cast<std::ptrdiff_t>(V * row),
+                      values.begin() + static_cast<std::ptrdiff_t>(V * (row + 1)));
       r.steps.push_back(std::move(s));
     }
     out.push_back(std::move(r));
@@ -383,7 +400,8 @@ void check_pending_header(const RunStoreHeader& store, const RunStoreHeader& pen
                           const std::filesystem::path& file) {
   if (pending.config_json != store.config_json || pending.database_json != store.database_json ||
       pending.steps != store.steps ||
-      pending.stages != store.stages || pending.objects != store.objects ||
+      pending.stages != store.stages || pending.step_values != store.step_values ||
+      pending.objects != store.objects ||
       pending.variant_labels != store.variant_labels || pending.database_objects != store.database_objects)
     throw Error("these runs belong to another experiment than their store (remove the file, or the store)",
                 file.string(), "/config");
@@ -515,7 +533,7 @@ namespace {
 struct Columns {
   std::vector<std::int32_t> variant, object, run, grasps, step;
   std::vector<std::int64_t> first;
-  std::vector<double> truth, wall, pose, stage;
+  std::vector<double> truth, wall, pose, stage, values;
   std::vector<std::uint8_t> correct;
   std::vector<std::vector<std::int32_t>> ints;
   std::vector<std::vector<double>> dbls;
@@ -540,6 +558,8 @@ Columns read_columns(const std::filesystem::path& file, const RunStoreHeader& h)
   for (const char* n : kStepDoubles) c.dbls.push_back(st.read<double>(n, {h5::kAny}));
   c.pose = st.read<double>("pose", {h5::kAny, 7});
   if (S) c.stage = st.read<double>("stage_times_s", {h5::kAny, static_cast<std::int64_t>(S)});
+  const std::size_t V = h.step_values.size();
+  if (V) c.values = st.read<double>("values", {h5::kAny, static_cast<std::int64_t>(V)});
   f.close();
   return c;
 }
@@ -563,7 +583,7 @@ void RunStore::compact(const std::filesystem::path& path, bool complete) {
   std::vector<Columns> in;
   for (const auto& file : m.files) in.push_back(read_columns(file, h));
   const auto steps = static_cast<std::size_t>(h.steps);
-  const std::size_t S = h.stages.size();
+  const std::size_t S = h.stages.size(), V = h.step_values.size();
   Columns c;
   c.ints.resize(std::size(kStepInts));
   c.dbls.resize(std::size(kStepDoubles));
@@ -583,6 +603,7 @@ void RunStore::compact(const std::filesystem::path& path, bool complete) {
       for (std::size_t i = 0; i < c.dbls.size(); ++i) take_row(c.dbls[i], x.dbls[i], row, 1);
       take_row(c.pose, x.pose, row, 7);
       if (S) take_row(c.stage, x.stage, row, S);
+      if (V) take_row(c.values, x.values, row, V);
     }
   }
   const std::size_t n = m.source.size(), rows = n * steps;
@@ -598,6 +619,7 @@ void RunStore::compact(const std::filesystem::path& path, bool complete) {
     for (std::size_t i = 0; i < std::size(kStepDoubles); ++i) st.append(kStepDoubles[i], c.dbls[i].data(), rows);
     st.append("pose", c.pose.data(), rows);
     if (S) st.append("stage_times_s", c.stage.data(), rows);
+    if (V) st.append("values", c.values.data(), rows);
     std::vector<std::int64_t> first(n);
     for (std::size_t i = 0; i < n; ++i) first[i] = static_cast<std::int64_t>(i * steps);
     rg.append("first_step_row", first.data(), n);

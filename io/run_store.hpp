@@ -41,6 +41,8 @@ struct RunStepRecord {
   double mssd_m = 0.0;                 ///< BOP MSSD
   double time_s = 0.0;                 ///< wall time of the step
   std::vector<double> stage_times_s;   ///< one per RunStoreHeader::stages
+  std::vector<double> values;          ///< one per RunStoreHeader::step_values (e.g. the
+                                       ///< confidence and its features)
 };
 
 /// One completed exploration run (one row of /runs and its `steps` rows of /steps).
@@ -70,6 +72,8 @@ struct RunStoreHeader {
   std::vector<std::string> objects;         ///< explored objects (RunRecord::object)
   std::vector<std::string> database_objects;///< names RunStepRecord::best_object indexes
   std::vector<std::string> stages;          ///< names of the per-stage timing columns
+  std::vector<std::string> step_values;     ///< names of the per-step value columns (optional:
+                                            ///< none in stores written before them)
 };
 
 struct RunStoreContents {

@@ -282,6 +282,39 @@ def plot_per_object(report, out, written):
     finish(fig, os.path.join(out, "recognition_per_object.png"), written)
 
 
+def plot_reliability(report, out, written):
+    """Reliability diagrams of the step confidences (object right; pose within 1 cm)."""
+    conf = report.get("confidence")
+    if not conf:
+        return
+    fig, axes = plt.subplots(1, 2, figsize=(WIDTH, 2.9))
+    panels = [("object", "object right"), ("pose", "right object, position < 1 cm")]
+    for ax, (key, title) in zip(axes, panels):
+        ax.plot([0, 1], [0, 1], color="0.6", linestyle="--", linewidth=0.9)
+        sets = [("all steps", conf["all_steps"][key + "_reliability"], COLORS[0])]
+        if conf.get("step20_reliability"):
+            step = min(20, len(conf["per_step"]))
+            sets.append((f"step {step}", conf["step20_reliability"][key], COLORS[1]))
+        for label, bins, c in sets:
+            x = [b["mean_confidence"] for b in bins if b["n"] > 0]
+            y = [b["accuracy"] for b in bins if b["n"] > 0]
+            n = [b["n"] for b in bins if b["n"] > 0]
+            total = max(1, sum(n))
+            ax.plot(x, y, color=c, marker="o", markersize=3, label=label)
+            for xi, yi, ni in zip(x, y, n):
+                ax.scatter([xi], [yi], s=8 + 200 * ni / total, color=c, alpha=0.25, linewidths=0)
+        a = conf["all_steps"]
+        ax.set_title(f"{title}: ECE {a[key + '_ece']:.3f}, Brier {a[key + '_brier']:.3f} (all steps)",
+                     fontsize=7.5)
+        ax.set_xlabel("confidence")
+        ax.set_ylabel("share right")
+        ax.set_xlim(-0.02, 1.02)
+        ax.set_ylim(-0.02, 1.02)
+        ax.legend(loc="upper left", frameon=False, fontsize=7)
+    fig.suptitle("reliability: " + subtitle(report) + "\n" + conf.get("source", ""), fontsize=7.5)
+    finish(fig, os.path.join(out, "reliability.png"), written)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("report", help="report JSON (touchstone report RUN.h5 --json)")
@@ -300,6 +333,7 @@ def main():
     plot_time(report, args.out, written)
     plot_error_vs_time(report, args.out, written)
     plot_per_object(report, args.out, written)
+    plot_reliability(report, args.out, written)
     if args.list:
         with open(args.list, "w") as f:
             f.write("\n".join(written) + "\n")

@@ -201,7 +201,16 @@ TEST_CASE("cli recognize: bad input gives one clear error and no output file") {
     CHECK_FALSE(fs::exists(dir / "out.h5"));
   };
   expect_error("recognize --db db.h5 --log log.h5 --steps 4 --out out.h5", "exceeds the log's 3 grasps");
-  expect_error("recognize --db small.h5 --log log.h5 --out out.h5", "is not in the database");
+  {  // a log of an object outside the database (the open set) is recognized, and scored wrong
+    const Run r = touchstone(dir, "recognize --db small.h5 --log log.h5 --json" + kFast);
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    const auto j = nlohmann::json::parse(r.out);
+    CHECK(j["truth_object"] == "wedge");
+    CHECK(j["truth_in_database"] == false);
+    for (const auto& st : j["steps"]) CHECK(st["correct"] == st["object"].is_null());
+    CHECK(j["steps"][0]["confidence"].is_null());   // no --calibration
+  }
+  expect_error("recognize --db db.h5 --log log.h5 --calibration missing.json --out out.h5", "missing.json");
 
   {  // a log without grasps
     TactileLog empty = io::read_log(dir / "log.h5");
@@ -279,7 +288,8 @@ nlohmann::json without_times(nlohmann::json j) {
 /// What a batch entry must equal: the per-input fields of a single-input run's JSON.
 nlohmann::json input_fields(const nlohmann::json& single) {
   nlohmann::json j;
-  for (const char* key : {"method", "preset", "steps", "input", "truth_object"}) j[key] = single.at(key);
+  for (const char* key : {"method", "preset", "steps", "input", "truth_object", "truth_in_database"})
+    j[key] = single.at(key);
   return without_times(j);
 }
 
@@ -405,15 +415,14 @@ TEST_CASE("cli recognize, several logs: broken inputs are reported, the others s
   const std::vector<nlohmann::json> singles = {
       alone(dir, "--db small.h5 --log nut.h5 --out nut_alone.h5"),
       alone(dir, "--db small.h5 --log box.h5 --out box_alone.h5")};
-  // inputs: good, not HDF5, good, truncated, object not in the database
+  // inputs: good, not HDF5, good, truncated, object not in the database (recognized: open set)
   const Run r = touchstone(dir, "recognize --db small.h5 --log nut.h5 junk.h5 box.h5 cut.h5 wedge.h5 --json --out res" + kFast);
   CHECK(r.code == 1);
   const auto j = nlohmann::json::parse(r.out);  // the JSON is complete all the same
   REQUIRE(j["inputs"].size() == 5);
   CHECK(without_times(j["inputs"][0]) == input_fields(singles[0]));
   CHECK(without_times(j["inputs"][2]) == input_fields(singles[1]));
-  const std::vector<std::pair<std::size_t, std::string>> broken = {
-      {1, "junk.h5"}, {3, "cut.h5"}, {4, "wedge.h5, /object"}};
+  const std::vector<std::pair<std::size_t, std::string>> broken = {{1, "junk.h5"}, {3, "cut.h5"}};
   for (const auto& [i, names] : broken) {
     const auto& entry = j["inputs"][i];
     INFO(entry.dump());
@@ -421,13 +430,14 @@ TEST_CASE("cli recognize, several logs: broken inputs are reported, the others s
     REQUIRE(entry["error"].is_string());
     CHECK(entry["error"].get<std::string>().find(names) != std::string::npos);
   }
-  CHECK(j["inputs"][4]["error"].get<std::string>().find("is not in the database") != std::string::npos);
+  CHECK(j["inputs"][4]["truth_in_database"] == false);
+  CHECK(j["inputs"][4].contains("steps"));
   // stderr: one line per broken input, naming it, in input order
   std::vector<std::string> lines;
   for (std::size_t at = 0, nl; (nl = r.err.find('\n', at)) != std::string::npos; at = nl + 1)
     lines.push_back(r.err.substr(at, nl - at));
-  REQUIRE(lines.size() == 3);
-  for (std::size_t k = 0; k < 3; ++k) {
+  REQUIRE(lines.size() == 2);
+  for (std::size_t k = 0; k < 2; ++k) {
     INFO(lines[k]);
     CHECK(lines[k].rfind("touchstone: error: ", 0) == 0);
     CHECK(lines[k].find(broken[k].second) != std::string::npos);
@@ -435,7 +445,8 @@ TEST_CASE("cli recognize, several logs: broken inputs are reported, the others s
   // the results of the good inputs, as alone; nothing else (no partial or temporary files)
   CHECK(test::read_bytes(dir / "res" / "nut.h5") == test::read_bytes(dir / "nut_alone.h5"));
   CHECK(test::read_bytes(dir / "res" / "box.h5") == test::read_bytes(dir / "box_alone.h5"));
-  CHECK(std::distance(fs::directory_iterator(dir / "res"), fs::directory_iterator{}) == 2);
+  CHECK(fs::exists(dir / "res" / "wedge.h5"));
+  CHECK(std::distance(fs::directory_iterator(dir / "res"), fs::directory_iterator{}) == 3);
 }
 
 TEST_CASE("cli recognize, several inputs: refusals before any work") {

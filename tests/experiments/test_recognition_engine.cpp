@@ -2,6 +2,7 @@
 // records; the same results for 1 and 2 threads and after an interruption.
 #include "engine/recognition_fixture.hpp"
 #include "datasets/simulator.hpp"
+#include "experiments/calibration.hpp"
 #include "experiments/recognition_engine.hpp"
 #include "temp_dir.hpp"
 
@@ -205,4 +206,58 @@ TEST_CASE("Recognition engine: the paper's shared pool as an option; protocols n
     CHECK(e.file() == "shared1.h5");
   }
   CHECK(io::RunStore::read(dir / "shared1.h5").runs.size() == 3);
+}
+
+TEST_CASE("Recognition engine: per-step confidence features; confidences from this database's calibration only") {
+  test::TempDir dir("engine");
+  ExperimentConfig c = small_config();
+  set_key(c, "objects", {"box"});
+  set_key(c, "runs", {"1"});
+  auto plain = make_recognition_engine(c, small_database(), 1);
+  CHECK(plain->header().step_values == recognition_step_values());
+  const auto runs = run_all(*plain, c, dir / "plain.h5", 1, true);
+  REQUIRE(runs.size() == 1);
+  const std::size_t F = confidence_feature_names().size();
+  for (const auto& s : runs[0].steps) {
+    REQUIRE(s.values.size() == 2 + F);
+    CHECK(std::isnan(s.values[0]));  // no calibration: no confidence
+    CHECK(std::isnan(s.values[1]));
+    for (std::size_t i = 2; i < s.values.size(); ++i) CHECK(std::isfinite(s.values[i]));
+    CHECK(s.values[2] == doctest::Approx(s.posterior_best));  // feature.posterior_best
+  }
+
+  // A calibration of this database: the recorded confidences are its predictions on the
+  // recorded features.
+  Calibration cal;
+  cal.database_fingerprint = small_database().description["fingerprint"].get<std::string>();
+  cal.features = confidence_feature_names();
+  cal.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 1.0), std::vector<double>(F + 1, 0.3)};
+  cal.pose = {std::vector<double>(F, 0.1), std::vector<double>(F, 2.0), std::vector<double>(F + 1, -0.2)};
+  write_calibration(dir / "cal.json", cal);
+  ExperimentConfig with = c;
+  set_key(with, "calibration", {(dir / "cal.json").string()});
+  auto calibrated = make_recognition_engine(with, small_database(), 1);
+  const auto cruns = run_all(*calibrated, with, dir / "calibrated.h5", 1, true);
+  REQUIRE(cruns.size() == 1);
+  for (std::size_t k = 0; k < cruns[0].steps.size(); ++k) {
+    const auto& v = cruns[0].steps[k].values;
+    const std::vector<double> f(v.begin() + 2, v.end());
+    CHECK(f == std::vector<double>(runs[0].steps[k].values.begin() + 2, runs[0].steps[k].values.end()));
+    CHECK(v[0] == cal.object_confidence(f));
+    CHECK(v[1] == cal.pose_confidence(f));
+    CHECK(v[0] > 0.0);
+    CHECK(v[0] < 1.0);
+  }
+
+  // Another database's calibration: one error naming the file and the key, before any run.
+  cal.database_fingerprint = "0123456789abcdef";
+  write_calibration(dir / "other.json", cal);
+  set_key(with, "calibration", {(dir / "other.json").string()});
+  try {
+    make_recognition_engine(with, small_database(), 1);
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.file() == (dir / "other.json").string());
+    CHECK(e.field() == "database_fingerprint");
+  }
 }

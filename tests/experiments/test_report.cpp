@@ -1,9 +1,11 @@
 // Report JSON: the interface's keys, values against hand-counted outcomes, plots.
+#include "experiments/calibration.hpp"
 #include "experiments/report.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>
 
+#include <cmath>
 #include <numbers>
 #include <sstream>
 
@@ -214,4 +216,73 @@ TEST_CASE("Report: recognition rates get a cluster bootstrap over objects and sa
   std::ostringstream old;
   print_report(j, old);
   CHECK(old.str().find("Wilson assumes every run independent (they are not: too narrow)") != std::string::npos);
+}
+
+TEST_CASE("Report: confidences judged per step (ECE, Brier, reliability), recorded or recomputed with a calibration") {
+  io::RunStoreContents c = synthetic();  // step k: runs r < k right (1, 2, 3 of 4 per object)
+  auto& h = c.header;
+  h.step_values = {"confidence_object", "confidence_pose"};
+  for (const std::string& f : confidence_feature_names()) h.step_values.push_back("feature." + f);
+  const std::size_t F = confidence_feature_names().size();
+  for (auto& r : c.runs)
+    for (std::size_t k = 0; k < r.steps.size(); ++k) {
+      auto& s = r.steps[k];
+      s.values.assign(2 + F, 0.0);
+      s.values[0] = 0.25 * static_cast<double>(k + 1);  // 0.25, 0.5, 0.75: the true shares
+      s.values[1] = 0.9;
+      s.values[2] = static_cast<double>(r.run);         // feature.posterior_best
+    }
+  auto j = report_json(c, {});
+  const auto& conf = j["confidence"];
+  REQUIRE(conf.is_object());
+  CHECK(conf["source"] == "recorded by the experiment");
+  REQUIRE(conf["per_step"].size() == 3);
+  for (int k = 0; k < 3; ++k) {
+    const auto& row = conf["per_step"][static_cast<std::size_t>(k)];
+    // Object: confidence (k + 1) / 4 for every run and exactly that share right: ECE 0.
+    CHECK(row["object_ece"].get<double>() == doctest::Approx(0.0).epsilon(1e-12));
+    const double p = 0.25 * (k + 1);
+    CHECK(row["object_brier"].get<double>() == doctest::Approx(p * (1 - p) * (1 - p) + (1 - p) * p * p));
+    // Pose: right and position error < 1 cm; run 0's error is 1 cm (not below), so none is.
+    CHECK(row["pose_accuracy"].get<double>() == 0.0);
+    CHECK(row["pose_ece"].get<double>() == doctest::Approx(0.9));
+  }
+  CHECK(conf["all_steps"]["n"] == 24);
+  CHECK(conf["step20_reliability"]["object"][7]["n"] == 8);  // step 3 (the last): 0.75 in [0.7, 0.8)
+
+  // A calibration recomputes from the features: coef on feature.posterior_best (the run) only.
+  Calibration cal;
+  cal.features = confidence_feature_names();
+  cal.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 1.0), std::vector<double>(F + 1, 0.0)};
+  cal.object.coef[1] = 1.0;
+  cal.pose = cal.object;
+  ReportSettings rs;
+  rs.calibration = &cal;
+  rs.calibration_path = "cal.json";
+  j = report_json(c, rs);
+  std::vector<double> conf1;
+  std::vector<int> right1;
+  for (const auto& r : c.runs) {
+    conf1.push_back(1.0 / (1.0 + std::exp(-static_cast<double>(r.run))));
+    right1.push_back(r.steps[0].correct ? 1 : 0);
+  }
+  const ConfidenceCalibration expected = confidence_calibration(conf1, right1);
+  CHECK(j["confidence"]["per_step"][0]["object_ece"].get<double>() == doctest::Approx(expected.ece));
+  CHECK(j["confidence"]["source"].get<std::string>().find("cal.json") != std::string::npos);
+  std::ostringstream text;
+  print_report(j, text);
+  CHECK(text.str().find("Confidence (recomputed") != std::string::npos);
+
+  // Without recorded confidences (NaN) and without a calibration: no confidence section.
+  for (auto& r : c.runs)
+    for (auto& s : r.steps) s.values[0] = std::nan("");
+  CHECK(report_json(c, {})["confidence"].is_null());
+  // A calibration whose features the store lacks is one error naming the calibration file.
+  h.step_values[2] = "feature.something_else";
+  try {
+    report_json(c, rs);
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.file() == "cal.json");
+  }
 }

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <fstream>
 #include <thread>
@@ -362,4 +363,38 @@ TEST_CASE("Killed at random instants while appending and folding, the store lose
   for (std::size_t i = 0; i < c.runs.size(); i += 37) check_equal(c.runs[i], record(0, 0, static_cast<int>(i), 2));
   RunStore::compact(path, true);
   CHECK(RunStore::read(path).runs.size() == stored);
+}
+
+TEST_CASE("Per-step values: named in the header, stored per step, folded by compact; optional") {
+  test::TempDir dir("runstore");
+  const auto path = dir / "values.h5";
+  RunStoreHeader h = header();
+  h.step_values = {"confidence_object", "feature.a"};
+  RunStore::create(path, h);
+  CHECK(RunStore::read_header(path).step_values == h.step_values);
+  auto with_values = [](RunRecord r) {
+    for (std::size_t k = 0; k < r.steps.size(); ++k)
+      r.steps[k].values = {0.1 * static_cast<double>(k + r.run), std::nan("")};
+    return r;
+  };
+  RunStore::append(path, {with_values(record(0, 1, 1))});
+  RunStore::append(path, {with_values(record(0, 0, 0))});
+  for (bool folded : {false, true}) {
+    if (folded) RunStore::compact(path, true);
+    const RunStoreContents c = RunStore::read(path);
+    REQUIRE(c.runs.size() == 2);
+    check_equal(c.runs[0], record(0, 0, 0));
+    REQUIRE(c.runs[1].steps[2].values.size() == 2);
+    CHECK(c.runs[1].steps[2].values[0] == doctest::Approx(0.3));
+    CHECK(std::isnan(c.runs[1].steps[2].values[1]));
+  }
+  // A step with the wrong number of values is refused before anything is written.
+  CHECK_THROWS_AS(RunStore::append(path, {record(1, 0, 0)}), Error);
+  CHECK(RunStore::read(path).runs.size() == 2);
+  // A store without values (as written before them) has none.
+  const auto plain = dir / "plain.h5";
+  RunStore::create(plain, header());
+  RunStore::append(plain, {record(0, 0, 0)});
+  CHECK(RunStore::read_header(plain).step_values.empty());
+  CHECK(RunStore::read(plain).runs[0].steps[0].values.empty());
 }
