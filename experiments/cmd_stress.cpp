@@ -3,8 +3,10 @@
 #include "experiments/cli_common.hpp"
 #include "experiments/stress.hpp"
 
+#include <algorithm>
 #include <filesystem>
 #include <iostream>
+#include <sstream>
 
 namespace ts::cli {
 
@@ -14,6 +16,7 @@ struct StressOptions {
   CommonOptions common;
   std::string config, out, cases;
   int runs = 0;
+  bool seed_given = false;   ///< --seed on the command line (else the configuration's seed)
 };
 
 int run_stress(const StressOptions& o) {
@@ -22,7 +25,7 @@ int run_stress(const StressOptions& o) {
     if (o.runs < 1 || o.runs > 200) throw Error("--runs must lie in 1..200", "", "--runs");
     study.runs = o.runs;
   }
-  study.seed = o.common.seed == 1 ? study.seed : o.common.seed;
+  if (o.seed_given) study.seed = o.common.seed;
   if (!o.cases.empty()) {
     std::vector<experiments::StressCase> keep;
     std::stringstream ss(o.cases);
@@ -84,7 +87,10 @@ void register_stress(CLI::App& app) {
   sub->add_option("--cases", o->cases, "Only these cases (comma-separated names)");
   sub->add_option("--runs", o->runs, "Runs per case (default: the configuration's)");
   add_common(sub, o->common);
-  sub->callback([o] { run_command(o->common, [o] { return run_stress(*o); }); });
+  sub->callback([o, sub] {
+    o->seed_given = sub->get_option("--seed")->count() > 0;
+    run_command(o->common, [o] { return run_stress(*o); });
+  });
 }
 
 }  // namespace ts::cli
