@@ -297,6 +297,13 @@ Simulator::Simulator(Mesh object_mesh, std::string object_name, Gripper gripper,
     throw Error("inconsistent grasp settings", {}, "grasp");
   if (!(settings.gain_min > 0) || settings.gain_min > settings.gain_max)
     throw Error("calibration gains must satisfy 0 < min <= max", {}, "gain");
+  const ProbeSettings& ps = settings.probe;
+  if (!(ps.spec.ball_radius > 0 && ps.spec.ball_radius < 0.1) || !(ps.spec.shaft_radius >= 0) ||
+      ps.spec.shaft_radius > ps.spec.ball_radius)
+    throw Error("probe: need 0 < ball radius < 0.1 m and 0 <= shaft radius <= ball radius", {}, "probe");
+  if (!(ps.max_tilt_deg >= 0 && ps.max_tilt_deg < 90) || !(ps.contact_sigma >= 0) || !(ps.quantization >= 0) ||
+      !std::isfinite(ps.contact_sigma) || !std::isfinite(ps.quantization) || ps.max_attempts < 1)
+    throw Error("probe: need a tilt in [0, 90) degrees, a finite noise and quantization >= 0", {}, "probe");
   const auto& n = settings.noise;
   for (double v : {n.arm_position_sigma, n.arm_rotation_sigma_deg, n.joint_sigma_deg, n.signal_noise,
                    n.force_noise, n.lateral_sigma})
@@ -357,8 +364,89 @@ const MeshIndex& Simulator::mesh() const { return impl_->mesh; }
 const SimulatorSettings& Simulator::settings() const { return impl_->settings; }
 const std::vector<int>& Simulator::logged_pads() const { return impl_->pads; }
 
+namespace {
+// One probe touch (ProbeSettings), object frame for the geometry.
+Simulator::Grasp probe_touch(const MeshIndex& mesh, const std::vector<double>& area_cdf,
+                             const SimulatorSettings& settings, const Pose& T_world_object,
+                             const Vec3& centre, double radius, double normal_sign, std::size_t g) {
+  const ProbeSettings& ps = settings.probe;
+  const auto& M = mesh.mesh();
+  const double r = ps.spec.ball_radius;
+  Rng rng(settings.seed, kStreamGeometry, g);
+  const double cos_max = std::cos(ps.max_tilt_deg * kDeg);
+  Simulator::Grasp out;
+  Vec3 start = Vec3::Zero(), d = Vec3::UnitZ();
+  double L = 0.0;
+  int attempts = 0;
+  for (bool ok = false; !ok && attempts < ps.max_attempts; ++attempts) {
+    const double u = rng.uniform() * area_cdf.back();
+    const int face = static_cast<int>(std::min<std::size_t>(
+        std::upper_bound(area_cdf.begin(), area_cdf.end(), u) - area_cdf.begin(), M.faces.size() - 1));
+    const double r1 = std::sqrt(rng.uniform()), r2 = rng.uniform();
+    const auto& tri = M.faces[face];
+    const Vec3 p = (1 - r1) * M.vertices[tri[0]] + r1 * (1 - r2) * M.vertices[tri[1]] + r1 * r2 * M.vertices[tri[2]];
+    Vec3 n = (M.vertices[tri[1]] - M.vertices[tri[0]]).cross(M.vertices[tri[2]] - M.vertices[tri[0]]);
+    n = n.norm() > 0 ? Vec3(normal_sign * n.normalized()) : Vec3::UnitZ();
+    const double cos_a = 1.0 - rng.uniform() * (1.0 - cos_max);
+    const double sin_a = std::sqrt(std::max(0.0, 1.0 - cos_a * cos_a));
+    const double beta = rng.uniform(0.0, 2.0 * std::numbers::pi);
+    const Vec3 e1 = perpendicular(-n), e2 = (-n).cross(e1);
+    d = (cos_a * -n + sin_a * (std::cos(beta) * e1 + std::sin(beta) * e2)).normalized();
+    const Vec3 aim = p - d * r;                  // the ball centre touching p straight ahead
+    L = (aim - centre).norm() + radius + r + 0.01;
+    start = aim - d * L;
+    ok = mesh.closest(start).distance > r && !mesh.inside(start);
+  }
+  // Sphere tracing: the ball centre advances by its clearance until it touches (1 um) or has
+  // gone past the far side of the bounding sphere.
+  const double t_max = L + 2.0 * radius + 2.0 * r;
+  double t = 0.0;
+  bool touched = false;
+  for (int it = 0; it < 10000 && t <= t_max; ++it) {
+    const double gap = mesh.closest(start + t * d).distance - r;
+    if (gap < 1e-6) {
+      touched = true;
+      break;
+    }
+    t += gap;
+  }
+  t = std::min(t, t_max);
+  Pose T_obj_tool = Pose::Identity();
+  const Vec3 x = perpendicular(d);
+  T_obj_tool.linear().col(0) = x;
+  T_obj_tool.linear().col(1) = d.cross(x);
+  T_obj_tool.linear().col(2) = d;
+  T_obj_tool.translation() = start + t * d;
+  out.true_arm_pose = T_world_object * T_obj_tool;
+  out.diagnostics.approach_travel = t;
+  out.diagnostics.attempts = attempts;
+  out.diagnostics.touching_links = touched ? 1 : 0;
+  out.diagnostics.contact_sensels = touched ? 1 : 0;
+
+  // What the robot records: the arm's pose error, the probe's own noise, the quantization.
+  Rng noise(settings.seed, kStreamNoise, g);
+  const NoiseSettings& ns = settings.noise;
+  GraspRecord& rec = out.measured;
+  rec.time = settings.grasp_interval * static_cast<double>(g);
+  rec.arm_pose = out.true_arm_pose;
+  const Vec3 dp(noise.normal(), noise.normal(), noise.normal());
+  const Vec3 dr(noise.normal(), noise.normal(), noise.normal());
+  const Vec3 dc(noise.normal(), noise.normal(), noise.normal());
+  rec.arm_pose.translation() += ns.arm_position_sigma * dp + ps.contact_sigma * dc;
+  rec.arm_pose.linear() = (out.true_arm_pose.linear() * small_rotation(ns.arm_rotation_sigma_deg * kDeg * dr)).eval();
+  if (ps.quantization > 0.0)
+    for (int i = 0; i < 3; ++i)
+      rec.arm_pose.translation()[i] = ps.quantization * std::round(rec.arm_pose.translation()[i] / ps.quantization);
+  rec.probe_travel = t;
+  rec.probe_touched = touched;
+  return out;
+}
+}  // namespace
+
 Simulator::Grasp Simulator::grasp(std::size_t g) const {
   const Impl& m = *impl_;
+  if (m.settings.sensing == Sensing::probe)
+    return probe_touch(m.mesh, m.area_cdf, m.settings, m.T_world_object, m.centre, m.radius, m.normal_sign, g);
   const GraspSettings& gs = m.settings.grasp;
   const Gripper& G = m.gripper;
   const SensorSettings& sensor = G.sensor();
@@ -503,16 +591,21 @@ SimulationResult Simulator::run() const {
   log.noise = m.settings.noise.name;
   log.seed = m.settings.seed;
   log.gripper = m.gripper;
-  log.pads = m.pads;
-  const std::size_t S = static_cast<std::size_t>(m.gripper.sensor().sensels());
-  for (int pad : m.pads)
-    log.gains.insert(log.gains.end(), m.gains_all.begin() + pad * S, m.gains_all.begin() + (pad + 1) * S);
+  const bool probe = m.settings.sensing == Sensing::probe;
+  log.sensing = m.settings.sensing;
+  log.probe = m.settings.probe.spec;
+  if (!probe) {
+    log.pads = m.pads;
+    const std::size_t S = static_cast<std::size_t>(m.gripper.sensor().sensels());
+    for (int pad : m.pads)
+      log.gains.insert(log.gains.end(), m.gains_all.begin() + pad * S, m.gains_all.begin() + (pad + 1) * S);
+  }
   log.truth = LogGroundTruth{};
   log.truth->object_pose = m.T_world_object;
   for (auto& s : slots) {
     out.grasps_with_contact += s.diagnostics.contact_sensels > 0;
     log.truth->arm_poses.push_back(s.true_arm_pose);
-    log.truth->joints.push_back(s.true_joints);
+    if (!probe) log.truth->joints.push_back(s.true_joints);
     out.diagnostics.push_back(s.diagnostics);
     log.grasps.push_back(std::move(s.measured));
   }

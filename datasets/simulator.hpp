@@ -67,8 +67,25 @@ struct GraspSettings {
   double other_spacing = 0.004;      ///< m, collision samples on the palm and link tips
 };
 
+/// The probe of `sensing = probe`: each touch aims the ball at a random surface point p
+/// (area-uniform) from a direction within `max_tilt_deg` of -n, starting outside the object's
+/// bounding sphere, and moves straight in until the ball first touches the surface (exact: sphere
+/// tracing on the mesh's distance). A start inside the object is redrawn. The log records the
+/// tool pose at the stop (ball centre; with the arm noise of the profile, `contact_sigma` more
+/// per axis, and the position rounded to `quantization`) and the travel.
+struct ProbeSettings {
+  ProbeSpec spec;                    ///< ball and shaft radii
+  double max_tilt_deg = 20.0;        ///< approach direction within this cone about -n
+  double contact_sigma = 0.0;        ///< m per axis, measurement noise of the ball centre
+                                     ///< beyond the arm's (e.g. a probe's own noise)
+  double quantization = 0.0;         ///< m, recorded positions rounded to this grid (0: none)
+  int max_attempts = 24;             ///< aims redrawn when the start lies inside the object
+};
+
 struct SimulatorSettings {
-  std::size_t grasps = 40;
+  std::size_t grasps = 40;           ///< grasps, or probe touches
+  Sensing sensing = Sensing::pads;   ///< pads: the gripper's tactile arrays; probe: ProbeSettings
+  ProbeSettings probe;
   int sensors = 1;                   ///< 1: the gripper's single_pad; 6 (or all): every pad
   NoiseSettings noise;
   GraspSettings grasp;
@@ -120,7 +137,7 @@ class Simulator {
     std::vector<double> true_joints;
     GraspDiagnostics diagnostics;
   };
-  Grasp grasp(std::size_t g) const;
+  Grasp grasp(std::size_t g) const;   ///< a probe touch under sensing = probe
 
  private:
   struct Impl;

@@ -37,6 +37,9 @@ struct EvaluateSettings {
   double lambda = 0.02;               ///< Eq. 9 weight of free space (paper: 0.02)
   double res_free = 0.04;             ///< m, free-space resolution; d_thresh = res_free / 2
   double d_thresh = 0.0;              ///< m, Eq. 8 threshold if > 0 (overrides res_free / 2)
+  double free_inside_margin = 0.0;    ///< m; that penalty only deeper than this (a probe's
+                                      ///< path, free by its ball radius and measured with the
+                                      ///< arm's error, can graze the true surface)
   bool free_inside_penalty = false;   ///< extension: a free point inside a closed object
                                       ///< (signed field < 0) costs e = 1 however deep
   bool use_distance_field = true;     ///< false: nearest fine-cloud point (paper's k-d tree)
@@ -144,8 +147,8 @@ inline double contact_error(double d, double d_outlier) {  // Eq. 4
   const double x = d / d_outlier;
   return x * x;
 }
-inline double free_error(double d, double d_thresh, bool inside_penalty) {  // Eq. 8
-  if (inside_penalty && d < 0.0) return 1.0;
+inline double free_error(double d, double d_thresh, bool inside_penalty, double margin = 0.0) {  // Eq. 8
+  if (inside_penalty && d < -margin) return 1.0;
   d = std::abs(d);
   if (!(d <= d_thresh)) return 0.0;
   return (d_thresh * d_thresh - d * d) / (d_thresh * d_thresh);
@@ -204,7 +207,7 @@ Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const 
     auto flush = [&] {
       distances(near, k, I, buf);
       for (std::size_t j = 0; j < k; ++j)
-        fsum += detail::free_error(buf[j], d_thresh, s.free_inside_penalty);
+        fsum += detail::free_error(buf[j], d_thresh, s.free_inside_penalty, s.free_inside_margin);
       count += static_cast<std::uint32_t>(k);
       k = 0;
     };

@@ -20,6 +20,14 @@ bool rigid_pose(const Pose& T) {
 }
 }  // namespace
 
+const char* to_string(Sensing s) { return s == Sensing::probe ? "probe" : "pads"; }
+
+Sensing parse_sensing(const std::string& word, const std::string& file, const std::string& field) {
+  if (word == "pads") return Sensing::pads;
+  if (word == "probe") return Sensing::probe;
+  throw Error("unknown sensing '" + word + "' (pads, probe)", file, field);
+}
+
 void validate_grasp(const TactileLog& log, const GraspRecord& r, std::size_t k, const std::string& file) {
   const Gripper& g = log.gripper;
   const std::size_t n = log.sensels();
@@ -30,6 +38,13 @@ void validate_grasp(const TactileLog& log, const GraspRecord& r, std::size_t k, 
   at += ']';
   require(std::isfinite(r.time), "timestamp is not finite", file, "/grasps/time" + at);
   require(rigid_pose(r.arm_pose), "arm pose is not a finite rigid transform", file, "/grasps/arm_pose" + at);
+  if (log.sensing == Sensing::probe) {
+    require(std::isfinite(r.probe_travel) && r.probe_travel >= 0.0,
+            "probe travel must be finite and >= 0", file, "/grasps/probe_travel" + at);
+    require(r.joints.empty() && r.tactile.empty() && r.past_peak.empty(),
+            "a probe touch has no joint angles or tactile images", file, "/grasps" + at);
+    return;
+  }
   require(r.joints.size() == static_cast<std::size_t>(g.joint_count()),
           "expected " + std::to_string(g.joint_count()) + " joint angles, got " +
               std::to_string(r.joints.size()),
@@ -57,7 +72,17 @@ void validate_grasp(const TactileLog& log, const GraspRecord& r, std::size_t k, 
 void validate(const TactileLog& log, const std::string& file) {
   const Gripper& g = log.gripper;
   const std::size_t n = log.sensels();
-  require(!log.pads.empty(), "log records no tactile pad", file, "/sensors/pad_index");
+  if (log.sensing == Sensing::probe) {
+    const ProbeSpec& p = log.probe;
+    require(std::isfinite(p.ball_radius) && p.ball_radius >= 0.0 && p.ball_radius < 0.1,
+            "probe ball radius must be in [0, 0.1) m", file, "/probe/ball_radius");
+    require(std::isfinite(p.shaft_radius) && p.shaft_radius >= 0.0 && p.shaft_radius <= p.ball_radius,
+            "probe shaft radius must be in [0, ball_radius] m", file, "/probe/shaft_radius");
+    require(log.pads.empty() && log.gains.empty(), "a probe log records no tactile pad", file,
+            "/sensors");
+  } else {
+    require(!log.pads.empty(), "log records no tactile pad", file, "/sensors/pad_index");
+  }
   std::set<int> seen;
   for (std::size_t i = 0; i < log.pads.size(); ++i) {
     const int p = log.pads[i];
@@ -94,6 +119,13 @@ void validate(const TactileLog& log, const std::string& file) {
 GraspContacts grasp_contacts(const TactileLog& log, std::size_t g, const ContactSettings& s) {
   GraspContacts out;
   const GraspRecord& r = log.grasps.at(g);
+  if (log.sensing == Sensing::probe) {
+    if (r.probe_touched) {
+      out.points.push_back(r.arm_pose * Vec3(0.0, 0.0, log.probe.ball_radius));
+      out.pad_slot.push_back(0);
+    }
+    return out;
+  }
   const SensorSettings& sensor = log.gripper.sensor();
   const std::size_t n = log.sensels();
   for (std::size_t slot = 0; slot < log.pads.size(); ++slot) {
@@ -128,7 +160,19 @@ void Exploration::advance_to(std::size_t k) {
     const GraspContacts c = grasp_contacts(log_, steps_, settings_.contact);
     // Swept links first, contacts after: a voxel holding a contact is occupied either way
     // (occupied wins), so the order does not change the result.
-    mark_swept_volume(grid_, log_.gripper, r.arm_pose, r.joints, settings_.free);
+    if (log_.sensing == Sensing::probe) {
+      // The ball swept a cylinder of its radius from the start of the approach to where it
+      // stopped (the shaft, no wider, follows inside it); its centres sampled as free points.
+      const double travel = r.probe_travel;
+      grid_.mark_free_cylinder(r.arm_pose, log_.probe.ball_radius, -travel, 0.0);
+      const double step = settings_.probe_free_spacing;
+      if (step > 0.0)
+        for (double z = settings_.probe_free_start; z <= travel + 1e-12; z += step)
+          probe_free_.push_back(r.arm_pose * Vec3(0, 0, -z));
+      for (std::size_t i = 0; i < c.points.size(); ++i) raw_normals_.push_back(-r.arm_pose.linear().col(2));
+    } else {
+      mark_swept_volume(grid_, log_.gripper, r.arm_pose, r.joints, settings_.free);
+    }
     for (const Vec3& p : c.points) grid_.mark_occupied(p);
     raw_.insert(raw_.end(), c.points.begin(), c.points.end());
     per_grasp_.push_back(c.points.size());
@@ -149,13 +193,28 @@ std::vector<Vec3> Exploration::voxel_filtered(const std::vector<Vec3>& world) co
 
 PointCloud Exploration::contact_cloud() const {
   PointCloud out;
-  out.points = voxel_filtered(raw_);
+  if (log_.sensing != Sensing::probe) {
+    out.points = voxel_filtered(raw_);
+    return out;
+  }
+  // Probe contacts with their normals (minus the approach), voxel-filtered together.
+  PointCloud local;
+  for (std::size_t i = 0; i < raw_.size(); ++i) {
+    local.points.push_back(raw_[i] - origin_);
+    local.normals.push_back(raw_normals_[i]);
+  }
+  if (local.empty()) return out;
+  out = voxel_filter(local, settings_.contact_voxel);
+  for (Vec3& p : out.points) p += origin_;
   return out;
 }
 
 PointCloud Exploration::free_cloud() const {
   PointCloud out;
-  out.points = grid_.full_free_cloud(free_space_box(raw_, settings_.free.s_obj_max), settings_.free.res_free);
+  const Eigen::AlignedBox3d box = free_space_box(raw_, settings_.free.s_obj_max);
+  out.points = grid_.full_free_cloud(box, settings_.free.res_free);
+  for (const Vec3& p : probe_free_)
+    if (box.contains(p)) out.points.push_back(p);
   return out;
 }
 

@@ -29,13 +29,33 @@
 
 namespace ts {
 
-/// One grasp as a robot records it.
+/// How a log senses touch: `pads`, the gripper's tactile arrays (the default, every log written
+/// before the probe), or `probe`, a rigid probe with a ball tip that records one contact per
+/// touch (a touch probe on an ROV arm, a fingertip contact sensor).
+enum class Sensing { pads, probe };
+const char* to_string(Sensing s);                              ///< "pads" / "probe"
+/// Throws ts::Error naming `file` and `field` on another word.
+Sensing parse_sensing(const std::string& word, const std::string& file = {}, const std::string& field = {});
+
+/// The probe of a `probe` log: a shaft ending in a ball. Its tool frame has its origin at the
+/// ball centre and z along the shaft toward the object (the approach direction).
+struct ProbeSpec {
+  double ball_radius = 0.003;    ///< m
+  double shaft_radius = 0.002;   ///< m, at most ball_radius (the ball's path covers the shaft's)
+};
+
+/// One grasp as a robot records it (a probe log: one probe touch; the pad fields stay empty).
 struct GraspRecord {
   double time = 0.0;                    ///< s, when the tactile images were taken
   Pose arm_pose = Pose::Identity();     ///< T_world_eef as measured: T_EEF(Θarm) of Eq. 2
   std::vector<double> joints;           ///< rad, Θfinger, Gripper::joint_count() values
   std::vector<float> tactile;           ///< signals, pads x sensels (pad-major, j = row*cols+col)
   std::vector<std::uint8_t> past_peak;  ///< FoldHint per signal (same layout), or empty: unknown
+  // Probe logs: arm_pose is T_world_tool when the probe stopped (the ball centre, z the
+  // approach direction). The ball centre came in along z from arm_pose * (0, 0, -probe_travel).
+  double probe_travel = 0.0;            ///< m the ball centre moved along z (probe logs)
+  bool probe_touched = false;           ///< the probe stopped on contact (false: it went the
+                                        ///< whole way free; the touch adds free space only)
 };
 
 /// Evaluation-only truth (simulated logs): never used to compute contacts or free space.
@@ -54,6 +74,8 @@ struct TactileLog {
   std::vector<float> gains;             ///< calibration gain, pads.size() x sensels
   std::vector<GraspRecord> grasps;
   std::optional<LogGroundTruth> truth;
+  Sensing sensing = Sensing::pads;      ///< probe: pads and gains are empty, `probe` describes it
+  ProbeSpec probe;
 
   std::size_t sensels() const { return static_cast<std::size_t>(gripper.sensor().sensels()); }
   float gain(std::size_t pad_slot, std::size_t sensel) const { return gains[pad_slot * sensels() + sensel]; }
@@ -80,11 +102,19 @@ struct GraspContacts {
   int clamped = 0;             ///< past-peak sensels with a signal below the end response
 };
 
-/// Eq. 1 then Eq. 2 for every sensel of every logged pad of grasp `g`.
+/// Eq. 1 then Eq. 2 for every sensel of every logged pad of grasp `g`. A probe log gives the
+/// touch's one contact, the ball centre moved by the ball radius along the approach (the
+/// contact assumed straight ahead of the ball), or none when the probe touched nothing.
 GraspContacts grasp_contacts(const TactileLog& log, std::size_t g, const ContactSettings& s = {});
 
 struct ExplorationSettings {
   double contact_voxel = 0.002;  ///< m, voxel-grid filter of the cumulative contact cloud
+  double probe_free_spacing = 0.01;  ///< m, probe logs: free points sampled along each touch's
+                                     ///< ball-centre path (a thin path fills no res_free cube),
+  double probe_free_start = 0.01;    ///< m, from this far behind the stopped ball centre: the
+                                     ///< samples are free by the ball radius only, so the
+                                     ///< evaluation should use d_thresh <= ball radius; the
+                                     ///< last centimetre is left out against the arm noise
   ContactSettings contact;
   FreeSpaceSettings free;
 };
@@ -108,10 +138,12 @@ class Exploration {
   const std::vector<Vec3>& raw_contacts() const { return raw_; }
   const std::vector<std::size_t>& contacts_per_grasp() const { return per_grasp_; }
   const OccupancyGrid& grid() const { return grid_; }
-  PointCloud contact_cloud() const;   ///< voxel-filtered PC_cum^cont
+  PointCloud contact_cloud() const;   ///< voxel-filtered PC_cum^cont; a probe log's contacts
+                                      ///< carry normals: minus the approach directions
   PointCloud free_cloud() const;      ///< PC^free in B around the current contacts: centres of
                                       ///< the res_free cubes that are entirely free
-                                      ///< (OccupancyGrid::full_free_cloud)
+                                      ///< (OccupancyGrid::full_free_cloud); a probe log adds
+                                      ///< its paths' samples inside B
   /// The contacts grouped by grasp, each grasp voxel-filtered on its own (contact_voxel):
   /// what the evaluation needs to take out each grasp's arm pose error.
   const GraspGroups& grasp_groups() const { return groups_; }
@@ -123,6 +155,8 @@ class Exploration {
   OccupancyGrid grid_;
   std::size_t steps_ = 0;
   std::vector<Vec3> raw_;
+  std::vector<Vec3> raw_normals_;      ///< probe logs: per raw contact, minus the approach
+  std::vector<Vec3> probe_free_;       ///< probe logs: samples of the ball-centre paths
   std::vector<std::size_t> per_grasp_;
   GraspGroups groups_;
 

@@ -186,6 +186,8 @@ RecognizerSettings RecognizerSettings::scaled(double f) const {
   s.shortlist.outlier_distance *= f;
   s.twins.contact_sigma *= f;
   s.twins.offset_sigma *= f;
+  s.sparse.distance_tolerance *= f;
+  s.sparse.model_spacing *= f;
   return s;
 }
 
@@ -268,6 +270,16 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   RansacStats rs;
   std::vector<Candidate> cands =
       ransac_candidates(scene, db_, search_, allowed, s_.ransac, s_.seed, step_u, &rs);
+  if (sparse_active(scene, s_.sparse)) {  // isolated contacts: feature-free triplets join in
+    if (!sparse_) sparse_ = std::make_unique<SparseTables>(db_, s_.sparse);
+    SparseStats sp;
+    const std::vector<Candidate> more = sparse_candidates(
+        scene, *sparse_, scene_contact_normals(scene, contacts_world), allowed, s_.sparse, s_.seed, step_u, &sp);
+    cands.insert(cands.end(), more.begin(), more.end());
+    res.sparse_active = true;
+    res.sparse_candidates = sp.candidates;
+    rs.time_register_s += sp.time_s;
+  }
   const bool watching = watch_ && *watch_ < db_.size();
   if (watching) {
     const std::uint32_t w = *watch_;

@@ -20,6 +20,7 @@
 #include "engine/ransac.hpp"
 #include "engine/scene.hpp"
 #include "engine/shortlist.hpp"
+#include "engine/sparse_hypotheses.hpp"
 #include "engine/twins.hpp"
 
 #include <memory>
@@ -54,6 +55,8 @@ struct RecognizerSettings {
   ShortlistSettings shortlist;      ///< extension: objects whose candidates are evaluated in full
                                     ///< per step (large databases)
   TwinSettings twins;               ///< extension: near-twin verification of the leading objects
+  SparseSettings sparse;            ///< extension: feature-free triplet matching when the
+                                    ///< contacts are isolated (touch probes; sparse_hypotheses.hpp)
   SceneSettings scene{.free_clearance = -1.0};  ///< free_clearance < 0: d_thresh (Eq. 8)
   RansacSettings ransac;
   IcpSettings icp;
@@ -136,6 +139,8 @@ struct StepResult {
   std::size_t geometry_loads = 0;   ///< geometry loads of the database so far (reloads counted)
   std::size_t geometry_resident = 0;  ///< objects whose geometry is in memory after the step
   bool boundary_fallback = false;   ///< triplets had to use patch-boundary points
+  bool sparse_active = false;       ///< the sparse-contact source ran (isolated contacts)
+  std::size_t sparse_candidates = 0;  ///< its candidates (beside RANSAC's `candidates`)
   std::optional<Funnel> watched;    ///< the watched object's funnel, when one is watched
   StageTimes times;
 };
@@ -175,6 +180,7 @@ class Recognizer {
   int step_ = 0;
   std::vector<Hypothesis> state_;   ///< S_t, world poses, best first
   std::optional<std::uint32_t> watch_;
+  std::unique_ptr<SparseTables> sparse_;  ///< built when the sparse source first runs
 };
 
 }  // namespace ts

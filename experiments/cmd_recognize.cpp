@@ -49,6 +49,8 @@ struct RecognizeOptions {
   std::string db, out, ground_truth, object;
   std::string calibration;           ///< --calibration: the confidence model (touchstone calibrate)
   std::vector<std::string> logs, clouds;  ///< --log files; --cloud files or folders
+  std::string free;                  ///< --free: the free-space cloud of a single --cloud
+  std::vector<std::string> only;     ///< --only: the objects the answer may name (empty: all)
   bool batch = false;                ///< several inputs (or a folder): per-input output
   std::string method = "bricpsf";
   std::string preset = "improved";   ///< improved | paper: the defaults the flags start from
@@ -56,6 +58,7 @@ struct RecognizeOptions {
   RecognizerSettings rs;             ///< method parameters (defaults: the paper's)
   double contact_voxel = 0.002;      ///< m, voxel filter of the cumulative contact cloud
   std::optional<double> memory_budget_mb;  ///< resident object geometry; unset: the default
+  std::optional<double> inside_margin;     ///< --free-inside-margin; unset: 0 (a probe: 1 cm)
 };
 
 /// A 4x4 row-major object -> world matrix from a text file (whitespace or comma separated).
@@ -182,6 +185,7 @@ struct InputRun {
   std::vector<StepResult> results;
   std::vector<io::ResultStep> stored;
   std::vector<double> fusion_time;
+  std::vector<double> contact_distance;  ///< m, mean contact-to-model distance at each answer
   std::string written;           ///< the result file written ("" : none)
   std::string error;             ///< several inputs: why this one failed ("" : it did not)
   bool truth_outside = false;    ///< the log's object is not in the database (open set)
@@ -223,6 +227,13 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
     single = io::read_cloud(in.path);
     if (o.steps > 1) throw Error("a contact cloud is one step", in.path, "--steps");
   }
+  std::vector<Vec3> single_free;   // --free: a user's free-space cloud beside the contacts
+  if (!o.free.empty()) {
+    single_free = io::read_cloud(o.free).points;
+    for (std::size_t i = 0; i < single_free.size(); ++i)
+      if (!single_free[i].allFinite())
+        throw Error("free-space point " + std::to_string(i) + " is not finite", o.free, "--free");
+  }
   if (!o.ground_truth.empty()) run.truth_pose = read_ground_truth(o.ground_truth);
   if (!o.object.empty()) {
     const std::size_t i = db.find(o.object);
@@ -231,7 +242,14 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
     run.truth_name = o.object;
   }
 
-  Recognizer rec(db, c.rs);
+  RecognizerSettings rs = c.rs;
+  // A probe's path: free by the ball radius only, measured with the arm's error
+  // (kProbeFreeThreshold, kProbeInsideMargin), unless the flags say otherwise.
+  if (log && log->sensing == Sensing::probe) {
+    if (!(rs.evaluate.d_thresh > 0.0)) rs.evaluate.d_thresh = kProbeFreeThreshold;
+    if (!o.inside_margin) rs.evaluate.free_inside_margin = kProbeInsideMargin;
+  }
+  Recognizer rec(db, rs);
   if (truth_object) rec.watch(static_cast<std::uint32_t>(*truth_object));   // the JSON's truth_funnel
   const SymmetryGroup* sym = nullptr;
   if (truth_object && run.truth_pose) sym = &c.symmetries.get(db, *truth_object);
@@ -257,6 +275,7 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
       grasps = ex->grasp_groups();  // unused when the offsets are off
     } else {
       contacts = single;
+      if (with_free) free = single_free;
     }
     run.fusion_time.push_back(
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
@@ -272,6 +291,10 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
                         std::to_string(c.largest) + " m: do the log and the database use the same units?",
                     in.path, log ? "/grasps" : "points");
     }
+    run.contact_distance.push_back(
+        r.valid && !contacts.empty()
+            ? mean_contact_distance(*db.geometry(r.best.object), r.best.pose, contacts.points)
+            : std::numeric_limits<double>::quiet_NaN());
     run.stored.push_back(io::to_result_step(r, truth_object, run.truth_pose, sym));
     if (run.truth_outside) run.stored.back().correct = !r.valid;
     run.results.push_back(std::move(r));
@@ -340,7 +363,12 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     st["free_points"] = r.free_points;
     st["unobservable_dof"] = r.unobservable_dof;
     st["pose_ambiguous"] = r.pose_ambiguous;
+    // Mean |distance| of the step's contacts to the answer's surface at its pose (Vezzani et al.)
+    st["contact_model_distance_m"] = number_or_null(
+        std::isfinite(run.contact_distance[k]) ? std::optional(run.contact_distance[k]) : std::nullopt);
     st["candidates"] = r.candidates;
+    st["sparse_active"] = r.sparse_active;
+    st["sparse_candidates"] = r.sparse_candidates;
     st["hypotheses"] = r.hypotheses.size();
     st["objects_allowed"] = r.objects_allowed;
     st["objects_reached"] = r.objects_reached;
@@ -570,6 +598,14 @@ int run_recognize(const RecognizeOptions& o) {
   Database db(source);
   if (db.size() == 0) throw Error("the database has no objects", o.db, "/objects");
   db.set_surface(needs_surface(rs, db.settings()));
+  if (!o.only.empty()) {   // --only: the answer is one of these (one name: localize a known object)
+    rs.objects.assign(db.size(), 0);
+    for (const std::string& name : o.only) {
+      const std::size_t i = db.find(name);
+      if (i == db.size()) throw Error("no object '" + name + "' in the database", o.db, "--only");
+      rs.objects[i] = 1;
+    }
+  }
   set_memory_budget(db, o.memory_budget_mb, o.db);
   double largest = 0.0;
   for (std::size_t i = 0; i < db.size(); ++i) largest = std::max(largest, db.info(i).extent.norm());
@@ -607,6 +643,13 @@ void register_recognize(CLI::App& app) {
                                 "free space; a folder gives its .ply/.pcd files in name order")
                     ->check(CLI::ExistingPath);
   log->excludes(cloud);
+  auto* free = sub->add_option("--free", o->free,
+                               "Free-space cloud (.ply/.pcd) of a single --cloud: points the sensor passed "
+                               "through (e.g. a probe's path), evidence against poses that put the object there");
+  free->needs(cloud)->check(CLI::ExistingFile);
+  sub->add_option("--only", o->only,
+                  "Objects the answer may name, NAME[,NAME...] (one name: localize a known object)")
+      ->delimiter(',');
   sub->add_option("--method", o->method, "bricpsf | batch-ransac | ransac-icp | ransac-icp-fs")
       ->check(CLI::IsMember({"bricpsf", "batch-ransac", "ransac-icp", "ransac-icp-fs"}));
   sub->add_option("--steps", o->steps, "Steps (grasps) to process (default: all)")
@@ -679,6 +722,15 @@ void register_recognize(CLI::App& app) {
   sub->add_option("--d-outlier", s.evaluate.d_outlier, "Outlier distance of Eq. 4 (m)")->group(g)->check(CLI::PositiveNumber);
   sub->add_option("--lambda", s.evaluate.lambda, "Free-space weight of Eq. 9")->group(g)->check(CLI::NonNegativeNumber);
   sub->add_option("--res-free", s.evaluate.res_free, "Free-space resolution (m); d_thresh = res_free/2")->group(g)->check(CLI::PositiveNumber);
+  sub->add_option("--d-thresh", s.evaluate.d_thresh,
+                  "Eq. 8 threshold (m; default res_free/2; a probe log: 0.0001): free points nearer than this "
+                  "to a hypothesis' surface are penalized (--free of a probe's path: about 0.0001)")
+      ->group(g)->check(CLI::PositiveNumber);
+  sub->add_option_function<double>(
+         "--free-inside-margin", [o](double v) { o->inside_margin = v; o->rs.evaluate.free_inside_margin = v; },
+         "m; a free point inside an object costs the full penalty only deeper than this (default 0; "
+         "a probe log: 0.01, its path measured with the arm's error; --free of a probe: about 3 sigma of it)")
+      ->group(g)->check(CLI::NonNegativeNumber);
   auto* inside = sub->add_flag("--free-inside-penalty{true},--no-free-inside-penalty{false}", s.evaluate.free_inside_penalty,
                 "Extension: free space inside a closed object costs the full penalty")->group(g);
   auto* grasp_sigma = sub->add_option("--grasp-offset-sigma", s.evaluate.grasp_offset_sigma,
@@ -743,6 +795,8 @@ void register_recognize(CLI::App& app) {
       throw CLI::RequiredError("--log or --cloud");
     o->batch = o->logs.size() + o->clouds.size() > 1 ||
                std::any_of(o->clouds.begin(), o->clouds.end(), [](const std::string& p) { return fs::is_directory(p); });
+    if (o->batch && !o->free.empty())
+      throw CLI::ValidationError("--free", "takes a single --cloud (its free space)");
     for (const auto& [flag, value] : {std::pair{"--ground-truth", &o->ground_truth}, {"--object", &o->object}})
       if (o->batch && !value->empty())
         throw CLI::ValidationError(flag, "takes a single input; with several inputs each log carries its own "

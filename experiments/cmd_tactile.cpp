@@ -35,6 +35,8 @@ struct SimulateOptions {
   double arm_position_sigma = -1, arm_rotation_sigma_deg = -1, joint_sigma_deg = -1;
   double signal_noise = -1, force_noise = -1, lateral_sigma = -1;
   std::vector<double> offset;
+  std::string sensing = "pads";
+  datasets::ProbeSettings probe;
 };
 
 int run_simulate(const SimulateOptions& o) {
@@ -54,6 +56,9 @@ int run_simulate(const SimulateOptions& o) {
   s.grasps = o.grasps;
   s.sensors = o.sensors;
   s.seed = o.common.seed;
+  s.sensing = parse_sensing(o.sensing, {}, "--sensing");
+  s.probe = o.probe;
+  s.probe.spec.shaft_radius = std::min(s.probe.spec.shaft_radius, s.probe.spec.ball_radius);
   s.noise = datasets::noise_profile(o.noise);
   auto set = [](double v, double& field) {
     if (v >= 0) field = v;
@@ -71,11 +76,15 @@ int run_simulate(const SimulateOptions& o) {
   std::ostringstream source;
   source << "touchstone simulate --object " << o.object << " --grasps " << o.grasps << " --noise " << o.noise
          << " --sensors " << o.sensors << " --seed " << o.common.seed;
+  if (s.sensing == Sensing::probe)
+    source << " --sensing probe --ball-radius " << o.probe.spec.ball_radius << " --probe-tilt " << o.probe.max_tilt_deg
+           << " --contact-sigma " << o.probe.contact_sigma << " --quantization " << o.probe.quantization;
   io::LogHeader header = io::header_of(result.log);
   header.source = source.str();
   io::LogWriter writer = io::LogWriter::create(o.out, header, true);
   for (std::size_t g = 0; g < result.log.grasps.size(); ++g)
-    writer.append(result.log.grasps[g], &result.log.truth->arm_poses[g], &result.log.truth->joints[g]);
+    writer.append(result.log.grasps[g], &result.log.truth->arm_poses[g],
+                  result.log.truth->joints.empty() ? nullptr : &result.log.truth->joints[g]);
   writer.close();
 
   std::size_t contacts = 0;
@@ -89,13 +98,17 @@ int run_simulate(const SimulateOptions& o) {
     j["contacts"] = contacts;
     j["noise"] = s.noise.name;
     j["sensors"] = result.log.pads.size();
+    j["sensing"] = to_string(result.log.sensing);
     j["seed"] = o.common.seed;
     j["out"] = o.out;
     j["time_s"] = seconds;
     std::cout << j.dump() << '\n';
   } else {
-    std::cout << "simulated " << result.log.grasps.size() << " grasps on '" << result.log.object << "' ("
-              << s.noise.name << ", " << result.log.pads.size() << (result.log.pads.size() == 1 ? " pad" : " pads")
+    std::cout << "simulated " << result.log.grasps.size()
+              << (s.sensing == Sensing::probe ? " probe touches" : " grasps") << " on '" << result.log.object << "' ("
+              << s.noise.name << ", "
+              << (s.sensing == Sensing::probe ? std::string("probe")
+                  : std::to_string(result.log.pads.size()) + (result.log.pads.size() == 1 ? " pad" : " pads"))
               << "): " << result.grasps_with_contact << " with contact, " << contacts << " contact points -> "
               << o.out << " (" << std::fixed << std::setprecision(2) << seconds << " s)\n";
   }
@@ -129,6 +142,9 @@ int run_log_info(const LogInfoOptions& o) {
     j["noise"] = log.noise;
     j["sensors"] = log.pads.size();
     j["pads"] = pads;
+    j["sensing"] = to_string(log.sensing);
+    if (log.sensing == Sensing::probe)
+      j["probe"] = {{"ball_radius_m", log.probe.ball_radius}, {"shaft_radius_m", log.probe.shaft_radius}};
     j["gripper"] = log.gripper.spec().name;
     j["seed"] = log.seed;
     j["duration_s"] = duration;
@@ -140,9 +156,13 @@ int run_log_info(const LogInfoOptions& o) {
   for (auto n : per_grasp) total += n, with += n > 0;
   std::cout << o.log << "\n"
             << "  object        " << (log.object.empty() ? "(unknown)" : log.object) << "\n"
-            << "  noise         " << log.noise << "\n"
-            << "  gripper       " << log.gripper.spec().name << ", pads logged:";
-  for (const auto& p : pads) std::cout << ' ' << p;
+            << "  noise         " << log.noise << "\n";
+  if (log.sensing == Sensing::probe) {
+    std::cout << "  sensing       probe, ball radius " << log.probe.ball_radius << " m";
+  } else {
+    std::cout << "  gripper       " << log.gripper.spec().name << ", pads logged:";
+    for (const auto& p : pads) std::cout << ' ' << p;
+  }
   std::cout << "\n  grasps        " << log.grasps.size() << " (" << with << " with contact, " << total
             << " contact points";
   if (ambiguous) std::cout << ", " << ambiguous << " sensels on an unknown side of the fold";
@@ -206,6 +226,18 @@ void register_tactile(CLI::App& app) {
         ->check(CLI::IsMember({1, 6}))
         ->capture_default_str();
     sub->add_option("--out", opt->out, "Tactile log to write (HDF5)")->required();
+    sub->add_option("--sensing", opt->sensing, "pads: the gripper's tactile arrays; probe: a ball-tipped probe, "
+                    "one contact per touch (--grasps counts touches)")
+        ->check(CLI::IsMember({"pads", "probe"}))->capture_default_str();
+    const std::string pg = "Probe (--sensing probe)";
+    sub->add_option("--ball-radius", opt->probe.spec.ball_radius, "m, probe ball radius")->group(pg)
+        ->check(CLI::Range(1e-4, 0.05))->capture_default_str();
+    sub->add_option("--probe-tilt", opt->probe.max_tilt_deg, "deg, approach within this cone about the surface normal")
+        ->group(pg)->check(CLI::Range(0.0, 89.0))->capture_default_str();
+    sub->add_option("--contact-sigma", opt->probe.contact_sigma, "m per axis, probe noise beyond the arm's")->group(pg)
+        ->check(CLI::Range(0.0, 0.1))->capture_default_str();
+    sub->add_option("--quantization", opt->probe.quantization, "m, recorded positions rounded to this (0: none)")
+        ->group(pg)->check(CLI::Range(0.0, 0.1))->capture_default_str();
     sub->add_option("--gripper", opt->gripper, "Gripper description (JSON; default: the built-in touchstone-3f)");
     auto mc = "Noise overrides (Monte Carlo studies)";
     sub->add_option("--arm-position-sigma", opt->arm_position_sigma, "m per axis, per grasp")->group(mc)->check(CLI::NonNegativeNumber);

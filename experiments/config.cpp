@@ -170,6 +170,8 @@ const std::vector<KeyDef>& key_defs() {
     add("sensors", true,
         [](auto& c, auto& in, auto& x) { c.sensors = std::stoi(choice(in, {"1", "6"}, x)); },
         [](auto& c) { return J(c.sensors); });
+    add("sensing", false, [](auto& c, auto& in, auto& x) { c.sensing = choice(in, {"pads", "probe"}, x); },
+        [](auto& c) { return J(c.sensing); });
     add("seed", false,
         [](auto& c, auto& in, auto& x) {
           const std::string& t = single(in, x);

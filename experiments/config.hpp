@@ -23,6 +23,8 @@
 //   noise.arm_position_sigma_m, noise.arm_rotation_sigma_deg, noise.sensel_noise,
 //   noise.force_noise, noise.contact_sigma_m     overrides of the profile (>= 0)
 //   sensors            1 | 6
+//   sensing            pads (default: the gripper's tactile arrays) | probe (a ball-tipped probe,
+//                      one contact per step; noise.contact_sigma_m is then the probe's own noise)
 //   seed               unsigned integer
 //   ransac.triplets (N), ransac.registrations (R), ransac.samples ("NxR"), ransac.prune (W),
 //   ransac.prune_per_object (W per object, 0: the global W),
@@ -109,6 +111,7 @@ struct ExperimentConfig {
   std::string noise = "underwater";
   NoiseOverrides noise_params;
   int sensors = 1;
+  std::string sensing = "pads";         ///< pads | probe (datasets::ProbeSettings)
   std::uint64_t seed = 1;
   MethodParams params;
   std::string schedule = "runs";

@@ -128,6 +128,11 @@ datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
   if (n.sensel_noise) s.noise.signal_noise = *n.sensel_noise;
   if (n.force_noise) s.noise.force_noise = *n.force_noise;
   if (n.contact_sigma_m) s.noise.lateral_sigma = *n.contact_sigma_m;
+  s.sensing = parse_sensing(c.sensing, {}, "sensing");
+  if (s.sensing == Sensing::probe && n.contact_sigma_m) {   // the probe's own contact noise
+    s.probe.contact_sigma = *n.contact_sigma_m;
+    s.noise.lateral_sigma = 0.0;
+  }
   s.grasps = static_cast<std::size_t>(c.pool);
   return s;
 }
@@ -138,12 +143,18 @@ std::string pool_key(const datasets::SimulatorSettings& s) {
   k << s.noise.name << '|' << s.noise.arm_position_sigma << '|' << s.noise.arm_rotation_sigma_deg
     << '|' << s.noise.joint_sigma_deg << '|' << s.noise.signal_noise << '|' << s.noise.force_noise
     << '|' << s.noise.lateral_sigma << '|' << s.noise.fold_detect << '|' << s.sensors << '|'
-    << s.grasps;
+    << s.grasps << '|' << to_string(s.sensing) << '|' << s.probe.contact_sigma;
   return k.str();
 }
 
 RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
   RecognizerSettings s = c.preset == "paper" ? RecognizerSettings::paper() : RecognizerSettings::improved();
+  // A probe's path: free by the ball radius only, measured with the arm's error (sparse_hypotheses.hpp).
+  if (c.sensing == "probe") {
+    s.evaluate.d_thresh = kProbeFreeThreshold;
+    s.evaluate.free_inside_penalty = true;
+    s.evaluate.free_inside_margin = kProbeInsideMargin;
+  }
   const auto method = parse_method(c.method);
   if (!method) throw Error("unknown method '" + c.method + "'", {}, "method");
   s.method = *method;

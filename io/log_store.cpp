@@ -63,6 +63,7 @@ struct Dims {
   std::uint64_t pads, rows, cols, joints;
 };
 Dims dims_of(const LogHeader& h) {
+  if (h.sensing == Sensing::probe) return {0, 0, 0, 0};
   return {h.pads.size(), static_cast<std::uint64_t>(h.gripper.sensor().rows),
           static_cast<std::uint64_t>(h.gripper.sensor().cols),
           static_cast<std::uint64_t>(h.gripper.joint_count())};
@@ -76,8 +77,12 @@ TactileLog log_of(const LogHeader& h) {
   log.gripper = h.gripper;
   log.pads = h.pads;
   log.gains = h.gains;
+  log.sensing = h.sensing;
+  log.probe = h.probe;
   return log;
 }
+
+bool probe_log(const LogHeader& h) { return h.sensing == Sensing::probe; }
 
 // Header: root attributes, /gripper, /sensors and (structure of) /ground_truth.
 LogHeader read_header(const h5::File& file) {
@@ -102,12 +107,23 @@ LogHeader read_header(const h5::File& file) {
   } catch (const Error& e) {
     throw Error("gripper description: " + e.message(), name, "/gripper/description " + e.field());
   }
-  const SensorSettings& s = h.gripper.sensor();
-  const h5::Group sensors = file.group("sensors");
-  const auto pads = sensors.read<std::int32_t>("pad_index", {kAny});
-  h.pads.assign(pads.begin(), pads.end());
-  const auto P = static_cast<std::int64_t>(h.pads.size());
-  h.gains = sensors.read<float>("gain", {P, s.rows, s.cols});
+  if (root.has_attribute("sensing"))
+    h.sensing = parse_sensing(root.string_attribute("sensing"), name, "/sensing");
+  if (probe_log(h)) {
+    if (version < 2) throw Error("a probe log needs format_version 2", name, "/format_version");
+    const h5::Group probe = file.group("probe");
+    for (const char* a : {"ball_radius", "shaft_radius"})
+      if (!probe.has_attribute(a)) throw Error("missing attribute", name, std::string("/probe/") + a);
+    h.probe.ball_radius = probe.double_attribute("ball_radius");
+    h.probe.shaft_radius = probe.double_attribute("shaft_radius");
+  } else {
+    const SensorSettings& s = h.gripper.sensor();
+    const h5::Group sensors = file.group("sensors");
+    const auto pads = sensors.read<std::int32_t>("pad_index", {kAny});
+    h.pads.assign(pads.begin(), pads.end());
+    const auto P = static_cast<std::int64_t>(h.pads.size());
+    h.gains = sensors.read<float>("gain", {P, s.rows, s.cols});
+  }
   if (root.has_group("ground_truth")) {
     const auto row = file.group("ground_truth").read<double>("object_pose", {7});
     h.true_object_pose = pose_from_row(row.data(), name, "/ground_truth/object_pose");
@@ -126,6 +142,8 @@ LogHeader header_of(const TactileLog& log) {
   h.gripper = log.gripper;
   h.pads = log.pads;
   h.gains = log.gains;
+  h.sensing = log.sensing;
+  h.probe = log.probe;
   if (log.truth) h.true_object_pose = log.truth->object_pose;
   return h;
 }
@@ -168,12 +186,30 @@ LogWriter LogWriter::create(const std::filesystem::path& path, const LogHeader& 
   std::lock_guard lock(h5::mutex());
   h5::Group root = m.file.root();
   root.set_attribute("format", kLogFormat);
-  root.set_attribute("format_version", static_cast<std::int64_t>(kLogFormatVersion));
+  root.set_attribute("format_version", static_cast<std::int64_t>(probe_log(header) ? 2 : 1));
   root.set_attribute("object", header.object);
   root.set_attribute("noise", header.noise);
   root.set_attribute("seed", seed_to_attr(header.seed));
   root.set_attribute("source", header.source);
   root.create_group("gripper").write_strings("description", {gripper_to_json(header.gripper.spec())});
+  if (probe_log(header)) {
+    root.set_attribute("sensing", to_string(header.sensing));
+    h5::Group probe = root.create_group("probe");
+    probe.set_attribute("ball_radius", header.probe.ball_radius);
+    probe.set_attribute("shaft_radius", header.probe.shaft_radius);
+    h5::Group grasps = root.create_group("grasps");
+    grasps.create_extendible<double>("time", {}, chunks(256));
+    grasps.create_extendible<double>("arm_pose", {7}, chunks(256));
+    grasps.create_extendible<double>("probe_travel", {}, chunks(256));
+    grasps.create_extendible<std::uint8_t>("probe_touched", {}, chunks(256));
+    if (header.true_object_pose) {
+      h5::Group truth = root.create_group("ground_truth");
+      const auto row = pose_row(*header.true_object_pose);
+      truth.write("object_pose", row.data(), {7});
+      truth.create_extendible<double>("arm_pose", {7}, chunks(256));
+    }
+    return w;
+  }
   h5::Group sensors = root.create_group("sensors");
   std::vector<std::int32_t> pads(header.pads.begin(), header.pads.end());
   sensors.write("pad_index", pads);
@@ -207,7 +243,9 @@ LogWriter LogWriter::append_to(const std::filesystem::path& path) {
   m.shape = log_of(m.header);
   const h5::Group grasps = m.file.group("grasps");
   m.grasps = grasps.shape("time").at(0);
-  for (const char* name : {"arm_pose", "joints", "tactile", "past_peak"})
+  const auto row_sets = probe_log(m.header) ? std::vector<const char*>{"arm_pose", "probe_travel", "probe_touched"}
+                                            : std::vector<const char*>{"arm_pose", "joints", "tactile", "past_peak"};
+  for (const char* name : row_sets)
     if (grasps.shape(name).at(0) != m.grasps)
       throw Error("dataset has " + std::to_string(grasps.shape(name).at(0)) + " rows but /grasps/time has " +
                       std::to_string(m.grasps) + " (interrupted append?)",
@@ -232,7 +270,7 @@ void LogWriter::append(const GraspRecord& grasp, const Pose* truth_arm_pose,
   if (truth_arm_pose) {
     if (!truth_arm_pose->matrix().allFinite())
       throw Error("true arm pose is not finite", m.display, indexed("/ground_truth/arm_pose", m.grasps));
-    if (!truth_joints || truth_joints->size() != d.joints)
+    if (!probe_log(m.header) && (!truth_joints || truth_joints->size() != d.joints))
       throw Error("true joint angles are required, one per joint", m.display,
                   indexed("/ground_truth/joints", m.grasps));
   }
@@ -242,6 +280,17 @@ void LogWriter::append(const GraspRecord& grasp, const Pose* truth_arm_pose,
   g.append("time", &grasp.time, 1);
   const auto pose = pose_row(grasp.arm_pose);
   g.append("arm_pose", pose.data(), 1);
+  if (probe_log(m.header)) {
+    g.append("probe_travel", &grasp.probe_travel, 1);
+    const std::uint8_t touched = grasp.probe_touched ? 1 : 0;
+    g.append("probe_touched", &touched, 1);
+    if (truth_arm_pose) {
+      const auto row = pose_row(*truth_arm_pose);
+      root.open_group("ground_truth").append("arm_pose", row.data(), 1);
+    }
+    ++m.grasps;
+    return;
+  }
   g.append("joints", grasp.joints.data(), 1);
   g.append("tactile", grasp.tactile.data(), 1);
   std::vector<std::uint8_t> hints = grasp.past_peak;
@@ -298,24 +347,40 @@ TactileLog read_log(const std::filesystem::path& path) {
   h5::Shape s;
   const auto pose = g.read<double>("arm_pose", {kAny, 7}, &s);
   rows_of("arm_pose", s);
-  const auto joints = g.read<double>("joints", {kAny, J}, &s);
-  rows_of("joints", s);
-  const auto tactile = g.read<float>("tactile", {kAny, P, R, C}, &s);
-  rows_of("tactile", s);
-  std::vector<std::uint8_t> hints;
-  if (g.has_dataset("past_peak")) {
-    hints = g.read<std::uint8_t>("past_peak", {kAny, P, R, C}, &s);
-    rows_of("past_peak", s);
-  }
-  const std::size_t image = d.pads * d.rows * d.cols;
-  log.grasps.resize(G);
-  for (std::size_t k = 0; k < G; ++k) {
-    GraspRecord& r = log.grasps[k];
-    r.time = time[k];
-    r.arm_pose = pose_from_row(&pose[7 * k], name, indexed("/grasps/arm_pose", k));
-    r.joints.assign(joints.begin() + k * d.joints, joints.begin() + (k + 1) * d.joints);
-    r.tactile.assign(tactile.begin() + k * image, tactile.begin() + (k + 1) * image);
-    if (!hints.empty()) r.past_peak.assign(hints.begin() + k * image, hints.begin() + (k + 1) * image);
+  if (probe_log(h)) {
+    const auto travel = g.read<double>("probe_travel", {kAny}, &s);
+    rows_of("probe_travel", s);
+    const auto touched = g.read<std::uint8_t>("probe_touched", {kAny}, &s);
+    rows_of("probe_touched", s);
+    log.grasps.resize(G);
+    for (std::size_t k = 0; k < G; ++k) {
+      GraspRecord& r = log.grasps[k];
+      r.time = time[k];
+      r.arm_pose = pose_from_row(&pose[7 * k], name, indexed("/grasps/arm_pose", k));
+      r.probe_travel = travel[k];
+      if (touched[k] > 1) throw Error("probe_touched must be 0 or 1", name, indexed("/grasps/probe_touched", k));
+      r.probe_touched = touched[k] == 1;
+    }
+  } else {
+    const auto joints = g.read<double>("joints", {kAny, J}, &s);
+    rows_of("joints", s);
+    const auto tactile = g.read<float>("tactile", {kAny, P, R, C}, &s);
+    rows_of("tactile", s);
+    std::vector<std::uint8_t> hints;
+    if (g.has_dataset("past_peak")) {
+      hints = g.read<std::uint8_t>("past_peak", {kAny, P, R, C}, &s);
+      rows_of("past_peak", s);
+    }
+    const std::size_t image = d.pads * d.rows * d.cols;
+    log.grasps.resize(G);
+    for (std::size_t k = 0; k < G; ++k) {
+      GraspRecord& r = log.grasps[k];
+      r.time = time[k];
+      r.arm_pose = pose_from_row(&pose[7 * k], name, indexed("/grasps/arm_pose", k));
+      r.joints.assign(joints.begin() + k * d.joints, joints.begin() + (k + 1) * d.joints);
+      r.tactile.assign(tactile.begin() + k * image, tactile.begin() + (k + 1) * image);
+      if (!hints.empty()) r.past_peak.assign(hints.begin() + k * image, hints.begin() + (k + 1) * image);
+    }
   }
   if (h.true_object_pose) {
     const h5::Group t = file.group("ground_truth");

@@ -539,3 +539,60 @@ TEST_CASE("cli recognize: each answer's class of congruent objects, and whether 
     CHECK(s["correct_class"] == true);
   }
 }
+
+TEST_CASE("cli probe: simulate --sensing probe, recognize the log, --only, --cloud with --free") {
+  test::TempDir dir("cli_probe");
+  make_db(dir);
+  const Run sim = touchstone(dir, "simulate --db db.h5 --object wedge --grasps 24 --sensing probe --noise ideal "
+                                  "--contact-sigma 0.0005 --quantization 0.001 --seed 4 --out probe.h5 --json");
+  REQUIRE_MESSAGE(sim.code == 0, sim.err);
+  CHECK(nlohmann::json::parse(sim.out)["sensing"] == "probe");
+  const Run info = touchstone(dir, "log info probe.h5 --json");
+  REQUIRE(info.code == 0);
+  const auto ji = nlohmann::json::parse(info.out);
+  CHECK(ji["sensing"] == "probe");
+  CHECK(ji["grasps"] == 24);
+  for (const auto& n : ji["contacts_per_grasp"]) CHECK(n.get<int>() <= 1);
+
+  // The log among the six objects, and the wedge alone (localization of a known object).
+  for (const std::string only : {"", " --only wedge", " --only wedge,nut"}) {
+    INFO(only);
+    const Run r = touchstone(dir, "recognize --db db.h5 --log probe.h5 --json" + only + kFast);
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    const auto j = nlohmann::json::parse(r.out);
+    REQUIRE(j["steps"].size() == 24);
+    const auto& last = j["steps"][23];
+    CHECK(last["sparse_active"] == true);
+    CHECK(last["sparse_candidates"].get<int>() > 0);
+    CHECK(last["object"] == "wedge");
+    REQUIRE(last["contact_model_distance_m"].is_number());
+    // 0.5 mm contact noise and 1 mm quantization: the contacts lie about a millimetre from the
+    // surface at the right pose, centimetres at a wrong one.
+    CHECK(last["contact_model_distance_m"].get<double>() < 0.0015);
+    CHECK(last["position_error_m"].get<double>() < 0.005);
+    CHECK(j["steps"][0]["contact_model_distance_m"].is_null());   // one contact: no answer yet
+    if (!only.empty())
+      for (const auto& s : j["steps"])
+        if (!s["object"].is_null()) CHECK((s["object"] == "wedge" || (only.size() > 13 && s["object"] == "nut")));
+  }
+
+  // The same touches as a plain contact cloud (with normals) and a free-space cloud.
+  REQUIRE(touchstone(dir, "log export probe.h5 --out contacts.ply --free free.ply").code == 0);
+  const Run c = touchstone(dir, "recognize --db db.h5 --cloud contacts.ply --free free.ply --d-thresh 0.0001 "
+                                "--free-inside-margin 0.01 --only wedge --json" + kFast);
+  REQUIRE_MESSAGE(c.code == 0, c.err);
+  const auto jc = nlohmann::json::parse(c.out);
+  CHECK(jc["steps"][0]["free_points"].get<int>() > 50);
+  CHECK(jc["steps"][0]["object"] == "wedge");
+  CHECK(jc["steps"][0]["contact_model_distance_m"].get<double>() < 0.0015);
+
+  // Bad input: one clear error.
+  const Run bad = touchstone(dir, "recognize --db db.h5 --log probe.h5 --only wedge,teapot --json" + kFast);
+  CHECK(bad.code == 1);
+  CHECK(bad.err.find("no object 'teapot'") != std::string::npos);
+  CHECK(bad.err.find("--only") != std::string::npos);
+  CHECK(touchstone(dir, "recognize --db db.h5 --log probe.h5 --free free.ply").code == 2);   // --free needs --cloud
+  CHECK(touchstone(dir, "recognize --db db.h5 --cloud contacts.ply --free missing.ply").code == 2);
+  CHECK(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 3 --sensing taxels --out x.h5").code == 2);
+  CHECK_FALSE(fs::exists(dir / "x.h5"));
+}

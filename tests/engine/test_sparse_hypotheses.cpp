@@ -1,0 +1,266 @@
+// Feature-free hypotheses for sparse contacts (engine/sparse_hypotheses): the pair tables against
+// brute force, when the source runs, the true pose among the candidates (asymmetric, symmetric,
+// coplanar, 1 mm quantized contacts), degenerate sets, determinism, and the recognizer with
+// isolated contacts alone.
+#include "engine/pose_error.hpp"
+#include "engine/recognizer.hpp"
+#include "engine/sparse_hypotheses.hpp"
+#include "engine/symmetry.hpp"
+#include "recognition_fixture.hpp"
+
+#include <doctest/doctest.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+
+using namespace ts;
+
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+/// `n` isolated contacts of object `obj` at T (world), at least `spacing` apart, with outward
+/// normals tilted by up to `tilt_deg`, noise `noise` per axis, rounded to `quantum` (0: not).
+PointCloud isolated(const test::TestSource& src, std::size_t obj, const Pose& T, std::size_t n,
+                    std::uint64_t seed, double spacing = 0.02, double tilt_deg = 10.0,
+                    double noise = 0.0, double quantum = 0.0) {
+  const PointCloud& fine = src.fines[obj];
+  Rng rng(seed);
+  PointCloud out;
+  for (int attempt = 0; attempt < 100000 && out.size() < n; ++attempt) {
+    const std::size_t i = rng.index(fine.size());
+    const Vec3 p = T * fine.points[i];
+    bool far = true;
+    for (const Vec3& q : out.points) far = far && (q - p).norm() >= spacing;
+    if (!far) continue;
+    Vec3 w = p + noise * Vec3(rng.normal(), rng.normal(), rng.normal());
+    if (quantum > 0)
+      for (int k = 0; k < 3; ++k) w[k] = quantum * std::round(w[k] / quantum);
+    const Vec3 nrm = T.linear() * fine.normals[i];
+    const Vec3 axis = nrm.cross(rng.unit_vector()).normalized();
+    out.points.push_back(w);
+    out.normals.push_back(Eigen::AngleAxisd(tilt_deg * kDeg * rng.uniform(), axis) * nrm);
+  }
+  return out;
+}
+
+Scene scene_of(const Database& db, const PointCloud& contacts) {
+  return prepare_scene(contacts, {}, db.settings().fpfh, SceneSettings{}, 1, 1);
+}
+
+/// The smallest (position, orientation) error of the object's candidates to the truth, up to
+/// the object's symmetries.
+std::pair<double, double> closest(const Scene& scene, const std::vector<Candidate>& cands, std::uint32_t obj,
+                                  const Pose& T, const SymmetryGroup* sym) {
+  double best_p = 1e9, best_r = 1e9, best = 1e9;
+  for (const Candidate& c : cands) {
+    if (c.object != obj) continue;
+    const PoseError e = pose_error(scene.to_world(c.T_scene_object), T, sym);
+    const double score = e.symmetric_position_m / 0.005 + e.symmetric_orientation_deg / 5.0;
+    if (score < best) best = score, best_p = e.symmetric_position_m, best_r = e.symmetric_orientation_deg;
+  }
+  return {best_p, best_r};
+}
+
+}  // namespace
+
+TEST_CASE("Pair tables: every other point per point, sorted by distance, with the pair's angles") {
+  auto src = test::make_source();
+  Database db(src);
+  SparseSettings s;
+  s.max_model_points = 120;
+  const ObjectPairs t = build_object_pairs(db.keypoints(4), s);
+  const std::size_t n = t.points.size();
+  REQUIRE(n >= 20);
+  CHECK(n <= 120);
+  REQUIRE(t.near.size() == n * (n - 1));
+  auto deg = [](std::uint8_t u) { return u * 180.0 / 255.0; };
+  auto angle = [](const Vec3& a, const Vec3& b) { return std::atan2(a.cross(b).norm(), a.dot(b)) / kDeg; };
+  for (std::size_t i = 0; i < n; ++i) {
+    std::vector<std::uint8_t> seen(n, 0);
+    for (std::size_t k = 0; k < n - 1; ++k) {
+      const ObjectPairs::Near& e = t.near[i * (n - 1) + k];
+      if (k > 0) {
+        const ObjectPairs::Near& f = t.near[i * (n - 1) + k - 1];
+        CHECK((f.distance < e.distance || (f.distance == e.distance && f.index < e.index)));
+      }
+      REQUIRE(e.index < n);
+      CHECK(e.index != i);
+      CHECK_FALSE(seen[e.index]);
+      seen[e.index] = 1;
+      const Vec3 d = t.points[e.index] - t.points[i];
+      CHECK(std::abs(e.distance * t.unit - d.norm()) <= 0.51 * t.unit);
+      CHECK(std::abs(deg(e.a_i) - angle(t.normals[i], d)) < 0.75);
+      CHECK(std::abs(deg(e.a_j) - angle(t.normals[e.index], d)) < 0.75);
+      CHECK(std::abs(deg(e.a_ij) - angle(t.normals[i], t.normals[e.index])) < 0.75);
+    }
+  }
+  for (const Vec3& v : t.normals) CHECK(std::abs(v.norm() - 1.0) < 1e-6);
+}
+
+TEST_CASE("The source runs on isolated contacts, not on tactile patches") {
+  auto src = test::make_source();
+  Database db(src);
+  const Pose T = test::random_pose(5, Vec3(0.3, 0.1, -0.2));
+  const SparseSettings s;
+  const Scene dense = scene_of(db, test::touch(src->fines[4], T, 6, 3));
+  CHECK(dense.contacts.size() > 50);
+  CHECK_FALSE(sparse_active(dense, s));
+  const Scene sparse = scene_of(db, isolated(*src, 4, T, 12, 3));
+  CHECK(sparse.contacts.size() == 12);
+  CHECK(isolated_contacts(sparse) == 12);
+  CHECK(sparse_active(sparse, s));
+  SparseSettings off = s;
+  off.enabled = false;
+  CHECK_FALSE(sparse_active(sparse, off));
+  // Two contacts are no triplet.
+  CHECK_FALSE(sparse_active(scene_of(db, isolated(*src, 4, T, 2, 3)), s));
+}
+
+TEST_CASE("The true pose is among the candidates: asymmetric, symmetric, noisy, quantized") {
+  auto src = test::make_source();
+  Database db(src);
+  SymmetryCache symmetries;
+  SparseTables tables(db, SparseSettings{});
+  const std::vector<std::uint8_t> all(db.size(), 1);
+  struct Case {
+    std::size_t obj;
+    double noise, quantum, tilt;
+    bool normals;
+  };
+  for (const Case& k : {Case{4, 0.0, 0.0, 10.0, true},      // wedge, exact contacts
+                        Case{4, 0.001, 0.0, 20.0, true},    // 1 mm noise, rough normals
+                        Case{4, 0.0, 0.001, 10.0, true},    // 1 mm quantization
+                        Case{4, 0.0, 0.0, 0.0, false},      // no normals known
+                        Case{1, 0.0005, 0.001, 10.0, true}, // nut (5-fold symmetric)
+                        Case{5, 0.0005, 0.0, 10.0, true}}) { // cube (24 rotations)
+    INFO("object " << db.info(k.obj).name << " noise " << k.noise << " quantum " << k.quantum
+                   << " normals " << k.normals);
+    const Pose T = test::random_pose(60 + k.obj, Vec3(-0.2, 0.4, 0.1));
+    PointCloud c = isolated(*src, k.obj, T, 15, 7 + k.obj, 0.02, k.tilt, k.noise, k.quantum);
+    if (!k.normals) c.normals.clear();
+    const Scene scene = scene_of(db, c);
+    SparseStats st;
+    const auto cands = sparse_candidates(scene, tables, scene_contact_normals(scene, c), all, SparseSettings{},
+                                         9, 1, &st);
+    CHECK(st.active);
+    CHECK(st.triplets > 0);
+    REQUIRE(!cands.empty());
+    for (const Candidate& cd : cands) {
+      REQUIRE(cd.T_scene_object.matrix().allFinite());
+      CHECK(std::abs(cd.T_scene_object.linear().determinant() - 1.0) < 1e-9);
+      CHECK(cd.slot >= kSparseSlot);
+    }
+    const auto [dp, dr] = closest(scene, cands, static_cast<std::uint32_t>(k.obj), T,
+                                  &symmetries.get(db, k.obj));
+    CHECK(dp < 0.012);
+    CHECK(dr < 12.0);
+  }
+}
+
+TEST_CASE("Degenerate contacts: collinear sets give no triplet, coplanar ones stay finite") {
+  auto src = test::make_source();
+  Database db(src);
+  SparseTables tables(db, SparseSettings{});
+  const std::vector<std::uint8_t> all(db.size(), 1);
+  // Nine points on one line (an edge of the box), 15 mm apart (isolated: the feature radius is
+  // 12 mm): no well-conditioned triangle.
+  PointCloud line;
+  for (int i = 0; i < 9; ++i) line.points.push_back(Vec3(-0.06 + 0.015 * i, -0.04, -0.025) + Vec3(1.0, 2.0, 3.0));
+  const Scene s1 = scene_of(db, line);
+  SparseStats st;
+  CHECK(sparse_candidates(s1, tables, {}, all, SparseSettings{}, 1, 1, &st).empty());
+  CHECK(st.active);
+  CHECK(st.triplets == 0);
+  // Nearly collinear (1e-5 m off the line) is refused the same way.
+  line.points[4].y() += 1e-5;
+  CHECK(sparse_candidates(scene_of(db, line), tables, {}, all, SparseSettings{}, 1, 1, &st).empty());
+  // Every contact on the box's largest face: a plane; candidates exist, the truth up to the
+  // face's in-plane ambiguity is among them, every pose finite and proper.
+  const Pose T = test::random_pose(8, Vec3(0.1, 0.2, 0.3));
+  PointCloud face;
+  Rng rng(4);
+  for (int i = 0; i < 10; ++i)
+    face.points.push_back(T * Vec3(rng.uniform(-0.055, 0.055), rng.uniform(-0.035, 0.035), 0.025));
+  const Scene s2 = scene_of(db, face);
+  const auto cands = sparse_candidates(s2, tables, {}, all, SparseSettings{}, 1, 1, &st);
+  REQUIRE(!cands.empty());
+  bool on_face = false;
+  for (const Candidate& c : cands) {
+    REQUIRE(c.T_scene_object.matrix().allFinite());
+    if (c.object != 0) continue;
+    // The contacts should lie within the tolerance of the box's surface under the candidate.
+    double worst = 0.0;
+    const Pose Tw = s2.to_world(c.T_scene_object).inverse();
+    for (const Vec3& p : face.points) {
+      const Vec3 q = Tw * p;
+      const Vec3 h(0.06, 0.04, 0.025);
+      const Vec3 out = (q.cwiseAbs() - h);
+      worst = std::max(worst, out.maxCoeff() > 0 ? out.cwiseMax(0.0).norm() : -out.maxCoeff());
+    }
+    on_face = on_face || worst < 0.008;
+  }
+  CHECK(on_face);
+}
+
+TEST_CASE("Sparse candidates: the same for 1 and 2 threads") {
+  auto src = test::make_source();
+  Database db(src);
+  const Pose T = test::random_pose(12, Vec3(0.0, 0.0, 0.5));
+  const PointCloud c = isolated(*src, 1, T, 20, 5, 0.02, 15.0, 0.001);
+  const std::vector<std::uint8_t> all(db.size(), 1);
+  auto run = [&](int threads) {
+    tbb::task_arena arena(threads);
+    std::vector<Candidate> out;
+    arena.execute([&] {
+      SparseTables tables(db, SparseSettings{});
+      const Scene scene = scene_of(db, c);
+      out = sparse_candidates(scene, tables, scene_contact_normals(scene, c), all, SparseSettings{}, 3, 2);
+    });
+    return out;
+  };
+  const auto a = run(1), b = run(2);
+  REQUIRE(a.size() == b.size());
+  REQUIRE(!a.empty());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    CHECK(a[i].object == b[i].object);
+    CHECK(a[i].slot == b[i].slot);
+    CHECK(a[i].T_scene_object.matrix() == b[i].T_scene_object.matrix());
+  }
+}
+
+TEST_CASE("The recognizer recognizes and localizes from isolated contacts alone") {
+  auto src = test::make_source();
+  Database db(src);
+  SymmetryCache symmetries;
+  RecognizerSettings rs = test::fast_settings();
+  rs.evaluate.free_inside_penalty = true;
+  rs.refine_new = true;
+  rs.refine_pool = 40;
+  for (std::size_t obj : {4u, 1u}) {
+    INFO("object " << db.info(obj).name);
+    const Pose T = test::random_pose(80 + obj, Vec3(0.2, -0.1, 0.3));
+    const PointCloud all = isolated(*src, obj, T, 25, 21 + obj, 0.015, 15.0, 0.0005);
+    Recognizer rec(db, rs);
+    StepResult last;
+    for (std::size_t k = 3; k <= all.size(); k += 2) {
+      PointCloud c;
+      c.points.assign(all.points.begin(), all.points.begin() + static_cast<std::ptrdiff_t>(k));
+      c.normals.assign(all.normals.begin(), all.normals.begin() + static_cast<std::ptrdiff_t>(k));
+      last = rec.step(c, {});
+      CHECK(last.sparse_active);
+    }
+    REQUIRE(last.valid);
+    CHECK(last.best.object == obj);
+    const PoseError e = pose_error(last.best.pose, T, &symmetries.get(db, obj));
+    CHECK(e.symmetric_position_m < 0.004);
+    CHECK(e.symmetric_orientation_deg < 4.0);
+    // The mean contact-to-model distance at the answer: about the contact noise.
+    const double d = mean_contact_distance(*db.geometry(last.best.object), last.best.pose, all.points);
+    CHECK(d < 0.0015);
+    const double wrong = mean_contact_distance(*db.geometry(last.best.object),
+                                               Pose(Eigen::Translation3d(0.01, 0, 0)) * last.best.pose, all.points);
+    CHECK(wrong > d);
+  }
+}
