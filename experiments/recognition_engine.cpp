@@ -479,6 +479,8 @@ class RecognitionEngine final : public RunEngine {
     log.gripper = pool.gripper;
     log.pads = pool.pads;
     log.gains = pool.gains;
+    log.sensing = pool.sensing;   // a probe pool stays a probe log
+    log.probe = pool.probe;
     LogGroundTruth truth;
     truth.object_pose = pool.truth->object_pose;
     for (std::int32_t g : grasps) {

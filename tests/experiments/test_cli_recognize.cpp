@@ -596,3 +596,20 @@ TEST_CASE("cli probe: simulate --sensing probe, recognize the log, --only, --clo
   CHECK(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 3 --sensing taxels --out x.h5").code == 2);
   CHECK_FALSE(fs::exists(dir / "x.h5"));
 }
+
+TEST_CASE("cli probe experiment: sensing = probe under both protocols (the shared pool stays a probe log)") {
+  test::TempDir dir("cli_probe_exp");
+  make_db(dir);
+  for (const std::string protocol : {"independent", "shared_pool"}) {
+    INFO(protocol);
+    const Run r = touchstone(dir, "experiment --db db.h5 --objects wedge --runs 1 --steps 20 --pool 20 --set sensing=probe "
+                                  "--set protocol=" + protocol + " --json --out " + protocol + ".h5");
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    const auto j = nlohmann::json::parse(r.out);
+    REQUIRE(j["per_step"].size() == 20);
+    CHECK(j["config"]["sensing"] == "probe");
+    // 20 touches on the wedge among six objects: recognized, within a few millimetres.
+    CHECK(j["per_step"][19]["recognition_rate"] == 1.0);
+    CHECK(j["per_step"][19]["position_error_m_median"].get<double>() < 0.005);
+  }
+}
