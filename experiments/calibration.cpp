@@ -104,6 +104,15 @@ LogisticModel fit_logistic(const std::vector<std::vector<double>>& rows, const s
   return m;
 }
 
+double choose_open_set_threshold(std::vector<double> right, std::size_t runs, double max_drop) {
+  if (!(max_drop >= 0.0 && max_drop < 1.0))
+    throw Error("the open-set drop must lie in [0, 1)", {}, "--open-set-drop");
+  const auto k = static_cast<std::size_t>(std::floor(max_drop * static_cast<double>(runs) + 1e-9));
+  if (k >= right.size()) return 1.0;
+  std::sort(right.begin(), right.end());
+  return right[k];
+}
+
 namespace {
 
 nlohmann::ordered_json model_json(const LogisticModel& m) {
@@ -148,6 +157,7 @@ nlohmann::ordered_json to_json(const Calibration& c) {
   j["features"] = c.features;
   j["object"] = model_json(c.object);
   j["pose"] = model_json(c.pose);
+  j["open_set_threshold"] = c.open_set_threshold ? nlohmann::ordered_json(*c.open_set_threshold) : nullptr;
   j["provenance"] = c.provenance.is_null() ? nlohmann::ordered_json::object() : c.provenance;
   return j;
 }
@@ -195,6 +205,12 @@ Calibration read_calibration(const std::filesystem::path& path, const std::strin
                 "): refit it with this version", file, "features");
   c.object = model_from(j, "object", c.features.size(), file);
   c.pose = model_from(j, "pose", c.features.size(), file);
+  if (j.contains("open_set_threshold") && !j["open_set_threshold"].is_null()) {
+    const auto& t = j["open_set_threshold"];
+    if (!t.is_number() || !(t.get<double>() >= 0.0 && t.get<double>() <= 1.0))
+      throw Error("the open-set threshold must be a number in [0, 1] or null", file, "open_set_threshold");
+    c.open_set_threshold = t.get<double>();
+  }
   c.provenance = j.contains("provenance") ? j["provenance"] : nlohmann::ordered_json::object();
   return c;
 }

@@ -16,6 +16,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -49,11 +50,22 @@ struct Calibration {
   std::vector<std::string> features;  ///< confidence_feature_names() when fitted
   LogisticModel object;               ///< P(the named object is right)
   LogisticModel pose;                 ///< P(right object and position error < 1 cm)
+  /// Open set: an answer whose object confidence is below this is "not in the database"
+  /// (unset: every answer names an object). Chosen on calibration runs by
+  /// choose_open_set_threshold.
+  std::optional<double> open_set_threshold;
   nlohmann::ordered_json provenance;  ///< what it was fitted on (stores, runs, steps, seeds)
 
   double object_confidence(std::span<const double> f) const { return object.predict(f); }
   double pose_confidence(std::span<const double> f) const { return pose.predict(f); }
 };
+
+/// The open-set threshold: the largest confidence t such that refusing the answers below t
+/// costs at most `max_drop` of the runs at that step their right answer, i.e. t is the
+/// (floor(max_drop * runs) + 1)-th smallest confidence of the right answers (1 when there are
+/// no more right answers than that). `right_confidences`: the object confidences of the right
+/// answers at one step; `runs`: all answers at that step. Throws for max_drop outside [0, 1).
+double choose_open_set_threshold(std::vector<double> right_confidences, std::size_t runs, double max_drop);
 
 nlohmann::ordered_json to_json(const Calibration& c);
 /// Write atomically (a temporary file renamed).

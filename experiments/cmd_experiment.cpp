@@ -43,6 +43,8 @@ struct CalibrateOptions {
   CommonOptions common;
   std::vector<std::string> stores;
   std::string out, runs;
+  double open_set_drop = 0.03;   ///< known-object recognition the open-set threshold may cost
+  int open_set_step = 20;        ///< at this step (the last when the runs are shorter)
 };
 
 /// --runs A:B, the runs A <= run < B of every object ("" : all).
@@ -184,7 +186,7 @@ int run_experiment(const ExperimentOptions& o) {
   } catch (const Error& e) {
     // An unknown object: name where it was listed (the --objects flag, or the configuration
     // file's key) and the database that lacks it.
-    if (!e.file().empty() || (e.field() != "objects" && e.field() != "database")) throw;
+    if (!e.file().empty() || (e.field() != "objects" && e.field() != "database" && e.field() != "hidden")) throw;
     const bool flag = e.field() == "objects" && !o.objects.empty();
     if (flag || o.config_file.empty()) throw Error(e.message(), o.db, flag ? "--objects" : e.field());
     std::string message = e.message();
@@ -274,7 +276,7 @@ int run_report(const ReportOptions& o) {
 int run_calibrate(const CalibrateOptions& o) {
   const auto& names = experiments::confidence_feature_names();
   std::vector<std::vector<double>> rows;
-  std::vector<int> object_right, pose_right;
+  std::vector<int> object_right, pose_right, step_of;
   std::string fingerprint;
   nlohmann::ordered_json sources = nlohmann::ordered_json::array();
   const RunRange range = parse_runs(o.runs);
@@ -304,6 +306,7 @@ int run_calibrate(const CalibrateOptions& o) {
         rows.push_back(std::move(f));
         object_right.push_back(s.correct ? 1 : 0);
         pose_right.push_back(s.correct && s.position_error_m < 0.01 ? 1 : 0);
+        step_of.push_back(static_cast<int>(&s - r.steps.data()) + 1);
         ++steps;
       }
     const auto config = nlohmann::ordered_json::parse(c.header.config_json, nullptr, false);
@@ -324,6 +327,20 @@ int run_calibrate(const CalibrateOptions& o) {
   cal.features = names;
   cal.object = experiments::fit_logistic(rows, object_right);
   cal.pose = experiments::fit_logistic(rows, pose_right);
+  // Open set: the threshold that costs the fitted runs at most --open-set-drop of their right
+  // answers at --open-set-step.
+  const int last = *std::max_element(step_of.begin(), step_of.end());
+  const int at = std::min(o.open_set_step, last);
+  std::vector<double> right_at;
+  std::size_t runs_at = 0;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    if (step_of[i] != at) continue;
+    ++runs_at;
+    if (object_right[i]) right_at.push_back(cal.object_confidence(rows[i]));
+  }
+  cal.open_set_threshold = experiments::choose_open_set_threshold(right_at, runs_at, o.open_set_drop);
+  cal.provenance["open_set"] = {{"max_drop", o.open_set_drop}, {"step", at}, {"runs", runs_at},
+                                {"right", right_at.size()}};
   cal.provenance["fitted_on"] = sources;
   cal.provenance["step_answers"] = rows.size();
   experiments::write_calibration(o.out, cal);
@@ -343,8 +360,9 @@ int run_calibrate(const CalibrateOptions& o) {
     std::cout << "Calibration written to " << o.out << ": " << rows.size() << " step answers of "
               << o.stores.size() << " run store(s); in-sample object ECE " << std::fixed
               << std::setprecision(3) << a.ece << ", Brier " << a.brier << "; pose ECE " << b.ece
-              << ", Brier " << b.brier << " (judge it on other runs: touchstone report STORE "
-                 "--calibration " << o.out << ")\n";
+              << ", Brier " << b.brier << "; open-set threshold " << *cal.open_set_threshold
+              << " (at most " << o.open_set_drop * 100 << " % of the runs lose their right answer at step "
+              << at << "; judge it on other runs: touchstone report STORE --calibration " << o.out << ")\n";
   }
   return 0;
 }
@@ -406,6 +424,12 @@ void register_experiment(CLI::App& app) {
   cb->add_option("stores", co->stores, "Run stores (HDF5) of simulated runs of one database")->required();
   cb->add_option("--out", co->out, "Calibration file to write (JSON)")->required();
   cb->add_option("--runs", co->runs, "Fit on the runs A <= run < B of every object only (A:B)");
+  cb->add_option("--open-set-drop", co->open_set_drop,
+                 "Open set: the threshold may cost at most this share of the runs their right answer "
+                 "(default 0.03)")->check(CLI::Range(0.0, 0.99));
+  cb->add_option("--open-set-step", co->open_set_step,
+                 "Open set: ... at this step (default 20; the last when runs are shorter)")
+      ->check(CLI::PositiveNumber);
   add_common(cb, co->common);
   cb->callback([co] { run_command(co->common, [co] { return run_calibrate(*co); }); });
 }

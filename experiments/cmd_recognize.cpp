@@ -48,6 +48,7 @@ struct RecognizeOptions {
   CommonOptions common;
   std::string db, out, ground_truth, object;
   std::string calibration;           ///< --calibration: the confidence model (touchstone calibrate)
+  std::optional<double> open_set_threshold;  ///< --open-set-threshold (unset: the calibration's)
   std::vector<std::string> logs, clouds;  ///< --log files; --cloud files or folders
   std::string free;                  ///< --free: the free-space cloud of a single --cloud
   std::vector<std::string> only;     ///< --only: the objects the answer may name (empty: all)
@@ -330,13 +331,21 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     st["weight"] = r.valid ? nlohmann::ordered_json(r.best.weight) : nullptr;
     st["posterior"] = r.valid ? nlohmann::ordered_json(r.posterior) : nullptr;
     // Calibrated: P(the named object is right), P(and its position within 1 cm) (--calibration).
+    // Open set: below the threshold the answer is "not in the database" (the object the
+    // evidence fits best stays as best_guess).
+    bool refused = false;
     if (c.calibration) {
       const std::vector<double> f = experiments::confidence_features(r);
-      st["confidence"] = {{"object", c.calibration->object_confidence(f)},
-                          {"pose", c.calibration->pose_confidence(f)}};
+      const double object_confidence = c.calibration->object_confidence(f);
+      st["confidence"] = {{"object", object_confidence}, {"pose", c.calibration->pose_confidence(f)}};
+      const auto threshold = c.o.open_set_threshold ? c.o.open_set_threshold : c.calibration->open_set_threshold;
+      refused = r.valid && threshold && object_confidence < *threshold;
     } else {
       st["confidence"] = nullptr;
     }
+    st["reason"] = refused ? nlohmann::ordered_json("not_in_database") : nullptr;
+    st["best_guess"] = refused ? st["object"] : nullptr;
+    if (refused) st["object"] = nullptr;
     st["pose"] = r.valid ? pose_json(r.best.pose) : nullptr;
     const auto e = s.error;
     st["position_error_m"] = number_or_null(e ? std::optional(e->position_m) : std::nullopt);
@@ -345,13 +354,16 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
         number_or_null(e ? std::optional(e->symmetric_orientation_deg) : std::nullopt);
     st["time_s"] = r.times.total_s;
     // extensions
-    st["correct"] = s.correct ? nlohmann::ordered_json(*s.correct) : nullptr;
+    // A refused answer is right exactly when the touched object is not in the database.
+    st["correct"] = !s.correct ? nlohmann::ordered_json(nullptr)
+                    : refused  ? nlohmann::ordered_json(run.truth_outside)
+                               : nlohmann::ordered_json(*s.correct);
     // The named object's class of congruent objects (no touch tells them apart), and whether the
     // answer lies in the true object's class.
     st["object_class"] = r.valid ? class_json(c, r.best.object) : nullptr;
     if (s.correct) {
       const std::size_t truth = c.db.find(run.truth_name);
-      st["correct_class"] = r.valid && truth < c.db.size() &&
+      st["correct_class"] = refused ? run.truth_outside : r.valid && truth < c.db.size() &&
                             (c.congruence ? c.congruence->same_class(r.best.object, truth) : r.best.object == truth);
     } else {
       st["correct_class"] = nullptr;
@@ -613,6 +625,8 @@ int run_recognize(const RecognizeOptions& o) {
   std::optional<experiments::Calibration> calibration;   // fitted for this database, or an error
   if (!o.calibration.empty())
     calibration = experiments::read_calibration(o.calibration, experiments::file_fingerprint(*source));
+  else if (o.open_set_threshold)
+    throw Error("an open-set threshold needs a confidence calibration (--calibration)", {}, "--open-set-threshold");
   const Context c{o, rs, db, largest, symmetries, source->congruence(), calibration ? &*calibration : nullptr};
   if (many) return recognize_many(c, inputs, outs);
 
@@ -663,7 +677,12 @@ void register_recognize(CLI::App& app) {
   sub->add_option("--object", o->object, "Name of the touched object (ground truth), if known");
   sub->add_option("--calibration", o->calibration,
                   "Confidence calibration of this database (touchstone calibrate): each step's JSON "
-                  "gets \"confidence\" {object, pose}");
+                  "gets \"confidence\" {object, pose}; below its open-set threshold the answer is "
+                  "\"object\": null, \"reason\": \"not_in_database\"");
+  sub->add_option("--open-set-threshold", o->open_set_threshold,
+                  "Object confidence below which the answer is \"not in the database\" (default: the "
+                  "calibration file's, chosen on its calibration runs; 0: always name an object)")
+      ->check(CLI::Range(0.0, 1.0));
 
   sub->add_option("--preset", o->preset,
                   "improved (default): Touchstone's extensions (per-object feature pruning, free "

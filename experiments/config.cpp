@@ -129,6 +129,9 @@ const std::vector<KeyDef>& key_defs() {
     add("database_size", true,
         [](auto& c, auto& in, auto& x) { c.database_size = int_at_least(in, 1, x); },
         [](auto& c) { return opt(c.database_size); });
+    // hidden: names of the database file, or "each" (leave-one-out); see config.hpp.
+    add("hidden", false, [](auto& c, auto& in, auto& x) { c.hidden = name_list(in, x); },
+        [](auto& c) { return J(c.hidden); });
     add("runs", false, [](auto& c, auto& in, auto& x) { c.runs = int_at_least(in, 1, x); },
         [](auto& c) { return J(c.runs); });
     add("steps", false, [](auto& c, auto& in, auto& x) { c.steps = int_at_least(in, 1, x); },
@@ -392,12 +395,30 @@ ResolvedObjects resolve_objects(const ExperimentConfig& c,
   std::vector<std::string> pool = c.database.empty() ? names : c.database;
   for (const auto& n : pool)
     if (!known.count(n)) throw Error("unknown object '" + n + "' (not in the database)", {}, "database");
+  // Open set: hidden objects leave the recognizer's database (they may still be explored).
+  r.hide_each = c.hidden.size() == 1 && c.hidden.front() == "each";
+  std::set<std::string> hidden;
+  if (!r.hide_each)
+    for (const auto& n : c.hidden) {
+      if (n == "each") throw Error("hidden: \"each\" cannot be combined with names", {}, "hidden");
+      if (!known.count(n)) throw Error("hidden object '" + n + "' is not in the database", {}, "hidden");
+      hidden.insert(n);
+    }
+  std::erase_if(pool, [&](const std::string& n) { return hidden.count(n) > 0; });
+  if (pool.empty()) throw Error("every database object is hidden", {}, "hidden");
   const std::set<std::string> in_pool(pool.begin(), pool.end());
-  for (const auto& n : r.explored)
+  for (const auto& n : r.explored) {
+    if (hidden.count(n)) {
+      r.hidden.push_back(n);
+      continue;
+    }
     if (!in_pool.count(n))
       throw Error("explored object '" + n + "' is not among the database objects", {}, "database");
-  r.database = r.explored;
+  }
+  if (r.hide_each) r.hidden = r.explored;
   const std::set<std::string> explored(r.explored.begin(), r.explored.end());
+  for (const auto& n : r.explored)
+    if (!hidden.count(n)) r.database.push_back(n);
   for (const auto& n : pool)
     if (!explored.count(n)) r.database.push_back(n);
   if (c.database_size) {

@@ -8,6 +8,10 @@
 //   objects            "all" | [names]     objects explored (default: all of the database)
 //   database           "all" | [names]     objects the recognizer may answer (default: all)
 //   database_size      int >= 1            first the explored objects, then database order
+//   hidden             [names] | "each"    open set: objects the recognizer may not answer
+//                                          (removed from its database; they may be explored),
+//                                          "each": every explored object hidden from its own
+//                                          runs (leave-one-out). Default: none
 //   runs               int >= 1            exploration runs per object (paper: 20 or 50)
 //   steps              int >= 1            exploration steps (grasps) per run (paper: 40)
 //   pool               int >= steps        simulated grasps per pool (Section 5.1: >= 50)
@@ -100,6 +104,8 @@ struct ExperimentConfig {
   std::vector<std::string> objects;     ///< explored objects; empty = all of the database
   std::vector<std::string> database;    ///< objects the recognizer knows; empty = all
   std::optional<int> database_size;     ///< truncate the database (explored objects first)
+  std::vector<std::string> hidden;      ///< open set: hidden from the recognizer; {"each"}:
+                                        ///< every explored object from its own runs
   int runs = 20;
   int steps = 40;
   int pool = 50;
@@ -141,6 +147,9 @@ void validate(const ExperimentConfig& config, const std::string& file = {});
 struct ResolvedObjects {
   std::vector<std::string> explored;   ///< in the configuration's order
   std::vector<std::string> database;   ///< what the recognizer knows, explored objects first
+                                       ///< (hidden objects excluded)
+  std::vector<std::string> hidden;     ///< explored objects the recognizer does not know
+  bool hide_each = false;              ///< hidden = "each": each explored object from its runs
 };
 ResolvedObjects resolve_objects(const ExperimentConfig& config,
                                 const std::vector<std::string>& database_names);

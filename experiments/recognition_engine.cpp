@@ -77,6 +77,8 @@ struct VariantData {
   std::size_t group = 0;                       ///< DatabaseGroup index
   std::string pool_key;                        ///< what determines the grasp pools
   bool shared_pool = false;                    ///< protocol "shared_pool": one pool per object
+  bool hide_each = false;                      ///< hidden = "each": the explored object masked
+                                               ///< out of the recognizer in its own runs
   datasets::SimulatorSettings simulation;      ///< without grasps count and seed
   RecognizerSettings recognizer;
 };
@@ -250,6 +252,7 @@ class RecognitionEngine final : public RunEngine {
       d.simulation = simulation_settings(v.config);
       d.pool_key = pool_key(d.simulation);
       d.shared_pool = v.config.protocol == "shared_pool";
+      d.hide_each = r.hide_each;
       d.recognizer = rs;
       variants_.push_back(std::move(d));
       labels_.push_back(v.label);
@@ -380,7 +383,12 @@ class RecognitionEngine final : public RunEngine {
     const std::string& name = explored_.at(static_cast<std::size_t>(task.object));
     const ObjectTruthModel& model = *truth_models_.at(task.object);
     const std::size_t file_index = explored_file_[static_cast<std::size_t>(task.object)];
-    const std::uint32_t local_true = group.to_local.at(file_index);
+    // Open set: a hidden object is not in the recognizer's database, or (leave-one-out) masked out
+    // of it in its own runs; no answer can then be right.
+    const auto found = group.to_local.find(file_index);
+    const bool hidden = found == group.to_local.end() || v.hide_each;
+    const std::uint32_t local_true = found == group.to_local.end() ? std::numeric_limits<std::uint32_t>::max()
+                                                                    : found->second;
 
     io::RunRecord rec;
     rec.variant = task.variant;
@@ -393,6 +401,10 @@ class RecognitionEngine final : public RunEngine {
     rec.truth = log.truth->object_pose;
 
     RecognizerSettings rs = v.recognizer;
+    if (v.hide_each) {
+      rs.objects.assign(group.objects.size(), 1);
+      rs.objects.at(local_true) = 0;
+    }
     rs.seed = Rng(config_.seed, kRecognizerStream, name_hash(name), static_cast<std::uint64_t>(task.run)).next();
     Recognizer recognizer(*group.database, group.index, rs);
     ExplorationSettings es;  // as `touchstone recognize`: B from the database's largest object
@@ -418,7 +430,7 @@ class RecognitionEngine final : public RunEngine {
       s.free_points = static_cast<std::int32_t>(sr.free_points);
       if (sr.valid) {
         s.best_object = group.to_file.at(sr.best.object);
-        s.correct = sr.best.object == local_true;
+        s.correct = !hidden && sr.best.object == local_true;
         s.weight = sr.best.weight;
         s.posterior_best = sr.posterior;
         s.pose = sr.best.pose;

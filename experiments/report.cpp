@@ -191,8 +191,9 @@ J summary_json(const J& per_step, const std::vector<const io::RunRecord*>& runs)
 }
 
 struct VariantJson {
-  J per_step, per_object, summary, confidence;
+  J per_step, per_object, summary, confidence, open_set;
 };
+
 
 J bins_json(const ConfidenceCalibration& c) {
   J out = J::array();
@@ -204,24 +205,45 @@ J bins_json(const ConfidenceCalibration& c) {
 
 /// Calibration of the confidences per step (ECE, Brier, reliability): those the store recorded,
 /// or recomputed from its features with `calibration`. Null when there are none.
+/// A step's confidences (object, pose): those the store recorded, or recomputed from its features
+/// with the report's calibration; NaN when there are none.
+class ConfidenceSource {
+ public:
+  ConfidenceSource(const io::RunStoreHeader& h, const ReportSettings& settings) : settings_(settings) {
+    auto column = [&](const std::string& name) {
+      const auto it = std::find(h.step_values.begin(), h.step_values.end(), name);
+      return it == h.step_values.end() ? -1 : static_cast<int>(it - h.step_values.begin());
+    };
+    object_col_ = column("confidence_object");
+    pose_col_ = column("confidence_pose");
+    if (settings.calibration)
+      for (const std::string& f : settings.calibration->features) {
+        feature_cols_.push_back(column("feature." + f));
+        if (feature_cols_.back() < 0)
+          throw Error("the run store has no feature '" + f + "' to apply the calibration to",
+                      settings.calibration_path, "features");
+      }
+  }
+  bool available() const { return settings_.calibration || (object_col_ >= 0 && pose_col_ >= 0); }
+  std::pair<double, double> at(const io::RunStepRecord& s) const {
+    if (settings_.calibration) {
+      std::vector<double> f;
+      for (int c : feature_cols_) f.push_back(s.values.at(static_cast<std::size_t>(c)));
+      return {settings_.calibration->object_confidence(f), settings_.calibration->pose_confidence(f)};
+    }
+    return {s.values.at(static_cast<std::size_t>(object_col_)), s.values.at(static_cast<std::size_t>(pose_col_))};
+  }
+
+ private:
+  const ReportSettings& settings_;
+  int object_col_ = -1, pose_col_ = -1;
+  std::vector<int> feature_cols_;
+};
+
 J confidence_json(const io::RunStoreHeader& h, const std::vector<const io::RunRecord*>& runs,
                   const ReportSettings& settings) {
-  auto column = [&](const std::string& name) {
-    const auto it = std::find(h.step_values.begin(), h.step_values.end(), name);
-    return it == h.step_values.end() ? -1 : static_cast<int>(it - h.step_values.begin());
-  };
-  const int object_col = column("confidence_object"), pose_col = column("confidence_pose");
-  std::vector<int> feature_cols;
-  if (settings.calibration) {
-    for (const std::string& f : settings.calibration->features) {
-      feature_cols.push_back(column("feature." + f));
-      if (feature_cols.back() < 0)
-        throw Error("the run store has no feature '" + f + "' to apply the calibration to",
-                    settings.calibration_path, "features");
-    }
-  } else if (object_col < 0 || pose_col < 0) {
-    return nullptr;
-  }
+  const ConfidenceSource source(h, settings);
+  if (!source.available() || runs.empty()) return nullptr;
   const int steps = h.steps;
   std::vector<double> all_object, all_pose;
   std::vector<int> all_object_right, all_pose_right;
@@ -232,16 +254,7 @@ J confidence_json(const io::RunStoreHeader& h, const std::vector<const io::RunRe
     std::vector<int> obj_right, pose_right;
     for (const io::RunRecord* r : runs) {
       const io::RunStepRecord& s = r->steps[static_cast<std::size_t>(k)];
-      double co = 0.0, cp = 0.0;
-      if (settings.calibration) {
-        std::vector<double> f;
-        for (int c : feature_cols) f.push_back(s.values.at(static_cast<std::size_t>(c)));
-        co = settings.calibration->object_confidence(f);
-        cp = settings.calibration->pose_confidence(f);
-      } else {
-        co = s.values.at(static_cast<std::size_t>(object_col));
-        cp = s.values.at(static_cast<std::size_t>(pose_col));
-      }
+      const auto [co, cp] = source.at(s);
       if (!std::isfinite(co) || !std::isfinite(cp)) continue;  // recorded without a calibration
       obj.push_back(co);
       pose.push_back(cp);
@@ -285,6 +298,69 @@ J confidence_json(const io::RunStoreHeader& h, const std::vector<const io::RunRe
   return out;
 }
 
+/// Open set (config `hidden`): runs of objects the recognizer did not know, against runs of known
+/// ones, with the calibration's open-set threshold t: an answer with object confidence < t is
+/// "not in the database". Per step: the false-accept rate (hidden runs that name an object; null
+/// without hidden runs) and the known objects' recognition with and without the threshold. Null
+/// without a threshold.
+J open_set_json(const io::RunStoreHeader& h, const std::vector<const io::RunRecord*>& known,
+                const std::vector<const io::RunRecord*>& hidden, const ReportSettings& settings) {
+  if (!settings.calibration || !settings.calibration->open_set_threshold) return nullptr;
+  const double t = *settings.calibration->open_set_threshold;
+  const ConfidenceSource source(h, settings);
+  J rows = J::array();
+  for (int k = 0; k < h.steps; ++k) {
+    const auto step = static_cast<std::size_t>(k);
+    std::size_t accepts = 0, right_closed = 0, right_open = 0;
+    for (const io::RunRecord* r : hidden)
+      accepts += r->steps[step].best_object >= 0 && source.at(r->steps[step]).first >= t ? 1 : 0;
+    for (const io::RunRecord* r : known) {
+      const io::RunStepRecord& s = r->steps[step];
+      right_closed += s.correct ? 1 : 0;
+      right_open += s.correct && source.at(s).first >= t ? 1 : 0;
+    }
+    const Interval fa = wilson_interval(accepts, hidden.size());
+    J row;
+    row["step"] = k + 1;
+    row["hidden_runs"] = hidden.size();
+    row["false_accepts"] = accepts;
+    if (hidden.empty()) {   // no hidden objects: only the known objects' side
+      row["false_accept_rate"] = row["false_accept_rate_ci95"] = nullptr;
+    } else {
+      row["false_accept_rate"] = static_cast<double>(accepts) / static_cast<double>(hidden.size());
+      row["false_accept_rate_ci95"] = J::array({fa.lo, fa.hi});
+    }
+    row["known_runs"] = known.size();
+    if (known.empty()) {
+      row["known_rate_closed"] = row["known_rate_open"] = row["known_drop"] = nullptr;
+    } else {
+      const double n = static_cast<double>(known.size());
+      row["known_rate_closed"] = static_cast<double>(right_closed) / n;
+      row["known_rate_open"] = static_cast<double>(right_open) / n;
+      row["known_drop"] = static_cast<double>(right_closed - right_open) / n;
+    }
+    rows.push_back(row);
+  }
+  J out;
+  out["threshold"] = t;
+  out["source"] = settings.calibration_path;
+  out["per_step"] = rows;
+  return out;
+}
+
+/// Explored objects hidden from the recognizer (config `hidden`; "each": all of them).
+std::set<int> hidden_objects(const io::RunStoreHeader& h) {
+  std::set<int> out;
+  const J config = J::parse(h.config_json, nullptr, false);
+  if (!config.is_object() || !config.contains("hidden") || !config["hidden"].is_array()) return out;
+  std::set<std::string> names;
+  for (const auto& n : config["hidden"])
+    if (n.is_string()) names.insert(n.get<std::string>());
+  for (std::size_t o = 0; o < h.objects.size(); ++o)
+    if (names.count("each") || names.count(h.objects[o])) out.insert(static_cast<int>(o));
+  return out;
+}
+
 VariantJson variant_json(const io::RunStoreContents& store, int variant, const ReportSettings& settings) {
   const ErrorBounds& bounds = settings.bounds;
   const auto& h = store.header;
@@ -296,7 +372,14 @@ VariantJson variant_json(const io::RunStoreContents& store, int variant, const R
       by_object[static_cast<std::size_t>(r.object)].push_back(&r);
     }
   const ClassMap classes = class_map(h);
+  // Open set: the recognition rates are over the known objects' runs (all runs when every
+  // explored object was hidden); the hidden objects' runs are judged in open_set.
+  const std::set<int> hidden_set = hidden_objects(h);
+  std::vector<const io::RunRecord*> known, hidden;
+  for (const io::RunRecord* r : all) (hidden_set.count(r->object) ? hidden : known).push_back(r);
+  if (!hidden.empty() && !known.empty()) all = known;
   VariantJson v;
+  v.open_set = open_set_json(h, known, hidden, settings);
   std::set<int> objects;
   for (const io::RunRecord* r : all) objects.insert(r->object);
   v.per_step = per_step_json(h, all, h.steps, bounds, classes, objects.size() > 1);
@@ -392,6 +475,7 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
   out["per_object"] = vj.empty() ? J::array() : vj[0].per_object;
   out["summary"] = vj.empty() ? J(nullptr) : vj[0].summary;
   out["confidence"] = vj.empty() ? J(nullptr) : vj[0].confidence;
+  out["open_set"] = vj.empty() ? J(nullptr) : vj[0].open_set;
 
   if (variants > 1) {
     J list = J::array();
@@ -518,6 +602,31 @@ void print_intervals(const J& report, std::ostream& out) {
       << " resamples), assuming only objects independent\n";
 }
 
+void print_open_set(const J& report, std::ostream& out) {
+  const J& o = report.value("open_set", J(nullptr));
+  if (!o.is_object()) return;
+  out << "\nOpen set (threshold " << fmt(o["threshold"], 1, 3) << " on the object confidence, from "
+      << o["source"].get<std::string>() << "): hidden objects named as a database object, and the "
+      << "known objects' recognition without / with the threshold\n"
+         "  step  hidden  false accepts (%)  Wilson (%)  known  closed (%)  open (%)  drop (points)\n";
+  const J& rows = o["per_step"];
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const J& r = rows[i];
+    const int step = r["step"].get<int>();
+    if (!(step == 1 || step == 5 || step % 10 == 0 || i + 1 == rows.size())) continue;
+    std::ostringstream ci;
+    if (r["false_accept_rate_ci95"].is_array())
+      ci << pct(r["false_accept_rate_ci95"][0]) << "-" << pct(r["false_accept_rate_ci95"][1]);
+    else
+      ci << "-";
+    out << "  " << std::setw(4) << step << "  " << std::setw(6) << r["hidden_runs"].get<std::size_t>() << "  "
+        << std::setw(17) << fmt(r["false_accept_rate"], 100, 1) << "  " << std::setw(10) << ci.str() << "  "
+        << std::setw(5) << r["known_runs"].get<std::size_t>() << "  " << std::setw(10)
+        << fmt(r["known_rate_closed"], 100, 1) << "  " << std::setw(8) << fmt(r["known_rate_open"], 100, 1)
+        << "  " << std::setw(13) << fmt(r["known_drop"], 100, 1) << "\n";
+  }
+}
+
 void print_confidence(const J& report, std::ostream& out) {
   const J& c = report.value("confidence", J(nullptr));
   if (!c.is_object()) {
@@ -585,6 +694,7 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
     print_classes(report, out);
     print_intervals(report, out);
     print_confidence(report, out);
+    print_open_set(report, out);
     out << "\nPer object:\n";
     print_objects(report["per_object"], out);
     return;

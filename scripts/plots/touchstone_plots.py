@@ -304,14 +304,15 @@ def plot_reliability(report, out, written):
             for xi, yi, ni in zip(x, y, n):
                 ax.scatter([xi], [yi], s=8 + 200 * ni / total, color=c, alpha=0.25, linewidths=0)
         a = conf["all_steps"]
-        ax.set_title(f"{title}: ECE {a[key + '_ece']:.3f}, Brier {a[key + '_brier']:.3f} (all steps)",
+        ax.set_title(f"{title}\nall steps: ECE {a[key + '_ece']:.3f}, Brier {a[key + '_brier']:.3f}",
                      fontsize=7.5)
         ax.set_xlabel("confidence")
         ax.set_ylabel("share right")
         ax.set_xlim(-0.02, 1.02)
         ax.set_ylim(-0.02, 1.02)
         ax.legend(loc="upper left", frameon=False, fontsize=7)
-    fig.suptitle("reliability: " + subtitle(report) + "\n" + conf.get("source", ""), fontsize=7.5)
+    source = os.path.basename(conf.get("source", "").split(" with ")[-1])
+    fig.suptitle(f"reliability: {subtitle(report)} (confidence: {source})", fontsize=7.5, y=1.04)
     finish(fig, os.path.join(out, "reliability.png"), written)
 
 

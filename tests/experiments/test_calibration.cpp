@@ -118,3 +118,38 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   CHECK(error_of("[1, 2]", "abc123").empty());
   CHECK_THROWS_AS(read_calibration(dir / "missing.json", ""), Error);
 }
+
+TEST_CASE("Open-set threshold: the most confidence refused while at most the allowed share of runs loses its right answer") {
+  // 100 runs at the step, 4 right answers: refusing below t costs the right answers under t.
+  const std::vector<double> right{0.9, 0.2, 0.5, 0.7};
+  CHECK(choose_open_set_threshold(right, 100, 0.0) == 0.2);    // nothing may be lost
+  CHECK(choose_open_set_threshold(right, 100, 0.01) == 0.5);   // 1 run of 100
+  CHECK(choose_open_set_threshold(right, 100, 0.03) == 0.9);   // 3 runs
+  CHECK(choose_open_set_threshold(right, 100, 0.05) == 1.0);   // all 4 may go
+  CHECK(choose_open_set_threshold({}, 10, 0.03) == 1.0);
+  CHECK_THROWS_AS(choose_open_set_threshold(right, 100, 1.0), Error);
+  CHECK_THROWS_AS(choose_open_set_threshold(right, 100, -0.1), Error);
+
+  test::TempDir dir("calibration");
+  Calibration c;
+  c.database_fingerprint = "f";
+  c.features = confidence_feature_names();
+  const std::size_t f = c.features.size();
+  c.object = {std::vector<double>(f, 0.0), std::vector<double>(f, 1.0), std::vector<double>(f + 1, 0.0)};
+  c.pose = c.object;
+  write_calibration(dir / "none.json", c);
+  CHECK_FALSE(read_calibration(dir / "none.json", "f").open_set_threshold);
+  c.open_set_threshold = 0.25;
+  write_calibration(dir / "t.json", c);
+  CHECK(read_calibration(dir / "t.json", "f").open_set_threshold == 0.25);
+  auto j = to_json(c);
+  j["open_set_threshold"] = 1.5;
+  std::ofstream(dir / "bad.json") << j.dump();
+  try {
+    read_calibration(dir / "bad.json", "f");
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.field() == "open_set_threshold");
+    CHECK(e.file() == (dir / "bad.json").string());
+  }
+}

@@ -3,6 +3,8 @@
 // and clear errors for bad input.
 #include "engine/fusion.hpp"
 #include "engine/recognizer.hpp"
+#include "experiments/calibration.hpp"
+#include "experiments/recognition_engine.hpp"
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
 #include "io/log_store.hpp"
@@ -612,4 +614,55 @@ TEST_CASE("cli probe experiment: sensing = probe under both protocols (the share
     CHECK(j["per_step"][19]["recognition_rate"] == 1.0);
     CHECK(j["per_step"][19]["position_error_m_median"].get<double>() < 0.005);
   }
+}
+
+TEST_CASE("cli recognize --calibration: confidences, and the open-set answer below the threshold") {
+  test::TempDir dir("cli_rec_open");
+  make_db(dir, "small.h5", {"wedge"});
+  REQUIRE(touchstone(dir, "simulate --db small.h5 --object box --grasps 2 --noise ideal --out box.h5").code == 0);
+  make_db(dir);
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 2 --noise ideal --out wedge.h5").code == 0);
+  experiments::Calibration cal;
+  cal.database_fingerprint = experiments::file_fingerprint(io::DbReader(dir / "small.h5"));
+  cal.features = experiments::confidence_feature_names();
+  const std::size_t F = cal.features.size();
+  cal.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 1.0), std::vector<double>(F + 1, 0.0)};
+  cal.pose = cal.object;   // every confidence 0.5
+  experiments::write_calibration(dir / "cal.json", cal);
+  cal.open_set_threshold = 0.6;
+  experiments::write_calibration(dir / "open.json", cal);
+
+  const Run plain = touchstone(dir, "recognize --db small.h5 --log box.h5 --json --calibration cal.json" + kFast);
+  REQUIRE_MESSAGE(plain.code == 0, plain.err);
+  for (const auto& st : nlohmann::json::parse(plain.out)["steps"]) {
+    CHECK(st["confidence"]["object"].get<double>() == doctest::Approx(0.5));
+    CHECK(st["reason"].is_null());
+    CHECK(st["object"].is_string());
+  }
+  // Below the threshold: "not in the database"; right for the wedge (not in small.h5), wrong
+  // for the box (it is).
+  for (const auto& [log, outside] : {std::pair{"wedge.h5", true}, {"box.h5", false}}) {
+    const Run r = touchstone(dir, std::string("recognize --db small.h5 --log ") + log + " --json --calibration open.json" + kFast);
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    const auto j = nlohmann::json::parse(r.out);
+    CHECK(j["truth_in_database"] == !outside);
+    for (const auto& st : j["steps"]) {
+      CHECK(st["object"].is_null());
+      CHECK(st["reason"] == "not_in_database");
+      CHECK(st["best_guess"].is_string());
+      CHECK(st["correct"] == outside);
+    }
+  }
+  // --open-set-threshold overrides the file's (0: always name an object), needs a calibration.
+  const Run named = touchstone(dir, "recognize --db small.h5 --log wedge.h5 --json --calibration open.json --open-set-threshold 0" + kFast);
+  REQUIRE_MESSAGE(named.code == 0, named.err);
+  CHECK(nlohmann::json::parse(named.out)["steps"][0]["object"].is_string());
+  const Run lone = touchstone(dir, "recognize --db small.h5 --log wedge.h5 --open-set-threshold 0.5");
+  CHECK(lone.code == 1);
+  CHECK(lone.err.find("--open-set-threshold") != std::string::npos);
+  // Another database's calibration: one error naming the file and the key.
+  const Run other = touchstone(dir, "recognize --db db.h5 --log wedge.h5 --calibration open.json");
+  CHECK(other.code == 1);
+  CHECK(other.err.find("open.json") != std::string::npos);
+  CHECK(other.err.find("database_fingerprint") != std::string::npos);
 }

@@ -289,3 +289,38 @@ TEST_CASE("Every study configuration of experiments/studies parses") {
   }
   CHECK(n >= 10);
 }
+
+TEST_CASE("Hidden objects (open set): out of the recognizer's database, still explored; bad names are errors") {
+  const std::vector<std::string> db{"a", "b", "c", "d"};
+  ExperimentConfig c;
+  set_key(c, "objects", {"a,c"});
+  set_key(c, "hidden", {"c,d"});
+  auto r = resolve_objects(c, db);
+  CHECK(r.explored == std::vector<std::string>{"a", "c"});
+  CHECK(r.database == std::vector<std::string>{"a", "b"});
+  CHECK(r.hidden == std::vector<std::string>{"c"});
+  CHECK_FALSE(r.hide_each);
+  CHECK(to_json(c).at("hidden") == nlohmann::ordered_json({"c", "d"}));
+
+  ExperimentConfig each;
+  set_key(each, "hidden", {"each"});
+  auto e = resolve_objects(each, db);
+  CHECK(e.hide_each);
+  CHECK(e.database == db);   // masked per run, not removed
+  CHECK(e.hidden == db);
+
+  auto error_of = [&](const std::string& hidden) {
+    ExperimentConfig x;
+    set_key(x, "hidden", {hidden});
+    try {
+      resolve_objects(x, db);
+    } catch (const Error& err) {
+      return err.field() + ": " + err.message();
+    }
+    return std::string("no error");
+  };
+  CHECK(error_of("zz").find("hidden: hidden object 'zz' is not in the database") == 0);
+  CHECK(error_of("each,a").rfind("hidden: ", 0) == 0);
+  CHECK(error_of("a,b,c,d").rfind("hidden: every database object is hidden", 0) == 0);
+  CHECK(load_error("hidden = [\"a\", \"a\"]\n").second == "hidden");
+}

@@ -261,3 +261,42 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
     CHECK(e.field() == "database_fingerprint");
   }
 }
+
+TEST_CASE("Recognition engine: hidden objects (open set) are explored but never answerable") {
+  test::TempDir dir("engine");
+  for (const char* hidden : {"nut", "each"}) {
+    CAPTURE(hidden);
+    ExperimentConfig c = small_config();
+    set_key(c, "objects", {"box,nut"});
+    set_key(c, "runs", {"1"});
+    set_key(c, "hidden", {hidden});
+    auto engine = make_recognition_engine(c, small_database(), 1);
+    const auto& h = engine->header();
+    CHECK(h.database_objects.size() == 6);   // indices stay those of the file
+    const auto runs = run_all(*engine, c, dir / (std::string(hidden) + ".h5"), 1, true);
+    REQUIRE(runs.size() == 2);
+    for (const auto& r : runs) {
+      const std::string& explored = h.objects[static_cast<std::size_t>(r.object)];
+      const bool is_hidden = std::string(hidden) == "each" || explored == "nut";
+      for (const auto& s : r.steps) {
+        if (is_hidden) {
+          CHECK_FALSE(s.correct);
+          CHECK(s.posterior_true == 0.0);
+          if (s.best_object >= 0) CHECK(h.database_objects[static_cast<std::size_t>(s.best_object)] != explored);
+        }
+        // The hidden nut is never an answer, for any explored object.
+        if (std::string(hidden) == "nut" && s.best_object >= 0)
+          CHECK(h.database_objects[static_cast<std::size_t>(s.best_object)] != "nut");
+      }
+    }
+  }
+  ExperimentConfig bad = small_config();
+  set_key(bad, "hidden", {"teapot"});
+  try {
+    make_recognition_engine(bad, small_database(), 1);
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.field() == "hidden");
+    CHECK(e.message().find("teapot") != std::string::npos);
+  }
+}

@@ -5,6 +5,7 @@
 
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <sstream>
@@ -285,4 +286,59 @@ TEST_CASE("Report: confidences judged per step (ECE, Brier, reliability), record
   } catch (const Error& e) {
     CHECK(e.file() == "cal.json");
   }
+}
+
+TEST_CASE("Report: open set, false accepts of hidden objects and the known objects' drop under the threshold") {
+  io::RunStoreContents c = synthetic();  // objects cube, sphere; step k: runs r < k right
+  auto& h = c.header;
+  h.config_json = R"({"name":"open","runs":4,"steps":3,"hidden":["sphere"]})";
+  h.step_values = {"confidence_object", "confidence_pose"};
+  for (const std::string& f : confidence_feature_names()) h.step_values.push_back("feature." + f);
+  const std::size_t F = confidence_feature_names().size();
+  for (auto& r : c.runs)
+    for (auto& s : r.steps) {
+      if (r.object == 1) s.correct = false;        // hidden: nothing is right
+      s.values.assign(2 + F, 0.0);
+      s.values[2] = 0.1 * static_cast<double>(r.run);   // feature.posterior_best: 0, .1, .2, .3
+    }
+  Calibration cal;
+  cal.features = confidence_feature_names();
+  cal.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 0.1), std::vector<double>(F + 1, 0.0)};
+  cal.object.coef[1] = 1.0;   // confidence sigmoid(run): 0.5, 0.73, 0.88, 0.95
+  cal.pose = cal.object;
+  cal.open_set_threshold = 0.8;   // runs 2 and 3 accepted
+  ReportSettings rs;
+  rs.calibration = &cal;
+  rs.calibration_path = "cal.json";
+  const auto j = report_json(c, rs);
+  // Recognition rates are over the known cube's runs only: step k, k of 4 right.
+  CHECK(j["per_step"][1]["runs"] == 4);
+  CHECK(j["per_step"][1]["recognition_rate"].get<double>() == doctest::Approx(0.5));
+  const auto& o = j["open_set"];
+  REQUIRE(o.is_object());
+  CHECK(o["threshold"] == 0.8);
+  for (int k = 0; k < 3; ++k) {
+    const auto& row = o["per_step"][static_cast<std::size_t>(k)];
+    CHECK(row["hidden_runs"] == 4);
+    CHECK(row["false_accepts"] == 2);   // the sphere's runs 2 and 3 name an object confidently
+    CHECK(row["false_accept_rate"].get<double>() == doctest::Approx(0.5));
+    CHECK(row["known_runs"] == 4);
+    // Cube: runs 0..k right; of those, runs >= 2 pass the threshold.
+    const int right = k + 1, kept = std::max(0, k - 1);
+    CHECK(row["known_rate_closed"].get<double>() == doctest::Approx(right / 4.0));
+    CHECK(row["known_rate_open"].get<double>() == doctest::Approx(kept / 4.0));
+    CHECK(row["known_drop"].get<double>() == doctest::Approx((right - kept) / 4.0));
+  }
+  std::ostringstream text;
+  print_report(j, text);
+  CHECK(text.str().find("Open set (threshold 0.800") != std::string::npos);
+  // Without hidden objects: the known side alone.
+  h.config_json = R"({"name":"closed","runs":4,"steps":3})";
+  const auto closed = report_json(c, rs)["open_set"];
+  REQUIRE(closed.is_object());
+  CHECK(closed["per_step"][2]["false_accept_rate"].is_null());
+  CHECK(closed["per_step"][2]["known_runs"] == 8);
+  // Without a threshold there is no open-set section.
+  cal.open_set_threshold.reset();
+  CHECK(report_json(c, rs)["open_set"].is_null());
 }
