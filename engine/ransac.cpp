@@ -251,7 +251,8 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
                                          const FeatureSearch& search,
                                          const std::vector<std::uint8_t>& allowed,
                                          const RansacSettings& s, std::uint64_t seed,
-                                         std::uint64_t step, RansacStats* stats) {
+                                         std::uint64_t step, RansacStats* stats,
+                                         const std::vector<std::uint32_t>& preferred) {
   RansacStats st;
   for (std::uint8_t a : allowed) st.objects_allowed += a;
   std::vector<Candidate> out;
@@ -316,6 +317,21 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   // same for every step of a run), each triplet D = object_draws objects on from where the
   // previous one stopped, each step on from where the previous step stopped: every allowed
   // object is searched once before any is searched twice.
+  // With a shape prior, the first prior_draws of the draws are the same best objects for every
+  // triplet, and the slices (of the other objects) are that much shorter.
+  std::vector<std::uint8_t> common(draw ? allowed.size() : 0, 0);
+  std::size_t slice = s.object_draws;
+  if (draw && s.prior_draws > 0) {
+    std::size_t taken = 0;
+    for (std::uint32_t o : preferred) {
+      if (taken == std::min(s.prior_draws, s.object_draws)) break;
+      if (o < allowed.size() && allowed[o] && !common[o]) {
+        common[o] = 1;
+        ++taken;
+      }
+    }
+    slice -= taken;
+  }
   std::vector<std::uint32_t> order;
   std::size_t offset = 0;
   if (draw) {
@@ -324,16 +340,19 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
     Rng rng(seed, 0, kTagObjects, 0);
     for (std::size_t k = all.size(); k > 1; --k) std::swap(all[k - 1], all[rng.index(k)]);
     for (std::uint32_t o : all)
-      if (allowed[o]) order.push_back(o);
-    offset = (static_cast<std::size_t>(step > 0 ? step - 1 : 0) * trip.size() * s.object_draws) % order.size();
+      if (allowed[o] && !common[o]) order.push_back(o);
+    if (!order.empty())
+      offset = (static_cast<std::size_t>(step > 0 ? step - 1 : 0) * trip.size() * slice) % order.size();
   }
   for (std::size_t i = 0; i < trip.size(); ++i) {
     const Triplet& t = trip[i];
     if (!t.valid) continue;
     std::vector<std::uint8_t> mask = allowed;
-    if (draw) {  // the objects of this triplet's slice
-      mask.assign(allowed.size(), 0);
-      for (std::size_t d = 0; d < s.object_draws; ++d) mask[order[(offset + i * s.object_draws + d) % order.size()]] = 1;
+    if (draw) {  // the common objects and this triplet's slice
+      mask = common;
+      if (!order.empty())
+        for (std::size_t d = 0; d < std::min(slice, order.size()); ++d)
+          mask[order[(offset + i * slice + d) % order.size()]] = 1;
     }
     st.objects_searched += static_cast<std::size_t>(std::count(mask.begin(), mask.end(), 1));
     st.searched.resize(mask.size(), 0);

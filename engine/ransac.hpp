@@ -31,6 +31,10 @@ struct RansacSettings {
                                       ///< them when there are no more allowed objects than
                                       ///< draws; 0: always all). Bounds the pruning of a step
                                       ///< by N x object_draws objects, whatever the database
+  std::size_t prior_draws = 0;        ///< extension, large databases: of each triplet's
+                                      ///< object_draws, this many are the step's best objects
+                                      ///< by the shape prior (the same for every triplet; the
+                                      ///< rest is the triplet's slice of the shuffled order)
   std::size_t prune_blocks = 0;       ///< extension: per-object pruning reads only each
                                       ///< object's prune_blocks blocks of 128 features nearest
                                       ///< to the query (approximate; 0: exact, every block
@@ -94,11 +98,14 @@ struct FeatureSearch {
 
 /// N x R registrations; the valid ones, in slot order (slot = triplet * R + registration).
 /// Per-object pruning searches the allowed objects only; the paper's global W nearest are
-/// searched among all objects (KT_db,cum^feat) and then filtered.
+/// searched among all objects (KT_db,cum^feat) and then filtered. `preferred`: objects best
+/// first (the shape prior's ranking), the first prior_draws allowed ones searched by every
+/// triplet when object draws are on.
 std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
                                          const FeatureSearch& search,
                                          const std::vector<std::uint8_t>& allowed,
                                          const RansacSettings& settings, std::uint64_t seed,
-                                         std::uint64_t step, RansacStats* stats = nullptr);
+                                         std::uint64_t step, RansacStats* stats = nullptr,
+                                         const std::vector<std::uint32_t>& preferred = {});
 
 }  // namespace ts

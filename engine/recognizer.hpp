@@ -19,6 +19,7 @@
 #include "engine/icp.hpp"
 #include "engine/ransac.hpp"
 #include "engine/scene.hpp"
+#include "engine/shape_prior.hpp"
 #include "engine/shortlist.hpp"
 #include "engine/sparse_hypotheses.hpp"
 #include "engine/twins.hpp"
@@ -55,6 +56,10 @@ struct RecognizerSettings {
   ShortlistSettings shortlist;      ///< extension: objects whose candidates are evaluated in full
                                     ///< per step (large databases)
   TwinSettings twins;               ///< extension: near-twin verification of the leading objects
+  ShapePriorSettings prior;         ///< extension: the shape prior that ranks the objects
+                                    ///< for feature pruning (ransac.prior_draws > 0)
+  std::size_t prior_min_database = 0;  ///< the shape prior acts only on databases of more
+                                       ///< objects than this
   SparseSettings sparse;            ///< extension: feature-free triplet matching when the
                                     ///< contacts are isolated (touch probes; sparse_hypotheses.hpp)
   SceneSettings scene{.free_clearance = -1.0};  ///< free_clearance < 0: d_thresh (Eq. 8)
@@ -95,7 +100,8 @@ struct Hypothesis {
 struct StageTimes {
   double prepare_s = 0.0;           ///< normals, FPFH, interior points of the contacts
   double shortlist_s = 0.0;         ///< screening the candidates for the object shortlist
-  double prune_s = 0.0;             ///< triplet sampling + W-nearest feature queries
+  double prune_s = 0.0;             ///< triplet sampling + W-nearest feature queries (and the
+                                    ///< shape prior that chooses the objects searched)
   double register_s = 0.0;          ///< triplet registrations (Kabsch)
   double icp_s = 0.0;               ///< ICP of hypotheses
   double evaluate_s = 0.0;          ///< Eq. 4-9 (with early rejection)
@@ -114,6 +120,7 @@ struct Funnel {
   double screen_cut = -1.0;       ///< the score the shortlist's last kept object reached
   std::size_t screen_rank = 0;    ///< rank (1 = best) of its best candidate among the objects'
                                   ///< best (0: no candidate or no shortlist)
+  std::size_t prior_rank = 0;     ///< its rank (1 = best) by the shape prior (0: no prior)
   std::size_t transfer_rank = 0;  ///< its rank (1 = best) in pose transfer's screening at the
                                   ///< leader's pose; 0: not screened or no fit
   std::size_t hypotheses = 0;     ///< its hypotheses in the state after the step
@@ -180,6 +187,7 @@ class Recognizer {
   int step_ = 0;
   std::vector<Hypothesis> state_;   ///< S_t, world poses, best first
   std::optional<std::uint32_t> watch_;
+  std::shared_ptr<const ShapePrior> prior_;  ///< when the shape prior acts (large databases)
   std::unique_ptr<SparseTables> sparse_;  ///< built when the sparse source first runs
 };
 

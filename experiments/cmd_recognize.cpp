@@ -126,6 +126,7 @@ std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& 
           {"W_per_object", double(s.ransac.prune_per_object)},
           {"prune_blocks", double(s.ransac.prune_blocks)},
           {"object_draws", double(s.ransac.object_draws)},
+          {"prior_draws", double(s.ransac.prior_draws)},
           {"twins", double(s.twins.rivals)},
           {"twins_refine", double(s.twins.refine)},
           {"transfer", double(s.twins.transfer)},
@@ -389,7 +390,7 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
       const Funnel& f = *r.watched;
       st["truth_funnel"] = {{"searched", f.searched},       {"candidates", f.candidates},
                             {"shortlisted", f.shortlisted}, {"transferred", f.transferred},
-                            {"transfer_rank", f.transfer_rank}, {"screen_score", f.screen_score},
+                            {"transfer_rank", f.transfer_rank}, {"prior_rank", f.prior_rank}, {"screen_score", f.screen_score},
                             {"screen_cut", f.screen_cut}, {"screen_rank", f.screen_rank},
                             {"hypotheses", f.hypotheses}};
     }
@@ -711,6 +712,13 @@ void register_recognize(CLI::App& app) {
                                        "next of a shuffled order, when the database has more (0: every object)")
                            ->group(g)
                            ->check(CLI::Range(0, 100000000));
+  auto* prior_draws = sub->add_option("--prior-draws", s.ransac.prior_draws,
+                                      "Extension: of each triplet's object draws, this many are the step's best "
+                                      "objects by the shape prior, a pose-free fit of the contacts' point pairs "
+                                      "(0: off; the improved preset: 60 on databases of more than 48 objects; asked for "
+                                      "explicitly, on any database)")
+                          ->group(g)
+                          ->check(CLI::Range(0, 100000000));
   auto* twins = sub->add_option("--twins", s.twins.rivals,
                                 "Extension: near-twin verification, the leading objects compared by a likelihood "
                                 "with per-grasp offsets (0: off; tactile logs only)")
@@ -795,6 +803,10 @@ void register_recognize(CLI::App& app) {
        }},
       {shortlist, [](RecognizerSettings& r, const RecognizerSettings& i) { r.shortlist = i.shortlist; }},
       {object_draws, [](RecognizerSettings& r, const RecognizerSettings& i) { r.ransac.object_draws = i.ransac.object_draws; }},
+      {prior_draws, [](RecognizerSettings& r, const RecognizerSettings& i) {
+         r.ransac.prior_draws = i.ransac.prior_draws;
+         r.prior_min_database = i.prior_min_database;
+       }},
       {twins, [](RecognizerSettings& r, const RecognizerSettings& i) { r.twins.rivals = i.twins.rivals; }},
       {twins_refine, [](RecognizerSettings& r, const RecognizerSettings& i) { r.twins.refine = i.twins.refine; }},
       {transfer, [](RecognizerSettings& r, const RecognizerSettings& i) {

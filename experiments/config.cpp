@@ -236,6 +236,18 @@ const std::vector<KeyDef>& key_defs() {
     add("ransac.object_draws", true,
         [](auto& c, auto& in, auto& x) { c.params.object_draws = int_at_least(in, 0, x); },
         [](auto& c) { return opt(c.params.object_draws); });
+    add("ransac.prior_draws", true,
+        [](auto& c, auto& in, auto& x) { c.params.prior_draws = int_at_least(in, 0, x); },
+        [](auto& c) { return opt(c.params.prior_draws); });
+    add("prior.angle_bins", true,
+        [=](auto& c, auto& in, auto& x) { c.params.prior_angle_bins = static_cast<int>(number_in(in, 1, 64, x)); },
+        [](auto& c) { return opt(c.params.prior_angle_bins); });
+    add("prior.distance_bin_m", true,
+        [=](auto& c, auto& in, auto& x) { c.params.prior_distance_bin_m = number_in(in, 1e-4, 1, x); },
+        [](auto& c) { return opt(c.params.prior_distance_bin_m); });
+    add("prior.object_points", true,
+        [](auto& c, auto& in, auto& x) { c.params.prior_object_points = int_at_least(in, 2, x); },
+        [](auto& c) { return opt(c.params.prior_object_points); });
     add("twins.rivals", true,
         [](auto& c, auto& in, auto& x) { c.params.twins = int_at_least(in, 0, x); },
         [](auto& c) { return opt(c.params.twins); });

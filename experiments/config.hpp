@@ -37,6 +37,8 @@
 //   shortlist.objects (extension: objects whose candidates are evaluated per step, 0: all),
 //   ransac.prune_blocks (extension: approximate per-object pruning, blocks read; 0: exact),
 //   ransac.object_draws (extension: objects drawn per triplet for per-object pruning; 0: all),
+//   ransac.prior_draws (extension: of the object draws, the shape prior's best objects; 0: off),
+//   prior.angle_bins, prior.distance_bin_m, prior.object_points (the shape prior's histograms),
 //   twins.rivals (extension: near-twin verification, leading objects compared; 0: off),
 //   twins.transfer (extension: the leader's pose tried on this many look-alike objects; 0: off),
 //   twins.refine (near-twin verification: pose refinements under V; 0: off),
@@ -87,6 +89,10 @@ struct MethodParams {
   std::optional<int> shortlist;         ///< objects whose candidates are evaluated per step (0: all)
   std::optional<int> prune_blocks;      ///< approximate per-object pruning: blocks read (0: exact)
   std::optional<int> object_draws;      ///< per-object pruning: objects drawn per triplet (0: all)
+  std::optional<int> prior_draws;       ///< of the object draws, the shape prior's best (0: off)
+  std::optional<int> prior_angle_bins;  ///< shape prior: bins of each angle term
+  std::optional<double> prior_distance_bin_m;  ///< shape prior: m, pair-distance bin
+  std::optional<int> prior_object_points;  ///< shape prior: keypoints per object histogram
   std::optional<int> twins;             ///< near-twin verification: leading objects compared (0: off)
   std::optional<int> twins_transfer;    ///< pose transfer to look-alikes of the leader (0: off)
   std::optional<int> twins_refine;      ///< near-twin verification: pose refinements under V

@@ -180,6 +180,13 @@ RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
     s.ransac.prune_blocks_min_database = 0;
   }
   if (p.object_draws) s.ransac.object_draws = static_cast<std::size_t>(*p.object_draws);
+  if (p.prior_draws) {  // asked for explicitly: on any database
+    s.ransac.prior_draws = static_cast<std::size_t>(*p.prior_draws);
+    s.prior_min_database = 0;
+  }
+  if (p.prior_angle_bins) s.prior.angle_bins = *p.prior_angle_bins;
+  if (p.prior_distance_bin_m) s.prior.distance_bin = *p.prior_distance_bin_m;
+  if (p.prior_object_points) s.prior.object_points = static_cast<std::size_t>(*p.prior_object_points);
   if (p.twins) s.twins.rivals = static_cast<std::size_t>(*p.twins);
   if (p.twins_refine) s.twins.refine = *p.twins_refine;
   if (p.twins_max_gap) s.twins.max_gap = *p.twins_max_gap;
