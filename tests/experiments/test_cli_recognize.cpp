@@ -634,7 +634,8 @@ TEST_CASE("cli recognize --calibration: confidences, and the open-set answer bel
 
   const Run plain = touchstone(dir, "recognize --db small.h5 --log box.h5 --json --calibration cal.json" + kFast);
   REQUIRE_MESSAGE(plain.code == 0, plain.err);
-  for (const auto& st : nlohmann::json::parse(plain.out)["steps"]) {
+  const auto jp = nlohmann::json::parse(plain.out);  // kept alive: the loop reads into it
+  for (const auto& st : jp["steps"]) {
     CHECK(st["confidence"]["object"].get<double>() == doctest::Approx(0.5));
     CHECK(st["reason"].is_null());
     CHECK(st["object"].is_string());
