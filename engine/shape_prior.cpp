@@ -122,10 +122,6 @@ ShapePrior::ShapePrior(ShapePrior&&) noexcept = default;
 ShapePrior& ShapePrior::operator=(ShapePrior&&) noexcept = default;
 
 std::size_t ShapePrior::size() const { return impl_->dbins.size(); }
-const ShapePriorSettings& ShapePrior::settings() const { return impl_->s; }
-std::size_t ShapePrior::memory_bytes() const {
-  return impl_->codes.size() + impl_->dbins.size() * (sizeof(std::uint32_t) + sizeof(std::size_t));
-}
 
 std::vector<double> ShapePrior::score(const Scene& scene, const std::vector<std::uint8_t>& allowed,
                                       std::uint64_t seed, std::uint64_t step) const {

@@ -47,8 +47,6 @@ class ShapePrior {
   ShapePrior& operator=(ShapePrior&&) noexcept;
 
   std::size_t size() const;                ///< database objects
-  std::size_t memory_bytes() const;
-  const ShapePriorSettings& settings() const;
 
   /// Per database object, the mean log-likelihood of the scene's contact pairs (higher is
   /// better; -inf for objects not allowed, outside the construction mask, or when the scene
