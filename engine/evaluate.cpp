@@ -73,12 +73,33 @@ GraspFit fit_grasp_offsets(const Scene& scene, const DistanceField& field, const
     for (std::size_t i = 0; i < m; ++i) {
       fit.error_sum += detail::contact_error(d[i], s.d_outlier);
       fit.clamped_sq_sum += std::min(d[i] * d[i], clamp2);
+      fit.far += d[i] * d[i] > clamp2 ? 1 : 0;
+      fit.far10 += std::abs(d[i]) > 10.0 * s.grasp_contact_sigma ? 1 : 0;
     }
     fit.contacts += m;
     fit.offsets[k] = t;
     off2 += t.squaredNorm();
   }
   fit.offset_rms = std::sqrt(off2 / static_cast<double>(G.grasps()));
+  return fit;
+}
+
+GraspFit contact_fit(const Scene& scene, const DistanceField& field, const Pose& T_so,
+                     const EvaluateSettings& s) {
+  if (s.grasp_offset_sigma > 0.0 && scene.grasps.grasps() > 0) return fit_grasp_offsets(scene, field, T_so, s);
+  GraspFit fit;
+  const std::vector<Vec3>& p = scene.contacts.points;
+  if (p.empty() || field.empty() || !T_so.matrix().allFinite()) return fit;
+  std::vector<double> d(p.size());
+  field.distances(p.data(), p.size(), T_so.inverse(), d.data());
+  const double clamp2 = 9.0 * s.grasp_contact_sigma * s.grasp_contact_sigma;
+  for (double x : d) {
+    fit.error_sum += detail::contact_error(x, s.d_outlier);
+    fit.clamped_sq_sum += std::min(x * x, clamp2);
+    fit.far += x * x > clamp2 ? 1 : 0;
+    fit.far10 += std::abs(x) > 10.0 * s.grasp_contact_sigma ? 1 : 0;
+  }
+  fit.contacts = p.size();
   return fit;
 }
 

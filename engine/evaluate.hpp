@@ -91,9 +91,17 @@ struct GraspFit {
   std::vector<Vec3> offsets;          ///< t_g per grasp, scene frame
   double clamped_sq_sum = 0.0;        ///< m^2, sum over the shifted contacts of
                                       ///< min(d^2, (3 grasp_contact_sigma)^2)
+  std::size_t far = 0;                ///< shifted contacts farther than 3 grasp_contact_sigma
+  std::size_t far10 = 0;              ///< ... farther than 10 grasp_contact_sigma
 };
 GraspFit fit_grasp_offsets(const Scene& scene, const DistanceField& field, const Pose& T_scene_object,
                            const EvaluateSettings& settings);
+
+/// The same fit as an absolute measure of how well a hypothesis explains every contact: with
+/// grasp groups and grasp_offset_sigma > 0, fit_grasp_offsets; otherwise the scene's contacts
+/// unshifted (offsets empty, offset_rms 0). far/far10/clamped_sq_sum use grasp_contact_sigma.
+GraspFit contact_fit(const Scene& scene, const DistanceField& field, const Pose& T_scene_object,
+                     const EvaluateSettings& settings);
 
 /// A contact term computed beforehand (sum of Eq. 4 over n contacts).
 struct ContactTerm {

@@ -74,6 +74,25 @@ void evaluate_each(const Scene& scene, const Database& db, const EvaluateSetting
   });
 }
 
+/// The answer's fit in absolute terms (AnswerFit).
+AnswerFit answer_fit(const Scene& scene, const Database& db, const Working& h, const EvaluateSettings& s) {
+  AnswerFit out;
+  const GeometryPins geometry = pin(db, std::vector<Working>{h});
+  const ObjectGeometry& geo = geometry[h.cand.object];
+  if (geo.field.empty()) return out;
+  const GraspFit fit = contact_fit(scene, geo.field, h.cand.T_scene_object, s);
+  if (fit.contacts == 0) return out;
+  const double n = static_cast<double>(fit.contacts), sigma = s.grasp_contact_sigma;
+  out.valid = true;
+  out.contacts = fit.contacts;
+  out.rms_sigma = std::sqrt(fit.clamped_sq_sum / n) / sigma;
+  out.far_share = static_cast<double>(fit.far) / n;
+  out.far10_share = static_cast<double>(fit.far10) / n;
+  out.offset_rms_sigma = s.grasp_offset_sigma > 0.0 ? fit.offset_rms / s.grasp_offset_sigma : 0.0;
+  out.free_conflict = h.eval.free_error / static_cast<double>(std::max<std::size_t>(scene.free_space.size(), 1));
+  return out;
+}
+
 bool duplicates(const Working& a, const Working& b, double distance) {
   if (a.cand.object != b.cand.object) return false;
   const Pose d = a.cand.T_scene_object.inverse() * b.cand.T_scene_object;
@@ -557,6 +576,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   if (res.valid) {
     res.best = state_[chosen];
     res.posterior = res.posteriors[res.best.object];
+    res.fit = answer_fit(scene, db_, next[chosen], s_.evaluate);
   }
   db_.trim();  // nothing of this step is pinned any more
   res.geometry_loads = db_.geometry_loads();

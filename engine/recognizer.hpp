@@ -126,6 +126,20 @@ struct Funnel {
   std::size_t hypotheses = 0;     ///< its hypotheses in the state after the step
 };
 
+/// How well the answer (the best hypothesis) explains all the evidence in absolute terms: its
+/// contacts' distances to the model after the per-grasp offsets against the assumed contact
+/// noise (evaluate.grasp_contact_sigma), and the free space it conflicts with. Features of the
+/// open-set ("in the database") score (experiments/calibration.hpp).
+struct AnswerFit {
+  bool valid = false;               ///< computed (a valid answer with a distance field)
+  std::size_t contacts = 0;
+  double rms_sigma = 0.0;           ///< RMS distance, each clamped to 3 sigma, in sigmas
+  double far_share = 0.0;           ///< share of contacts farther than 3 sigma
+  double far10_share = 0.0;         ///< share of contacts farther than 10 sigma
+  double offset_rms_sigma = 0.0;    ///< RMS per-grasp offset / grasp_offset_sigma (0: no offsets)
+  double free_conflict = 0.0;       ///< Eq. 8 error summed over the free points, per free point
+};
+
 struct StepResult {
   int step = 0;                     ///< 1-based
   bool valid = false;               ///< there is at least one hypothesis
@@ -149,6 +163,7 @@ struct StepResult {
   bool sparse_active = false;       ///< the sparse-contact source ran (isolated contacts)
   std::size_t sparse_candidates = 0;  ///< its candidates (beside RANSAC's `candidates`)
   std::optional<Funnel> watched;    ///< the watched object's funnel, when one is watched
+  AnswerFit fit;                    ///< of the answer (best)
   StageTimes times;
 };
 

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 namespace ts::experiments {
@@ -22,12 +23,21 @@ const std::vector<std::string>& confidence_feature_names() {
       "posterior_margin",   // minus the largest posterior of another object
       "log_residual",       // ln(-ln wt) of the best hypothesis: its Eq. 4-9 misfit
       "agreement",          // share of hypotheses on the named object within 1 cm of its pose
-      "log_contacts"};      // ln(1 + contacts)
+      "log_contacts",       // ln(1 + contacts)
+      "log_step",           // ln(step)
+      "fit_rms_sigma",      // the answer's RMS contact distance after the per-grasp offsets,
+                            // each clamped to 3 sigma, in contact sigmas (AnswerFit)
+      "fit_far_share",      // share of its contacts farther than 3 sigma
+      "fit_far10_share",    // ... farther than 10 sigma
+      "fit_offset_sigma",   // RMS per-grasp offset in offset sigmas
+      "free_conflict"};     // Eq. 8 error of the free space per free point
   return names;
 }
 
 std::vector<double> confidence_features(const StepResult& r) {
   double best = 0.0, other = 0.0, misfit = 1.0, agreement = 0.0;
+  // No answer: the worst fit (every contact far, the offsets at their bound).
+  double rms = 3.0, far = 1.0, far10 = 1.0, offset = 3.0, free = 0.0;
   if (r.valid) {
     best = r.posterior;
     for (std::size_t i = 0; i < r.posteriors.size(); ++i)
@@ -39,8 +49,37 @@ std::vector<double> confidence_features(const StepResult& r) {
           (h.pose.translation() - r.best.pose.translation()).norm() < kAgreementRadius)
         ++agree;
     if (!r.hypotheses.empty()) agreement = static_cast<double>(agree) / static_cast<double>(r.hypotheses.size());
+    if (r.fit.valid) {
+      rms = r.fit.rms_sigma;
+      far = r.fit.far_share;
+      far10 = r.fit.far10_share;
+      offset = r.fit.offset_rms_sigma;
+      free = r.fit.free_conflict;
+    }
   }
-  return {best, best - other, std::log(misfit), agreement, std::log1p(static_cast<double>(r.contacts))};
+  return {best, best - other, std::log(misfit), agreement, std::log1p(static_cast<double>(r.contacts)),
+          std::log(static_cast<double>(std::max(r.step, 1))), rms, far, far10, offset, free};
+}
+
+int feature_step(std::span<const double> f) {
+  static const std::size_t at = static_cast<std::size_t>(
+      std::find(confidence_feature_names().begin(), confidence_feature_names().end(), "log_step") -
+      confidence_feature_names().begin());
+  if (f.size() <= at || !std::isfinite(f[at]))
+    throw Error("the features carry no step (log_step)", {}, "features");
+  return static_cast<int>(std::lround(std::exp(f[at])));
+}
+
+const std::vector<int>& default_step_ranges() {
+  static const std::vector<int> first{1, 2, 3, 5, 7, 9, 12, 16};
+  return first;
+}
+
+const StepModels& Calibration::at(int step) const {
+  if (ranges.empty()) throw Error("the calibration has no models", {}, "steps");
+  std::size_t k = 0;
+  while (k + 1 < ranges.size() && ranges[k + 1].first_step <= step) ++k;
+  return ranges[k];
 }
 
 double LogisticModel::predict(std::span<const double> f) const {
@@ -104,6 +143,120 @@ LogisticModel fit_logistic(const std::vector<std::vector<double>>& rows, const s
   return m;
 }
 
+const std::vector<double>& default_l2_grid() {
+  static const std::vector<double> grid{1e-4, 1e-3, 1e-2, 3e-2, 0.1, 0.3};
+  return grid;
+}
+
+double choose_l2(const std::vector<std::vector<double>>& rows, const std::vector<int>& labels,
+                 const std::vector<int>& groups, const std::vector<double>& grid, int folds) {
+  if (grid.empty()) throw Error("an empty grid of L2 penalties", {}, "l2");
+  if (grid.size() == 1 || folds < 2) return grid.front();
+  std::vector<int> fold(rows.size());
+  std::vector<std::size_t> in_fold(static_cast<std::size_t>(folds), 0);
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    fold[i] = ((groups.at(i) % folds) + folds) % folds;
+    ++in_fold[static_cast<std::size_t>(fold[i])];
+  }
+  if (std::count_if(in_fold.begin(), in_fold.end(), [](std::size_t n) { return n > 0; }) < 2) return grid.front();
+  double best = grid.front(), best_loss = std::numeric_limits<double>::infinity();
+  for (double l2 : grid) {
+    double loss = 0.0;
+    for (int f = 0; f < folds; ++f) {
+      if (in_fold[static_cast<std::size_t>(f)] == 0) continue;
+      std::vector<std::vector<double>> train;
+      std::vector<int> y;
+      for (std::size_t i = 0; i < rows.size(); ++i)
+        if (fold[i] != f) {
+          train.push_back(rows[i]);
+          y.push_back(labels[i]);
+        }
+      const LogisticModel m = fit_logistic(train, y, l2);
+      for (std::size_t i = 0; i < rows.size(); ++i)
+        if (fold[i] == f) {
+          const double p = std::clamp(m.predict(rows[i]), 1e-6, 1.0 - 1e-6);
+          loss -= labels[i] ? std::log(p) : std::log(1.0 - p);
+        }
+    }
+    if (loss < best_loss) {
+      best_loss = loss;
+      best = l2;
+    }
+  }
+  return best;
+}
+
+std::vector<double> out_of_fold_in_database(const std::vector<CalibrationRow>& rows, const std::vector<int>& first,
+                                            int step, double l2, int folds) {
+  std::size_t k = 0;
+  while (k + 1 < first.size() && first[k + 1] <= step) ++k;
+  const int lo = first.at(k), hi = k + 1 < first.size() ? first[k + 1] : std::numeric_limits<int>::max();
+  auto fold_of = [&](const CalibrationRow& r) { return ((r.group % folds) + folds) % folds; };
+  std::vector<double> out(rows.size(), std::numeric_limits<double>::quiet_NaN());
+  for (int f = 0; f < folds; ++f) {
+    std::vector<std::vector<double>> train;
+    std::vector<int> y;
+    bool held = false;
+    for (const CalibrationRow& r : rows) {
+      if (r.step < lo || r.step >= hi) continue;
+      if (fold_of(r) == f) {
+        held = held || r.step == step;
+        continue;
+      }
+      train.push_back(r.features);
+      y.push_back(r.hidden ? 0 : 1);
+    }
+    if (!held || train.empty()) continue;
+    const LogisticModel m = fit_logistic(train, y, l2);
+    for (std::size_t i = 0; i < rows.size(); ++i)
+      if (rows[i].step == step && fold_of(rows[i]) == f) out[i] = m.predict(rows[i].features);
+  }
+  return out;
+}
+
+std::vector<StepModels> fit_step_models(const std::vector<CalibrationRow>& rows, const std::vector<int>& first,
+                                        const std::vector<double>& l2_grid) {
+  if (first.empty() || first.front() != 1 || !std::is_sorted(first.begin(), first.end()) ||
+      std::adjacent_find(first.begin(), first.end()) != first.end())
+    throw Error("the ranges of steps must start at step 1 and ascend", {}, "--step-ranges");
+  const bool open_set = std::any_of(rows.begin(), rows.end(), [](const CalibrationRow& r) { return r.hidden; });
+  std::vector<StepModels> out;
+  for (std::size_t k = 0; k < first.size(); ++k) {
+    const int lo = first[k], hi = k + 1 < first.size() ? first[k + 1] : std::numeric_limits<int>::max();
+    std::vector<std::vector<double>> known, all;
+    std::vector<int> right, pose_right, in_db, known_group, all_group;
+    for (const CalibrationRow& r : rows) {
+      if (r.step < lo || r.step >= hi) continue;
+      all.push_back(r.features);
+      in_db.push_back(r.hidden ? 0 : 1);
+      all_group.push_back(r.group);
+      if (r.hidden) continue;
+      known.push_back(r.features);
+      right.push_back(r.right ? 1 : 0);
+      pose_right.push_back(r.pose_right ? 1 : 0);
+      known_group.push_back(r.group);
+    }
+    const std::string steps = "steps " + std::to_string(lo) + (hi == std::numeric_limits<int>::max()
+                                                                    ? std::string(" on")
+                                                                    : "-" + std::to_string(hi - 1));
+    if (known.empty()) throw Error("no answers of known objects at " + steps + " to fit on", {}, "--step-ranges");
+    StepModels m;
+    m.first_step = lo;
+    m.l2[0] = choose_l2(known, right, known_group, l2_grid);
+    m.object = fit_logistic(known, right, m.l2[0]);
+    m.l2[1] = choose_l2(known, pose_right, known_group, l2_grid);
+    m.pose = fit_logistic(known, pose_right, m.l2[1]);
+    if (open_set) {
+      if (known.size() == all.size())
+        throw Error("no runs of hidden objects at " + steps + " to fit the open-set score on", {}, "--step-ranges");
+      m.l2[2] = choose_l2(all, in_db, all_group, l2_grid);
+      m.in_database = fit_logistic(all, in_db, m.l2[2]);
+    }
+    out.push_back(std::move(m));
+  }
+  return out;
+}
+
 double choose_open_set_threshold(std::vector<double> right, std::size_t runs, double max_drop) {
   if (!(max_drop >= 0.0 && max_drop < 1.0))
     throw Error("the open-set drop must lie in [0, 1)", {}, "--open-set-drop");
@@ -124,12 +277,13 @@ nlohmann::ordered_json model_json(const LogisticModel& m) {
 }
 
 LogisticModel model_from(const nlohmann::ordered_json& j, const std::string& key, std::size_t features,
-                         const std::string& file) {
-  if (!j.contains(key) || !j[key].is_object()) throw Error("missing the model object", file, key);
+                         const std::string& file, const std::string& prefix) {
+  const std::string at = prefix + "." + key;
+  if (!j.contains(key) || !j[key].is_object()) throw Error("missing the model object", file, at);
   const auto& m = j[key];
   LogisticModel out;
   auto numbers = [&](const char* name, std::size_t size) {
-    const std::string where = key + "." + name;
+    const std::string where = at + "." + name;
     if (!m.contains(name) || !m[name].is_array() || m[name].size() != size)
       throw Error("expected an array of " + std::to_string(size) + " numbers", file, where);
     std::vector<double> v;
@@ -143,7 +297,7 @@ LogisticModel model_from(const nlohmann::ordered_json& j, const std::string& key
   out.scale = numbers("scale", features);
   out.coef = numbers("coef", features + 1);
   for (double s : out.scale)
-    if (!(s > 0.0)) throw Error("scales must be positive", file, key + ".scale");
+    if (!(s > 0.0)) throw Error("scales must be positive", file, at + ".scale");
   return out;
 }
 
@@ -155,8 +309,16 @@ nlohmann::ordered_json to_json(const Calibration& c) {
   j["version"] = Calibration::kVersion;
   j["database_fingerprint"] = c.database_fingerprint;
   j["features"] = c.features;
-  j["object"] = model_json(c.object);
-  j["pose"] = model_json(c.pose);
+  j["steps"] = nlohmann::ordered_json::array();
+  for (const StepModels& m : c.ranges) {
+    nlohmann::ordered_json r;
+    r["first_step"] = m.first_step;
+    r["object"] = model_json(m.object);
+    r["pose"] = model_json(m.pose);
+    r["in_database"] = m.in_database ? model_json(*m.in_database) : nlohmann::ordered_json(nullptr);
+    r["l2"] = m.l2;   // the penalties the fit chose (informational)
+    j["steps"].push_back(r);
+  }
   j["open_set_threshold"] = c.open_set_threshold ? nlohmann::ordered_json(*c.open_set_threshold) : nullptr;
   j["provenance"] = c.provenance.is_null() ? nlohmann::ordered_json::object() : c.provenance;
   return j;
@@ -185,7 +347,8 @@ Calibration read_calibration(const std::filesystem::path& path, const std::strin
     throw Error("not a Touchstone calibration file (format must be \"" + std::string(kFormat) + "\")", file, "format");
   if (!j.contains("version") || !j["version"].is_number_integer() || j["version"].get<long long>() != Calibration::kVersion)
     throw Error("calibration version " + (j.contains("version") ? j["version"].dump() : std::string("absent")) +
-                " is not supported (this build reads version " + std::to_string(Calibration::kVersion) + ")",
+                " is not supported (this build reads version " + std::to_string(Calibration::kVersion) +
+                "): refit it with `touchstone calibrate`",
                 file, "version");
   Calibration c;
   if (!j.contains("database_fingerprint") || !j["database_fingerprint"].is_string())
@@ -203,12 +366,32 @@ Calibration read_calibration(const std::filesystem::path& path, const std::strin
   if (c.features != confidence_feature_names())
     throw Error("the calibration's features differ from this build's (" + j["features"].dump() +
                 "): refit it with this version", file, "features");
-  c.object = model_from(j, "object", c.features.size(), file);
-  c.pose = model_from(j, "pose", c.features.size(), file);
+  if (!j.contains("steps") || !j["steps"].is_array() || j["steps"].empty())
+    throw Error("missing the models per range of steps (a non-empty array)", file, "steps");
+  for (std::size_t k = 0; k < j["steps"].size(); ++k) {
+    const auto& r = j["steps"][k];
+    const std::string where = "steps[" + std::to_string(k) + "]";
+    if (!r.is_object()) throw Error("expected an object", file, where);
+    StepModels m;
+    if (!r.contains("first_step") || !r["first_step"].is_number_integer())
+      throw Error("expected an integer first step", file, where + ".first_step");
+    m.first_step = r["first_step"].get<int>();
+    if (k == 0 ? m.first_step != 1 : m.first_step <= c.ranges.back().first_step)
+      throw Error("the ranges must start at step 1 and ascend", file, where + ".first_step");
+    m.object = model_from(r, "object", c.features.size(), file, where);
+    m.pose = model_from(r, "pose", c.features.size(), file, where);
+    if (r.contains("in_database") && !r["in_database"].is_null())
+      m.in_database = model_from(r, "in_database", c.features.size(), file, where);
+    c.ranges.push_back(std::move(m));
+  }
   if (j.contains("open_set_threshold") && !j["open_set_threshold"].is_null()) {
     const auto& t = j["open_set_threshold"];
     if (!t.is_number() || !(t.get<double>() >= 0.0 && t.get<double>() <= 1.0))
       throw Error("the open-set threshold must be a number in [0, 1] or null", file, "open_set_threshold");
+    for (std::size_t k = 0; k < c.ranges.size(); ++k)
+      if (!c.ranges[k].in_database)
+        throw Error("an open-set threshold needs the in-database model of every range of steps", file,
+                    "steps[" + std::to_string(k) + "].in_database");
     c.open_set_threshold = t.get<double>();
   }
   c.provenance = j.contains("provenance") ? j["provenance"] : nlohmann::ordered_json::object();

@@ -1,7 +1,11 @@
 // Calibrated confidence of a recognition step (issue 14): the probability that the named object
-// is right, and separately that its pose is within 1 cm, from a small logistic model over
-// features of the step's evidence (posterior mass of the winner, its margin to the runner-up, the
-// Eq. 5-6 evidence of the best hypothesis, how many hypotheses agree with it, contacts).
+// is right, and separately that its pose is within 1 cm, from small logistic models (one per
+// range of steps) over features of the step's evidence (posterior mass of the winner, its margin
+// to the runner-up, the Eq. 5-6 evidence of the best hypothesis, how many hypotheses agree with
+// it, contacts, and how well the answer explains the contacts and free space in absolute terms).
+// Apart from these, the open-set score: the probability that the explored object is in the
+// database at all, fitted on runs of known objects against runs of objects hidden from the
+// recognizer (leave-one-out); the open-set threshold applies to it.
 //
 // The model is fitted on simulated runs (the run store records every step's features and truth:
 // `touchstone calibrate STORE... --out FILE`) and shipped as a versioned JSON file that records
@@ -14,6 +18,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <optional>
@@ -30,6 +35,9 @@ const std::vector<std::string>& confidence_feature_names();
 /// the values of "no evidence" (posterior 0, evidence at its floor).
 std::vector<double> confidence_features(const StepResult& r);
 
+/// The step a feature vector of confidence_features() was computed at (its "log_step").
+int feature_step(std::span<const double> features);
+
 /// Logistic regression p = 1 / (1 + exp(-(b + w . z))), z the standardized features.
 struct LogisticModel {
   std::vector<double> mean, scale;   ///< standardization of each feature
@@ -43,22 +51,84 @@ struct LogisticModel {
 LogisticModel fit_logistic(const std::vector<std::vector<double>>& rows, const std::vector<int>& labels,
                            double l2 = 1e-3);
 
-/// The calibration file (JSON, "format": "touchstone-calibration").
+/// The models of one range of steps.
+struct StepModels {
+  int first_step = 1;                 ///< the range runs from here to the next range's first step
+  LogisticModel object;               ///< P(the named object is right | it is in the database)
+  LogisticModel pose;                 ///< P(right object and position error < 1 cm | ...)
+  /// Open set: P(the explored object is in the database), fitted on runs of known objects
+  /// against runs of hidden ones (unset: the calibration has no open-set score).
+  std::optional<LogisticModel> in_database;
+  /// The L2 penalties the fit chose for object, pose, in_database (cross-validation over the
+  /// explored objects; informational, 0 when not recorded).
+  std::array<double, 3> l2{};
+};
+
+/// The calibration file (JSON, "format": "touchstone-calibration", version 2): one set of
+/// models per range of steps (how far an exploration is changes what the features mean).
 struct Calibration {
-  static constexpr int kVersion = 1;
+  static constexpr int kVersion = 2;
   std::string database_fingerprint;   ///< of the database the runs explored
   std::vector<std::string> features;  ///< confidence_feature_names() when fitted
-  LogisticModel object;               ///< P(the named object is right)
-  LogisticModel pose;                 ///< P(right object and position error < 1 cm)
-  /// Open set: an answer whose object confidence is below this is "not in the database"
+  std::vector<StepModels> ranges;     ///< first_step ascending, the first 1
+  /// Open set: an answer whose in-database score is below this is "not in the database"
   /// (unset: every answer names an object). Chosen on calibration runs by
-  /// choose_open_set_threshold.
+  /// choose_open_set_threshold; needs in_database in every range.
   std::optional<double> open_set_threshold;
   nlohmann::ordered_json provenance;  ///< what it was fitted on (stores, runs, steps, seeds)
 
-  double object_confidence(std::span<const double> f) const { return object.predict(f); }
-  double pose_confidence(std::span<const double> f) const { return pose.predict(f); }
+  /// The range of a step (1-based; steps past the last range's first use the last).
+  const StepModels& at(int step) const;
+  /// The same, the step read off the features' own ln(step) (confidence_feature_names()).
+  double object_confidence(std::span<const double> f) const { return object_confidence(feature_step(f), f); }
+  double pose_confidence(std::span<const double> f) const { return pose_confidence(feature_step(f), f); }
+  double object_confidence(int step, std::span<const double> f) const { return at(step).object.predict(f); }
+  double pose_confidence(int step, std::span<const double> f) const { return at(step).pose.predict(f); }
+  /// The open-set score; nullopt without an in-database model.
+  std::optional<double> in_database(int step, std::span<const double> f) const {
+    const StepModels& m = at(step);
+    return m.in_database ? std::optional(m.in_database->predict(f)) : std::nullopt;
+  }
 };
+
+/// The default ranges of steps (their first steps): 1, 2, 3-4, 5-6, 7-8, 9-11, 12-15, 16 on.
+const std::vector<int>& default_step_ranges();
+
+/// One step answer to fit on: its features, its step, whether the explored object was hidden from
+/// the recognizer (open-set run), and its outcomes.
+struct CalibrationRow {
+  std::vector<double> features;
+  int step = 1;
+  int group = 0;                      ///< the explored object (cross-validation folds by it)
+  bool hidden = false;
+  bool right = false;                 ///< the named object is the explored one
+  bool pose_right = false;            ///< ... and its position error is below 1 cm
+};
+
+/// The L2 penalty of fit_logistic, among `grid`, with the least log loss on held-out groups
+/// (`folds`-fold cross-validation, group g in fold g mod folds): answers of one explored object
+/// are not independent, so they are held out together. The first of the grid when fewer than
+/// two folds have rows.
+double choose_l2(const std::vector<std::vector<double>>& rows, const std::vector<int>& labels,
+                 const std::vector<int>& groups, const std::vector<double>& grid, int folds = 5);
+
+/// Out-of-fold in-database scores of the rows at `step`: each row scored by the model of its
+/// step's range fitted (L2 penalty `l2`) without its group's fold (group g in fold g mod folds),
+/// so that a threshold chosen on them is not chosen on the model's own training answers.
+/// Returns one score per row at that step (NaN for rows at other steps).
+std::vector<double> out_of_fold_in_database(const std::vector<CalibrationRow>& rows, const std::vector<int>& first_steps,
+                                            int step, double l2, int folds = 5);
+
+/// The default grid of choose_l2.
+const std::vector<double>& default_l2_grid();
+
+/// The models of each range of steps (`first_steps` ascending from 1): object and pose on the
+/// rows of known objects, in_database on all rows (known 1, hidden 0) when some row is hidden;
+/// each with the L2 penalty choose_l2 picks from `l2_grid` (one value: that one).
+/// Throws ts::Error (key "--step-ranges") for a range without rows of known objects, or without
+/// hidden rows when other ranges have some.
+std::vector<StepModels> fit_step_models(const std::vector<CalibrationRow>& rows, const std::vector<int>& first_steps,
+                                        const std::vector<double>& l2_grid = default_l2_grid());
 
 /// The open-set threshold: the largest confidence t such that refusing the answers below t
 /// costs at most `max_drop` of the runs at that step their right answer, i.e. t is the

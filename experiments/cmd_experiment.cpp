@@ -11,7 +11,9 @@
 
 #include <algorithm>
 #include <csignal>
+#include <map>
 #include <optional>
+#include <set>
 #include <cmath>
 #include <cstdio>
 #include <iomanip>
@@ -45,7 +47,31 @@ struct CalibrateOptions {
   std::string out, runs;
   double open_set_drop = 0.03;   ///< known-object recognition the open-set threshold may cost
   int open_set_step = 20;        ///< at this step (the last when the runs are shorter)
+  std::string step_ranges;       ///< first steps of the ranges, "1,2,3,..." ("": the default)
 };
+
+/// --step-ranges: first steps, ascending from 1.
+std::vector<int> parse_step_ranges(const std::string& text) {
+  if (text.empty()) return experiments::default_step_ranges();
+  std::vector<int> out;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    std::size_t used = 0;
+    int v = 0;
+    try {
+      v = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != item.size() || (out.empty() ? v != 1 : v <= out.back()))
+      throw Error("expected ascending first steps starting at 1, e.g. 1,2,3,5,7,9,12,16 (got '" + text + "')",
+                  {}, "--step-ranges");
+    out.push_back(v);
+  }
+  if (out.empty()) throw Error("expected at least one range", {}, "--step-ranges");
+  return out;
+}
 
 /// --runs A:B, the runs A <= run < B of every object ("" : all).
 struct RunRange {
@@ -272,11 +298,15 @@ int run_report(const ReportOptions& o) {
   return 0;
 }
 
-/// Fit the confidence models on every step of the stores' runs (their features and outcomes).
+/// Fit the confidence models on every step of the stores' runs (their features and outcomes):
+/// per range of steps, P(right) and P(pose within 1 cm) on the runs of known objects, and the
+/// in-database score on known against hidden runs (when the stores hold hidden runs).
 int run_calibrate(const CalibrateOptions& o) {
   const auto& names = experiments::confidence_feature_names();
-  std::vector<std::vector<double>> rows;
-  std::vector<int> object_right, pose_right, step_of;
+  const std::vector<int> first = parse_step_ranges(o.step_ranges);
+  std::vector<experiments::CalibrationRow> rows;
+  std::map<std::string, int> groups;   // explored objects by name, across the stores
+  auto object_group = [&](const std::string& name) { return groups.emplace(name, static_cast<int>(groups.size())).first->second; };
   std::string fingerprint;
   nlohmann::ordered_json sources = nlohmann::ordered_json::array();
   const RunRange range = parse_runs(o.runs);
@@ -298,17 +328,22 @@ int run_calibrate(const CalibrateOptions& o) {
                     "/header/step_values");
       cols.push_back(static_cast<std::size_t>(it - v.begin()));
     }
-    std::size_t steps = 0;
-    for (const io::RunRecord& r : c.runs)
+    const std::set<int> hidden = experiments::hidden_explored_objects(c.header);
+    std::size_t steps = 0, hidden_runs = 0;
+    for (const io::RunRecord& r : c.runs) {
+      hidden_runs += hidden.count(r.object) ? 1 : 0;
       for (const io::RunStepRecord& s : r.steps) {
-        std::vector<double> f;
-        for (std::size_t k : cols) f.push_back(s.values.at(k));
-        rows.push_back(std::move(f));
-        object_right.push_back(s.correct ? 1 : 0);
-        pose_right.push_back(s.correct && s.position_error_m < 0.01 ? 1 : 0);
-        step_of.push_back(static_cast<int>(&s - r.steps.data()) + 1);
+        experiments::CalibrationRow row;
+        for (std::size_t k : cols) row.features.push_back(s.values.at(k));
+        row.step = static_cast<int>(&s - r.steps.data()) + 1;
+        row.hidden = hidden.count(r.object) > 0;
+        row.group = object_group(c.header.objects.at(static_cast<std::size_t>(r.object)));
+        row.right = s.correct;
+        row.pose_right = s.correct && s.position_error_m < 0.01;
+        rows.push_back(std::move(row));
         ++steps;
       }
+    }
     const auto config = nlohmann::ordered_json::parse(c.header.config_json, nullptr, false);
     nlohmann::ordered_json src;
     src["store"] = path;
@@ -316,39 +351,56 @@ int run_calibrate(const CalibrateOptions& o) {
     src["protocol"] = config.is_object() ? config.value("protocol", nlohmann::ordered_json("shared_pool")) : nullptr;
     src["objects"] = c.header.objects.size();
     src["runs"] = c.runs.size();
+    src["hidden_runs"] = hidden_runs;
     src["run_range"] = range.all() ? nlohmann::ordered_json("all")
                                    : nlohmann::ordered_json::array({range.first, range.end});
     src["step_answers"] = steps;
     sources.push_back(src);
   }
   if (rows.empty()) throw Error("the run stores hold no runs to fit on", o.stores.front(), "/runs");
+  const bool open_set = std::any_of(rows.begin(), rows.end(), [](const auto& r) { return r.hidden; });
   experiments::Calibration cal;
   cal.database_fingerprint = fingerprint;
   cal.features = names;
-  cal.object = experiments::fit_logistic(rows, object_right);
-  cal.pose = experiments::fit_logistic(rows, pose_right);
-  // Open set: the threshold that costs the fitted runs at most --open-set-drop of their right
-  // answers at --open-set-step.
-  const int last = *std::max_element(step_of.begin(), step_of.end());
+  cal.ranges = experiments::fit_step_models(rows, first);
+  // Open set: the threshold on the in-database score that costs the known objects' runs at most
+  // --open-set-drop of their right answers at --open-set-step.
+  int last = 0;
+  for (const auto& r : rows) last = std::max(last, r.step);
   const int at = std::min(o.open_set_step, last);
   std::vector<double> right_at;
   std::size_t runs_at = 0;
-  for (std::size_t i = 0; i < rows.size(); ++i) {
-    if (step_of[i] != at) continue;
-    ++runs_at;
-    if (object_right[i]) right_at.push_back(cal.object_confidence(rows[i]));
+  if (open_set) {
+    // Scored out of fold (objects held out): the in-sample scores of the known runs are
+    // optimistic, and a threshold chosen on them costs held-out runs more than --open-set-drop.
+    const auto& range = cal.at(at);
+    const std::vector<double> score =
+        experiments::out_of_fold_in_database(rows, first, at, range.l2[2]);
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      const auto& r = rows[i];
+      if (r.step != at || r.hidden) continue;
+      ++runs_at;
+      if (r.right && std::isfinite(score[i])) right_at.push_back(score[i]);
+    }
+    cal.open_set_threshold = experiments::choose_open_set_threshold(right_at, runs_at, o.open_set_drop);
+    cal.provenance["open_set"] = {{"score", "in_database, out of fold (5 folds by object)"},
+                                  {"max_drop", o.open_set_drop}, {"step", at},
+                                  {"known_runs", runs_at}, {"right", right_at.size()}};
+  } else {
+    cal.provenance["open_set"] = nullptr;   // no hidden runs: no open-set score
   }
-  cal.open_set_threshold = experiments::choose_open_set_threshold(right_at, runs_at, o.open_set_drop);
-  cal.provenance["open_set"] = {{"max_drop", o.open_set_drop}, {"step", at}, {"runs", runs_at},
-                                {"right", right_at.size()}};
   cal.provenance["fitted_on"] = sources;
   cal.provenance["step_answers"] = rows.size();
   experiments::write_calibration(o.out, cal);
   // In-sample calibration (the fit's own data; judge it on other runs with `report --calibration`).
   std::vector<double> po, pp;
-  for (const auto& f : rows) {
-    po.push_back(cal.object_confidence(f));
-    pp.push_back(cal.pose_confidence(f));
+  std::vector<int> object_right, pose_right;
+  for (const auto& r : rows) {
+    if (r.hidden) continue;
+    po.push_back(cal.object_confidence(r.step, r.features));
+    pp.push_back(cal.pose_confidence(r.step, r.features));
+    object_right.push_back(r.right ? 1 : 0);
+    pose_right.push_back(r.pose_right ? 1 : 0);
   }
   const auto a = experiments::confidence_calibration(po, object_right);
   const auto b = experiments::confidence_calibration(pp, pose_right);
@@ -358,11 +410,16 @@ int run_calibrate(const CalibrateOptions& o) {
     std::cout << j.dump(1) << "\n";
   } else {
     std::cout << "Calibration written to " << o.out << ": " << rows.size() << " step answers of "
-              << o.stores.size() << " run store(s); in-sample object ECE " << std::fixed
-              << std::setprecision(3) << a.ece << ", Brier " << a.brier << "; pose ECE " << b.ece
-              << ", Brier " << b.brier << "; open-set threshold " << *cal.open_set_threshold
-              << " (at most " << o.open_set_drop * 100 << " % of the runs lose their right answer at step "
-              << at << "; judge it on other runs: touchstone report STORE --calibration " << o.out << ")\n";
+              << o.stores.size() << " run store(s), " << first.size() << " ranges of steps; in-sample object ECE "
+              << std::fixed << std::setprecision(3) << a.ece << ", Brier " << a.brier << "; pose ECE " << b.ece
+              << ", Brier " << b.brier;
+    if (cal.open_set_threshold)
+      std::cout << "; open-set threshold " << *cal.open_set_threshold << " on the in-database score (at most "
+                << o.open_set_drop * 100 << " % of the known objects' runs lose their right answer at step " << at
+                << ")";
+    else
+      std::cout << "; no open-set score (no runs of hidden objects)";
+    std::cout << "; judge it on other runs: touchstone report STORE --calibration " << o.out << "\n";
   }
   return 0;
 }
@@ -425,8 +482,12 @@ void register_experiment(CLI::App& app) {
   cb->add_option("--out", co->out, "Calibration file to write (JSON)")->required();
   cb->add_option("--runs", co->runs, "Fit on the runs A <= run < B of every object only (A:B)");
   cb->add_option("--open-set-drop", co->open_set_drop,
-                 "Open set: the threshold may cost at most this share of the runs their right answer "
+                 "Open set (needs runs of hidden objects, config hidden): the threshold on the "
+                 "in-database score may cost at most this share of the known objects' runs their right answer "
                  "(default 0.03)")->check(CLI::Range(0.0, 0.99));
+  cb->add_option("--step-ranges", co->step_ranges,
+                 "First steps of the ranges of steps with their own models, ascending from 1 "
+                 "(default 1,2,3,5,7,9,12,16)");
   cb->add_option("--open-set-step", co->open_set_step,
                  "Open set: ... at this step (default 20; the last when runs are shorter)")
       ->check(CLI::PositiveNumber);

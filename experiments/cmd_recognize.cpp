@@ -337,10 +337,12 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     bool refused = false;
     if (c.calibration) {
       const std::vector<double> f = experiments::confidence_features(r);
-      const double object_confidence = c.calibration->object_confidence(f);
-      st["confidence"] = {{"object", object_confidence}, {"pose", c.calibration->pose_confidence(f)}};
+      const auto in_database = c.calibration->in_database(r.step, f);  // the open-set score
+      st["confidence"] = {{"object", c.calibration->object_confidence(r.step, f)},
+                          {"pose", c.calibration->pose_confidence(r.step, f)},
+                          {"in_database", in_database ? nlohmann::ordered_json(*in_database) : nullptr}};
       const auto threshold = c.o.open_set_threshold ? c.o.open_set_threshold : c.calibration->open_set_threshold;
-      refused = r.valid && threshold && object_confidence < *threshold;
+      refused = r.valid && threshold && in_database && *in_database < *threshold;
     } else {
       st["confidence"] = nullptr;
     }
@@ -628,6 +630,9 @@ int run_recognize(const RecognizeOptions& o) {
     calibration = experiments::read_calibration(o.calibration, experiments::file_fingerprint(*source));
   else if (o.open_set_threshold)
     throw Error("an open-set threshold needs a confidence calibration (--calibration)", {}, "--open-set-threshold");
+  if (calibration && o.open_set_threshold && !calibration->in_database(1, std::vector<double>(calibration->features.size(), 0.0)))
+    throw Error("the calibration has no open-set (in-database) model: fit it with leave-one-out runs too",
+                o.calibration, "steps[0].in_database");
   const Context c{o, rs, db, largest, symmetries, source->congruence(), calibration ? &*calibration : nullptr};
   if (many) return recognize_many(c, inputs, outs);
 
@@ -678,10 +683,11 @@ void register_recognize(CLI::App& app) {
   sub->add_option("--object", o->object, "Name of the touched object (ground truth), if known");
   sub->add_option("--calibration", o->calibration,
                   "Confidence calibration of this database (touchstone calibrate): each step's JSON "
-                  "gets \"confidence\" {object, pose}; below its open-set threshold the answer is "
+                  "gets \"confidence\" {object, pose, in_database}; below its open-set threshold the "
+                  "in-database score makes the answer "
                   "\"object\": null, \"reason\": \"not_in_database\"");
   sub->add_option("--open-set-threshold", o->open_set_threshold,
-                  "Object confidence below which the answer is \"not in the database\" (default: the "
+                  "In-database score below which the answer is \"not in the database\" (default: the "
                   "calibration file's, chosen on its calibration runs; 0: always name an object)")
       ->check(CLI::Range(0.0, 1.0));
 

@@ -86,6 +86,22 @@ ConfidenceCalibration confidence_calibration(std::span<const double> confidence,
   return out;
 }
 
+EceNoise ece_sampling_noise(std::span<const double> confidence, std::size_t bins, std::size_t replicates,
+                            std::uint64_t seed) {
+  EceNoise out;
+  if (confidence.empty() || replicates == 0) return out;
+  Rng rng(seed);
+  std::vector<int> y(confidence.size());
+  std::vector<double> e(replicates);
+  for (std::size_t k = 0; k < replicates; ++k) {
+    for (std::size_t i = 0; i < y.size(); ++i) y[i] = rng.uniform() < confidence[i] ? 1 : 0;
+    e[k] = confidence_calibration(confidence, y, bins).ece;
+  }
+  out.mean = std::accumulate(e.begin(), e.end(), 0.0) / static_cast<double>(e.size());
+  out.p95 = *quantile(e, 0.95);
+  return out;
+}
+
 std::optional<double> quantile(std::span<const double> values, double p) {
   if (values.empty()) return std::nullopt;
   if (!(p >= 0.0 && p <= 1.0)) throw Error("quantile level outside [0, 1]", {}, "p");

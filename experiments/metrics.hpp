@@ -77,6 +77,15 @@ struct ConfidenceCalibration {
 ConfidenceCalibration confidence_calibration(std::span<const double> confidence,
                                              std::span<const int> outcome, std::size_t bins = 10);
 
+/// What sampling alone gives: the ECE of an exactly calibrated model at these confidences, its
+/// outcomes drawn as Bernoulli(confidence), over `replicates` draws (fixed seed: deterministic).
+struct EceNoise {
+  double mean = 0.0;                 ///< mean ECE over the draws
+  double p95 = 0.0;                  ///< its 95th percentile
+};
+EceNoise ece_sampling_noise(std::span<const double> confidence, std::size_t bins = 10,
+                            std::size_t replicates = 400, std::uint64_t seed = 14);
+
 // --- Order statistics and means ------------------------------------------------------------------
 
 /// Quantile p in [0, 1] by linear interpolation between order statistics (Hyndman & Fan type 7,

@@ -225,16 +225,25 @@ class ConfidenceSource {
       }
   }
   bool available() const { return settings_.calibration || (object_col_ >= 0 && pose_col_ >= 0); }
-  std::pair<double, double> at(const io::RunStepRecord& s) const {
+  std::pair<double, double> at(const io::RunStepRecord& s, int step) const {
     if (settings_.calibration) {
-      std::vector<double> f;
-      for (int c : feature_cols_) f.push_back(s.values.at(static_cast<std::size_t>(c)));
-      return {settings_.calibration->object_confidence(f), settings_.calibration->pose_confidence(f)};
+      const std::vector<double> f = features(s);
+      return {settings_.calibration->object_confidence(step, f), settings_.calibration->pose_confidence(step, f)};
     }
     return {s.values.at(static_cast<std::size_t>(object_col_)), s.values.at(static_cast<std::size_t>(pose_col_))};
   }
+  /// The open-set score of the report's calibration (which must have one).
+  double in_database(const io::RunStepRecord& s, int step) const {
+    return settings_.calibration->in_database(step, features(s)).value();
+  }
 
  private:
+  std::vector<double> features(const io::RunStepRecord& s) const {
+    std::vector<double> f;
+    for (int c : feature_cols_) f.push_back(s.values.at(static_cast<std::size_t>(c)));
+    return f;
+  }
+
   const ReportSettings& settings_;
   int object_col_ = -1, pose_col_ = -1;
   std::vector<int> feature_cols_;
@@ -254,7 +263,7 @@ J confidence_json(const io::RunStoreHeader& h, const std::vector<const io::RunRe
     std::vector<int> obj_right, pose_right;
     for (const io::RunRecord* r : runs) {
       const io::RunStepRecord& s = r->steps[static_cast<std::size_t>(k)];
-      const auto [co, cp] = source.at(s);
+      const auto [co, cp] = source.at(s, k + 1);
       if (!std::isfinite(co) || !std::isfinite(cp)) continue;  // recorded without a calibration
       obj.push_back(co);
       pose.push_back(cp);
@@ -270,6 +279,9 @@ J confidence_json(const io::RunStoreHeader& h, const std::vector<const io::RunRe
     row["object_confidence_mean"] = a.mean_confidence;
     row["object_accuracy"] = a.accuracy;
     row["object_ece"] = a.ece;
+    const EceNoise noise = ece_sampling_noise(obj);   // an exact model's ECE at these answers
+    row["object_ece_noise_mean"] = noise.mean;
+    row["object_ece_noise_p95"] = noise.p95;
     row["object_brier"] = a.brier;
     row["pose_confidence_mean"] = b.mean_confidence;
     row["pose_accuracy"] = b.accuracy;
@@ -299,7 +311,7 @@ J confidence_json(const io::RunStoreHeader& h, const std::vector<const io::RunRe
 }
 
 /// Open set (config `hidden`): runs of objects the recognizer did not know, against runs of known
-/// ones, with the calibration's open-set threshold t: an answer with object confidence < t is
+/// ones, with the calibration's open-set threshold t: an answer with in-database score < t is
 /// "not in the database". Per step: the false-accept rate (hidden runs that name an object; null
 /// without hidden runs) and the known objects' recognition with and without the threshold. Null
 /// without a threshold.
@@ -313,11 +325,11 @@ J open_set_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
     const auto step = static_cast<std::size_t>(k);
     std::size_t accepts = 0, right_closed = 0, right_open = 0;
     for (const io::RunRecord* r : hidden)
-      accepts += r->steps[step].best_object >= 0 && source.at(r->steps[step]).first >= t ? 1 : 0;
+      accepts += r->steps[step].best_object >= 0 && source.in_database(r->steps[step], k + 1) >= t ? 1 : 0;
     for (const io::RunRecord* r : known) {
       const io::RunStepRecord& s = r->steps[step];
       right_closed += s.correct ? 1 : 0;
-      right_open += s.correct && source.at(s).first >= t ? 1 : 0;
+      right_open += s.correct && source.in_database(s, k + 1) >= t ? 1 : 0;
     }
     const Interval fa = wilson_interval(accepts, hidden.size());
     J row;
@@ -605,7 +617,7 @@ void print_intervals(const J& report, std::ostream& out) {
 void print_open_set(const J& report, std::ostream& out) {
   const J& o = report.value("open_set", J(nullptr));
   if (!o.is_object()) return;
-  out << "\nOpen set (threshold " << fmt(o["threshold"], 1, 3) << " on the object confidence, from "
+  out << "\nOpen set (threshold " << fmt(o["threshold"], 1, 3) << " on the in-database score, from "
       << o["source"].get<std::string>() << "): hidden objects named as a database object, and the "
       << "known objects' recognition without / with the threshold\n"
          "  step  hidden  false accepts (%)  Wilson (%)  known  closed (%)  open (%)  drop (points)\n";
@@ -636,15 +648,19 @@ void print_confidence(const J& report, std::ostream& out) {
   }
   out << "\nConfidence (" << c["source"].get<std::string>()
       << "): calibration against the outcomes, per step\n"
-         "  step  object: mean  right  ECE    Brier   pose (< 1 cm): mean  right  ECE    Brier\n";
+         "  step     n  object: mean  right  ECE    (exact model: mean, p95)  Brier   pose (< 1 cm): mean  right  ECE    Brier\n";
   const J& rows = c["per_step"];
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const int step = rows[i]["step"].get<int>();
     if (!(step == 1 || step == 5 || step == 10 || step == 20 || step % 10 == 0 || i + 1 == rows.size())) continue;
     const J& r = rows[i];
-    out << "  " << std::setw(4) << step << "  " << std::setw(12) << fmt(r["object_confidence_mean"], 1, 3)
+    std::ostringstream noise;
+    noise << fmt(r["object_ece_noise_mean"], 1, 3) << ", " << fmt(r["object_ece_noise_p95"], 1, 3);
+    out << "  " << std::setw(4) << step << "  " << std::setw(4) << r["n"].get<std::size_t>() << "  "
+        << std::setw(12) << fmt(r["object_confidence_mean"], 1, 3)
         << "  " << std::setw(5) << fmt(r["object_accuracy"], 1, 3) << "  " << std::setw(5)
-        << fmt(r["object_ece"], 1, 3) << "  " << std::setw(6) << fmt(r["object_brier"], 1, 3) << "  "
+        << fmt(r["object_ece"], 1, 3) << "  " << std::setw(24) << noise.str() << "  " << std::setw(6)
+        << fmt(r["object_brier"], 1, 3) << "  "
         << std::setw(19) << fmt(r["pose_confidence_mean"], 1, 3) << "  " << std::setw(5)
         << fmt(r["pose_accuracy"], 1, 3) << "  " << std::setw(5) << fmt(r["pose_ece"], 1, 3) << "  "
         << std::setw(6) << fmt(r["pose_brier"], 1, 3) << "\n";
@@ -657,6 +673,8 @@ void print_confidence(const J& report, std::ostream& out) {
 }
 
 }  // namespace
+
+std::set<int> hidden_explored_objects(const io::RunStoreHeader& header) { return hidden_objects(header); }
 
 /// "@20", or "@K" when the runs have fewer than 20 steps (the summary's step-20 column).
 static std::string step20_label(const J& report) {

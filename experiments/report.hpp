@@ -11,6 +11,7 @@
 
 #include <filesystem>
 #include <iosfwd>
+#include <set>
 #include <string>
 
 namespace ts::experiments {
@@ -36,6 +37,10 @@ struct ReportSettings {
 /// the store's database recorded, "congruent_classes"; null: none known, the two agree).
 nlohmann::ordered_json report_json(const io::RunStoreContents& store, const ReportSettings& settings,
                                    const std::string& store_path = {});
+
+/// The explored objects (indices into the header's objects) that the runs hid from the
+/// recognizer (config `hidden`; "each": all of them): open-set runs.
+std::set<int> hidden_explored_objects(const io::RunStoreHeader& header);
 
 /// Human tables (recognition and errors per step, per object at a few steps, sweep variants and
 /// the Pareto front) written to `out`.

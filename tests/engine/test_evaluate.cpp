@@ -304,6 +304,30 @@ TEST_CASE("Per-grasp offsets: a single flat patch keeps its unobservable offsets
   for (Vec3& p : sc.grasps.points) p.z() += 0.01;
   const GraspFit far = fit_grasp_offsets(sc, box.field, Pose::Identity(), s);
   CHECK(far.offsets[0].norm() <= 3 * s.grasp_offset_sigma + 1e-12);
+
+  // contact_fit, the answer's absolute fit: 22 mm above the face, beyond the offsets' reach
+  // (9 mm, and the fit only uses contacts within 12 mm), every contact farther than 10 sigma.
+  const std::size_t n = pts.size();
+  for (Vec3& p : sc.grasps.points) p.z() += 0.01;
+  const GraspFit f = contact_fit(sc, box.field, Pose::Identity(), s);
+  CHECK(f.contacts == n);
+  CHECK(f.far == n);
+  CHECK(f.far10 == n);
+  CHECK(f.clamped_sq_sum == doctest::Approx(9e-6 * double(n)));
+  sc.grasps = GraspGroups();
+  sc.grasps.add(pts);                                // 2 mm above the face again
+  const GraspFit close = contact_fit(sc, box.field, Pose::Identity(), s);
+  CHECK(close.far == 0);
+  CHECK(close.clamped_sq_sum < 1e-9 * double(n));
+  // Without the offsets (or without grasp groups) the scene's contacts as they are: 2 mm each.
+  EvaluateSettings plain = s;
+  plain.grasp_offset_sigma = 0.0;
+  const GraspFit unshifted = contact_fit(sc, box.field, Pose::Identity(), plain);
+  CHECK(unshifted.contacts == sc.contacts.size());
+  CHECK(unshifted.offsets.empty());
+  CHECK(unshifted.far == 0);
+  CHECK(unshifted.far10 == 0);
+  CHECK(unshifted.clamped_sq_sum == doctest::Approx(4e-6 * double(sc.contacts.size())).epsilon(0.03));
 }
 
 TEST_CASE("Per-grasp offsets separate a sphere from a faceted look-alike that plain Eq. 4 prefers") {

@@ -75,16 +75,41 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   c.database_fingerprint = "abc123";
   c.features = confidence_feature_names();
   const std::size_t f = c.features.size();
-  c.object = {std::vector<double>(f, 0.5), std::vector<double>(f, 2.0), std::vector<double>(f + 1, 0.25)};
-  c.pose = {std::vector<double>(f, 0.0), std::vector<double>(f, 1.0), std::vector<double>(f + 1, -0.5)};
+  StepModels early, late;
+  early.first_step = 1;
+  early.object = {std::vector<double>(f, 0.5), std::vector<double>(f, 2.0), std::vector<double>(f + 1, 0.25)};
+  early.pose = {std::vector<double>(f, 0.0), std::vector<double>(f, 1.0), std::vector<double>(f + 1, -0.5)};
+  late = early;
+  late.first_step = 5;
+  late.object.coef[0] = 2.0;
+  late.in_database = early.pose;
+  early.in_database = early.object;
+  c.ranges = {early, late};
+  c.open_set_threshold = 0.4;
   const auto path = dir / "cal.json";
   write_calibration(path, c);
   const Calibration back = read_calibration(path, "abc123");
-  CHECK(back.object.coef == c.object.coef);
-  CHECK(back.pose.mean == c.pose.mean);
+  REQUIRE(back.ranges.size() == 2);
+  CHECK(back.ranges[0].object.coef == early.object.coef);
+  CHECK(back.ranges[1].pose.mean == late.pose.mean);
+  CHECK(back.ranges[1].first_step == 5);
+  CHECK(back.open_set_threshold == 0.4);
   const std::vector<double> x(f, 0.5);
-  CHECK(back.object_confidence(x) == doctest::Approx(1.0 / (1.0 + std::exp(-0.25))));
+  // Steps 1-4 use the first range's models, 5 on the second's.
+  for (int step : {1, 4})
+    CHECK(back.object_confidence(step, x) == doctest::Approx(1.0 / (1.0 + std::exp(-0.25))));
+  for (int step : {5, 40}) CHECK(back.object_confidence(step, x) == doctest::Approx(1.0 / (1.0 + std::exp(-2.0))));
+  // pose's model: mean 0, scale 1, every coefficient -0.5: z = -0.5 - 0.5 * 0.5 * f.
+  CHECK(back.in_database(7, x).value() == doctest::Approx(1.0 / (1.0 + std::exp(0.5 + 0.25 * double(f)))));
   CHECK_NOTHROW(read_calibration(path, ""));  // no database to check against
+  // Without a step given, the features' own ln(step) picks the range.
+  StepResult r;
+  for (int step : {1, 4, 5, 13}) {
+    r.step = step;
+    const std::vector<double> feats = confidence_features(r);
+    CHECK(feature_step(feats) == step);
+    CHECK(back.object_confidence(feats) == back.object_confidence(step, feats));
+  }
 
   auto error_of = [&](const std::string& text, const std::string& fingerprint) {
     const auto p = dir / "bad.json";
@@ -101,7 +126,7 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   auto j = to_json(c);
   CHECK(error_of(j.dump(), "other") == "database_fingerprint");
   auto v = j;
-  v["version"] = 2;
+  v["version"] = 1;   // the single-model files before the ranges of steps
   CHECK(error_of(v.dump(), "abc123") == "version");
   auto fm = j;
   fm["format"] = "something";
@@ -110,13 +135,134 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   fe["features"] = {"posterior_best"};
   CHECK(error_of(fe.dump(), "abc123") == "features");
   auto co = j;
-  co["object"]["coef"] = {1.0};
-  CHECK(error_of(co.dump(), "abc123") == "object.coef");
+  co["steps"][0]["object"]["coef"] = {1.0};
+  CHECK(error_of(co.dump(), "abc123") == "steps[0].object.coef");
   auto sc = j;
-  sc["pose"]["scale"][0] = 0.0;
-  CHECK(error_of(sc.dump(), "abc123") == "pose.scale");
+  sc["steps"][1]["pose"]["scale"][0] = 0.0;
+  CHECK(error_of(sc.dump(), "abc123") == "steps[1].pose.scale");
+  auto first = j;
+  first["steps"][0]["first_step"] = 2;
+  CHECK(error_of(first.dump(), "abc123") == "steps[0].first_step");
+  auto order = j;
+  order["steps"][1]["first_step"] = 1;
+  CHECK(error_of(order.dump(), "abc123") == "steps[1].first_step");
+  auto none = j;
+  none["steps"] = nlohmann::ordered_json::array();
+  CHECK(error_of(none.dump(), "abc123") == "steps");
+  auto open = j;   // a threshold without the open-set model of every range
+  open["steps"][1]["in_database"] = nullptr;
+  CHECK(error_of(open.dump(), "abc123") == "steps[1].in_database");
+  auto indb = j;
+  indb["steps"][0]["in_database"]["mean"] = "x";
+  CHECK(error_of(indb.dump(), "abc123") == "steps[0].in_database.mean");
   CHECK(error_of("[1, 2]", "abc123").empty());
   CHECK_THROWS_AS(read_calibration(dir / "missing.json", ""), Error);
+}
+
+TEST_CASE("Step-aware fit: each range of steps recovers its own model; one model over all steps does not") {
+  // One feature x ~ N(0, 1). Known objects: steps 1-2 right with p = sigmoid(-1 + 2 x), steps 3-4
+  // with p = sigmoid(2 + 0.5 x). Hidden objects (open set) have x ~ N(-1, 1): the in-database
+  // odds are then exp(x + 0.5) times the known:hidden ratio (1:1 here), the exact
+  // P(known | x) = sigmoid(0.5 + x).
+  Rng rng(11);
+  auto sigmoid = [](double z) { return 1.0 / (1.0 + std::exp(-z)); };
+  std::vector<CalibrationRow> rows;
+  for (int i = 0; i < 40000; ++i) {
+    CalibrationRow r;
+    r.step = 1 + i % 4;
+    r.group = i % 97;
+    r.hidden = (i / 4) % 2 == 1;
+    const double x = rng.normal() - (r.hidden ? 1.0 : 0.0);
+    r.features = {x};
+    const double p = r.step <= 2 ? sigmoid(-1.0 + 2.0 * x) : sigmoid(2.0 + 0.5 * x);
+    r.right = !r.hidden && rng.uniform() < p;
+    r.pose_right = r.right && rng.uniform() < 0.5;
+    rows.push_back(r);
+  }
+  const auto models = fit_step_models(rows, {1, 3}, {0.0});
+  REQUIRE(models.size() == 2);
+  CHECK(models[1].first_step == 3);
+  for (double x : {-1.5, 0.0, 1.0}) {
+    const std::vector<double> f{x};
+    CHECK(std::abs(models[0].object.predict(f) - sigmoid(-1.0 + 2.0 * x)) < 0.03);
+    CHECK(std::abs(models[1].object.predict(f) - sigmoid(2.0 + 0.5 * x)) < 0.03);
+    for (const auto& m : models) {
+      REQUIRE(m.in_database);
+      CHECK(std::abs(m.in_database->predict(f) - sigmoid(0.5 + x)) < 0.03);
+    }
+  }
+  // Judged per step on fresh draws: the ranges are calibrated, one model over all steps is not.
+  const auto pooled = fit_step_models(rows, {1}, {0.0});
+  Rng fresh(12);
+  for (int step : {1, 4}) {
+    std::vector<double> by_range, by_pool;
+    std::vector<int> y;
+    for (int i = 0; i < 20000; ++i) {
+      const double x = fresh.normal();
+      const double p = step <= 2 ? sigmoid(-1.0 + 2.0 * x) : sigmoid(2.0 + 0.5 * x);
+      y.push_back(fresh.uniform() < p ? 1 : 0);
+      by_range.push_back(models[step <= 2 ? 0 : 1].object.predict(std::vector<double>{x}));
+      by_pool.push_back(pooled[0].object.predict(std::vector<double>{x}));
+    }
+    CHECK(confidence_calibration(by_range, y).ece < 0.02);
+    CHECK(confidence_calibration(by_pool, y).ece > 0.1);
+  }
+  // Bad ranges, a range without known answers, hidden answers missing from one range.
+  CHECK_THROWS_AS(fit_step_models(rows, {2, 3}), Error);
+  CHECK_THROWS_AS(fit_step_models(rows, {1, 3, 3}), Error);
+  try {
+    fit_step_models(rows, {1, 5});
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.field() == "--step-ranges");
+    CHECK(std::string(e.what()).find("steps 5 on") != std::string::npos);
+  }
+  std::erase_if(rows, [](const CalibrationRow& r) { return r.hidden && r.step >= 3; });
+  CHECK_THROWS_AS(fit_step_models(rows, {1, 3}), Error);
+  CHECK(fit_step_models(rows, {1})[0].in_database);
+}
+
+TEST_CASE("L2 penalty by cross-validation over objects: strong for noise, weak for a clear signal") {
+  Rng rng(3);
+  // 60 answers, 10 features of pure noise, labels fair coins: any fit is overfitting.
+  std::vector<std::vector<double>> noise;
+  std::vector<int> coin, groups;
+  for (int i = 0; i < 60; ++i) {
+    std::vector<double> f;
+    for (int j = 0; j < 10; ++j) f.push_back(rng.normal());
+    noise.push_back(f);
+    coin.push_back(rng.uniform() < 0.5 ? 1 : 0);
+    groups.push_back(i % 15);
+  }
+  CHECK(choose_l2(noise, coin, groups, default_l2_grid()) >= 0.1);
+  // 5 000 answers of y ~ Bernoulli(sigmoid(3 x)): shrinking the weight only costs.
+  std::vector<std::vector<double>> clear;
+  std::vector<int> y, g;
+  for (int i = 0; i < 5000; ++i) {
+    const double x = rng.normal();
+    clear.push_back({x});
+    y.push_back(rng.uniform() < 1.0 / (1.0 + std::exp(-3.0 * x)) ? 1 : 0);
+    g.push_back(i % 45);
+  }
+  CHECK(choose_l2(clear, y, g, default_l2_grid()) <= 1e-2);
+  // One group only (no held-out fold): the grid's first.
+  CHECK(choose_l2(clear, y, std::vector<int>(5000, 0), {0.5, 0.1}) == 0.5);
+  CHECK_THROWS_AS(choose_l2(clear, y, g, {}), Error);
+}
+
+TEST_CASE("ECE of an exactly calibrated model: what sampling alone gives") {
+  // 100 answers at 0.5 (one bin): ECE = |share right - 0.5|, share ~ Binomial(100, 0.5) / 100:
+  // E|.| = 0.0398 (sum_k C(100, k) |k / 100 - 0.5| / 2^100); 400 draws: standard error 0.0015.
+  const std::vector<double> half(100, 0.5);
+  const EceNoise n = ece_sampling_noise(half);
+  CHECK(n.mean > 0.0398 - 0.005);
+  CHECK(n.mean < 0.0398 + 0.005);
+  CHECK(n.p95 >= 0.08);   // |k - 50| >= 8 to 10 has probability ~ 0.05
+  CHECK(n.p95 <= 0.11);
+  // Certain answers: no noise.
+  const EceNoise zero = ece_sampling_noise(std::vector<double>(50, 1.0));
+  CHECK(zero.mean == 0.0);
+  CHECK(ece_sampling_noise(half).mean == n.mean);   // fixed seed
 }
 
 TEST_CASE("Open-set threshold: the most confidence refused while at most the allowed share of runs loses its right answer") {
@@ -135,10 +281,14 @@ TEST_CASE("Open-set threshold: the most confidence refused while at most the all
   c.database_fingerprint = "f";
   c.features = confidence_feature_names();
   const std::size_t f = c.features.size();
-  c.object = {std::vector<double>(f, 0.0), std::vector<double>(f, 1.0), std::vector<double>(f + 1, 0.0)};
-  c.pose = c.object;
+  StepModels m;
+  m.object = {std::vector<double>(f, 0.0), std::vector<double>(f, 1.0), std::vector<double>(f + 1, 0.0)};
+  m.pose = m.object;
+  c.ranges = {m};
   write_calibration(dir / "none.json", c);
   CHECK_FALSE(read_calibration(dir / "none.json", "f").open_set_threshold);
+  CHECK_FALSE(read_calibration(dir / "none.json", "f").in_database(3, std::vector<double>(f, 0.0)));
+  c.ranges[0].in_database = m.object;
   c.open_set_threshold = 0.25;
   write_calibration(dir / "t.json", c);
   CHECK(read_calibration(dir / "t.json", "f").open_set_threshold == 0.25);

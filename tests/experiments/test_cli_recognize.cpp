@@ -626,9 +626,17 @@ TEST_CASE("cli recognize --calibration: confidences, and the open-set answer bel
   cal.database_fingerprint = experiments::file_fingerprint(io::DbReader(dir / "small.h5"));
   cal.features = experiments::confidence_feature_names();
   const std::size_t F = cal.features.size();
-  cal.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 1.0), std::vector<double>(F + 1, 0.0)};
-  cal.pose = cal.object;   // every confidence 0.5
+  experiments::StepModels m;
+  m.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 1.0), std::vector<double>(F + 1, 0.0)};
+  m.pose = m.object;   // every confidence 0.5
+  cal.ranges = {m};
   experiments::write_calibration(dir / "cal.json", cal);
+  // A threshold on the in-database score: every score 0.5 (0.0 bias) from step 2 on, 0.7 at step 1.
+  cal.ranges[0].in_database = m.object;
+  cal.ranges[0].in_database->coef[0] = std::log(0.7 / 0.3);
+  cal.ranges.push_back(cal.ranges[0]);
+  cal.ranges[1].first_step = 2;
+  cal.ranges[1].in_database->coef[0] = 0.0;
   cal.open_set_threshold = 0.6;
   experiments::write_calibration(dir / "open.json", cal);
 
@@ -637,22 +645,28 @@ TEST_CASE("cli recognize --calibration: confidences, and the open-set answer bel
   const auto jp = nlohmann::json::parse(plain.out);  // kept alive: the loop reads into it
   for (const auto& st : jp["steps"]) {
     CHECK(st["confidence"]["object"].get<double>() == doctest::Approx(0.5));
+    CHECK(st["confidence"]["in_database"].is_null());   // no open-set model
     CHECK(st["reason"].is_null());
     CHECK(st["object"].is_string());
   }
-  // Below the threshold: "not in the database"; right for the wedge (not in small.h5), wrong
-  // for the box (it is).
+  // Below the threshold (steps 2 on): "not in the database"; right for the wedge (not in
+  // small.h5), wrong for the box (it is). At step 1 the score is 0.7: the object is named.
   for (const auto& [log, outside] : {std::pair{"wedge.h5", true}, {"box.h5", false}}) {
     const Run r = touchstone(dir, std::string("recognize --db small.h5 --log ") + log + " --json --calibration open.json" + kFast);
     REQUIRE_MESSAGE(r.code == 0, r.err);
     const auto j = nlohmann::json::parse(r.out);
     CHECK(j["truth_in_database"] == !outside);
-    for (const auto& st : j["steps"]) {
-      CHECK(st["object"].is_null());
-      CHECK(st["reason"] == "not_in_database");
-      CHECK(st["best_guess"].is_string());
-      CHECK(st["correct"] == outside);
-    }
+    REQUIRE(j["steps"].size() == 2);
+    const auto& first = j["steps"][0];
+    CHECK(first["confidence"]["in_database"].get<double>() == doctest::Approx(0.7));
+    CHECK(first["object"].is_string());
+    CHECK(first["reason"].is_null());
+    const auto& st = j["steps"][1];
+    CHECK(st["confidence"]["in_database"].get<double>() == doctest::Approx(0.5));
+    CHECK(st["object"].is_null());
+    CHECK(st["reason"] == "not_in_database");
+    CHECK(st["best_guess"].is_string());
+    CHECK(st["correct"] == outside);
   }
   // --open-set-threshold overrides the file's (0: always name an object), needs a calibration.
   const Run named = touchstone(dir, "recognize --db small.h5 --log wedge.h5 --json --calibration open.json --open-set-threshold 0" + kFast);
@@ -661,6 +675,11 @@ TEST_CASE("cli recognize --calibration: confidences, and the open-set answer bel
   const Run lone = touchstone(dir, "recognize --db small.h5 --log wedge.h5 --open-set-threshold 0.5");
   CHECK(lone.code == 1);
   CHECK(lone.err.find("--open-set-threshold") != std::string::npos);
+  // A threshold with a calibration that has no open-set model: one error naming the file and key.
+  const Run no_model = touchstone(dir, "recognize --db small.h5 --log wedge.h5 --calibration cal.json --open-set-threshold 0.5");
+  CHECK(no_model.code == 1);
+  CHECK(no_model.err.find("cal.json") != std::string::npos);
+  CHECK(no_model.err.find("in_database") != std::string::npos);
   // Another database's calibration: one error naming the file and the key.
   const Run other = touchstone(dir, "recognize --db db.h5 --log wedge.h5 --calibration open.json");
   CHECK(other.code == 1);

@@ -231,8 +231,13 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
   Calibration cal;
   cal.database_fingerprint = small_database().description["fingerprint"].get<std::string>();
   cal.features = confidence_feature_names();
-  cal.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 1.0), std::vector<double>(F + 1, 0.3)};
-  cal.pose = {std::vector<double>(F, 0.1), std::vector<double>(F, 2.0), std::vector<double>(F + 1, -0.2)};
+  StepModels early, late;
+  early.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 1.0), std::vector<double>(F + 1, 0.3)};
+  early.pose = {std::vector<double>(F, 0.1), std::vector<double>(F, 2.0), std::vector<double>(F + 1, -0.2)};
+  late = early;
+  late.first_step = 2;
+  late.object.coef[0] = -0.4;
+  cal.ranges = {early, late};
   write_calibration(dir / "cal.json", cal);
   ExperimentConfig with = c;
   set_key(with, "calibration", {(dir / "cal.json").string()});
@@ -243,8 +248,10 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
     const auto& v = cruns[0].steps[k].values;
     const std::vector<double> f(v.begin() + 2, v.end());
     CHECK(f == std::vector<double>(runs[0].steps[k].values.begin() + 2, runs[0].steps[k].values.end()));
-    CHECK(v[0] == cal.object_confidence(f));
-    CHECK(v[1] == cal.pose_confidence(f));
+    const int step = static_cast<int>(k) + 1;   // each step by its own range's models
+    CHECK(v[0] == (step == 1 ? early : late).object.predict(f));
+    CHECK(v[0] == cal.object_confidence(step, f));
+    CHECK(v[1] == cal.pose_confidence(step, f));
     CHECK(v[0] > 0.0);
     CHECK(v[0] < 1.0);
   }

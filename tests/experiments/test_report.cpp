@@ -254,9 +254,11 @@ TEST_CASE("Report: confidences judged per step (ECE, Brier, reliability), record
   // A calibration recomputes from the features: coef on feature.posterior_best (the run) only.
   Calibration cal;
   cal.features = confidence_feature_names();
-  cal.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 1.0), std::vector<double>(F + 1, 0.0)};
-  cal.object.coef[1] = 1.0;
-  cal.pose = cal.object;
+  StepModels m;
+  m.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 1.0), std::vector<double>(F + 1, 0.0)};
+  m.object.coef[1] = 1.0;
+  m.pose = m.object;
+  cal.ranges = {m};
   ReportSettings rs;
   rs.calibration = &cal;
   rs.calibration_path = "cal.json";
@@ -303,9 +305,12 @@ TEST_CASE("Report: open set, false accepts of hidden objects and the known objec
     }
   Calibration cal;
   cal.features = confidence_feature_names();
-  cal.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 0.1), std::vector<double>(F + 1, 0.0)};
-  cal.object.coef[1] = 1.0;   // confidence sigmoid(run): 0.5, 0.73, 0.88, 0.95
-  cal.pose = cal.object;
+  StepModels m;
+  m.object = {std::vector<double>(F, 0.0), std::vector<double>(F, 0.1), std::vector<double>(F + 1, 0.0)};
+  m.pose = m.object;   // object confidence 0.5 throughout: the threshold does not look at it
+  m.in_database = m.object;
+  m.in_database->coef[1] = 1.0;   // in-database score sigmoid(run): 0.5, 0.73, 0.88, 0.95
+  cal.ranges = {m};
   cal.open_set_threshold = 0.8;   // runs 2 and 3 accepted
   ReportSettings rs;
   rs.calibration = &cal;
