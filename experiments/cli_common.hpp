@@ -54,5 +54,6 @@ void register_recognize(CLI::App& app);   // recognize
 void register_experiment(CLI::App& app);  // experiment, report
 void register_catalogue(CLI::App& app);   // catalogue
 void register_stress(CLI::App& app);      // stress
+void register_params(CLI::App& app);      // params
 
 }  // namespace ts::cli

@@ -4,6 +4,7 @@
 // the loaded database; each input gets its own recognizer with the seed it would have alone.
 #include "experiments/calibration.hpp"
 #include "experiments/cli_common.hpp"
+#include "experiments/parameters.hpp"
 #include "experiments/recognition_engine.hpp"
 
 #include "engine/feature_table.hpp"
@@ -56,10 +57,11 @@ struct RecognizeOptions {
   std::string method = "bricpsf";
   std::string preset = "improved";   ///< improved | paper: the defaults the flags start from
   int steps = 0;                     ///< 0: every grasp of the log
-  RecognizerSettings rs;             ///< method parameters (defaults: the paper's)
+  experiments::ParameterFlags flags;  ///< the method parameters' flags given (parameters.hpp)
+  RecognizerSettings rs;             ///< the preset's method parameters with the flags applied
   double contact_voxel = 0.002;      ///< m, voxel filter of the cumulative contact cloud
   std::optional<double> memory_budget_mb;  ///< resident object geometry; unset: the default
-  std::optional<double> inside_margin;     ///< --free-inside-margin; unset: 0 (a probe: 1 cm)
+  bool inside_margin = false;        ///< --free-inside-margin given (unset: 0; a probe: 1 cm)
 };
 
 /// A 4x4 row-major object -> world matrix from a text file (whitespace or comma separated).
@@ -118,40 +120,10 @@ nlohmann::ordered_json number_or_null(const std::optional<double>& x) {
 
 std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& s,
                                                      double contact_voxel) {
-  return {{"n_p", double(s.n_p)},
-          {"psi", s.psi},
-          {"N", double(s.ransac.triplets)},
-          {"R", double(s.ransac.registrations)},
-          {"W", double(s.ransac.prune_w)},
-          {"W_per_object", double(s.ransac.prune_per_object)},
-          {"prune_blocks", double(s.ransac.prune_blocks)},
-          {"object_draws", double(s.ransac.object_draws)},
-          {"prior_draws", double(s.ransac.prior_draws)},
-          {"twins", double(s.twins.rivals)},
-          {"twins_refine", double(s.twins.refine)},
-          {"transfer", double(s.twins.transfer)},
-          {"shortlist", double(s.shortlist.objects)},
-          {"min_spacing", s.ransac.min_spacing},
-          {"distance_tolerance", s.ransac.distance_tolerance},
-          {"min_sv_ratio", s.ransac.min_sv_ratio},
-          {"size_slack", s.ransac.size_slack},
-          {"d_outlier", s.evaluate.d_outlier},
-          {"lambda", s.evaluate.lambda},
-          {"res_free", s.evaluate.res_free},
-          {"free_inside_penalty", s.evaluate.free_inside_penalty ? 1.0 : 0.0},
-          {"grasp_offset_sigma", s.evaluate.grasp_offset_sigma},
-          {"icp_iterations", double(s.icp.max_iterations)},
-          {"icp_trim", s.icp.trim_fraction},
-          {"icp_max_correspondence", s.icp.max_correspondence},
-          {"icp_max_points", double(s.icp.max_points)},
-          {"refine_new", s.refine_new ? 1.0 : 0.0},
-          {"refine_pool", double(s.refine_pool)},
-          {"new_per_object", double(s.new_per_object)},
-          {"normal_tolerance_deg", s.ransac.normal_tolerance_deg},
-          {"dedupe", s.dedupe ? 1.0 : 0.0},
-          {"index_exact", s.index.exact ? 1.0 : 0.0},
-          {"index_checks", double(s.index.checks)},
-          {"contact_voxel", contact_voxel}};
+  experiments::MethodSettings m;
+  m.recognizer = s;
+  m.contact_voxel = contact_voxel;
+  return experiments::stored_parameters(m);
 }
 
 /// One input of the command: a tactile log or a contact cloud.
@@ -696,138 +668,22 @@ void register_recognize(CLI::App& app) {
                   "space inside objects, duplicate removal, ICP on new hypotheses, diversity); "
                   "paper: the paper's method exactly. The flags below apply on top")
       ->check(CLI::IsMember({"paper", "improved"}));
-  RecognizerSettings& s = o->rs;
-  auto* g = "Method parameters (defaults: the preset's; the paper's unless marked Extension)";
-  sub->add_option("--n-p", s.n_p, "BRICPSF hypotheses n_p")->group(g)->check(CLI::Range(1, 1000000));
-  sub->add_option("--psi", s.psi, "Share of evolved hypotheses kept (Psi)")->group(g)->check(CLI::Range(0.0, 1.0));
-  sub->add_option("-N,--triplets", s.ransac.triplets, "Batch RANSAC triplets N")->group(g)->check(CLI::Range(1, 1000000));
-  sub->add_option("-R,--registrations", s.ransac.registrations, "Registrations per triplet R")->group(g)->check(CLI::Range(1, 1000000));
-  sub->add_option("-W,--prune", s.ransac.prune_w, "Nearest database features per triplet point W")->group(g)->check(CLI::Range(1, 100000000));
-  auto* per_object_w = sub->add_option("--prune-per-object", s.ransac.prune_per_object,
-                                       "Extension: nearest features of every object per triplet point (0: the global W)")
-                           ->group(g)
-                           ->check(CLI::Range(0, 100000000));
-  auto* prune_blocks = sub->add_option("--prune-blocks", s.ransac.prune_blocks,
-                                       "Extension: per-object pruning reads each object's B blocks of 128 features "
-                                       "nearest to the query (approximate; 0: exact; the improved preset: 8 on "
-                                       "databases of more than 48 objects)")
-                           ->group(g)
-                           ->check(CLI::Range(0, 1000000));
-  auto* object_draws = sub->add_option("--object-draws", s.ransac.object_draws,
-                                       "Extension: with per-object pruning, each triplet searches this many objects, the "
-                                       "next of a shuffled order, when the database has more (0: every object)")
-                           ->group(g)
-                           ->check(CLI::Range(0, 100000000));
-  auto* prior_draws = sub->add_option("--prior-draws", s.ransac.prior_draws,
-                                      "Extension: of each triplet's object draws, this many are the step's best "
-                                      "objects by the shape prior, a pose-free fit of the contacts' point pairs "
-                                      "(0: off; the improved preset: 60 on databases of more than 48 objects; asked for "
-                                      "explicitly, on any database)")
-                          ->group(g)
-                          ->check(CLI::Range(0, 100000000));
-  auto* twins = sub->add_option("--twins", s.twins.rivals,
-                                "Extension: near-twin verification, the leading objects compared by a likelihood "
-                                "with per-grasp offsets (0: off; tactile logs only)")
-                    ->group(g)
-                    ->check(CLI::Range(0, 1000));
-  auto* twins_refine = sub->add_option("--twins-refine", s.twins.refine,
-                                       "Extension: the near-twin verification refines each rival's pose and per-grasp "
-                                       "offsets together under its likelihood, at most this many Gauss-Newton steps "
-                                       "(0: each rival judged at its own pose)")
-                           ->group(g)
-                           ->check(CLI::Range(0, 100));
-  auto* transfer = sub->add_option("--transfer", s.twins.transfer,
-                                   "Extension: each step the leading hypothesis's pose is also tried on this many "
-                                   "other objects that fit the contacts best there, refined and evaluated (0: off; "
-                                   "the improved preset: 2 on databases of more than 48 objects)")
-                       ->group(g)
-                       ->check(CLI::Range(0, 100000));
-  auto* shortlist = sub->add_option("--shortlist", s.shortlist.objects,
-                                    "Extension: objects whose RANSAC candidates go on to ICP and evaluation per "
-                                    "step, chosen by screening against the coarse clouds (0: all; the improved "
-                                    "preset: 16 on databases of more than 48 objects)")
-                        ->group(g)
-                        ->check(CLI::Range(0, 100000000));
+  // Every method parameter (experiments/parameters.cpp): --KEY with `_` written `-`, and its
+  // older flags; the preset's value where not given.
+  experiments::add_parameter_flags(*sub, o->flags,
+                                   "Method parameters (defaults: the preset's; `touchstone params` lists them)");
   sub->add_option("--memory-budget", o->memory_budget_mb,
                   "Resident object geometry in MB, loaded on demand and evicted least-recently-used "
                   "(default 256; 0: no limit). Never changes results")
       ->check(CLI::NonNegativeNumber);
-  sub->add_option("--d-outlier", s.evaluate.d_outlier, "Outlier distance of Eq. 4 (m)")->group(g)->check(CLI::PositiveNumber);
-  sub->add_option("--lambda", s.evaluate.lambda, "Free-space weight of Eq. 9")->group(g)->check(CLI::NonNegativeNumber);
-  sub->add_option("--res-free", s.evaluate.res_free, "Free-space resolution (m); d_thresh = res_free/2")->group(g)->check(CLI::PositiveNumber);
-  sub->add_option("--d-thresh", s.evaluate.d_thresh,
-                  "Eq. 8 threshold (m; default res_free/2; a probe log: 0.0001): free points nearer than this "
-                  "to a hypothesis' surface are penalized (--free of a probe's path: about 0.0001)")
-      ->group(g)->check(CLI::PositiveNumber);
-  sub->add_option_function<double>(
-         "--free-inside-margin", [o](double v) { o->inside_margin = v; o->rs.evaluate.free_inside_margin = v; },
-         "m; a free point inside an object costs the full penalty only deeper than this (default 0; "
-         "a probe log: 0.01, its path measured with the arm's error; --free of a probe: about 3 sigma of it)")
-      ->group(g)->check(CLI::NonNegativeNumber);
-  auto* inside = sub->add_flag("--free-inside-penalty{true},--no-free-inside-penalty{false}", s.evaluate.free_inside_penalty,
-                "Extension: free space inside a closed object costs the full penalty")->group(g);
-  auto* grasp_sigma = sub->add_option("--grasp-offset-sigma", s.evaluate.grasp_offset_sigma,
-                                      "Extension: arm position error per grasp (m, per axis); each grasp's contacts "
-                                      "may shift by a fitted offset before Eq. 4 (0: off; tactile logs only)")
-                          ->group(g)
-                          ->check(CLI::Range(0.0, 1.0));
-  sub->add_option("--icp-iterations", s.icp.max_iterations, "ICP iteration cap")->group(g)->check(CLI::Range(0, 100000));
-  sub->add_option("--icp-trim", s.icp.trim_fraction, "Trimmed ICP: share of closest pairs fitted")->group(g)->check(CLI::Range(0.1, 1.0));
-  sub->add_option("--icp-max-correspondence", s.icp.max_correspondence, "ICP pair distance gate (m, 0: none)")->group(g)->check(CLI::NonNegativeNumber);
-  sub->add_option("--icp-points", s.icp.max_points, "Contacts used by ICP (0: all)")->group(g);
-  sub->add_option("--distance-tolerance", s.ransac.distance_tolerance, "Triplet registration distance tolerance (m)")->group(g)->check(CLI::PositiveNumber);
-  sub->add_option("--min-spacing", s.ransac.min_spacing, "Minimum triplet spacing (m, 0: the feature radius)")->group(g)->check(CLI::NonNegativeNumber);
-  auto* refine = sub->add_flag("--refine-new{true},--no-refine-new{false}", s.refine_new,
-                               "Extension: ICP on new RANSAC hypotheses before they join")->group(g);
-  auto* pool = sub->add_option("--refine-pool", s.refine_pool,
-                               "Extension: best RANSAC candidates considered (and refined) for the new hypotheses")
-                   ->group(g);
-  auto* per_object = sub->add_option("--new-per-object", s.new_per_object,
-                                     "Extension: at most this many new hypotheses per object and step (0: no cap)")
-                         ->group(g);
-  auto* dedupe = sub->add_flag("--dedupe{true},--no-dedupe{false}", s.dedupe, "Extension: drop duplicate hypotheses")->group(g);
-  sub->add_option("--normal-tolerance", s.ransac.normal_tolerance_deg,
-                  "Extension: registered pairs agree in normal angles within this (deg, 0: off)")
-      ->group(g)
-      ->check(CLI::Range(0.0, 90.0));
-  sub->add_flag("--exact-features", s.index.exact, "Exact feature search (slower)")->group(g);
-  sub->add_option("--feature-checks", s.index.checks, "Approximate feature search: leaves visited")->group(g)->check(CLI::Range(1, 1 << 30));
-  sub->add_option("--contact-voxel", o->contact_voxel, "Voxel filter of the cumulative contacts (m)")->group(g)->check(CLI::PositiveNumber);
   add_common(sub, o->common);
-  // The extensions' flags and how --preset improved sets each one a flag does not set.
-  using Apply = void (*)(RecognizerSettings&, const RecognizerSettings&);
-  const std::vector<std::pair<CLI::Option*, Apply>> extensions = {
-      {inside, [](RecognizerSettings& r, const RecognizerSettings& i) { r.evaluate.free_inside_penalty = i.evaluate.free_inside_penalty; }},
-      {dedupe, [](RecognizerSettings& r, const RecognizerSettings& i) { r.dedupe = i.dedupe; }},
-      {refine, [](RecognizerSettings& r, const RecognizerSettings& i) { r.refine_new = i.refine_new; }},
-      {pool, [](RecognizerSettings& r, const RecognizerSettings& i) { r.refine_pool = i.refine_pool; }},
-      {per_object, [](RecognizerSettings& r, const RecognizerSettings& i) { r.new_per_object = i.new_per_object; }},
-      {per_object_w, [](RecognizerSettings& r, const RecognizerSettings& i) { r.ransac.prune_per_object = i.ransac.prune_per_object; }},
-      {prune_blocks, [](RecognizerSettings& r, const RecognizerSettings& i) {
-         r.ransac.prune_blocks = i.ransac.prune_blocks;
-         r.ransac.prune_blocks_min_database = i.ransac.prune_blocks_min_database;
-       }},
-      {shortlist, [](RecognizerSettings& r, const RecognizerSettings& i) { r.shortlist = i.shortlist; }},
-      {object_draws, [](RecognizerSettings& r, const RecognizerSettings& i) { r.ransac.object_draws = i.ransac.object_draws; }},
-      {prior_draws, [](RecognizerSettings& r, const RecognizerSettings& i) {
-         r.ransac.prior_draws = i.ransac.prior_draws;
-         r.prior_min_database = i.prior_min_database;
-       }},
-      {twins, [](RecognizerSettings& r, const RecognizerSettings& i) { r.twins.rivals = i.twins.rivals; }},
-      {twins_refine, [](RecognizerSettings& r, const RecognizerSettings& i) { r.twins.refine = i.twins.refine; }},
-      {transfer, [](RecognizerSettings& r, const RecognizerSettings& i) {
-         r.twins.transfer = i.twins.transfer;
-         r.twins.transfer_min_database = i.twins.transfer_min_database;
-       }},
-      {grasp_sigma, [](RecognizerSettings& r, const RecognizerSettings& i) { r.evaluate.grasp_offset_sigma = i.evaluate.grasp_offset_sigma; }},
-  };
-  sub->callback([o, extensions] {
-    // --preset improved: the extensions, except where a flag says otherwise
-    if (o->preset == "improved") {
-      const RecognizerSettings imp = RecognizerSettings::improved();
-      for (const auto& [opt, apply] : extensions)
-        if (opt->count() == 0) apply(o->rs, imp);
-    }
+  sub->callback([o] {
+    // The preset's parameters, then the flags given (a bad value: a usage error naming the flag).
+    experiments::MethodSettings m = experiments::MethodSettings::preset(o->preset);
+    experiments::apply_flags(o->flags, m);
+    o->rs = m.recognizer;
+    o->contact_voxel = m.contact_voxel;
+    o->inside_margin = o->flags.given.count("evaluate.free_inside_margin_m") > 0;
     if (o->logs.empty() && o->clouds.empty())
       throw CLI::RequiredError("--log or --cloud");
     o->batch = o->logs.size() + o->clouds.size() > 1 ||

@@ -1,5 +1,7 @@
 #include "experiments/config.hpp"
 
+#include "experiments/parameters.hpp"
+
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -185,12 +187,7 @@ const std::vector<KeyDef>& key_defs() {
           c.seed = v;
         },
         [](auto& c) { return J(c.seed); });
-    add("ransac.triplets", true,
-        [](auto& c, auto& in, auto& x) { c.params.triplets = int_at_least(in, 1, x); },
-        [](auto& c) { return opt(c.params.triplets); });
-    add("ransac.registrations", true,
-        [](auto& c, auto& in, auto& x) { c.params.registrations = int_at_least(in, 1, x); },
-        [](auto& c) { return opt(c.params.registrations); });
+    // ransac.samples = "NxR": ransac.triplets and ransac.registrations together.
     add("ransac.samples", true,
         [](auto& c, auto& in, auto& x) {
           const std::string& t = single(in, x);
@@ -203,72 +200,23 @@ const std::vector<KeyDef>& key_defs() {
             if (ec != std::errc() || p != text.data() + text.size() || text.empty() || v < 1 ||
                 v > 100000000)
               x.fail(x.key + ": " + what + " must be a positive integer (got '" + t + "')");
-            return static_cast<int>(v);
+            return static_cast<double>(v);
           };
-          c.params.triplets = part(t.substr(0, cross), "N");
-          c.params.registrations = part(t.substr(cross + 1), "R");
+          c.params["ransac.triplets"] = part(t.substr(0, cross), "N");
+          c.params["ransac.registrations"] = part(t.substr(cross + 1), "R");
         },
         nullptr);
-    add("ransac.prune", true,
-        [](auto& c, auto& in, auto& x) { c.params.prune = int_at_least(in, 1, x); },
-        [](auto& c) { return opt(c.params.prune); });
-    add("ransac.prune_per_object", true,
-        [](auto& c, auto& in, auto& x) { c.params.prune_per_object = int_at_least(in, 0, x); },
-        [](auto& c) { return opt(c.params.prune_per_object); });
-    add("ransac.d_outlier_m", true,
-        [=](auto& c, auto& in, auto& x) { c.params.d_outlier_m = number_in(in, 1e-6, 100, x); },
-        [](auto& c) { return opt(c.params.d_outlier_m); });
-    add("bricpsf.hypotheses", true,
-        [](auto& c, auto& in, auto& x) { c.params.hypotheses = int_at_least(in, 1, x); },
-        [](auto& c) { return opt(c.params.hypotheses); });
-    add("bricpsf.psi", true,
-        [](auto& c, auto& in, auto& x) { c.params.psi = number_in(in, 0, 1, x); },
-        [](auto& c) { return opt(c.params.psi); });
-    add("bricpsf.lambda", true,
-        [=](auto& c, auto& in, auto& x) { c.params.lambda = number_in(in, 0, inf, x); },
-        [](auto& c) { return opt(c.params.lambda); });
-    add("evaluate.grasp_offset_sigma_m", true,
-        [=](auto& c, auto& in, auto& x) { c.params.grasp_offset_sigma_m = number_in(in, 0, 1, x); },
-        [](auto& c) { return opt(c.params.grasp_offset_sigma_m); });
-    add("ransac.prune_blocks", true,
-        [](auto& c, auto& in, auto& x) { c.params.prune_blocks = int_at_least(in, 0, x); },
-        [](auto& c) { return opt(c.params.prune_blocks); });
-    add("ransac.object_draws", true,
-        [](auto& c, auto& in, auto& x) { c.params.object_draws = int_at_least(in, 0, x); },
-        [](auto& c) { return opt(c.params.object_draws); });
-    add("ransac.prior_draws", true,
-        [](auto& c, auto& in, auto& x) { c.params.prior_draws = int_at_least(in, 0, x); },
-        [](auto& c) { return opt(c.params.prior_draws); });
-    add("prior.angle_bins", true,
-        [=](auto& c, auto& in, auto& x) { c.params.prior_angle_bins = static_cast<int>(number_in(in, 1, 64, x)); },
-        [](auto& c) { return opt(c.params.prior_angle_bins); });
-    add("prior.distance_bin_m", true,
-        [=](auto& c, auto& in, auto& x) { c.params.prior_distance_bin_m = number_in(in, 1e-4, 1, x); },
-        [](auto& c) { return opt(c.params.prior_distance_bin_m); });
-    add("prior.object_points", true,
-        [](auto& c, auto& in, auto& x) { c.params.prior_object_points = int_at_least(in, 2, x); },
-        [](auto& c) { return opt(c.params.prior_object_points); });
-    add("twins.rivals", true,
-        [](auto& c, auto& in, auto& x) { c.params.twins = int_at_least(in, 0, x); },
-        [](auto& c) { return opt(c.params.twins); });
-    add("twins.transfer", true,
-        [](auto& c, auto& in, auto& x) { c.params.twins_transfer = int_at_least(in, 0, x); },
-        [](auto& c) { return opt(c.params.twins_transfer); });
-    add("twins.refine", true,
-        [](auto& c, auto& in, auto& x) { c.params.twins_refine = int_at_least(in, 0, x); },
-        [](auto& c) { return opt(c.params.twins_refine); });
-    add("twins.max_gap", true,
-        [=](auto& c, auto& in, auto& x) { c.params.twins_max_gap = number_in(in, 0, inf, x); },
-        [](auto& c) { return opt(c.params.twins_max_gap); });
-    add("shortlist.objects", true,
-        [](auto& c, auto& in, auto& x) { c.params.shortlist = int_at_least(in, 0, x); },
-        [](auto& c) { return opt(c.params.shortlist); });
+    // Every method parameter (experiments/parameters.cpp), sweepable; unset: the preset's value.
+    for (const Parameter& p : method_parameters())
+      add(p.key, true,
+          [&p](auto& c, auto& in, auto& x) { c.params[p.key] = parse_value(p, single(in, x), x.file, x.key); },
+          [&p](auto& c) {
+            const auto it = c.params.find(p.key);
+            return it == c.params.end() ? J(nullptr) : p.json(it->second);
+          });
     add("memory_budget_mb", false,
         [=](auto& c, auto& in, auto& x) { c.memory_budget_mb = number_in(in, 0, inf, x); },
         [](auto& c) { return opt(c.memory_budget_mb); });
-    add("icp.iterations", true,
-        [](auto& c, auto& in, auto& x) { c.params.icp_iterations = int_at_least(in, 0, x); },
-        [](auto& c) { return opt(c.params.icp_iterations); });
     // calibration: a confidence calibration file (JSON, `touchstone calibrate`); "" none.
     add("calibration", false, [](auto& c, auto& in, auto& x) { c.calibration = single(in, x); },
         [](auto& c) { return J(c.calibration); });
@@ -485,7 +433,10 @@ std::string first_difference(const nlohmann::ordered_json& a, const nlohmann::or
     if (!a.contains(it.key())) keys.push_back(it.key());
   for (const auto& k : keys) {
     if (informative.count(k)) continue;
-    if (!a.contains(k) || !b.contains(k) || a.at(k) != b.at(k)) return k;
+    // A key absent on one side is unset there (a store written before the key existed).
+    const nlohmann::ordered_json va = a.contains(k) ? a.at(k) : nlohmann::ordered_json(nullptr);
+    const nlohmann::ordered_json vb = b.contains(k) ? b.at(k) : nlohmann::ordered_json(nullptr);
+    if (va != vb) return k;
   }
   return {};
 }

@@ -30,20 +30,10 @@
 //   sensing            pads (default: the gripper's tactile arrays) | probe (a ball-tipped probe,
 //                      one contact per step; noise.contact_sigma_m is then the probe's own noise)
 //   seed               unsigned integer
-//   ransac.triplets (N), ransac.registrations (R), ransac.samples ("NxR"), ransac.prune (W),
-//   ransac.prune_per_object (W per object, 0: the global W),
-//   ransac.d_outlier_m, bricpsf.hypotheses (n_p), bricpsf.psi, bricpsf.lambda,
-//   evaluate.grasp_offset_sigma_m (extension: per-grasp arm offsets, 0: off),
-//   shortlist.objects (extension: objects whose candidates are evaluated per step, 0: all),
-//   ransac.prune_blocks (extension: approximate per-object pruning, blocks read; 0: exact),
-//   ransac.object_draws (extension: objects drawn per triplet for per-object pruning; 0: all),
-//   ransac.prior_draws (extension: of the object draws, the shape prior's best objects; 0: off),
-//   prior.angle_bins, prior.distance_bin_m, prior.object_points (the shape prior's histograms),
-//   twins.rivals (extension: near-twin verification, leading objects compared; 0: off),
-//   twins.transfer (extension: the leader's pose tried on this many look-alike objects; 0: off),
-//   twins.refine (near-twin verification: pose refinements under V; 0: off),
-//   twins.max_gap (near-twin verification: ln wt gap within which objects compete),
-//   icp.iterations     method parameters; unset means the recognizer's default
+//   ransac.samples     "NxR": ransac.triplets and ransac.registrations together
+//   <method parameter> every key of experiments/parameters.cpp (`touchstone params`), e.g.
+//                      ransac.triplets, ransac.prune_per_object, bricpsf.psi, icp.iterations;
+//                      unset means the preset's value
 //   memory_budget_mb   resident object geometry (MB, 0: no limit); default: the recognizer's
 //   calibration        path | ""          confidence calibration file (touchstone calibrate);
 //                                          "" (default): confidences not computed (NaN)
@@ -59,6 +49,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -72,31 +63,6 @@ struct NoiseOverrides {
   std::optional<double> sensel_noise;            ///< fraction of the signal (0.05 = 5 %)
   std::optional<double> force_noise;             ///< fraction of the force (deep sea: 0.5)
   std::optional<double> contact_sigma_m;         ///< m, contact position noise (Q = diag)
-};
-
-/// Method parameters (unset: the recognizer's default, which follows the paper).
-struct MethodParams {
-  std::optional<int> triplets;          ///< N, input triplets per Batch RANSAC
-  std::optional<int> registrations;     ///< R, registrations per triplet
-  std::optional<int> prune;             ///< W, nearest database features per triplet point
-  std::optional<int> prune_per_object;  ///< W_obj, nearest features of every object (0: off)
-  std::optional<double> d_outlier_m;    ///< m, Eq. 4
-  std::optional<int> hypotheses;        ///< n_p, BRICPSF hypotheses
-  std::optional<double> psi;            ///< Ψ, share of evolved hypotheses kept
-  std::optional<double> lambda;         ///< λ, free-space weight (Eq. 9)
-  std::optional<int> icp_iterations;    ///< ICP iteration cap
-  std::optional<double> grasp_offset_sigma_m;  ///< m, per-grasp offset prior (0: off)
-  std::optional<int> shortlist;         ///< objects whose candidates are evaluated per step (0: all)
-  std::optional<int> prune_blocks;      ///< approximate per-object pruning: blocks read (0: exact)
-  std::optional<int> object_draws;      ///< per-object pruning: objects drawn per triplet (0: all)
-  std::optional<int> prior_draws;       ///< of the object draws, the shape prior's best (0: off)
-  std::optional<int> prior_angle_bins;  ///< shape prior: bins of each angle term
-  std::optional<double> prior_distance_bin_m;  ///< shape prior: m, pair-distance bin
-  std::optional<int> prior_object_points;  ///< shape prior: keypoints per object histogram
-  std::optional<int> twins;             ///< near-twin verification: leading objects compared (0: off)
-  std::optional<int> twins_transfer;    ///< pose transfer to look-alikes of the leader (0: off)
-  std::optional<int> twins_refine;      ///< near-twin verification: pose refinements under V
-  std::optional<double> twins_max_gap;  ///< near-twin verification: competing ln wt gap
 };
 
 struct SweepAxis {
@@ -125,7 +91,9 @@ struct ExperimentConfig {
   int sensors = 1;
   std::string sensing = "pads";         ///< pads | probe (datasets::ProbeSettings)
   std::uint64_t seed = 1;
-  MethodParams params;
+  /// Method parameters set explicitly (key of experiments/parameters.hpp -> value; unset: the
+  /// preset's)
+  std::map<std::string, double> params;
   std::string schedule = "runs";
   std::string calibration;              ///< confidence calibration file; "": none
   std::optional<double> memory_budget_mb;  ///< resident object geometry (MB); unset: the default
@@ -172,7 +140,8 @@ std::vector<Variant> expand_variants(const ExperimentConfig& config);
 nlohmann::ordered_json to_json(const ExperimentConfig& config);
 
 /// Compare two canonical configurations; returns the first key whose value differs ("" when
-/// they determine the same results; "schedule" is ignored).
+/// they determine the same results; "schedule" is ignored; a key absent on one side counts as
+/// unset, null).
 std::string first_difference(const nlohmann::ordered_json& a, const nlohmann::ordered_json& b);
 
 }  // namespace ts::experiments

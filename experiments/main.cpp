@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
   ts::cli::register_experiment(app);
   ts::cli::register_catalogue(app);
   ts::cli::register_stress(app);
+  ts::cli::register_params(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

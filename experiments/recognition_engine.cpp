@@ -9,6 +9,7 @@
 #include "engine/symmetry.hpp"
 #include "experiments/cli_common.hpp"
 #include "experiments/metrics.hpp"
+#include "experiments/parameters.hpp"
 #include "io/db_store.hpp"
 #include "io/sha256.hpp"
 
@@ -81,6 +82,7 @@ struct VariantData {
                                                ///< out of the recognizer in its own runs
   datasets::SimulatorSettings simulation;      ///< without grasps count and seed
   RecognizerSettings recognizer;
+  double contact_voxel = 0.002;                ///< m, voxel filter of the cumulative contacts
 };
 
 /// The object's symmetries and a model sample, for the symmetry-aware errors and MSSD.
@@ -149,8 +151,11 @@ std::string pool_key(const datasets::SimulatorSettings& s) {
   return k.str();
 }
 
-RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
-  RecognizerSettings s = c.preset == "paper" ? RecognizerSettings::paper() : RecognizerSettings::improved();
+/// The method settings of a variant: the preset's, a probe's free-space defaults, then every
+/// parameter the configuration sets (experiments/parameters.cpp).
+MethodSettings method_settings(const ExperimentConfig& c) {
+  MethodSettings m = MethodSettings::preset(c.preset);
+  RecognizerSettings& s = m.recognizer;
   // A probe's path: free by the ball radius only, measured with the arm's error (sparse_hypotheses.hpp).
   if (c.sensing == "probe") {
     s.evaluate.d_thresh = kProbeFreeThreshold;
@@ -160,41 +165,11 @@ RecognizerSettings recognizer_settings(const ExperimentConfig& c) {
   const auto method = parse_method(c.method);
   if (!method) throw Error("unknown method '" + c.method + "'", {}, "method");
   s.method = *method;
-  const MethodParams& p = c.params;
-  if (p.triplets) s.ransac.triplets = *p.triplets;
-  if (p.registrations) s.ransac.registrations = *p.registrations;
-  if (p.prune) s.ransac.prune_w = static_cast<std::size_t>(*p.prune);
-  if (p.prune_per_object) s.ransac.prune_per_object = static_cast<std::size_t>(*p.prune_per_object);
-  if (p.d_outlier_m) s.evaluate.d_outlier = *p.d_outlier_m;
-  if (p.hypotheses) s.n_p = static_cast<std::size_t>(*p.hypotheses);
-  if (p.psi) s.psi = *p.psi;
-  if (p.lambda) s.evaluate.lambda = *p.lambda;
-  if (p.icp_iterations) s.icp.max_iterations = *p.icp_iterations;
-  if (p.grasp_offset_sigma_m) s.evaluate.grasp_offset_sigma = *p.grasp_offset_sigma_m;
-  if (p.shortlist) {  // asked for explicitly: on any database
-    s.shortlist.objects = static_cast<std::size_t>(*p.shortlist);
-    s.shortlist.min_database = 0;
+  for (const Parameter& p : method_parameters()) {
+    const auto it = c.params.find(p.key);
+    if (it != c.params.end()) apply(m, p, it->second);
   }
-  if (p.prune_blocks) {  // asked for explicitly: on any database
-    s.ransac.prune_blocks = static_cast<std::size_t>(*p.prune_blocks);
-    s.ransac.prune_blocks_min_database = 0;
-  }
-  if (p.object_draws) s.ransac.object_draws = static_cast<std::size_t>(*p.object_draws);
-  if (p.prior_draws) {  // asked for explicitly: on any database
-    s.ransac.prior_draws = static_cast<std::size_t>(*p.prior_draws);
-    s.prior_min_database = 0;
-  }
-  if (p.prior_angle_bins) s.prior.angle_bins = *p.prior_angle_bins;
-  if (p.prior_distance_bin_m) s.prior.distance_bin = *p.prior_distance_bin_m;
-  if (p.prior_object_points) s.prior.object_points = static_cast<std::size_t>(*p.prior_object_points);
-  if (p.twins) s.twins.rivals = static_cast<std::size_t>(*p.twins);
-  if (p.twins_refine) s.twins.refine = *p.twins_refine;
-  if (p.twins_max_gap) s.twins.max_gap = *p.twins_max_gap;
-  if (p.twins_transfer) {  // asked for explicitly: on any database
-    s.twins.transfer = static_cast<std::size_t>(*p.twins_transfer);
-    s.twins.transfer_min_database = 0;
-  }
-  return s;
+  return m;
 }
 
 std::size_t index_of(const std::vector<std::string>& names, const std::string& name) {
@@ -227,7 +202,8 @@ class RecognitionEngine final : public RunEngine {
       // The recognizer sees its objects in the file's order (the whole file: the file itself),
       // so an experiment over the full database recognizes exactly as `touchstone recognize`.
       std::sort(objects.begin(), objects.end());
-      const RecognizerSettings rs = recognizer_settings(v.config);
+      const MethodSettings ms = method_settings(v.config);
+      const RecognizerSettings& rs = ms.recognizer;
       const bool surface = needs_surface(rs, reader_->settings());
       const std::string db_label = db_.description.value("path", std::string("database"));
       auto [it, inserted] = group_of.emplace(objects, groups_.size());
@@ -261,6 +237,7 @@ class RecognitionEngine final : public RunEngine {
       d.shared_pool = v.config.protocol == "shared_pool";
       d.hide_each = r.hide_each;
       d.recognizer = rs;
+      d.contact_voxel = ms.contact_voxel;
       variants_.push_back(std::move(d));
       labels_.push_back(v.label);
       configs_.push_back(to_json(v.config).dump());
@@ -415,6 +392,7 @@ class RecognitionEngine final : public RunEngine {
     rs.seed = Rng(config_.seed, kRecognizerStream, name_hash(name), static_cast<std::uint64_t>(task.run)).next();
     Recognizer recognizer(*group.database, group.index, rs);
     ExplorationSettings es;  // as `touchstone recognize`: B from the database's largest object
+    es.contact_voxel = v.contact_voxel;
     es.free.res_free = rs.evaluate.res_free;
     es.free.s_obj_max = largest_object_extent(*group.database);
     Exploration exploration(log, es);

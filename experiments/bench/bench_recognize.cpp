@@ -11,8 +11,10 @@
 //
 //   build/bench/bench_recognize --db DB.h5 [--grasps 20] [--speed-logs 6] [--seeds 3]
 //       [--noise underwater] [--method bricpsf] [--objects N] [--skip-speed] [--skip-accuracy]
-//       [--preset improved|paper] [--set key=value ...]   (recognizer parameters, default the
-//       improved preset as `touchstone recognize`; --preset first)
+//       [--preset improved|paper] [--KEY VALUE ...] [--set KEY=VALUE ...]
+//   Method parameters (experiments/parameters.cpp, `touchstone params`) as `touchstone recognize`
+//   takes them: the preset's values (improved by default), then each --KEY (e.g. --ransac.triplets
+//   15, or an older flag, -N 15) or --set KEY=VALUE (a key or an older name: --set N=15).
 //
 // Prints the machine, thread counts, parameters and every figure.
 #include "datasets/simulator.hpp"
@@ -22,8 +24,10 @@
 #include "engine/recognizer.hpp"
 #include "engine/symmetry.hpp"
 #include "experiments/cli_common.hpp"
+#include "experiments/parameters.hpp"
 #include "io/db_store.hpp"
 
+#include <CLI/CLI.hpp>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -70,8 +74,10 @@ struct Steps {
   std::vector<GraspGroups> grasps;
 };
 
-Steps clouds_of(const TactileLog& log, std::size_t grasps, double s_obj_max, double res_free) {
+Steps clouds_of(const TactileLog& log, std::size_t grasps, double s_obj_max, double res_free,
+                double contact_voxel) {
   ExplorationSettings es;
+  es.contact_voxel = contact_voxel;
   es.free.s_obj_max = s_obj_max;
   es.free.res_free = res_free;
   Exploration ex(log, es);
@@ -95,89 +101,46 @@ Log simulate(const io::DbReader& db, std::size_t object, std::size_t grasps, con
   return {object, sim.run().log};
 }
 
-void set_param(RecognizerSettings& s, const std::string& kv) {
-  const auto eq = kv.find('=');
-  if (eq == std::string::npos) throw Error("--set expects key=value", {}, kv);
-  const std::string k = kv.substr(0, eq);
-  const double v = std::stod(kv.substr(eq + 1));
-  if (k == "n_p") s.n_p = static_cast<std::size_t>(v);
-  else if (k == "psi") s.psi = v;
-  else if (k == "N") s.ransac.triplets = static_cast<int>(v);
-  else if (k == "R") s.ransac.registrations = static_cast<int>(v);
-  else if (k == "W") s.ransac.prune_w = static_cast<std::size_t>(v);
-  else if (k == "W_obj") s.ransac.prune_per_object = static_cast<std::size_t>(v);
-  else if (k == "d_outlier") s.evaluate.d_outlier = v;
-  else if (k == "lambda") s.evaluate.lambda = v;
-  else if (k == "grasp_offset_sigma") s.evaluate.grasp_offset_sigma = v;
-  else if (k == "grasp_contact_sigma") s.evaluate.grasp_contact_sigma = v;
-  else if (k == "grasp_iterations") s.evaluate.grasp_offset_iterations = static_cast<int>(v);
-  else if (k == "grasp_fit_points") s.evaluate.grasp_fit_points = static_cast<std::size_t>(v);
-  else if (k == "res_free") s.evaluate.res_free = v;
-  else if (k == "normal_tolerance_deg") s.ransac.normal_tolerance_deg = v;
-  else if (k == "distance_tolerance") s.ransac.distance_tolerance = v;
-  else if (k == "icp_iterations") s.icp.max_iterations = static_cast<int>(v);
-  else if (k == "icp_points") s.icp.max_points = static_cast<std::size_t>(v);
-  else if (k == "icp_trim") s.icp.trim_fraction = v;
-  else if (k == "icp_metric") s.icp.metric = v == 0 ? IcpMetric::point_to_point : v == 1 ? IcpMetric::point_to_plane : IcpMetric::field;
-  else if (k == "refine_new") s.refine_new = v != 0;
-  else if (k == "dedupe") s.dedupe = v != 0;
-  else if (k == "free_inside_penalty") s.evaluate.free_inside_penalty = v != 0;
-  else if (k == "index_exact") s.index.exact = v != 0;
-  else if (k == "index_checks") s.index.checks = static_cast<int>(v);
-  else if (k == "min_spacing") s.ransac.min_spacing = v;
-  else if (k == "d_thresh") s.evaluate.d_thresh = v;
-  else if (k == "refine_pool") s.refine_pool = static_cast<std::size_t>(v);
-  else if (k == "new_per_object") s.new_per_object = static_cast<std::size_t>(v);
-  else if (k == "prune_blocks") {  // asked for explicitly: on any database
-    s.ransac.prune_blocks = static_cast<std::size_t>(v);
-    s.ransac.prune_blocks_min_database = 0;
-  }
-  else if (k == "object_draws") s.ransac.object_draws = static_cast<std::size_t>(v);
-  else if (k == "twins") s.twins.rivals = static_cast<std::size_t>(v);
-  else if (k == "twins_refine") s.twins.refine = static_cast<int>(v);
-  else if (k == "transfer") {  // asked for explicitly: on any database
-    s.twins.transfer = static_cast<std::size_t>(v);
-    s.twins.transfer_min_database = 0;
-  }
-  else if (k == "shortlist") s.shortlist.objects = static_cast<std::size_t>(v);
-  else if (k == "shortlist_contacts") s.shortlist.contacts = static_cast<std::size_t>(v);
-  else if (k == "shortlist_outlier") s.shortlist.outlier_distance = v;
-  else throw Error("unknown parameter", {}, k);
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
+  std::string db_path, noise = "underwater", method = "bricpsf", preset = "improved";
+  std::size_t grasps = 20, speed_logs = 6, seeds = 3, objects = 0;
+  bool skip_speed = false, skip_accuracy = false;
+  std::vector<std::string> sets;
+  experiments::ParameterFlags flags;
+  experiments::MethodSettings settings;
+  CLI::App app{"bench_recognize: recognizer speed and accuracy on simulated logs"};
+  app.add_option("--db", db_path, "Object database (HDF5)")->required();
+  app.add_option("--grasps", grasps, "Steps (grasps) of each log")->check(CLI::Range(1, 100000));
+  app.add_option("--speed-logs", speed_logs, "Logs of the speed part")->check(CLI::Range(1, 100000));
+  app.add_option("--seeds", seeds, "Logs per object of the accuracy part")->check(CLI::Range(1, 100000));
+  app.add_option("--noise", noise, "Noise profile: ideal | underwater | deepsea");
+  app.add_option("--method", method, "bricpsf | batch-ransac | ransac-icp | ransac-icp-fs");
+  app.add_option("--objects", objects, "First N objects of the database (0: all)");
+  app.add_flag("--skip-speed", skip_speed, "Skip the speed part");
+  app.add_flag("--skip-accuracy", skip_accuracy, "Skip the accuracy part");
+  app.add_option("--preset", preset, "improved (default) | paper: the parameters the others change")
+      ->check(CLI::IsMember({"paper", "improved"}));
+  app.add_option("--set", sets, "KEY=VALUE: a method parameter by its key or an older name (touchstone params)");
+  experiments::add_parameter_flags(app, flags, "Method parameters (touchstone params)");
   try {
-    std::string db_path, noise = "underwater", method = "bricpsf";
-    std::size_t grasps = 20, speed_logs = 6, seeds = 3, objects = 0;
-    bool speed = true, accuracy = true;
-    RecognizerSettings rs = RecognizerSettings::improved();
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw Error("missing value", {}, a);
-        return argv[++i];
-      };
-      if (a == "--db") db_path = next();
-      else if (a == "--grasps") grasps = std::stoul(next());
-      else if (a == "--speed-logs") speed_logs = std::stoul(next());
-      else if (a == "--seeds") seeds = std::stoul(next());
-      else if (a == "--noise") noise = next();
-      else if (a == "--method") method = next();
-      else if (a == "--objects") objects = std::stoul(next());
-      else if (a == "--skip-speed") speed = false;
-      else if (a == "--skip-accuracy") accuracy = false;
-      else if (a == "--set") set_param(rs, next());
-      else if (a == "--preset") {
-        const std::string p = next();
-        if (p == "improved") rs = RecognizerSettings::improved();
-        else if (p == "paper") rs = RecognizerSettings::paper();
-        else throw Error("unknown preset", {}, p);
-      }
-      else throw Error("unknown argument (see the header of bench_recognize.cpp)", {}, a);
+    app.parse(argc, argv);
+    for (const std::string& kv : sets) {   // --set KEY=VALUE: the key's flag, given
+      const auto eq = kv.find('=');
+      const experiments::Parameter* p = eq == std::string::npos ? nullptr : experiments::find_parameter(kv.substr(0, eq));
+      if (!p) throw CLI::ValidationError("--set", "expects KEY=VALUE with a method parameter's key (got '" + kv + "')");
+      flags.given[p->key] = kv.substr(eq + 1);
     }
-    if (db_path.empty()) throw Error("--db DB.h5 is required");
+    experiments::MethodSettings ms = experiments::MethodSettings::preset(preset);
+    experiments::apply_flags(flags, ms);
+    settings = ms;
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    const bool speed = !skip_speed, accuracy = !skip_accuracy;
+    RecognizerSettings rs = settings.recognizer;
     const auto m = parse_method(method);
     if (!m) throw Error("unknown method", {}, method);
     rs.method = *m;
@@ -189,19 +152,14 @@ int main(int argc, char** argv) {
     std::printf("bench_recognize: %s\nmachine: %s\ndatabase: %s (%zu objects), method %s, %zu grasps, noise %s\n",
                 "recognizer speed and accuracy", cli::machine_description().c_str(), db_path.c_str(),
                 db.size(), method.c_str(), grasps, noise.c_str());
-    std::printf("parameters: n_p %zu, psi %.2f, N %d, R %d, W %zu, W per object %zu, refine_new %d (pool %zu, "
-                "%zu per object), dedupe %d, free inside %d, d_outlier %.3f, lambda %.3f, res_free %.3f, "
-                "normal_tol %.1f deg, ICP %s (%d it, %zu pts), object draws %zu, shortlist %zu, twins %zu "
-                "(refine %d), transfer %zu (databases above %zu objects), prune blocks %zu\n",
-                rs.n_p, rs.psi, rs.ransac.triplets, rs.ransac.registrations, rs.ransac.prune_w,
-                rs.ransac.prune_per_object, int(rs.refine_new), rs.refine_pool, rs.new_per_object,
-                int(rs.dedupe), int(rs.evaluate.free_inside_penalty),
-                rs.evaluate.d_outlier, rs.evaluate.lambda, rs.evaluate.res_free, rs.ransac.normal_tolerance_deg,
-                rs.icp.metric == IcpMetric::field            ? "distance-field"
-                : rs.icp.metric == IcpMetric::point_to_plane ? "point-to-plane"
-                                                             : "point-to-point",
-                rs.icp.max_iterations, rs.icp.max_points, rs.ransac.object_draws, rs.shortlist.objects,
-                rs.twins.rivals, rs.twins.refine, rs.twins.transfer, rs.twins.transfer_min_database, rs.ransac.prune_blocks);
+    std::printf("parameters (preset %s):", preset.c_str());
+    {
+      experiments::MethodSettings shown = settings;
+      shown.recognizer = rs;
+      for (const auto& [key, value] : experiments::stored_parameters(shown))
+        std::printf(" %s %s,", key.c_str(), experiments::find_parameter(key)->text(value).c_str());
+      std::printf("\n");
+    }
     const double s_obj_max = largest_object_extent(db);
 
     auto t0 = std::chrono::steady_clock::now();
@@ -225,7 +183,7 @@ int main(int argc, char** argv) {
         const std::size_t obj = (i * 7 + 3) % n_obj;
         sim_arena.execute([&] {
           logs.push_back(simulate(*reader, obj, grasps, noise, 1000 + i));
-          steps.push_back(clouds_of(logs.back().log, grasps, s_obj_max, rs.evaluate.res_free));
+          steps.push_back(clouds_of(logs.back().log, grasps, s_obj_max, rs.evaluate.res_free, settings.contact_voxel));
         });
       }
       std::map<int, std::vector<double>> last, all, cpu_last;
@@ -290,7 +248,7 @@ int main(int argc, char** argv) {
       for (std::size_t obj = 0; obj < n_obj; ++obj) {
         for (std::size_t seed = 1; seed <= seeds; ++seed) {
           const Log log = simulate(*reader, obj, grasps, noise, seed);
-          const Steps st = clouds_of(log.log, grasps, s_obj_max, rs.evaluate.res_free);
+          const Steps st = clouds_of(log.log, grasps, s_obj_max, rs.evaluate.res_free, settings.contact_voxel);
           Recognizer rec(db, index, rs);
           StepResult r;
           for (std::size_t k = 0; k < grasps; ++k) {

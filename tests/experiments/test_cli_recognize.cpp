@@ -126,22 +126,22 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
     CHECK_MESSAGE(expect.empty(), "missing parameters");
   };
   CHECK(ja["preset"] == "improved");  // the default
-  check_params(res, {{"W_per_object", 200.0}, {"refine_new", 1.0}, {"grasp_offset_sigma", 0.003},
-                     {"object_draws", 100.0}, {"shortlist", 16.0}, {"twins", 5.0}, {"prune_blocks", 8.0}});
+  check_params(res, {{"ransac.prune_per_object", 200.0}, {"bricpsf.refine_new", 1.0}, {"evaluate.grasp_offset_sigma_m", 0.003},
+                     {"ransac.object_draws", 100.0}, {"shortlist.objects", 16.0}, {"twins.rivals", 5.0}, {"ransac.prune_blocks", 8.0}});
 
   SUBCASE("--preset paper, and a flag on top of a preset") {
     const Run p = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --preset paper --out rp.h5" + kFast);
     REQUIRE_MESSAGE(p.code == 0, p.err);
     CHECK(nlohmann::json::parse(p.out)["preset"] == "paper");
     check_params(io::read_result(dir / "rp.h5"),
-                 {{"W_per_object", 0.0}, {"refine_new", 0.0}, {"dedupe", 0.0}, {"grasp_offset_sigma", 0.0},
-                  {"object_draws", 0.0}, {"shortlist", 0.0}, {"twins", 0.0}});
+                 {{"ransac.prune_per_object", 0.0}, {"bricpsf.refine_new", 0.0}, {"bricpsf.dedupe", 0.0}, {"evaluate.grasp_offset_sigma_m", 0.0},
+                  {"ransac.object_draws", 0.0}, {"shortlist.objects", 0.0}, {"twins.rivals", 0.0}});
     const Run q = touchstone(dir, "recognize --db db.h5 --log log.h5 --steps 1 --prune-per-object 50 --no-dedupe "
                                   "--grasp-offset-sigma 0.005 --shortlist 3 --twins 0 --prune-blocks 2 --out rq.h5" + kFast);
     REQUIRE_MESSAGE(q.code == 0, q.err);
     check_params(io::read_result(dir / "rq.h5"),
-                 {{"W_per_object", 50.0}, {"dedupe", 0.0}, {"grasp_offset_sigma", 0.005}, {"refine_new", 1.0},
-                  {"shortlist", 3.0}, {"twins", 0.0}, {"prune_blocks", 2.0}, {"object_draws", 100.0}});
+                 {{"ransac.prune_per_object", 50.0}, {"bricpsf.dedupe", 0.0}, {"evaluate.grasp_offset_sigma_m", 0.005}, {"bricpsf.refine_new", 1.0},
+                  {"shortlist.objects", 3.0}, {"twins.rivals", 0.0}, {"ransac.prune_blocks", 2.0}, {"ransac.object_draws", 100.0}});
   }
   SUBCASE("--steps and --method") {
     const Run c = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --method batch-ransac" + kFast);
@@ -685,4 +685,87 @@ TEST_CASE("cli recognize --calibration: confidences, and the open-set answer bel
   CHECK(other.code == 1);
   CHECK(other.err.find("open.json") != std::string::npos);
   CHECK(other.err.find("database_fingerprint") != std::string::npos);
+}
+
+TEST_CASE("cli params --json: every parameter is a recognize flag (and each older flag), and an experiment --set key") {
+  test::TempDir dir("cli_params");
+  make_db(dir);
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 2 --noise ideal --out log.h5").code == 0);
+  const Run list = touchstone(dir, "params --json");
+  REQUIRE_MESSAGE(list.code == 0, list.err);
+  const auto params = nlohmann::json::parse(list.out).at("parameters");
+  REQUIRE(params.size() >= 40);
+  // Each value: the improved preset's, integers one more and reals 10 % more (within range) so
+  // that a flag that does not reach the settings shows; the costly counts kept small.
+  const std::map<std::string, double> fast = {{"ransac.triplets", 6}, {"ransac.registrations", 40},
+                                              {"ransac.prune", 800}, {"bricpsf.hypotheses", 20}, {"icp.points", 64}};
+  std::map<std::string, nlohmann::json> value;
+  for (const auto& p : params) {
+    const std::string key = p["key"];
+    nlohmann::json v = p["default"]["improved"];
+    if (v.is_object()) v = v["value"];   // an extension of large databases: asked for, on any
+    if (fast.count(key)) {
+      v = static_cast<long long>(fast.at(key));
+    } else if (p["type"] == "integer") {
+      v = std::min(v.get<long long>() + 1, static_cast<long long>(p["max"].get<double>()));
+    } else if (p["type"] == "real" && v.get<double>() > 0) {
+      v = p["max"].is_null() ? v.get<double>() * 1.1 : std::min(v.get<double>() * 1.1, p["max"].get<double>());
+    }
+    value[key] = v;
+  }
+  auto text = [](const nlohmann::json& v) { return v.is_string() ? v.get<std::string>() : v.dump(); };
+  auto stored = [&](const nlohmann::json& p, const nlohmann::json& v) {
+    if (v.is_boolean()) return v.get<bool>() ? 1.0 : 0.0;
+    if (v.is_string()) {   // a choice: its index
+      const auto& c = p["choices"];
+      return static_cast<double>(std::find(c.begin(), c.end(), v) - c.begin());
+    }
+    return v.get<double>();
+  };
+  // Round 0: every parameter's flag (--KEY with '_' written '-'); round k: each parameter's k-th
+  // older flag where it has one (scripts rely on them).
+  for (std::size_t round = 0; round <= 2; ++round) {
+    CAPTURE(round);
+    std::string args = "recognize --db db.h5 --log log.h5 --steps 1 --out r" + std::to_string(round) + ".h5";
+    for (const auto& p : params) {
+      std::vector<std::string> flags{p["flag"].get<std::string>()};
+      for (const auto& a : p["aliases"])
+        if (a.get<std::string>().front() == '-') flags.push_back(a);
+      const std::string flag = flags[std::min(round, flags.size() - 1)];
+      const auto& v = value.at(p["key"]);
+      if (v.is_boolean())
+        args += " " + (v.get<bool>() ? flag : "--no-" + flag.substr(2));
+      else
+        args += " " + flag + " " + text(v);
+    }
+    const Run r = touchstone(dir, args);
+    REQUIRE_MESSAGE(r.code == 0, (args + "\n" + r.err));
+    std::map<std::string, double> written;
+    for (const auto& [k, v] : io::read_result(dir / ("r" + std::to_string(round) + ".h5")).header.params) written[k] = v;
+    for (const auto& p : params) {
+      const std::string key = p["key"];
+      REQUIRE_MESSAGE(written.count(key), key);
+      CHECK_MESSAGE(written.at(key) == stored(p, value.at(key)), key);   // the text read back exactly
+    }
+  }
+  // experiment --set KEY=VALUE: every key, the canonical configuration records each value.
+  std::string args = "experiment --db db.h5 --objects wedge --runs 1 --steps 1 --pool 1 --json --out e.h5";
+  for (const auto& [key, v] : value) args += " --set " + key + "=" + text(v);
+  const Run e = touchstone(dir, args);
+  REQUIRE_MESSAGE(e.code == 0, (args + "\n" + e.err));
+  const auto config = nlohmann::json::parse(e.out).at("config");
+  for (const auto& [key, v] : value) {
+    REQUIRE_MESSAGE(config.contains(key), key);
+    if (v.is_number_float())
+      CHECK_MESSAGE(config[key].get<double>() == v.get<double>(), key);
+    else
+      CHECK_MESSAGE(config[key] == v, key);
+  }
+  // A bad value names the flag; an unknown key is refused.
+  const Run bad = touchstone(dir, "recognize --db db.h5 --log log.h5 --ransac.triplets 0");
+  CHECK(bad.code == 2);
+  CHECK(bad.err.find("--ransac.triplets") != std::string::npos);
+  const Run unknown = touchstone(dir, "experiment --db db.h5 --set ransac.tripletz=3 --out u.h5");
+  CHECK(unknown.code != 0);
+  CHECK(unknown.err.find("did you mean 'ransac.triplets'") != std::string::npos);
 }

@@ -1,0 +1,463 @@
+#include "experiments/parameters.hpp"
+
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <sstream>
+#include <type_traits>
+
+namespace ts::experiments {
+
+MethodSettings MethodSettings::preset(const std::string& name) {
+  MethodSettings m;
+  if (name == "paper")
+    m.recognizer = RecognizerSettings::paper();
+  else if (name == "improved")
+    m.recognizer = RecognizerSettings::improved();
+  else
+    throw Error("unknown preset '" + name + "' (paper | improved)", {}, "preset");
+  return m;
+}
+
+namespace {
+
+using Type = Parameter::Type;
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kLarge = 100000000;   // the cap of counts (an implausibly large value)
+
+/// A parameter reading and writing one field: `field` is a generic lambda returning a reference
+/// to it in a MethodSettings (const or not).
+template <class F>
+Parameter declare(std::string key, Type type, std::string unit, double lo, double hi,
+                  std::string paper, std::string help, std::vector<std::string> aliases, F field) {
+  Parameter p;
+  p.key = std::move(key);
+  p.type = type;
+  p.unit = std::move(unit);
+  p.lo = lo;
+  p.hi = hi;
+  p.paper = std::move(paper);
+  p.help = std::move(help);
+  p.aliases = std::move(aliases);
+  p.get = [field](const MethodSettings& m) {
+    const auto& x = field(m);
+    if constexpr (std::is_enum_v<std::decay_t<decltype(x)>>)
+      return static_cast<double>(static_cast<int>(x));
+    else
+      return static_cast<double>(x);
+  };
+  p.set = [field](MethodSettings& m, double v) {
+    auto& x = field(m);
+    using T = std::decay_t<decltype(x)>;
+    if constexpr (std::is_enum_v<T>)
+      x = static_cast<T>(static_cast<int>(v));
+    else if constexpr (std::is_same_v<T, bool>)
+      x = v != 0.0;
+    else
+      x = static_cast<T>(v);
+  };
+  return p;
+}
+
+template <class F>
+Parameter integer(std::string key, double lo, double hi, std::string paper, std::string help,
+                  std::vector<std::string> aliases, F field) {
+  return declare(std::move(key), Type::integer, "", lo, hi, std::move(paper), std::move(help),
+                 std::move(aliases), field);
+}
+template <class F>
+Parameter real(std::string key, std::string unit, double lo, double hi, std::string paper,
+               std::string help, std::vector<std::string> aliases, F field) {
+  return declare(std::move(key), Type::real, std::move(unit), lo, hi, std::move(paper),
+                 std::move(help), std::move(aliases), field);
+}
+template <class F>
+Parameter boolean(std::string key, std::string help, std::vector<std::string> aliases, F field) {
+  return declare(std::move(key), Type::boolean, "", 0, 1, "", std::move(help), std::move(aliases),
+                 field);
+}
+
+/// An extension the improved preset turns on only on databases of more objects than a threshold.
+template <class F>
+Parameter any_database(Parameter p, F threshold) {
+  p.min_database = [threshold](MethodSettings& m) -> std::size_t& { return threshold(m); };
+  return p;
+}
+
+#define TS_FIELD(expr) [](auto& m) -> auto& { return m.expr; }
+
+std::vector<Parameter> declaration() {
+  std::vector<Parameter> d;
+  // Batch RANSAC (Section 4.3.2).
+  d.push_back(integer("ransac.triplets", 1, 1000000, "15 (Section 5.5)", "N, triplets sampled from the contacts per step",
+                      {"-N", "--triplets", "N"}, TS_FIELD(recognizer.ransac.triplets)));
+  d.push_back(integer("ransac.registrations", 1, 1000000, "200 (Section 5.5)", "R, registrations per triplet",
+                      {"-R", "--registrations", "R"}, TS_FIELD(recognizer.ransac.registrations)));
+  d.push_back(integer("ransac.prune", 1, kLarge, "3000 (Section 5.3)", "W, nearest database features per triplet point",
+                      {"-W", "--prune", "W"}, TS_FIELD(recognizer.ransac.prune_w)));
+  d.push_back(integer("ransac.prune_per_object", 0, kLarge, "",
+                      "Extension: the W_obj nearest features of every object per triplet point (0: the global W)",
+                      {"--prune-per-object", "W_obj", "W_per_object"}, TS_FIELD(recognizer.ransac.prune_per_object)));
+  d.push_back(any_database(
+      integer("ransac.prune_blocks", 0, 1000000, "",
+              "Extension: per-object pruning reads each object's B blocks of 128 features nearest to the query "
+              "(approximate; 0: exact)",
+              {"--prune-blocks", "prune_blocks"}, TS_FIELD(recognizer.ransac.prune_blocks)),
+      TS_FIELD(recognizer.ransac.prune_blocks_min_database)));
+  d.push_back(integer("ransac.object_draws", 0, kLarge, "",
+                      "Extension: with per-object pruning, objects searched per triplet, the next of a shuffled "
+                      "order (0: every object)",
+                      {"--object-draws", "object_draws"}, TS_FIELD(recognizer.ransac.object_draws)));
+  d.push_back(any_database(
+      integer("ransac.prior_draws", 0, kLarge, "",
+              "Extension: of each triplet's object draws, this many are the step's best objects by the shape "
+              "prior (0: off)",
+              {"--prior-draws", "prior_draws"}, TS_FIELD(recognizer.ransac.prior_draws)),
+      TS_FIELD(recognizer.prior_min_database)));
+  d.push_back(real("ransac.distance_tolerance_m", "m", 1e-9, 1, "",
+                   "Triplet registration: allowed difference of each pair's distance",
+                   {"--distance-tolerance", "distance_tolerance"}, TS_FIELD(recognizer.ransac.distance_tolerance)));
+  d.push_back(real("ransac.min_spacing_m", "m", 0, 1, "", "Minimum distance between triplet points (0: the feature radius)",
+                   {"--min-spacing", "min_spacing"}, TS_FIELD(recognizer.ransac.min_spacing)));
+  d.push_back(real("ransac.normal_tolerance_deg", "deg", 0, 90, "",
+                   "Extension: registered pairs agree in normal angles within this (0: off)",
+                   {"--normal-tolerance", "normal_tolerance_deg"}, TS_FIELD(recognizer.ransac.normal_tolerance_deg)));
+  d.push_back(real("ransac.min_sv_ratio", "", 0, 1, "",
+                   "Triangles with sigma2/sigma1 below this are rejected as near-collinear",
+                   {"min_sv_ratio"}, TS_FIELD(recognizer.ransac.min_sv_ratio)));
+  d.push_back(real("ransac.size_slack_m", "m", 0, 1, "",
+                   "Objects shorter than the contacts' extent minus this are not registered",
+                   {"size_slack"}, TS_FIELD(recognizer.ransac.size_slack)));
+  // Feature search.
+  d.push_back(boolean("index.exact", "Exact feature search (false: approximate randomized k-d trees)",
+                      {"--exact-features", "index_exact"}, TS_FIELD(recognizer.index.exact)));
+  d.push_back(integer("index.checks", 1, 1 << 30, "", "Approximate feature search: leaves visited per query",
+                      {"--feature-checks", "index_checks"}, TS_FIELD(recognizer.index.checks)));
+  // Evaluation (Eq. 4-9).
+  d.push_back(real("ransac.d_outlier_m", "m", 1e-6, 100, "0.20 (Section 5.3)", "Outlier distance of Eq. 4",
+                   {"--d-outlier", "d_outlier"}, TS_FIELD(recognizer.evaluate.d_outlier)));
+  d.push_back(real("bricpsf.lambda", "", 0, kInf, "0.02 (Section 5.5)", "Free-space weight of Eq. 9",
+                   {"--lambda", "lambda"}, TS_FIELD(recognizer.evaluate.lambda)));
+  d.push_back(real("evaluate.res_free_m", "m", 1e-6, 10, "0.04 (Section 5.5)",
+                   "Free-space resolution; d_thresh = res_free/2 unless set",
+                   {"--res-free", "res_free"}, TS_FIELD(recognizer.evaluate.res_free)));
+  d.push_back(real("evaluate.d_thresh_m", "m", 0, 10, "0.02 (Section 5.5)",
+                   "Eq. 8 threshold: free points nearer the surface are penalized (0: res_free/2; a probe: 0.0001)",
+                   {"--d-thresh", "d_thresh"}, TS_FIELD(recognizer.evaluate.d_thresh)));
+  d.push_back(boolean("evaluate.free_inside_penalty", "Extension: free space inside a closed object costs the full penalty",
+                      {"--free-inside-penalty", "free_inside_penalty"}, TS_FIELD(recognizer.evaluate.free_inside_penalty)));
+  d.push_back(real("evaluate.free_inside_margin_m", "m", 0, 10, "",
+                   "A free point inside an object costs the full penalty only deeper than this (a probe: 0.01)",
+                   {"--free-inside-margin", "free_inside_margin"}, TS_FIELD(recognizer.evaluate.free_inside_margin)));
+  d.push_back(real("evaluate.grasp_offset_sigma_m", "m", 0, 1, "",
+                   "Extension: arm position error per grasp (per axis); each grasp's contacts may shift by a "
+                   "fitted offset before Eq. 4 (0: off; tactile logs only)",
+                   {"--grasp-offset-sigma", "grasp_offset_sigma"}, TS_FIELD(recognizer.evaluate.grasp_offset_sigma)));
+  d.push_back(real("evaluate.grasp_contact_sigma_m", "m", 1e-9, 1, "", "Contact noise assumed by the per-grasp offset fit",
+                   {"grasp_contact_sigma"}, TS_FIELD(recognizer.evaluate.grasp_contact_sigma)));
+  d.push_back(integer("evaluate.grasp_offset_iterations", 0, 1000, "", "Gauss-Newton iterations of the per-grasp offset fit",
+                      {"grasp_iterations"}, TS_FIELD(recognizer.evaluate.grasp_offset_iterations)));
+  d.push_back(integer("evaluate.grasp_fit_points", 1, 1000000, "", "Contacts per grasp of the per-grasp offset fit",
+                      {"grasp_fit_points"}, TS_FIELD(recognizer.evaluate.grasp_fit_points)));
+  // BRICPSF (Algorithm 1).
+  d.push_back(integer("bricpsf.hypotheses", 1, 1000000, "100 (Section 5.5)", "n_p, hypotheses kept per step",
+                      {"--n-p", "n_p"}, TS_FIELD(recognizer.n_p)));
+  d.push_back(real("bricpsf.psi", "", 0, 1, "0.8 (Section 5.5)", "Psi, share of evolved old hypotheses kept",
+                   {"--psi", "psi"}, TS_FIELD(recognizer.psi)));
+  d.push_back(boolean("bricpsf.refine_new", "Extension: ICP on new RANSAC hypotheses before they join",
+                      {"--refine-new", "refine_new"}, TS_FIELD(recognizer.refine_new)));
+  d.push_back(integer("bricpsf.refine_pool", 0, kLarge, "",
+                      "Extension: best RANSAC candidates considered (and refined) for the new hypotheses (0: (1-Psi) n_p)",
+                      {"--refine-pool", "refine_pool"}, TS_FIELD(recognizer.refine_pool)));
+  d.push_back(integer("bricpsf.new_per_object", 0, kLarge, "",
+                      "Extension: at most this many new hypotheses per object and step (0: no cap)",
+                      {"--new-per-object", "new_per_object"}, TS_FIELD(recognizer.new_per_object)));
+  d.push_back(boolean("bricpsf.dedupe", "Extension: drop hypotheses that duplicate a better one (2 mm, 2 degrees)",
+                      {"--dedupe", "dedupe"}, TS_FIELD(recognizer.dedupe)));
+  // ICP.
+  d.push_back(integer("icp.iterations", 0, 100000, "", "ICP iteration cap",
+                      {"--icp-iterations", "icp_iterations"}, TS_FIELD(recognizer.icp.max_iterations)));
+  d.push_back(real("icp.trim", "", 0.1, 1, "", "Trimmed ICP: share of the closest pairs fitted",
+                   {"--icp-trim", "icp_trim"}, TS_FIELD(recognizer.icp.trim_fraction)));
+  d.push_back(real("icp.max_correspondence_m", "m", 0, 100, "", "ICP pair distance gate (0: none)",
+                   {"--icp-max-correspondence", "icp_max_correspondence"}, TS_FIELD(recognizer.icp.max_correspondence)));
+  d.push_back(integer("icp.points", 0, kLarge, "", "Contacts used by ICP (0: all)",
+                      {"--icp-points", "icp_points", "icp_max_points"}, TS_FIELD(recognizer.icp.max_points)));
+  {
+    Parameter p = declare("icp.metric", Type::choice, "", 0, 2, "point_to_point (Section 4.4)",
+                          "ICP error metric: point_to_point (the paper), point_to_plane (k-d tree), field "
+                          "(point-to-plane on the distance field)",
+                          {"--icp-metric", "icp_metric"}, TS_FIELD(recognizer.icp.metric));
+    p.choices = {"point_to_point", "point_to_plane", "field"};
+    d.push_back(std::move(p));
+  }
+  // Large databases (shortlist, near-twin verification, shape prior).
+  d.push_back(any_database(
+      integer("shortlist.objects", 0, kLarge, "",
+              "Extension: objects whose RANSAC candidates go on to ICP and evaluation per step (0: all)",
+              {"--shortlist", "shortlist"}, TS_FIELD(recognizer.shortlist.objects)),
+      TS_FIELD(recognizer.shortlist.min_database)));
+  d.push_back(integer("shortlist.contacts", 1, 1000000, "", "Contacts scored per candidate by the shortlist's screening",
+                      {"shortlist_contacts"}, TS_FIELD(recognizer.shortlist.contacts)));
+  d.push_back(real("shortlist.outlier_distance_m", "m", 1e-9, 10, "", "The screening's error: min(1, (d / this)^2)",
+                   {"shortlist_outlier"}, TS_FIELD(recognizer.shortlist.outlier_distance)));
+  d.push_back(integer("twins.rivals", 0, 1000, "",
+                      "Extension: near-twin verification, leading objects compared by a likelihood with per-grasp "
+                      "offsets (0: off; tactile logs only)",
+                      {"--twins", "twins"}, TS_FIELD(recognizer.twins.rivals)));
+  d.push_back(integer("twins.refine", 0, 100, "",
+                      "Extension: near-twin verification refines each rival's pose and offsets, at most this many "
+                      "Gauss-Newton steps (0: off)",
+                      {"--twins-refine", "twins_refine"}, TS_FIELD(recognizer.twins.refine)));
+  d.push_back(real("twins.max_gap", "", 0, kInf, "", "Near-twin verification: ln wt gap within which objects compete",
+                   {"--twins-max-gap", "twins_max_gap"}, TS_FIELD(recognizer.twins.max_gap)));
+  d.push_back(any_database(
+      integer("twins.transfer", 0, 100000, "",
+              "Extension: the leading pose is also tried on this many look-alike objects (0: off)",
+              {"--transfer", "transfer"}, TS_FIELD(recognizer.twins.transfer)),
+      TS_FIELD(recognizer.twins.transfer_min_database)));
+  d.push_back(integer("prior.angle_bins", 1, 64, "", "Shape prior: bins of each angle term",
+                      {"--prior-angle-bins"}, TS_FIELD(recognizer.prior.angle_bins)));
+  d.push_back(real("prior.distance_bin_m", "m", 1e-4, 1, "", "Shape prior: pair-distance bin",
+                   {"--prior-distance-bin"}, TS_FIELD(recognizer.prior.distance_bin)));
+  d.push_back(integer("prior.object_points", 2, kLarge, "", "Shape prior: keypoints per object histogram",
+                      {"--prior-object-points"}, TS_FIELD(recognizer.prior.object_points)));
+  // Contact fusion.
+  d.push_back(real("exploration.contact_voxel_m", "m", 1e-6, 1, "", "Voxel filter of the cumulative contact cloud",
+                   {"--contact-voxel", "contact_voxel"}, TS_FIELD(contact_voxel)));
+  return d;
+}
+
+#undef TS_FIELD
+
+/// Names compared with `-` and `_` alike and without leading dashes.
+std::string normalized(std::string s) {
+  s.erase(0, s.find_first_not_of('-'));
+  std::replace(s.begin(), s.end(), '-', '_');
+  return s;
+}
+
+/// The shortest text that reads back as `v`.
+std::string number_text(double v) {
+  char buffer[64];
+  const auto [end, ec] = std::to_chars(buffer, buffer + sizeof buffer, v);
+  return ec == std::errc() ? std::string(buffer, end) : std::to_string(v);
+}
+
+}  // namespace
+
+std::string Parameter::flag() const {
+  std::string f = "--" + key;
+  std::replace(f.begin(), f.end(), '_', '-');
+  return f;
+}
+
+std::vector<std::string> Parameter::flag_aliases() const {
+  std::vector<std::string> out;
+  for (const auto& a : aliases)
+    if (a.front() == '-') out.push_back(a);
+  return out;
+}
+
+std::vector<std::string> Parameter::key_aliases() const {
+  std::vector<std::string> out;
+  for (const auto& a : aliases)
+    if (a.front() != '-') out.push_back(a);
+  return out;
+}
+
+std::string Parameter::text(double v) const {
+  switch (type) {
+    case Type::boolean: return v != 0.0 ? "true" : "false";
+    case Type::choice: return choices.at(static_cast<std::size_t>(v));
+    case Type::integer: return std::to_string(static_cast<long long>(v));
+    case Type::real: return number_text(v);
+  }
+  return number_text(v);
+}
+
+nlohmann::ordered_json Parameter::json(double v) const {
+  switch (type) {
+    case Type::boolean: return v != 0.0;
+    case Type::choice: return choices.at(static_cast<std::size_t>(v));
+    case Type::integer: return static_cast<long long>(v);
+    case Type::real: return v;
+  }
+  return v;
+}
+
+const std::vector<Parameter>& method_parameters() {
+  static const std::vector<Parameter> d = declaration();
+  return d;
+}
+
+const Parameter* find_parameter(const std::string& name) {
+  const std::string n = normalized(name);
+  for (const auto& p : method_parameters())
+    if (normalized(p.key) == n) return &p;
+  for (const auto& p : method_parameters())
+    for (const auto& a : p.aliases)
+      if (normalized(a) == n) return &p;
+  return nullptr;
+}
+
+double parse_value(const Parameter& p, const std::string& text, const std::string& file,
+                   const std::string& name) {
+  const std::string& key = name.empty() ? p.key : name;
+  auto fail = [&](const std::string& what) -> double { throw Error(key + " " + what, file, key); };
+  switch (p.type) {
+    case Type::boolean:
+      if (text == "true" || text == "1" || text == "on" || text == "yes") return 1.0;
+      if (text == "false" || text == "0" || text == "off" || text == "no") return 0.0;
+      return fail("must be true or false (got '" + text + "')");
+    case Type::choice: {
+      for (std::size_t i = 0; i < p.choices.size(); ++i)
+        if (text == p.choices[i] || text == std::to_string(i)) return static_cast<double>(i);
+      std::string all;
+      for (const auto& c : p.choices) all += (all.empty() ? "" : ", ") + c;
+      return fail("must be one of " + all + " (got '" + text + "')");
+    }
+    case Type::integer: {
+      long long v = 0;
+      const char* b = text.data();
+      const char* e = b + text.size();
+      if (!text.empty() && *b == '+') ++b;
+      auto [q, ec] = std::from_chars(b, e, v);
+      if (ec != std::errc() || q != e || text.empty()) return fail("must be an integer (got '" + text + "')");
+      if (static_cast<double>(v) < p.lo)
+        return fail("must be at least " + number_text(p.lo) + " (got " + std::to_string(v) + ")");
+      if (static_cast<double>(v) > p.hi)
+        return fail(p.hi >= kLarge ? "is implausibly large (got " + std::to_string(v) + ")"
+                                   : "must be at most " + number_text(p.hi) + " (got " + std::to_string(v) + ")");
+      return static_cast<double>(v);
+    }
+    case Type::real: {
+      double v = 0;
+      auto [q, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+      if (ec != std::errc() || q != text.data() + text.size() || text.empty() || !std::isfinite(v))
+        return fail("must be a number (got '" + text + "')");
+      if (v < p.lo || v > p.hi)
+        return fail("must lie in [" + number_text(p.lo) + ", " + (std::isinf(p.hi) ? "inf" : number_text(p.hi)) +
+                    "] (got " + text + ")");
+      return v;
+    }
+  }
+  return 0.0;
+}
+
+void apply(MethodSettings& m, const Parameter& p, double value) {
+  p.set(m, value);
+  if (p.min_database) p.min_database(m) = 0;   // asked for explicitly: on any database
+}
+
+std::vector<std::pair<std::string, double>> stored_parameters(const MethodSettings& m) {
+  std::vector<std::pair<std::string, double>> out;
+  for (const auto& p : method_parameters()) out.emplace_back(p.key, p.get(m));
+  return out;
+}
+
+void add_parameter_flags(CLI::App& app, ParameterFlags& flags, const std::string& group) {
+  for (const auto& p : method_parameters()) {
+    std::string names;
+    std::string help = p.help + (p.unit.empty() ? "" : " (" + p.unit + ")");
+    const std::string key = p.key;
+    if (p.type == Type::boolean) {
+      // --key / --no-key, and the older flags alike; --key=false also works.
+      for (const std::string& f : [&] {
+             std::vector<std::string> all{p.flag()};
+             for (const auto& a : p.flag_aliases()) all.push_back(a);
+             return all;
+           }())
+        names += (names.empty() ? "" : ",") + f + "{true},--no-" + f.substr(2) + "{false}";
+      app.add_flag_function(names, [&flags, key](std::int64_t v) { flags.given[key] = v > 0 ? "true" : "false"; },
+                            help)
+          ->group(group);
+      continue;
+    }
+    names = p.flag();
+    for (const auto& a : p.flag_aliases()) names += "," + a;
+    app.add_option_function<std::string>(
+           names, [&flags, key](const std::string& v) { flags.given[key] = v; }, help)
+        ->group(group)
+        ->type_name(p.type == Type::integer ? "INT" : p.type == Type::choice ? "NAME" : "NUMBER");
+  }
+}
+
+void apply_flags(const ParameterFlags& flags, MethodSettings& m) {
+  for (const auto& p : method_parameters()) {
+    const auto it = flags.given.find(p.key);
+    if (it == flags.given.end()) continue;
+    try {
+      apply(m, p, parse_value(p, it->second, {}, p.flag()));
+    } catch (const Error& e) {
+      throw CLI::ValidationError(p.flag(), e.what());
+    }
+  }
+}
+
+nlohmann::ordered_json parameters_json(const std::string& preset) {
+  std::vector<std::string> presets = {"paper", "improved"};
+  if (!preset.empty()) presets = {preset};
+  std::vector<MethodSettings> settings;
+  for (const auto& p : presets) settings.push_back(MethodSettings::preset(p));
+  nlohmann::ordered_json out = nlohmann::ordered_json::array();
+  static const char* type_names[] = {"integer", "real", "boolean", "choice"};
+  for (const auto& p : method_parameters()) {
+    nlohmann::ordered_json j;
+    j["key"] = p.key;
+    j["flag"] = p.flag();
+    j["aliases"] = p.aliases;
+    j["type"] = type_names[static_cast<int>(p.type)];
+    if (p.type == Type::choice) j["choices"] = p.choices;
+    j["unit"] = p.unit;
+    if (p.type == Type::integer || p.type == Type::real) {
+      j["min"] = p.lo;
+      j["max"] = std::isinf(p.hi) ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(p.hi);
+    }
+    nlohmann::ordered_json defaults;
+    for (std::size_t i = 0; i < presets.size(); ++i) {
+      MethodSettings& s = settings[i];
+      nlohmann::ordered_json v = p.json(p.get(s));
+      if (p.min_database && p.min_database(s) > 0)
+        v = {{"value", v}, {"databases_above", p.min_database(s)}, {"otherwise", p.json(0.0)}};
+      defaults[presets[i]] = v;
+    }
+    j["default"] = defaults;
+    j["paper"] = p.paper.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(p.paper);
+    j["help"] = p.help;
+    out.push_back(j);
+  }
+  return out;
+}
+
+std::string parameters_markdown() {
+  MethodSettings paper = MethodSettings::preset("paper");
+  MethodSettings improved = MethodSettings::preset("improved");
+  auto value = [](const Parameter& p, MethodSettings& s) {
+    std::string v = p.text(p.get(s));
+    if (p.min_database && p.min_database(s) > 0)
+      v += " (databases of more than " + std::to_string(p.min_database(s)) + " objects; else " + p.text(0.0) + ")";
+    return v;
+  };
+  std::ostringstream md;
+  md << "| key | flag (older names) | unit | range | paper preset | improved preset | paper | help |\n"
+     << "|---|---|---|---|---|---|---|---|\n";
+  for (const auto& p : method_parameters()) {
+    std::string aliases;
+    for (const auto& a : p.aliases) aliases += (aliases.empty() ? "" : ", ") + ("`" + a + "`");
+    std::string range;
+    if (p.type == Type::boolean) range = "true, false";
+    else if (p.type == Type::choice)
+      for (const auto& c : p.choices) range += (range.empty() ? "" : ", ") + c;
+    else
+      range = number_text(p.lo) + " – " + (std::isinf(p.hi) ? std::string("∞") : number_text(p.hi));
+    md << "| `" << p.key << "` | `" << p.flag() << "`" << (aliases.empty() ? "" : " (" + aliases + ")") << " | "
+       << p.unit << " | " << range << " | " << value(p, paper) << " | " << value(p, improved) << " | " << p.paper
+       << " | " << p.help << " |\n";
+  }
+  return md.str();
+}
+
+}  // namespace ts::experiments

@@ -1,0 +1,122 @@
+// The vocabulary of method parameters (experiments/parameters.hpp): one declaration, its names,
+// values that reach the settings, the presets, and the README's table generated from it.
+#include "experiments/config.hpp"
+#include "experiments/parameters.hpp"
+
+#include <doctest/doctest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+using namespace ts;
+using namespace ts::experiments;
+
+TEST_CASE("Parameters: unique keys and names, each resolving to its parameter") {
+  std::set<std::string> names;
+  for (const Parameter& p : method_parameters()) {
+    CAPTURE(p.key);
+    CHECK(p.key.find('.') != std::string::npos);       // a dotted key
+    CHECK(p.key.find('-') == std::string::npos);
+    CHECK(find_parameter(p.key) == &p);
+    CHECK(find_parameter(p.flag()) == &p);
+    CHECK(p.flag().find('_') == std::string::npos);    // the rule: '_' written '-'
+    CHECK_FALSE(p.help.empty());
+    CHECK(names.insert(p.key).second);
+    for (const auto& a : p.aliases) {
+      CAPTURE(a);
+      CHECK(find_parameter(a) == &p);
+      CHECK(names.insert(a).second);                   // no name for two parameters
+    }
+  }
+  CHECK(find_parameter("ransac.tripletz") == nullptr);
+  // The older names scripts use.
+  CHECK(find_parameter("-N")->key == "ransac.triplets");
+  CHECK(find_parameter("--prune-per-object")->key == "ransac.prune_per_object");
+  CHECK(find_parameter("W_obj")->key == "ransac.prune_per_object");
+  CHECK(find_parameter("--n-p")->key == "bricpsf.hypotheses");
+  CHECK(find_parameter("--twins")->key == "twins.rivals");
+}
+
+TEST_CASE("Parameters: a value set is the value read, and explicit extensions act on any database") {
+  for (const Parameter& p : method_parameters()) {
+    CAPTURE(p.key);
+    MethodSettings m = MethodSettings::preset("improved");
+    const double now = p.get(m);
+    // Another value in range: the setter and the getter must address the same field.
+    double other = p.type == Parameter::Type::boolean ? 1.0 - now
+                   : now + 1.0 <= p.hi                ? now + 1.0
+                                                      : p.lo;
+    if (p.type == Parameter::Type::real && now > p.lo) other = p.lo + 0.5 * (now - p.lo);
+    REQUIRE(other != now);
+    apply(m, p, other);
+    CHECK(p.get(m) == other);
+    if (p.min_database) CHECK(p.min_database(m) == 0);
+    // The text of a value parses back to it.
+    CHECK(parse_value(p, p.text(other)) == other);
+    // Only this parameter changed among the stored ones.
+    const auto before = stored_parameters(MethodSettings::preset("improved"));
+    const auto after = stored_parameters(m);
+    for (std::size_t i = 0; i < before.size(); ++i)
+      if (before[i].first != p.key) CHECK_MESSAGE(before[i].second == after[i].second, before[i].first);
+  }
+  // The presets: the paper's values where the paper gives them.
+  const MethodSettings paper = MethodSettings::preset("paper");
+  CHECK(find_parameter("ransac.triplets")->get(paper) == 15);
+  CHECK(find_parameter("ransac.registrations")->get(paper) == 200);
+  CHECK(find_parameter("ransac.prune")->get(paper) == 3000);
+  CHECK(find_parameter("bricpsf.hypotheses")->get(paper) == 100);
+  CHECK(find_parameter("bricpsf.psi")->get(paper) == 0.8);
+  CHECK(find_parameter("bricpsf.lambda")->get(paper) == 0.02);
+  CHECK(find_parameter("ransac.d_outlier_m")->get(paper) == 0.2);
+  CHECK(find_parameter("ransac.prune_per_object")->get(paper) == 0);
+  CHECK(find_parameter("ransac.prune_per_object")->get(MethodSettings::preset("improved")) == 200);
+  CHECK_THROWS_AS(MethodSettings::preset("fast"), Error);
+}
+
+TEST_CASE("Parameters: bad values are one error naming the key") {
+  const Parameter& n = *find_parameter("ransac.triplets");
+  auto message = [&](const std::string& text) {
+    try {
+      parse_value(n, text);
+    } catch (const Error& e) {
+      return e.message();
+    }
+    return std::string("no error");
+  };
+  CHECK(message("0") == "ransac.triplets must be at least 1 (got 0)");
+  CHECK(message("1.5") == "ransac.triplets must be an integer (got '1.5')");
+  CHECK_THROWS_AS(parse_value(*find_parameter("bricpsf.psi"), "1.5"), Error);
+  CHECK_THROWS_AS(parse_value(*find_parameter("bricpsf.dedupe"), "maybe"), Error);
+  CHECK(parse_value(*find_parameter("icp.metric"), "point_to_plane") == 1);
+  CHECK_THROWS_AS(parse_value(*find_parameter("icp.metric"), "plane"), Error);
+  // Through the configuration: the file and the key named.
+  ExperimentConfig c;
+  try {
+    set_key(c, "bricpsf.psi", {"2"}, "study.toml");
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.file() == "study.toml");
+    CHECK(e.field() == "bricpsf.psi");
+  }
+  set_key(c, "bricpsf.dedupe", {"false"});
+  CHECK(c.params.at("bricpsf.dedupe") == 0.0);
+  CHECK(to_json(c).at("bricpsf.dedupe") == false);
+}
+
+TEST_CASE("Parameters: the README's table is the declaration's (touchstone params --markdown)") {
+  std::ifstream in(std::filesystem::path(TS_SOURCE_DIR) / "README.md");
+  REQUIRE(in);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  const std::string readme = buffer.str();
+  const std::string begin = "<!-- parameters: begin (touchstone params --markdown) -->\n";
+  const std::string end = "<!-- parameters: end -->";
+  const auto a = readme.find(begin);
+  const auto b = readme.find(end);
+  REQUIRE(a != std::string::npos);
+  REQUIRE(b != std::string::npos);
+  CHECK_MESSAGE(readme.substr(a + begin.size(), b - a - begin.size()) == parameters_markdown(),
+                "README.md's parameter table is stale: replace it by `touchstone params --markdown`");
+}
