@@ -1,5 +1,7 @@
 #include "experiments/parameters.hpp"
 
+#include "experiments/config.hpp"
+
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -350,6 +352,25 @@ double parse_value(const Parameter& p, const std::string& text, const std::strin
 void apply(MethodSettings& m, const Parameter& p, double value) {
   p.set(m, value);
   if (p.min_database) p.min_database(m) = 0;   // asked for explicitly: on any database
+}
+
+MethodSettings method_settings(const ExperimentConfig& c) {
+  MethodSettings m = MethodSettings::preset(c.preset);
+  RecognizerSettings& s = m.recognizer;
+  // A probe's path: free by the ball radius only, measured with the arm's error (sparse_hypotheses.hpp).
+  if (c.sensing == "probe") {
+    s.evaluate.d_thresh = kProbeFreeThreshold;
+    s.evaluate.free_inside_penalty = true;
+    s.evaluate.free_inside_margin = kProbeInsideMargin;
+  }
+  const auto method = parse_method(c.method);
+  if (!method) throw Error("unknown method '" + c.method + "'", {}, "method");
+  s.method = *method;
+  for (const Parameter& p : method_parameters()) {
+    const auto it = c.params.find(p.key);
+    if (it != c.params.end()) apply(m, p, it->second);
+  }
+  return m;
 }
 
 std::vector<std::pair<std::string, double>> stored_parameters(const MethodSettings& m) {

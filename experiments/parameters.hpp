@@ -30,6 +30,8 @@ class App;
 
 namespace ts::experiments {
 
+struct ExperimentConfig;
+
 /// Everything a method parameter may set: the recognizer and the contact fusion.
 struct MethodSettings {
   RecognizerSettings recognizer;
@@ -75,6 +77,10 @@ const Parameter* find_parameter(const std::string& name);
 /// Parse a value of `p` (range checked). Throws ts::Error naming `file` and `name`.
 double parse_value(const Parameter& p, const std::string& text, const std::string& file = {},
                    const std::string& name = {});
+
+/// The method settings of an experiment variant: its preset's, a probe's free-space defaults
+/// (sensing = probe), its method, then every parameter the configuration sets.
+MethodSettings method_settings(const ExperimentConfig& config);
 
 /// Set `p` to `value` explicitly: an extension limited to large databases then acts on any.
 void apply(MethodSettings& m, const Parameter& p, double value);

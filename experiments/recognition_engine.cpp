@@ -8,10 +8,10 @@
 #include "engine/recognizer.hpp"
 #include "engine/symmetry.hpp"
 #include "experiments/cli_common.hpp"
+#include "experiments/grasp_pools.hpp"
 #include "experiments/metrics.hpp"
 #include "experiments/parameters.hpp"
-#include "io/db_store.hpp"
-#include "io/sha256.hpp"
+#include "experiments/truth_model.hpp"
 
 #include <tbb/parallel_for.h>
 #include <tbb/version.h>
@@ -38,40 +38,7 @@ double seconds_since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
-constexpr std::uint64_t kPoolStream = 0x706f6f6cULL;  // "pool"
-constexpr std::uint64_t kRunPoolStream = 0x72706f6cULL;  // "rpol": a run's own pool (independent)
 constexpr std::uint64_t kRecognizerStream = 0x72656367ULL;  // "recg"
-
-/// A database restricted to some objects of another (study 4 and 7: smaller databases from the
-/// same file). Index i here is objects[i] there.
-class SubsetSource final : public ObjectSource {
- public:
-  SubsetSource(std::shared_ptr<const ObjectSource> base, std::vector<std::size_t> objects)
-      : base_(std::move(base)), objects_(std::move(objects)) {}
-  std::size_t size() const override { return objects_.size(); }
-  const ObjectInfo& info(std::size_t i) const override { return base_->info(objects_.at(i)); }
-  const DatabaseSettings& settings() const override { return base_->settings(); }
-  ObjectFeatures load_features(std::size_t i) const override { return base_->load_features(objects_.at(i)); }
-  PointCloud load_coarse(std::size_t i) const override { return base_->load_coarse(objects_.at(i)); }
-  PointCloud load_fine(std::size_t i) const override { return base_->load_fine(objects_.at(i)); }
-  DistanceField load_field(std::size_t i) const override { return base_->load_field(objects_.at(i)); }
-
- private:
-  std::shared_ptr<const ObjectSource> base_;
-  std::vector<std::size_t> objects_;
-};
-
-/// One recognizer database (a subset of the file), shared by the variants that use it.
-struct DatabaseGroup {
-  std::vector<std::size_t> objects;            ///< file indices, in recognizer order
-  std::vector<std::int32_t> to_file;           ///< recognizer index -> file index
-  std::map<std::size_t, std::uint32_t> to_local;  ///< file index -> recognizer index
-  std::unique_ptr<Database> database;
-  std::shared_ptr<const FeatureIndex> index;   ///< built in prepare() where a variant needs it
-  /// The FeatureTables of its variants (FeatureTable::shared keeps one only while it is held):
-  /// built once in prepare(), not once per run.
-  std::vector<std::shared_ptr<const FeatureTable>> tables;
-};
 
 struct VariantData {
   ExperimentConfig config;
@@ -84,93 +51,6 @@ struct VariantData {
   RecognizerSettings recognizer;
   double contact_voxel = 0.002;                ///< m, voxel filter of the cumulative contacts
 };
-
-/// The object's symmetries and a model sample, for the symmetry-aware errors and MSSD.
-struct ObjectTruthModel {
-  SymmetryGroup symmetry;
-  std::vector<Pose> mssd_symmetries;           ///< discrete elements as object-frame transforms
-  std::vector<Vec3> model_points;              ///< <= 500 points of the fine cloud
-};
-
-/// MSSD (BOP) for a symmetry group that may be continuous.
-double group_mssd(const Pose& estimate, const Pose& truth, const ObjectTruthModel& m) {
-  const SymmetryGroup& g = m.symmetry;
-  if (g.kind == SymmetryGroup::Kind::spherical) {
-    // Any rotation about the centre is a symmetry: the best one aligns the orientations, and
-    // every point then moves by the displacement of the centre.
-    return (estimate * g.centre - truth * g.centre).norm();
-  }
-  if (g.kind == SymmetryGroup::Kind::discrete) return mssd(estimate, truth, m.mssd_symmetries, m.model_points);
-  // Axial: rotations about the axis (5-degree grid, then 0.25 degrees around the best) times
-  // the discrete elements.
-  auto at = [&](double angle) {
-    const Mat3 spin = Eigen::AngleAxisd(angle, g.axis).toRotationMatrix();
-    double best = std::numeric_limits<double>::infinity();
-    for (const Mat3& r : g.rotations) {
-      const Pose s = g.transform(spin * r);
-      best = std::min(best, mssd(estimate, truth * s, {}, m.model_points));
-    }
-    return best;
-  };
-  const double coarse = 5.0 * std::numbers::pi / 180.0;
-  double best = std::numeric_limits<double>::infinity(), best_angle = 0.0;
-  for (int i = 0; i < 72; ++i) {
-    const double v = at(i * coarse);
-    if (v < best) best = v, best_angle = i * coarse;
-  }
-  for (int i = -20; i <= 20; ++i) best = std::min(best, at(best_angle + i * coarse / 20.0));
-  return best;
-}
-
-datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
-  datasets::SimulatorSettings s;
-  s.sensors = c.sensors;
-  s.noise = datasets::noise_profile(c.noise);
-  const NoiseOverrides& n = c.noise_params;
-  if (n.arm_position_sigma_m) s.noise.arm_position_sigma = *n.arm_position_sigma_m;
-  if (n.arm_rotation_sigma_deg) s.noise.arm_rotation_sigma_deg = *n.arm_rotation_sigma_deg;
-  if (n.sensel_noise) s.noise.signal_noise = *n.sensel_noise;
-  if (n.force_noise) s.noise.force_noise = *n.force_noise;
-  if (n.contact_sigma_m) s.noise.lateral_sigma = *n.contact_sigma_m;
-  s.sensing = parse_sensing(c.sensing, {}, "sensing");
-  if (s.sensing == Sensing::probe && n.contact_sigma_m) {   // the probe's own contact noise
-    s.probe.contact_sigma = *n.contact_sigma_m;
-    s.noise.lateral_sigma = 0.0;
-  }
-  s.grasps = static_cast<std::size_t>(c.pool);
-  return s;
-}
-
-std::string pool_key(const datasets::SimulatorSettings& s) {
-  std::ostringstream k;
-  k.precision(17);
-  k << s.noise.name << '|' << s.noise.arm_position_sigma << '|' << s.noise.arm_rotation_sigma_deg
-    << '|' << s.noise.joint_sigma_deg << '|' << s.noise.signal_noise << '|' << s.noise.force_noise
-    << '|' << s.noise.lateral_sigma << '|' << s.noise.fold_detect << '|' << s.sensors << '|'
-    << s.grasps << '|' << to_string(s.sensing) << '|' << s.probe.contact_sigma;
-  return k.str();
-}
-
-/// The method settings of a variant: the preset's, a probe's free-space defaults, then every
-/// parameter the configuration sets (experiments/parameters.cpp).
-MethodSettings method_settings(const ExperimentConfig& c) {
-  MethodSettings m = MethodSettings::preset(c.preset);
-  RecognizerSettings& s = m.recognizer;
-  // A probe's path: free by the ball radius only, measured with the arm's error (sparse_hypotheses.hpp).
-  if (c.sensing == "probe") {
-    s.evaluate.d_thresh = kProbeFreeThreshold;
-    s.evaluate.free_inside_penalty = true;
-    s.evaluate.free_inside_margin = kProbeInsideMargin;
-  }
-  const auto method = parse_method(c.method);
-  if (!method) throw Error("unknown method '" + c.method + "'", {}, "method");
-  s.method = *method;
-  for (const Parameter& p : method_parameters()) {
-    const auto it = c.params.find(p.key);
-    if (it != c.params.end()) apply(m, p, it->second);
-  }
-  return m;
-}
 
 std::size_t index_of(const std::vector<std::string>& names, const std::string& name) {
   const auto it = std::find(names.begin(), names.end(), name);
@@ -348,14 +228,7 @@ class RecognitionEngine final : public RunEngine {
     tbb::parallel_for(std::size_t{0}, list.size(), [&](std::size_t i) {
       if (truth_models_.count(list[i])) return;
       const std::size_t file = explored_file_[static_cast<std::size_t>(list[i])];
-      const PointCloud fine = reader_->load_fine(file);
-      auto m = std::make_unique<ObjectTruthModel>();
-      KdTree3 tree(fine.points);
-      m->symmetry = find_symmetries(fine.points, tree);
-      for (const Mat3& r : m->symmetry.rotations) m->mssd_symmetries.push_back(m->symmetry.transform(r));
-      const std::size_t stride = std::max<std::size_t>(1, fine.points.size() / 500);
-      for (std::size_t k = 0; k < fine.points.size(); k += stride) m->model_points.push_back(fine.points[k]);
-      models[i] = std::move(m);
+      models[i] = std::make_unique<ObjectTruthModel>(truth_model(reader_->load_fine(file)));
     });
     for (std::size_t i = 0; i < list.size(); ++i)
       if (models[i]) truth_models_.emplace(list[i], std::move(models[i]));
@@ -467,60 +340,17 @@ class RecognitionEngine final : public RunEngine {
   std::map<int, std::unique_ptr<ObjectTruthModel>> truth_models_;
   std::optional<Calibration> calibration_;
 
-  /// The drawn grasps of a shared pool, in the order drawn.
-  static TactileLog log_from_pool(const TactileLog& pool, const std::vector<std::int32_t>& grasps) {
-    TactileLog log;
-    log.object = pool.object;
-    log.noise = pool.noise;
-    log.seed = pool.seed;
-    log.gripper = pool.gripper;
-    log.pads = pool.pads;
-    log.gains = pool.gains;
-    log.sensing = pool.sensing;   // a probe pool stays a probe log
-    log.probe = pool.probe;
-    LogGroundTruth truth;
-    truth.object_pose = pool.truth->object_pose;
-    for (std::int32_t g : grasps) {
-      const auto gi = static_cast<std::size_t>(g);
-      log.grasps.push_back(pool.grasps.at(gi));
-      if (gi < pool.truth->arm_poses.size()) truth.arm_poses.push_back(pool.truth->arm_poses[gi]);
-      if (gi < pool.truth->joints.size()) truth.joints.push_back(pool.truth->joints[gi]);
-    }
-    log.truth = std::move(truth);
-    return log;
-  }
-
-  /// Protocol "independent": the run's own pool (object pose, gains, `pool` grasps) from its own
-  /// seed; only the drawn grasps are simulated (a grasp depends on the seed and its index alone,
-  /// so this equals picking them from the whole simulated pool). Nothing outlives the run.
+  /// Protocol "independent": the run's own pool (grasp_pools.hpp).
   TactileLog simulate_run_log(const VariantData& v, const RunTask& task,
                               const std::vector<std::int32_t>& grasps) const {
     const auto object = static_cast<std::size_t>(task.object);
     const std::string& name = explored_.at(object);
-    datasets::SimulatorSettings s = v.simulation;
-    s.seed = pool_seed(config_.seed, name, task.run);
-    s.grasps = 0;  // run() below gives the log's header (pose, gains) without grasps
-    datasets::Simulator sim(db_.load_mesh(explored_file_.at(object)), name, Gripper(), s);
-    TactileLog log = sim.run().log;
-    if (!log.truth) throw Error("the simulator gave no ground truth", {}, name);
-    std::vector<datasets::Simulator::Grasp> drawn(grasps.size());
-    tbb::parallel_for(std::size_t{0}, grasps.size(),
-                      [&](std::size_t i) { drawn[i] = sim.grasp(static_cast<std::size_t>(grasps[i])); });
-    for (auto& g : drawn) {
-      log.grasps.push_back(std::move(g.measured));
-      log.truth->arm_poses.push_back(g.true_arm_pose);
-      log.truth->joints.push_back(std::move(g.true_joints));
-    }
-    return log;
+    return simulate_run_pool(db_.load_mesh(explored_file_.at(object)), name, v.simulation,
+                             pool_seed(config_.seed, name, task.run), grasps);
   }
 };
 
 }  // namespace
-
-std::uint64_t pool_seed(std::uint64_t seed, const std::string& object, std::optional<int> run) {
-  if (!run) return Rng(seed, kPoolStream, name_hash(object)).next();
-  return Rng(seed, kRunPoolStream, name_hash(object), static_cast<std::uint64_t>(*run)).next();
-}
 
 const std::vector<std::string>& recognition_step_values() {
   static const std::vector<std::string> names = [] {
@@ -541,77 +371,6 @@ std::unique_ptr<RunEngine> make_recognition_engine(const ExperimentConfig& confi
                                                    EngineDatabase database, int threads,
                                                    std::function<void(const std::string&)> note) {
   return std::make_unique<RecognitionEngine>(config, std::move(database), threads, std::move(note));
-}
-
-std::string source_fingerprint(const ObjectSource& source) {
-  io::Sha256 h;
-  auto add = [&](const std::string& s) {
-    h.update(s);
-    h.update("\n");
-  };
-  std::ostringstream settings;
-  settings.precision(17);
-  const DatabaseSettings& d = source.settings();
-  settings << d.max_extent << ' ' << d.fpfh.normal_radius << ' ' << d.fpfh.feature_radius;
-  add(settings.str());
-  for (std::size_t i = 0; i < source.size(); ++i) {
-    const ObjectInfo& o = source.info(i);
-    std::ostringstream s;
-    s.precision(17);
-    s << o.name << ' ' << o.mesh_sha256 << ' ' << o.scale << ' ' << o.fine_points << ' '
-      << o.coarse_points;
-    add(s.str());
-  }
-  return h.hex_digest();
-}
-
-std::string file_fingerprint(const io::DbReader& reader) {
-  // The content fingerprint plus the build seeds: a rebuilt database with other seeds is another
-  // database even when its names and sizes agree.
-  io::Sha256 h;
-  h.update(source_fingerprint(reader));
-  h.update(std::to_string(reader.schema_version()) + " " + std::to_string(reader.build_seed()));
-  for (std::size_t i = 0; i < reader.size(); ++i) h.update(" " + std::to_string(reader.object_seed(i)));
-  return h.hex_digest();
-}
-
-EngineDatabase open_database(const std::filesystem::path& path) {
-  auto reader = std::make_shared<io::DbReader>(path);
-  EngineDatabase db;
-  db.source = reader;
-  db.load_mesh = [reader](std::size_t i) { return reader->load_mesh(i); };
-  std::error_code ec;
-  const auto absolute = std::filesystem::absolute(path, ec);
-  db.description["path"] = ec ? path.string() : absolute.string();
-  db.description["fingerprint"] = file_fingerprint(*reader);
-  db.description["objects"] = reader->size();
-  db.description["schema_version"] = reader->schema_version();
-  db.description["build_seed"] = reader->build_seed();
-  db.description["max_extent_m"] = reader->settings().max_extent;
-  // Classes of congruent objects (names), which reports count class-aware rates with; absent
-  // when the database recorded none.
-  if (const io::CongruenceRecord* c = reader->congruence()) {
-    nlohmann::ordered_json classes = nlohmann::ordered_json::array();
-    for (const auto& members : c->classes()) {
-      nlohmann::ordered_json names = nlohmann::ordered_json::array();
-      for (std::size_t i : members) names.push_back(reader->info(i).name);
-      classes.push_back(names);
-    }
-    db.description["congruent_classes"] = classes;
-  }
-  return db;
-}
-
-EngineDatabase memory_database(std::vector<BuiltObject> objects, const DatabaseSettings& settings) {
-  auto meshes = std::make_shared<std::vector<Mesh>>();
-  for (const BuiltObject& o : objects) meshes->push_back(o.mesh);
-  EngineDatabase db;
-  db.source = std::make_shared<MemorySource>(std::move(objects), settings);
-  db.load_mesh = [meshes](std::size_t i) { return meshes->at(i); };
-  db.description["path"] = "(memory)";
-  db.description["fingerprint"] = source_fingerprint(*db.source);
-  db.description["objects"] = db.source->size();
-  return db;
 }
 
 }  // namespace ts::experiments

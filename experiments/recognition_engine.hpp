@@ -15,10 +15,17 @@
 // stream from (seed, object name, run). They do not depend on the variant, so sweep variants
 // compare on the same grasps (common random numbers), nor on which other objects an
 // experiment explores.
+//
+// Its parts, one concept a file: grasp_pools.hpp (simulator settings, pool seeds, a run's log),
+// engine_database.hpp (the database file, fingerprints, the recognizer databases of the
+// variants), truth_model.hpp (symmetries and MSSD), parameters.hpp (a variant's method
+// settings); recognition_engine.cpp is the run loop.
 #pragma once
 
 #include "experiments/config.hpp"
 #include "experiments/driver.hpp"
+#include "experiments/engine_database.hpp"
+#include "experiments/grasp_pools.hpp"
 #include "engine/database.hpp"
 
 #include <nlohmann/json.hpp>
@@ -29,30 +36,7 @@
 #include <optional>
 #include <string>
 
-namespace ts::io {
-class DbReader;
-}
-
 namespace ts::experiments {
-
-/// The database an experiment uses: objects for the recognizer, meshes for the simulator, and
-/// what the run store records about it (its "fingerprint" decides whether --resume may go on).
-struct EngineDatabase {
-  std::shared_ptr<const ObjectSource> source;
-  std::function<Mesh(std::size_t)> load_mesh;  ///< object-frame mesh of object i
-  nlohmann::ordered_json description;          ///< {"path", "fingerprint", ...}
-};
-
-/// A database file (io/db_store). Throws ts::Error for a missing or foreign file.
-EngineDatabase open_database(const std::filesystem::path& path);
-/// Objects held in memory (tests; a database built a moment ago).
-EngineDatabase memory_database(std::vector<BuiltObject> objects, const DatabaseSettings& settings);
-/// SHA-256 over what determines an object source's content: settings, names, mesh checksums,
-/// scales and point counts.
-std::string source_fingerprint(const ObjectSource& source);
-/// A database file's fingerprint (run stores and calibration files record it): the source's plus
-/// the schema version and build seeds.
-std::string file_fingerprint(const io::DbReader& reader);
 
 /// Resolve the configuration's objects for every variant against `database` and build the run
 /// store header. Throws ts::Error for an unknown object (naming the key). `threads` is recorded;
@@ -60,10 +44,6 @@ std::string file_fingerprint(const io::DbReader& reader);
 std::unique_ptr<RunEngine> make_recognition_engine(const ExperimentConfig& config,
                                                    EngineDatabase database, int threads,
                                                    std::function<void(const std::string&)> note = {});
-
-/// The simulator seed of a pool: the object's shared pool (run = nullopt, protocol shared_pool)
-/// or run `run`'s own pool (protocol independent).
-std::uint64_t pool_seed(std::uint64_t seed, const std::string& object, std::optional<int> run);
 
 /// Names of the per-step values the recognition engine records: "confidence_object" and
 /// "confidence_pose" (NaN without a calibration), then "feature.<name>" for every confidence
