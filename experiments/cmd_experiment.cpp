@@ -5,6 +5,7 @@
 #include "experiments/cli_common.hpp"
 #include "experiments/config.hpp"
 #include "experiments/driver.hpp"
+#include "experiments/parameters.hpp"
 #include "experiments/recognition_engine.hpp"
 #include "experiments/report.hpp"
 #include "io/run_store.hpp"
@@ -30,7 +31,7 @@ using experiments::ExperimentConfig;
 struct ExperimentOptions {
   CommonOptions common;
   std::string db, config_file, out, plots;
-  std::string objects, runs, steps, pool, method, preset, noise, sensors, schedule, memory_budget;
+  experiments::ParameterFlags flags;   ///< the simulator and experiment parameters' flags
   std::vector<std::string> set;   ///< KEY=VALUE, any configuration key
   bool resume = false;
   bool seed_given = false;
@@ -142,24 +143,8 @@ std::string duration_text(double s) {
 ExperimentConfig build_config(const ExperimentOptions& o) {
   ExperimentConfig c;
   if (!o.config_file.empty()) experiments::load_config_file(c, o.config_file);
-  auto flag = [&](const std::string& value, const std::string& key) {
-    if (value.empty()) return;
-    try {
-      experiments::set_key(c, key, {value});
-    } catch (const Error& e) {
-      throw Error(e.message(), {}, "--" + key);
-    }
-  };
-  flag(o.objects, "objects");
-  flag(o.runs, "runs");
-  flag(o.steps, "steps");
-  flag(o.pool, "pool");
-  flag(o.method, "method");
-  flag(o.preset, "preset");
-  flag(o.noise, "noise");
-  flag(o.sensors, "sensors");
-  flag(o.schedule, "schedule");
-  flag(o.memory_budget, "memory_budget_mb");
+  // The flags (--runs 5, --noise.sensel-noise 0.1, ...), in the declaration's order.
+  experiments::apply_flags(o.flags, c);
   if (o.seed_given) c.seed = o.common.seed;
   for (const std::string& kv : o.set) {
     const auto eq = kv.find('=');
@@ -213,8 +198,8 @@ int run_experiment(const ExperimentOptions& o) {
     // An unknown object: name where it was listed (the --objects flag, or the configuration
     // file's key) and the database that lacks it.
     if (!e.file().empty() || (e.field() != "objects" && e.field() != "database" && e.field() != "hidden")) throw;
-    const bool flag = e.field() == "objects" && !o.objects.empty();
-    if (flag || o.config_file.empty()) throw Error(e.message(), o.db, flag ? "--objects" : e.field());
+    const bool flag = o.flags.given.count(e.field()) > 0;
+    if (flag || o.config_file.empty()) throw Error(e.message(), o.db, flag ? "--" + e.field() : e.field());
     std::string message = e.message();
     const std::string lacks = "(not in the database)";
     if (const auto at = message.find(lacks); at != std::string::npos) message.replace(at, lacks.size(), "(not in the database " + o.db + ")");
@@ -434,21 +419,12 @@ void register_experiment(CLI::App& app) {
   e->add_option("--db", eo->db, "Object database (HDF5)")->required();
   e->add_option("--config", eo->config_file,
                 "Experiment configuration (TOML or INI; see experiments/studies/)");
-  e->add_option("--objects", eo->objects, "Explored objects: all, or a,b,c");
-  e->add_option("--runs", eo->runs, "Exploration runs per object (default 20)");
-  e->add_option("--steps", eo->steps, "Exploration steps (grasps) per run (default 40)");
-  e->add_option("--pool", eo->pool, "Simulated grasps per object that runs draw from (default 50)");
-  e->add_option("--method", eo->method, "bricpsf | batch-ransac | ransac-icp | ransac-icp-fs");
-  e->add_option("--preset", eo->preset,
-                "improved (default): Touchstone's extensions; paper: the paper's parameters exactly");
-  e->add_option("--noise", eo->noise, "ideal | underwater | deepsea");
-  e->add_option("--sensors", eo->sensors, "Tactile pads: 1 (the paper's) or 6");
-  e->add_option("--schedule", eo->schedule,
-                "runs: runs in parallel (throughput, default); steps: one run at a time, each "
-                "step on every thread (latency). Never changes results");
-  e->add_option("--memory-budget", eo->memory_budget,
-                "Resident object geometry in MB, loaded on demand and evicted least-recently-used "
-                "(default 256; 0: no limit). Never changes results");
+  // Every simulator and experiment parameter as a flag (--runs, --noise, --memory-budget, ...;
+  // experiments/parameters.cpp); --seed is the common flag.
+  experiments::add_parameter_flags(*e, eo->flags, "Simulator and experiment parameters (touchstone params)",
+                                   [](const experiments::Parameter& p) {
+                                     return p.kind != experiments::Parameter::Kind::method && p.key != "seed";
+                                   });
   e->add_option("--set", eo->set,
                 "Any configuration key, KEY=VALUE (repeatable), e.g. --set ransac.samples=50x200 "
                 "or --set sweep.method=bricpsf,ransac-icp");

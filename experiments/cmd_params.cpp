@@ -1,5 +1,6 @@
-// `touchstone params`: every method parameter as declared in experiments/parameters.cpp (key,
-// flag and older names, type, unit, range, each preset's value, the paper's value, help).
+// `touchstone params`: every parameter (method, simulator, experiment) as declared in
+// experiments/parameters.cpp (key, kind, flag and older names, the commands taking the flag,
+// type, unit, range, each preset's value, the paper's value, help).
 #include "experiments/cli_common.hpp"
 #include "experiments/parameters.hpp"
 
@@ -15,8 +16,8 @@ void register_params(CLI::App& app) {
   };
   auto o = std::make_shared<Options>();
   auto* sub = app.add_subcommand(
-      "params", "List every method parameter: its key (experiment keys and --set), its recognize flag, "
-                "unit, range, the presets' values and the paper's");
+      "params", "List every parameter (method, simulator, experiment): its key (experiment keys and --set), "
+                "its flag and the commands taking it, unit, range, the presets' values and the paper's");
   sub->add_option("--preset", o->preset, "Only this preset's values: paper | improved (default: both)")
       ->check(CLI::IsMember({"paper", "improved"}));
   auto* md = sub->add_flag("--markdown", o->markdown, "The README's parameter table (Markdown)");
@@ -36,7 +37,10 @@ void register_params(CLI::App& app) {
         std::cout << out.dump(2) << '\n';
         return 0;
       }
-      for (const auto& p : j) {
+      for (const char* kind : {"method", "simulator", "experiment"}) {
+       std::cout << kind << " parameters:\n";
+       for (const auto& p : j) {
+        if (p["kind"] != kind) continue;
         std::cout << p["key"].get<std::string>() << "  " << p["flag"].get<std::string>();
         const std::string unit = p["unit"].get<std::string>();
         if (!unit.empty()) std::cout << "  [" << unit << "]";
@@ -44,6 +48,7 @@ void register_params(CLI::App& app) {
         if (!p["paper"].is_null()) std::cout << "; paper " << p["paper"].get<std::string>();
         if (!p["aliases"].empty()) std::cout << "; also " << p["aliases"].dump();
         std::cout << '\n';
+       }
       }
       return 0;
     });

@@ -2,6 +2,9 @@
 #include "datasets/simulator.hpp"
 #include "engine/fusion.hpp"
 #include "experiments/cli_common.hpp"
+#include "experiments/config.hpp"
+#include "experiments/grasp_pools.hpp"
+#include "experiments/parameters.hpp"
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
 #include "io/gripper_io.hpp"
@@ -28,14 +31,14 @@ ojson pose_json(const Pose& T) {
 // ---- simulate -------------------------------------------------------------------------------
 struct SimulateOptions {
   CommonOptions common;
-  std::string db, object, out, noise = "ideal", gripper;
+  std::string db, object, out, gripper;
   std::size_t grasps = 40;
-  int sensors = 1;
-  // Monte Carlo overrides of the noise profile (negative: keep the profile's value)
-  double arm_position_sigma = -1, arm_rotation_sigma_deg = -1, joint_sigma_deg = -1;
-  double signal_noise = -1, force_noise = -1, lateral_sigma = -1;
+  /// The simulator parameters simulate takes (experiments/parameters.cpp: noise, sensors,
+  /// sensing and the noise overrides; --noise defaults to ideal here)
+  experiments::ParameterFlags flags;
+  // Overrides of the noise profile simulate alone has (negative: keep the profile's value)
+  double joint_sigma_deg = -1, lateral_sigma = -1;
   std::vector<double> offset;
-  std::string sensing = "pads";
   datasets::ProbeSettings probe;
 };
 
@@ -52,30 +55,27 @@ int run_simulate(const SimulateOptions& o) {
                 o.db, "--object");
   }
   const Gripper gripper = o.gripper.empty() ? Gripper() : io::read_gripper(o.gripper);
-  datasets::SimulatorSettings s;
+  // The simulator parameters as an experiment maps them (simulation_settings), from the flags.
+  experiments::ExperimentConfig c;
+  c.noise = "ideal";
+  experiments::apply_flags(o.flags, c);
+  datasets::SimulatorSettings s = experiments::simulation_settings(c);
   s.grasps = o.grasps;
-  s.sensors = o.sensors;
   s.seed = o.common.seed;
-  s.sensing = parse_sensing(o.sensing, {}, "--sensing");
   s.probe = o.probe;
   s.probe.spec.shaft_radius = std::min(s.probe.spec.shaft_radius, s.probe.spec.ball_radius);
-  s.noise = datasets::noise_profile(o.noise);
   auto set = [](double v, double& field) {
     if (v >= 0) field = v;
   };
-  set(o.arm_position_sigma, s.noise.arm_position_sigma);
-  set(o.arm_rotation_sigma_deg, s.noise.arm_rotation_sigma_deg);
   set(o.joint_sigma_deg, s.noise.joint_sigma_deg);
-  set(o.signal_noise, s.noise.signal_noise);
-  set(o.force_noise, s.noise.force_noise);
   set(o.lateral_sigma, s.noise.lateral_sigma);
   if (!o.offset.empty()) s.world_offset = Vec3(o.offset[0], o.offset[1], o.offset[2]);
 
   const datasets::Simulator sim(db.load_mesh(index), db.info(index).name, gripper, s);
   const datasets::SimulationResult result = sim.run();
   std::ostringstream source;
-  source << "touchstone simulate --object " << o.object << " --grasps " << o.grasps << " --noise " << o.noise
-         << " --sensors " << o.sensors << " --seed " << o.common.seed;
+  source << "touchstone simulate --object " << o.object << " --grasps " << o.grasps << " --noise " << c.noise
+         << " --sensors " << c.sensors << " --seed " << o.common.seed;
   if (s.sensing == Sensing::probe)
     source << " --sensing probe --ball-radius " << o.probe.spec.ball_radius << " --probe-tilt " << o.probe.max_tilt_deg
            << " --contact-sigma " << o.probe.contact_sigma << " --quantization " << o.probe.quantization;
@@ -219,16 +219,11 @@ void register_tactile(CLI::App& app) {
     sub->add_option("--db", opt->db, "Object database (HDF5)")->required();
     sub->add_option("--object", opt->object, "Name of the object to explore")->required();
     sub->add_option("--grasps", opt->grasps, "Number of grasps")->required()->check(CLI::Range(1, 1000000));
-    sub->add_option("--noise", opt->noise, "Noise profile")
-        ->check(CLI::IsMember({"ideal", "underwater", "deepsea"}))
-        ->capture_default_str();
-    sub->add_option("--sensors", opt->sensors, "Pads logged: 1 (middle distal, as in the paper) or 6")
-        ->check(CLI::IsMember({1, 6}))
-        ->capture_default_str();
     sub->add_option("--out", opt->out, "Tactile log to write (HDF5)")->required();
-    sub->add_option("--sensing", opt->sensing, "pads: the gripper's tactile arrays; probe: a ball-tipped probe, "
-                    "one contact per touch (--grasps counts touches)")
-        ->check(CLI::IsMember({"pads", "probe"}))->capture_default_str();
+    // --noise (default ideal here), --sensors, --sensing, --arm-position-sigma, --arm-rotation-sigma,
+    // --signal-noise, --force-noise: the simulator parameters of experiments/parameters.cpp.
+    experiments::add_parameter_flags(*sub, opt->flags, "Simulator parameters (touchstone params)",
+                                     [](const experiments::Parameter& p) { return p.simulate; });
     const std::string pg = "Probe (--sensing probe)";
     sub->add_option("--ball-radius", opt->probe.spec.ball_radius, "m, probe ball radius")->group(pg)
         ->check(CLI::Range(1e-4, 0.05))->capture_default_str();
@@ -240,11 +235,7 @@ void register_tactile(CLI::App& app) {
         ->group(pg)->check(CLI::Range(0.0, 0.1))->capture_default_str();
     sub->add_option("--gripper", opt->gripper, "Gripper description (JSON; default: the built-in touchstone-3f)");
     auto mc = "Noise overrides (Monte Carlo studies)";
-    sub->add_option("--arm-position-sigma", opt->arm_position_sigma, "m per axis, per grasp")->group(mc)->check(CLI::NonNegativeNumber);
-    sub->add_option("--arm-rotation-sigma", opt->arm_rotation_sigma_deg, "deg per axis, per grasp")->group(mc)->check(CLI::NonNegativeNumber);
     sub->add_option("--joint-sigma", opt->joint_sigma_deg, "deg, finger joint readings")->group(mc)->check(CLI::NonNegativeNumber);
-    sub->add_option("--signal-noise", opt->signal_noise, "relative sensel signal noise")->group(mc)->check(CLI::NonNegativeNumber);
-    sub->add_option("--force-noise", opt->force_noise, "relative force-resolution noise of contacted sensels")->group(mc)->check(CLI::NonNegativeNumber);
     sub->add_option("--lateral-sigma", opt->lateral_sigma, "m, lateral sampling error of a sensel")->group(mc)->check(CLI::NonNegativeNumber);
     sub->add_option("--offset", opt->offset, "X Y Z: world position of the object (m; e.g. a dive site far from the origin)")
         ->expected(3);

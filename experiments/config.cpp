@@ -15,222 +15,16 @@ namespace ts::experiments {
 
 namespace {
 
-struct Ctx {
-  const std::string& key;
-  const std::string& file;
-  [[noreturn]] void fail(const std::string& what) const { throw Error(what, file, key); }
-};
-
 std::string joined(const std::vector<std::string>& inputs) {
   std::string s;
   for (const auto& i : inputs) s += (s.empty() ? "" : ",") + i;
   return s;
 }
 
-const std::string& single(const std::vector<std::string>& inputs, const Ctx& c) {
-  if (inputs.size() != 1)
-    c.fail(c.key + " expects one value, got " + std::to_string(inputs.size()) +
-           (inputs.empty() ? "" : " ('" + joined(inputs) + "')"));
-  return inputs.front();
-}
-
-long long parse_integer(const std::string& text, const Ctx& c) {
-  long long v = 0;
-  const char* b = text.data();
-  const char* e = b + text.size();
-  if (!text.empty() && *b == '+') ++b;
-  auto [p, ec] = std::from_chars(b, e, v);
-  if (ec != std::errc() || p != e || text.empty())
-    c.fail(c.key + " must be an integer (got '" + text + "')");
-  return v;
-}
-
-int int_at_least(const std::vector<std::string>& inputs, long long lo, const Ctx& c) {
-  const long long v = parse_integer(single(inputs, c), c);
-  if (v < lo) c.fail(c.key + " must be at least " + std::to_string(lo) + " (got " + std::to_string(v) + ")");
-  if (v > 100000000) c.fail(c.key + " is implausibly large (got " + std::to_string(v) + ")");
-  return static_cast<int>(v);
-}
-
-double number_in(const std::vector<std::string>& inputs, double lo, double hi, const Ctx& c) {
-  const std::string& text = single(inputs, c);
-  double v = 0;
-  auto [p, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
-  if (ec != std::errc() || p != text.data() + text.size() || text.empty() || !std::isfinite(v))
-    c.fail(c.key + " must be a number (got '" + text + "')");
-  if (v < lo || v > hi) {
-    std::string range = "[" + std::to_string(lo) + ", " + (std::isinf(hi) ? "inf" : std::to_string(hi)) + "]";
-    c.fail(c.key + " must lie in " + range + " (got " + text + ")");
-  }
-  return v;
-}
-
-std::string choice(const std::vector<std::string>& inputs, const std::vector<std::string>& allowed,
-                   const Ctx& c) {
-  const std::string& v = single(inputs, c);
-  if (std::find(allowed.begin(), allowed.end(), v) == allowed.end())
-    c.fail(c.key + " must be one of " + joined(allowed) + " (got '" + v + "')");
-  return v;
-}
-
-/// A list of names: "all" (alone) means empty = everything; inputs may also be comma lists.
-std::vector<std::string> name_list(const std::vector<std::string>& inputs, const Ctx& c) {
-  std::vector<std::string> out;
-  for (const auto& in : inputs) {
-    std::size_t start = 0;
-    while (start <= in.size()) {
-      const std::size_t comma = std::min(in.find(',', start), in.size());
-      std::string name = in.substr(start, comma - start);
-      name.erase(0, name.find_first_not_of(" \t"));
-      name.erase(name.find_last_not_of(" \t") + 1);
-      if (name.empty()) c.fail(c.key + " has an empty object name ('" + joined(inputs) + "')");
-      out.push_back(name);
-      start = comma + 1;
-    }
-  }
-  if (out.empty()) c.fail(c.key + " is empty (use \"all\")");
-  if (out.size() == 1 && out.front() == "all") return {};
-  std::set<std::string> seen;
-  for (const auto& n : out) {
-    if (n == "all") c.fail(c.key + ": \"all\" cannot be combined with names");
-    if (!seen.insert(n).second) c.fail(c.key + " lists '" + n + "' twice");
-  }
-  return out;
-}
-
-using Setter = std::function<void(ExperimentConfig&, const std::vector<std::string>&, const Ctx&)>;
-
-struct KeyDef {
-  std::string key;
-  bool sweepable;
-  Setter set;
-  std::function<nlohmann::ordered_json(const ExperimentConfig&)> get;  ///< null: derived key
-};
-
-template <class T>
-nlohmann::ordered_json opt(const std::optional<T>& v) {
-  return v ? nlohmann::ordered_json(*v) : nlohmann::ordered_json(nullptr);
-}
-
-const std::vector<KeyDef>& key_defs() {
-  using J = nlohmann::ordered_json;
-  static const std::vector<KeyDef> defs = [] {
-    std::vector<KeyDef> d;
-    auto add = [&](std::string key, bool sweepable, Setter s,
-                   std::function<J(const ExperimentConfig&)> g) {
-      d.push_back({std::move(key), sweepable, std::move(s), std::move(g)});
-    };
-    add("name", false, [](auto& c, auto& in, auto& x) { c.name = single(in, x); },
-        [](auto& c) { return J(c.name); });
-    add("description", false, [](auto& c, auto& in, auto& x) { c.description = joined(in); },
-        [](auto& c) { return J(c.description); });
-    add("objects", false, [](auto& c, auto& in, auto& x) { c.objects = name_list(in, x); },
-        [](auto& c) { return c.objects.empty() ? J("all") : J(c.objects); });
-    add("database", false, [](auto& c, auto& in, auto& x) { c.database = name_list(in, x); },
-        [](auto& c) { return c.database.empty() ? J("all") : J(c.database); });
-    add("database_size", true,
-        [](auto& c, auto& in, auto& x) { c.database_size = int_at_least(in, 1, x); },
-        [](auto& c) { return opt(c.database_size); });
-    // hidden: names of the database file, or "each" (leave-one-out); see config.hpp.
-    add("hidden", false, [](auto& c, auto& in, auto& x) { c.hidden = name_list(in, x); },
-        [](auto& c) { return J(c.hidden); });
-    add("runs", false, [](auto& c, auto& in, auto& x) { c.runs = int_at_least(in, 1, x); },
-        [](auto& c) { return J(c.runs); });
-    add("steps", false, [](auto& c, auto& in, auto& x) { c.steps = int_at_least(in, 1, x); },
-        [](auto& c) { return J(c.steps); });
-    add("pool", false, [](auto& c, auto& in, auto& x) { c.pool = int_at_least(in, 1, x); },
-        [](auto& c) { return J(c.pool); });
-    // protocol: independent (default; a pose and pool per run) | shared_pool (the paper's: a
-    // pose and pool per object). Not sweepable: variants share their runs' grasps.
-    add("protocol", false,
-        [](auto& c, auto& in, auto& x) { c.protocol = choice(in, {"independent", "shared_pool"}, x); },
-        [](auto& c) { return J(c.protocol); });
-    add("method", true,
-        [](auto& c, auto& in, auto& x) {
-          c.method = choice(in, {"bricpsf", "batch-ransac", "ransac-icp", "ransac-icp-fs"}, x);
-        },
-        [](auto& c) { return J(c.method); });
-    add("preset", true,
-        [](auto& c, auto& in, auto& x) { c.preset = choice(in, {"improved", "paper"}, x); },
-        [](auto& c) { return J(c.preset); });
-    add("noise", true,
-        [](auto& c, auto& in, auto& x) { c.noise = choice(in, {"ideal", "underwater", "deepsea"}, x); },
-        [](auto& c) { return J(c.noise); });
-    const double inf = std::numeric_limits<double>::infinity();
-    add("noise.arm_position_sigma_m", true,
-        [=](auto& c, auto& in, auto& x) { c.noise_params.arm_position_sigma_m = number_in(in, 0, 1, x); },
-        [](auto& c) { return opt(c.noise_params.arm_position_sigma_m); });
-    add("noise.arm_rotation_sigma_deg", true,
-        [=](auto& c, auto& in, auto& x) { c.noise_params.arm_rotation_sigma_deg = number_in(in, 0, 90, x); },
-        [](auto& c) { return opt(c.noise_params.arm_rotation_sigma_deg); });
-    add("noise.sensel_noise", true,
-        [=](auto& c, auto& in, auto& x) { c.noise_params.sensel_noise = number_in(in, 0, 10, x); },
-        [](auto& c) { return opt(c.noise_params.sensel_noise); });
-    add("noise.force_noise", true,
-        [=](auto& c, auto& in, auto& x) { c.noise_params.force_noise = number_in(in, 0, 10, x); },
-        [](auto& c) { return opt(c.noise_params.force_noise); });
-    add("noise.contact_sigma_m", true,
-        [=](auto& c, auto& in, auto& x) { c.noise_params.contact_sigma_m = number_in(in, 0, 1, x); },
-        [](auto& c) { return opt(c.noise_params.contact_sigma_m); });
-    add("sensors", true,
-        [](auto& c, auto& in, auto& x) { c.sensors = std::stoi(choice(in, {"1", "6"}, x)); },
-        [](auto& c) { return J(c.sensors); });
-    add("sensing", false, [](auto& c, auto& in, auto& x) { c.sensing = choice(in, {"pads", "probe"}, x); },
-        [](auto& c) { return J(c.sensing); });
-    add("seed", false,
-        [](auto& c, auto& in, auto& x) {
-          const std::string& t = single(in, x);
-          std::uint64_t v = 0;
-          auto [p, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
-          if (ec != std::errc() || p != t.data() + t.size() || t.empty())
-            x.fail("seed must be an unsigned integer (got '" + t + "')");
-          c.seed = v;
-        },
-        [](auto& c) { return J(c.seed); });
-    // ransac.samples = "NxR": ransac.triplets and ransac.registrations together.
-    add("ransac.samples", true,
-        [](auto& c, auto& in, auto& x) {
-          const std::string& t = single(in, x);
-          const auto cross = t.find_first_of("xX*");
-          if (cross == std::string::npos)
-            x.fail("ransac.samples must read NxR, e.g. 15x200 (got '" + t + "')");
-          auto part = [&](const std::string& text, const char* what) {
-            long long v = 0;
-            auto [p, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
-            if (ec != std::errc() || p != text.data() + text.size() || text.empty() || v < 1 ||
-                v > 100000000)
-              x.fail(x.key + ": " + what + " must be a positive integer (got '" + t + "')");
-            return static_cast<double>(v);
-          };
-          c.params["ransac.triplets"] = part(t.substr(0, cross), "N");
-          c.params["ransac.registrations"] = part(t.substr(cross + 1), "R");
-        },
-        nullptr);
-    // Every method parameter (experiments/parameters.cpp), sweepable; unset: the preset's value.
-    for (const Parameter& p : method_parameters())
-      add(p.key, true,
-          [&p](auto& c, auto& in, auto& x) { c.params[p.key] = parse_value(p, single(in, x), x.file, x.key); },
-          [&p](auto& c) {
-            const auto it = c.params.find(p.key);
-            return it == c.params.end() ? J(nullptr) : p.json(it->second);
-          });
-    add("memory_budget_mb", false,
-        [=](auto& c, auto& in, auto& x) { c.memory_budget_mb = number_in(in, 0, inf, x); },
-        [](auto& c) { return opt(c.memory_budget_mb); });
-    // calibration: a confidence calibration file (JSON, `touchstone calibrate`); "" none.
-    add("calibration", false, [](auto& c, auto& in, auto& x) { c.calibration = single(in, x); },
-        [](auto& c) { return J(c.calibration); });
-    add("schedule", false,
-        [](auto& c, auto& in, auto& x) { c.schedule = choice(in, {"runs", "steps"}, x); },
-        [](auto& c) { return J(c.schedule); });
-    return d;
-  }();
-  return defs;
-}
-
-const KeyDef* find_def(const std::string& key) {
-  for (const auto& d : key_defs())
-    if (d.key == key) return &d;
+/// The parameter of a configuration key (exactly its key; experiments/parameters.cpp).
+const Parameter* find_def(const std::string& key) {
+  for (const auto& p : parameters())
+    if (p.key == key) return &p;
   return nullptr;
 }
 
@@ -250,7 +44,7 @@ std::size_t edit_distance(const std::string& a, const std::string& b) {
   std::string best;
   std::size_t best_d = 4;
   const std::string bare = key.rfind("sweep.", 0) == 0 ? key.substr(6) : key;
-  for (const auto& d : key_defs()) {
+  for (const auto& d : parameters()) {
     const std::size_t dist = edit_distance(bare, d.key);
     if (dist < best_d) best_d = dist, best = d.key;
   }
@@ -263,7 +57,7 @@ std::size_t edit_distance(const std::string& a, const std::string& b) {
 const std::vector<std::string>& config_keys() {
   static const std::vector<std::string> keys = [] {
     std::vector<std::string> k;
-    for (const auto& d : key_defs()) k.push_back(d.key);
+    for (const auto& d : parameters()) k.push_back(d.key);
     return k;
   }();
   return keys;
@@ -273,18 +67,22 @@ void set_key(ExperimentConfig& config, const std::string& key,
              const std::vector<std::string>& inputs, const std::string& file) {
   if (key.rfind("sweep.", 0) == 0) {
     const std::string target = key.substr(6);
-    const KeyDef* d = find_def(target);
+    const Parameter* d = find_def(target);
     if (!d) unknown_key(key, file);
-    if (!d->sweepable)
-      throw Error("key '" + target + "' cannot be swept (sweepable: method, noise, noise.*, "
-                  "sensors, database_size, ransac.*, bricpsf.*, icp.*)", file, key);
+    if (!d->sweepable) {
+      std::string sweepable;
+      for (const auto& p : parameters())
+        if (p.sweepable && p.kind != Parameter::Kind::method) sweepable += p.key + ", ";
+      throw Error("key '" + target + "' cannot be swept (sweepable: " + sweepable + "every method parameter)",
+                  file, key);
+    }
     if (inputs.empty()) throw Error(key + " needs at least one value", file, key);
     SweepAxis axis{target, {}};
     std::set<std::string> seen;
     for (const auto& v : inputs) {
       if (!seen.insert(v).second) throw Error(key + " lists '" + v + "' twice", file, key);
       ExperimentConfig probe = config;  // validate each value now, naming the sweep key
-      d->set(probe, {v}, Ctx{key, file});
+      d->set_config(probe, {v}, file, key);
       axis.values.push_back({v});
     }
     for (auto& a : config.sweep)
@@ -295,9 +93,9 @@ void set_key(ExperimentConfig& config, const std::string& key,
     config.sweep.push_back(std::move(axis));
     return;
   }
-  const KeyDef* d = find_def(key);
+  const Parameter* d = find_def(key);
   if (!d) unknown_key(key, file);
-  d->set(config, inputs, Ctx{key, file});
+  d->set_config(config, inputs, file, key);
 }
 
 void load_config_file(ExperimentConfig& config, const std::filesystem::path& file) {
@@ -413,8 +211,8 @@ std::vector<Variant> expand_variants(const ExperimentConfig& config) {
 
 nlohmann::ordered_json to_json(const ExperimentConfig& config) {
   nlohmann::ordered_json j;
-  for (const auto& d : key_defs())
-    if (d.get) j[d.key] = d.get(config);
+  for (const auto& p : parameters())
+    if (p.get_config) j[p.key] = p.get_config(config);
   nlohmann::ordered_json sweep = nlohmann::ordered_json::object();
   for (const auto& a : config.sweep) {
     nlohmann::ordered_json values = nlohmann::ordered_json::array();

@@ -4,43 +4,11 @@
 // and a flag are validated alike and an error names the key (and the file).
 //
 // Keys (file sections become dotted prefixes: `[ransac]` + `triplets = 15` is ransac.triplets):
-//   name, description                      free text
-//   objects            "all" | [names]     objects explored (default: all of the database)
-//   database           "all" | [names]     objects the recognizer may answer (default: all)
-//   database_size      int >= 1            first the explored objects, then database order
-//   hidden             [names] | "each"    open set: objects the recognizer may not answer
-//                                          (removed from its database; they may be explored),
-//                                          "each": every explored object hidden from its own
-//                                          runs (leave-one-out). Default: none
-//   runs               int >= 1            exploration runs per object (paper: 20 or 50)
-//   steps              int >= 1            exploration steps (grasps) per run (paper: 40)
-//   pool               int >= steps        simulated grasps per pool (Section 5.1: >= 50)
-//   protocol           independent | shared_pool   (default independent) what a run shares:
-//                      independent: each run simulates its own object pose and pool of `pool`
-//                      grasps from its own seed (runs are independent samples); shared_pool: the
-//                      paper's protocol, one pose and pool per object that its runs draw from
-//   method             bricpsf | batch-ransac | ransac-icp | ransac-icp-fs
-//   preset             improved (default) | paper: the defaults of the method parameters
-//                      (paper: Section 4-5 exactly; improved: Touchstone's extensions, see
-//                      RecognizerSettings::improved)
-//   noise              ideal | underwater | deepsea
-//   noise.arm_position_sigma_m, noise.arm_rotation_sigma_deg, noise.sensel_noise,
-//   noise.force_noise, noise.contact_sigma_m     overrides of the profile (>= 0)
-//   sensors            1 | 6
-//   sensing            pads (default: the gripper's tactile arrays) | probe (a ball-tipped probe,
-//                      one contact per step; noise.contact_sigma_m is then the probe's own noise)
-//   seed               unsigned integer
-//   ransac.samples     "NxR": ransac.triplets and ransac.registrations together
-//   <method parameter> every key of experiments/parameters.cpp (`touchstone params`), e.g.
-//                      ransac.triplets, ransac.prune_per_object, bricpsf.psi, icp.iterations;
-//                      unset means the preset's value
-//   memory_budget_mb   resident object geometry (MB, 0: no limit); default: the recognizer's
-//   calibration        path | ""          confidence calibration file (touchstone calibrate);
-//                                          "" (default): confidences not computed (NaN)
-//   schedule           runs | steps        parallel over runs (throughput) or inside each step
-//                                          (latency); never changes results
-//   sweep.<key> = [v1, v2, ...]            one variant per combination (cartesian product, the
-//                                          first listed key varies slowest)
+// every parameter of experiments/parameters.cpp, method, simulator and experiment alike
+// (`touchstone params`, and the README's tables): objects, runs, steps, pool, protocol, noise,
+// sensors, seed, ransac.triplets, bricpsf.psi, ...; a method parameter unset means the preset's
+// value. `sweep.<key> = [v1, v2, ...]` (sweepable keys only): one variant per combination
+// (cartesian product, the first listed key varies slowest).
 #pragma once
 
 #include "engine/core.hpp"

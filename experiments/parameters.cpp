@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <set>
 #include <sstream>
 #include <type_traits>
 
@@ -29,13 +30,12 @@ using Type = Parameter::Type;
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kLarge = 100000000;   // the cap of counts (an implausibly large value)
 
-/// A parameter reading and writing one field: `field` is a generic lambda returning a reference
-/// to it in a MethodSettings (const or not).
-template <class F>
-Parameter declare(std::string key, Type type, std::string unit, double lo, double hi,
-                  std::string paper, std::string help, std::vector<std::string> aliases, F field) {
+/// A parameter's description (key, kind, type, unit, range, the paper's value, help, older names).
+Parameter setting(std::string key, Parameter::Kind kind, Type type, std::string unit, double lo, double hi,
+                  std::string paper, std::string help, std::vector<std::string> aliases = {}) {
   Parameter p;
   p.key = std::move(key);
+  p.kind = kind;
   p.type = type;
   p.unit = std::move(unit);
   p.lo = lo;
@@ -43,6 +43,16 @@ Parameter declare(std::string key, Type type, std::string unit, double lo, doubl
   p.paper = std::move(paper);
   p.help = std::move(help);
   p.aliases = std::move(aliases);
+  return p;
+}
+
+/// A method parameter reading and writing one field: `field` is a generic lambda returning a
+/// reference to it in a MethodSettings (const or not).
+template <class F>
+Parameter declare(std::string key, Type type, std::string unit, double lo, double hi,
+                  std::string paper, std::string help, std::vector<std::string> aliases, F field) {
+  Parameter p = setting(std::move(key), Parameter::Kind::method, type, std::move(unit), lo, hi, std::move(paper),
+                        std::move(help), std::move(aliases));
   p.get = [field](const MethodSettings& m) {
     const auto& x = field(m);
     if constexpr (std::is_enum_v<std::decay_t<decltype(x)>>)
@@ -234,18 +244,293 @@ std::vector<Parameter> declaration() {
 
 #undef TS_FIELD
 
-/// Names compared with `-` and `_` alike and without leading dashes.
-std::string normalized(std::string s) {
-  s.erase(0, s.find_first_not_of('-'));
-  std::replace(s.begin(), s.end(), '-', '_');
-  return s;
-}
-
 /// The shortest text that reads back as `v`.
 std::string number_text(double v) {
   char buffer[64];
   const auto [end, ec] = std::to_chars(buffer, buffer + sizeof buffer, v);
   return ec == std::errc() ? std::string(buffer, end) : std::to_string(v);
+}
+
+// ---- The simulator and experiment parameters: values held by ExperimentConfig ----
+
+using J = nlohmann::ordered_json;
+using Inputs = std::vector<std::string>;
+using Kind = Parameter::Kind;
+
+std::string joined(const Inputs& inputs) {
+  std::string s;
+  for (const auto& i : inputs) s += (s.empty() ? "" : ",") + i;
+  return s;
+}
+
+const std::string& single(const Inputs& inputs, const std::string& file, const std::string& name) {
+  if (inputs.size() != 1)
+    throw Error(name + " expects one value, got " + std::to_string(inputs.size()) +
+                    (inputs.empty() ? "" : " ('" + joined(inputs) + "')"),
+                file, name);
+  return inputs.front();
+}
+
+/// A list of names: "all" (alone) means empty = everything; inputs may also be comma lists.
+std::vector<std::string> name_list(const Inputs& inputs, const std::string& file, const std::string& key) {
+  auto fail = [&](const std::string& what) { throw Error(key + what, file, key); };
+  std::vector<std::string> out;
+  for (const auto& in : inputs) {
+    std::size_t start = 0;
+    while (start <= in.size()) {
+      const std::size_t comma = std::min(in.find(',', start), in.size());
+      std::string name = in.substr(start, comma - start);
+      name.erase(0, name.find_first_not_of(" \t"));
+      name.erase(name.find_last_not_of(" \t") + 1);
+      if (name.empty()) fail(" has an empty object name ('" + joined(inputs) + "')");
+      out.push_back(name);
+      start = comma + 1;
+    }
+  }
+  if (out.empty()) fail(" is empty (use \"all\")");
+  if (out.size() == 1 && out.front() == "all") return {};
+  std::set<std::string> seen;
+  for (const auto& n : out) {
+    if (n == "all") fail(": \"all\" cannot be combined with names");
+    if (!seen.insert(n).second) fail(" lists '" + n + "' twice");
+  }
+  return out;
+}
+
+
+/// A number held by the configuration: `field` returns a reference to an int, a double or an
+/// optional of either (unset: null).
+template <class F>
+Parameter number(Parameter p, F field) {
+  const Parameter shape = p;
+  p.set_config = [shape, field](ExperimentConfig& c, const Inputs& in, const std::string& file,
+                                const std::string& name) {
+    const double v = parse_value(shape, single(in, file, name), file, name);
+    auto& x = field(c);
+    using T = std::decay_t<decltype(x)>;
+    if constexpr (std::is_same_v<T, std::optional<int>> || std::is_same_v<T, int>)
+      x = static_cast<int>(v);
+    else
+      x = v;
+  };
+  p.get_config = [field](const ExperimentConfig& c) {
+    const auto& x = field(c);
+    using T = std::decay_t<decltype(x)>;
+    if constexpr (std::is_same_v<T, std::optional<int>> || std::is_same_v<T, std::optional<double>>)
+      return x ? J(*x) : J(nullptr);
+    else
+      return J(x);
+  };
+  return p;
+}
+
+/// One of `choices`, held by the configuration as its name (a std::string field).
+template <class F>
+Parameter named(Parameter p, std::vector<std::string> choices, F field) {
+  p.type = Type::choice;
+  p.choices = std::move(choices);
+  p.hi = static_cast<double>(p.choices.size() - 1);
+  const Parameter shape = p;
+  p.set_config = [shape, field](ExperimentConfig& c, const Inputs& in, const std::string& file,
+                                const std::string& name) {
+    field(c) = shape.text(parse_value(shape, single(in, file, name), file, name));
+  };
+  p.get_config = [field](const ExperimentConfig& c) { return J(field(c)); };
+  return p;
+}
+
+#define TS_CONFIG(expr) [](auto& c) -> auto& { return c.expr; }
+
+/// The simulator and experiment parameters before the method's, and after them (the order of a
+/// configuration's JSON).
+std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
+  const Kind E = Kind::experiment, S = Kind::simulator;
+  std::vector<Parameter> d;
+  auto text = [](Parameter p, auto field, bool join) {
+    p.set_config = [field, join](ExperimentConfig& c, const Inputs& in, const std::string& file,
+                                 const std::string& name) { field(c) = join ? joined(in) : single(in, file, name); };
+    p.get_config = [field](const ExperimentConfig& c) { return J(field(c)); };
+    p.sweepable = false;
+    return p;
+  };
+  auto names = [](Parameter p, auto field, bool all_when_empty) {
+    p.set_config = [field](ExperimentConfig& c, const Inputs& in, const std::string& file, const std::string& name) {
+      field(c) = name_list(in, file, name);
+    };
+    p.get_config = [field, all_when_empty](const ExperimentConfig& c) {
+      const auto& v = field(c);
+      return v.empty() && all_when_empty ? J("all") : J(v);
+    };
+    p.sweepable = false;
+    return p;
+  };
+  d.push_back(text(setting("name", E, Type::text, "", 0, 0, "", "The study's name (informative)"), TS_CONFIG(name), false));
+  d.push_back(text(setting("description", E, Type::text, "", 0, 0, "", "What the study measures (informative)"),
+                   TS_CONFIG(description), true));
+  d.push_back(names(setting("objects", E, Type::names, "", 0, 0, "", "Explored objects: all, or names of the database"),
+                    TS_CONFIG(objects), true));
+  d.push_back(names(setting("database", E, Type::names, "", 0, 0, "",
+                            "Objects the recognizer may answer: all, or names of the database"),
+                    TS_CONFIG(database), true));
+  d.push_back(number(setting("database_size", E, Type::integer, "", 1, kLarge, "",
+                             "The recognizer's database cut to this many objects, the explored ones first (unset: all)"),
+                     TS_CONFIG(database_size)));
+  d.push_back(names(setting("hidden", E, Type::names, "", 0, 0, "",
+                            "Open set: objects removed from the recognizer's database (they may be explored), or "
+                            "each: every explored object hidden from its own runs (leave-one-out)"),
+                    TS_CONFIG(hidden), false));
+  for (Parameter& p : d) p.sweepable = p.key == "database_size";
+  d.push_back(number(setting("runs", E, Type::integer, "", 1, kLarge, "20 or 50 (Section 5.2)",
+                             "Exploration runs per object"), TS_CONFIG(runs)));
+  d.push_back(number(setting("steps", E, Type::integer, "", 1, kLarge, "40 (Section 5.2)",
+                             "Exploration steps (grasps) per run"), TS_CONFIG(steps)));
+  d.push_back(number(setting("pool", E, Type::integer, "", 1, kLarge, "at least 50 (Section 5.1)",
+                             "Simulated grasps per pool, at least steps: a run draws its steps from it"),
+                     TS_CONFIG(pool)));
+  for (std::size_t i = d.size() - 3; i < d.size(); ++i) d[i].sweepable = false;   // runs, steps, pool
+  d.push_back(named(setting("protocol", E, Type::choice, "", 0, 0, "shared_pool (Section 5.1)",
+                            "What a run shares: independent (its own object pose and grasp pool from its own seed) "
+                            "or shared_pool (the paper's: one pose and pool per object that its runs draw from)"),
+                    {"independent", "shared_pool"}, TS_CONFIG(protocol)));
+  d.back().sweepable = false;   // variants share their runs' grasps
+  d.push_back(named(setting("method", E, Type::choice, "", 0, 0, "bricpsf (Algorithm 1)", "The recognition method"),
+                    {"bricpsf", "batch-ransac", "ransac-icp", "ransac-icp-fs"}, TS_CONFIG(method)));
+  d.push_back(named(setting("preset", E, Type::choice, "", 0, 0, "",
+                            "The method parameters' defaults: improved (Touchstone's extensions) or paper "
+                            "(Sections 4-5 exactly)"),
+                    {"improved", "paper"}, TS_CONFIG(preset)));
+  // The simulator.
+  Parameter noise = named(setting("noise", S, Type::choice, "", 0, 0, "underwater (Section 5.1)",
+                                  "Noise profile of the simulated arm and sensors"),
+                          {"ideal", "underwater", "deepsea"}, TS_CONFIG(noise));
+  noise.simulate = true;
+  d.push_back(noise);
+  auto override_of = [&](std::string key, std::string unit, double hi, std::string help,
+                         std::vector<std::string> aliases, auto field) {
+    Parameter p = number(setting(std::move(key), S, Type::real, std::move(unit), 0, hi, "", std::move(help),
+                                 std::move(aliases)),
+                         field);
+    p.simulate = !p.aliases.empty();
+    d.push_back(std::move(p));
+  };
+  override_of("noise.arm_position_sigma_m", "m", 1, "Arm position error per axis and grasp (unset: the profile's)",
+              {"--arm-position-sigma"}, TS_CONFIG(noise_params.arm_position_sigma_m));
+  override_of("noise.arm_rotation_sigma_deg", "deg", 90, "Arm rotation error per grasp (unset: the profile's)",
+              {"--arm-rotation-sigma"}, TS_CONFIG(noise_params.arm_rotation_sigma_deg));
+  override_of("noise.sensel_noise", "", 10, "Sensel signal noise, a share of the signal (unset: the profile's)",
+              {"--signal-noise"}, TS_CONFIG(noise_params.sensel_noise));
+  override_of("noise.force_noise", "", 10, "Force-resolution noise of contacted sensels, a share (unset: the profile's)",
+              {"--force-noise"}, TS_CONFIG(noise_params.force_noise));
+  override_of("noise.contact_sigma_m", "m", 1,
+              "Contact position noise per axis: a sensel's lateral error, or the probe's own noise (unset: the profile's)",
+              {}, TS_CONFIG(noise_params.contact_sigma_m));
+  {
+    Parameter p = setting("sensors", S, Type::choice, "", 0, 1, "1 (Section 5.1)",
+                          "Tactile pads logged: 1 (the middle finger's distal pad) or 6");
+    p.choices = {"1", "6"};
+    const Parameter shape = p;
+    p.set_config = [shape](ExperimentConfig& c, const Inputs& in, const std::string& file, const std::string& name) {
+      c.sensors = std::stoi(shape.text(parse_value(shape, single(in, file, name), file, name)));
+    };
+    p.get_config = [](const ExperimentConfig& c) { return J(c.sensors); };
+    p.simulate = true;
+    d.push_back(std::move(p));
+  }
+  d.push_back(named(setting("sensing", S, Type::choice, "", 0, 0, "pads",
+                            "pads: the gripper's tactile arrays; probe: a ball-tipped probe, one contact per step "
+                            "(noise.contact_sigma_m is then the probe's own noise)"),
+                    {"pads", "probe"}, TS_CONFIG(sensing)));
+  d.back().sweepable = false;
+  d.back().simulate = true;
+  {
+    Parameter p = setting("seed", E, Type::integer, "", 0, kInf, "", "Seed of every random draw (unsigned integer)");
+    p.set_config = [](ExperimentConfig& c, const Inputs& in, const std::string& file, const std::string& name) {
+      const std::string& t = single(in, file, name);
+      std::uint64_t v = 0;
+      auto [q, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
+      if (ec != std::errc() || q != t.data() + t.size() || t.empty())
+        throw Error(name + " must be an unsigned integer (got '" + t + "')", file, name);
+      c.seed = v;
+    };
+    p.get_config = [](const ExperimentConfig& c) { return J(c.seed); };
+    p.sweepable = false;
+    d.push_back(std::move(p));
+  }
+  {
+    Parameter p = setting("ransac.samples", E, Type::text, "", 0, 0, "15x200 (Section 5.5)",
+                          "NxR: ransac.triplets and ransac.registrations together");
+    p.set_config = [](ExperimentConfig& c, const Inputs& in, const std::string& file, const std::string& name) {
+      const std::string& t = single(in, file, name);
+      const auto cross = t.find_first_of("xX*");
+      if (cross == std::string::npos)
+        throw Error(name + " must read NxR, e.g. 15x200 (got '" + t + "')", file, name);
+      auto part = [&](const std::string& text, const char* what) {
+        long long v = 0;
+        auto [q, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+        if (ec != std::errc() || q != text.data() + text.size() || text.empty() || v < 1 || v > kLarge)
+          throw Error(name + ": " + what + " must be a positive integer (got '" + t + "')", file, name);
+        return static_cast<double>(v);
+      };
+      c.params["ransac.triplets"] = part(t.substr(0, cross), "N");
+      c.params["ransac.registrations"] = part(t.substr(cross + 1), "R");
+    };
+    d.push_back(std::move(p));   // no getter: it sets ransac.triplets and ransac.registrations
+  }
+  std::vector<Parameter> after;
+  after.push_back(number(setting("memory_budget_mb", E, Type::real, "MB", 0, kInf, "",
+                                 "Resident object geometry, loaded on demand and evicted least-recently-used (0: no "
+                                 "limit; unset: the recognizer's default). Never changes results",
+                                 {"--memory-budget"}),
+                         TS_CONFIG(memory_budget_mb)));
+  after.push_back(text(setting("calibration", E, Type::text, "", 0, 0, "",
+                               "Confidence calibration file (touchstone calibrate); empty: confidences not computed"),
+                       TS_CONFIG(calibration), false));
+  after.push_back(named(setting("schedule", E, Type::choice, "", 0, 0, "",
+                                "Parallel over runs (throughput) or inside each step (latency). Never changes "
+                                "results"),
+                        {"runs", "steps"}, TS_CONFIG(schedule)));
+  for (Parameter& p : after) p.sweepable = false;
+  return {std::move(d), std::move(after)};
+}
+
+#undef TS_CONFIG
+
+/// Every parameter: the simulator and experiment ones around the method's. The method
+/// parameters are held by the configuration's `params` (key -> value; absent: the preset's).
+struct Declaration {
+  std::vector<Parameter> all;
+  std::size_t method_begin = 0, method_end = 0;
+};
+
+const Declaration& the_declaration() {
+  static const Declaration d = [] {
+    Declaration out;
+    auto [before, after] = config_declaration();
+    out.all = std::move(before);
+    out.method_begin = out.all.size();
+    for (Parameter& p : declaration()) {
+      const Parameter shape = p;
+      p.set_config = [shape](ExperimentConfig& c, const Inputs& in, const std::string& file, const std::string& name) {
+        c.params[shape.key] = parse_value(shape, single(in, file, name), file, name);
+      };
+      p.get_config = [shape](const ExperimentConfig& c) {
+        const auto it = c.params.find(shape.key);
+        return it == c.params.end() ? J(nullptr) : shape.json(it->second);
+      };
+      out.all.push_back(std::move(p));
+    }
+    out.method_end = out.all.size();
+    for (Parameter& p : after) out.all.push_back(std::move(p));
+    return out;
+  }();
+  return d;
+}
+
+/// Names compared with `-` and `_` alike and without leading dashes.
+std::string normalized(std::string s) {
+  s.erase(0, s.find_first_not_of('-'));
+  std::replace(s.begin(), s.end(), '-', '_');
+  return s;
 }
 
 }  // namespace
@@ -275,7 +560,9 @@ std::string Parameter::text(double v) const {
     case Type::boolean: return v != 0.0 ? "true" : "false";
     case Type::choice: return choices.at(static_cast<std::size_t>(v));
     case Type::integer: return std::to_string(static_cast<long long>(v));
-    case Type::real: return number_text(v);
+    case Type::real:
+    case Type::text:
+    case Type::names: return number_text(v);
   }
   return number_text(v);
 }
@@ -285,21 +572,34 @@ nlohmann::ordered_json Parameter::json(double v) const {
     case Type::boolean: return v != 0.0;
     case Type::choice: return choices.at(static_cast<std::size_t>(v));
     case Type::integer: return static_cast<long long>(v);
-    case Type::real: return v;
+    case Type::real:
+    case Type::text:
+    case Type::names: return v;
   }
   return v;
 }
 
-const std::vector<Parameter>& method_parameters() {
-  static const std::vector<Parameter> d = declaration();
-  return d;
+const std::vector<Parameter>& parameters() { return the_declaration().all; }
+
+std::span<const Parameter> method_parameters() {
+  const Declaration& d = the_declaration();
+  return std::span<const Parameter>(d.all).subspan(d.method_begin, d.method_end - d.method_begin);
+}
+
+const char* kind_name(Parameter::Kind kind) {
+  switch (kind) {
+    case Kind::method: return "method";
+    case Kind::simulator: return "simulator";
+    case Kind::experiment: return "experiment";
+  }
+  return "method";
 }
 
 const Parameter* find_parameter(const std::string& name) {
   const std::string n = normalized(name);
-  for (const auto& p : method_parameters())
+  for (const auto& p : parameters())
     if (normalized(p.key) == n) return &p;
-  for (const auto& p : method_parameters())
+  for (const auto& p : parameters())
     for (const auto& a : p.aliases)
       if (normalized(a) == n) return &p;
   return nullptr;
@@ -316,11 +616,17 @@ double parse_value(const Parameter& p, const std::string& text, const std::strin
       return fail("must be true or false (got '" + text + "')");
     case Type::choice: {
       for (std::size_t i = 0; i < p.choices.size(); ++i)
-        if (text == p.choices[i] || text == std::to_string(i)) return static_cast<double>(i);
+        if (text == p.choices[i]) return static_cast<double>(i);
+      if (p.kind == Kind::method)   // a method choice as stored in result files: its index
+        for (std::size_t i = 0; i < p.choices.size(); ++i)
+          if (text == std::to_string(i)) return static_cast<double>(i);
       std::string all;
       for (const auto& c : p.choices) all += (all.empty() ? "" : ", ") + c;
       return fail("must be one of " + all + " (got '" + text + "')");
     }
+    case Type::text:
+    case Type::names:
+      return fail("has no single numeric value");
     case Type::integer: {
       long long v = 0;
       const char* b = text.data();
@@ -379,8 +685,10 @@ std::vector<std::pair<std::string, double>> stored_parameters(const MethodSettin
   return out;
 }
 
-void add_parameter_flags(CLI::App& app, ParameterFlags& flags, const std::string& group) {
-  for (const auto& p : method_parameters()) {
+void add_parameter_flags(CLI::App& app, ParameterFlags& flags, const std::string& group,
+                         const std::function<bool(const Parameter&)>& which) {
+  for (const auto& p : parameters()) {
+    if (which ? !which(p) : p.kind != Kind::method) continue;
     std::string names;
     std::string help = p.help + (p.unit.empty() ? "" : " (" + p.unit + ")");
     const std::string key = p.key;
@@ -399,10 +707,25 @@ void add_parameter_flags(CLI::App& app, ParameterFlags& flags, const std::string
     }
     names = p.flag();
     for (const auto& a : p.flag_aliases()) names += "," + a;
+    const Parameter* pp = &p;
     app.add_option_function<std::string>(
-           names, [&flags, key](const std::string& v) { flags.given[key] = v; }, help)
+           names,
+           [&flags, pp](const std::string& v) {
+             if (pp->type != Type::text && pp->type != Type::names && pp->key != "seed") {
+               try {   // checked when given: the error names the flag
+                 parse_value(*pp, v, {}, pp->flag());
+               } catch (const Error& e) {
+                 throw CLI::ValidationError(pp->flag(), e.what());
+               }
+             }
+             flags.given[pp->key] = v;
+           },
+           help)
         ->group(group)
-        ->type_name(p.type == Type::integer ? "INT" : p.type == Type::choice ? "NAME" : "NUMBER");
+        ->type_name(p.type == Type::integer ? "INT"
+                    : p.type == Type::choice ? "NAME"
+                    : p.type == Type::real   ? "NUMBER"
+                                             : "TEXT");
   }
 }
 
@@ -418,17 +741,57 @@ void apply_flags(const ParameterFlags& flags, MethodSettings& m) {
   }
 }
 
+void apply_flags(const ParameterFlags& flags, ExperimentConfig& c) {
+  for (const Parameter& p : parameters()) {
+    const auto it = flags.given.find(p.key);
+    if (it == flags.given.end()) continue;
+    try {
+      set_key(c, p.key, {it->second});
+    } catch (const Error& e) {
+      throw Error(e.message(), {}, p.flag());
+    }
+  }
+}
+
+namespace {
+
+/// The commands that take `p` as a flag (besides `experiment --set KEY=VALUE`, which takes all).
+std::vector<std::string> flag_commands(const Parameter& p) {
+  if (p.kind == Kind::method) return {"recognize", "bench_recognize"};
+  if (p.simulate) return {"experiment", "simulate"};
+  return {"experiment"};
+}
+
+/// A parameter's default as JSON in each preset (a method parameter's from the preset; the
+/// others' from the configuration's defaults, alike in both).
+nlohmann::ordered_json default_json(const Parameter& p, MethodSettings& s, const std::string& preset) {
+  if (p.kind != Kind::method) {
+    ExperimentConfig c;
+    c.preset = preset;
+    return p.get_config ? p.get_config(c) : J(nullptr);
+  }
+  nlohmann::ordered_json v = p.json(p.get(s));
+  if (p.min_database && p.min_database(s) > 0)
+    v = {{"value", v}, {"databases_above", p.min_database(s)}, {"otherwise", p.json(0.0)}};
+  return v;
+}
+
+}  // namespace
+
 nlohmann::ordered_json parameters_json(const std::string& preset) {
   std::vector<std::string> presets = {"paper", "improved"};
   if (!preset.empty()) presets = {preset};
   std::vector<MethodSettings> settings;
   for (const auto& p : presets) settings.push_back(MethodSettings::preset(p));
   nlohmann::ordered_json out = nlohmann::ordered_json::array();
-  static const char* type_names[] = {"integer", "real", "boolean", "choice"};
-  for (const auto& p : method_parameters()) {
+  static const char* type_names[] = {"integer", "real", "boolean", "choice", "text", "names"};
+  for (const auto& p : parameters()) {
     nlohmann::ordered_json j;
     j["key"] = p.key;
+    j["kind"] = kind_name(p.kind);
     j["flag"] = p.flag();
+    j["commands"] = flag_commands(p);
+    j["sweepable"] = p.sweepable;
     j["aliases"] = p.aliases;
     j["type"] = type_names[static_cast<int>(p.type)];
     if (p.type == Type::choice) j["choices"] = p.choices;
@@ -438,13 +801,7 @@ nlohmann::ordered_json parameters_json(const std::string& preset) {
       j["max"] = std::isinf(p.hi) ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(p.hi);
     }
     nlohmann::ordered_json defaults;
-    for (std::size_t i = 0; i < presets.size(); ++i) {
-      MethodSettings& s = settings[i];
-      nlohmann::ordered_json v = p.json(p.get(s));
-      if (p.min_database && p.min_database(s) > 0)
-        v = {{"value", v}, {"databases_above", p.min_database(s)}, {"otherwise", p.json(0.0)}};
-      defaults[presets[i]] = v;
-    }
+    for (std::size_t i = 0; i < presets.size(); ++i) defaults[presets[i]] = default_json(p, settings[i], presets[i]);
     j["default"] = defaults;
     j["paper"] = p.paper.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(p.paper);
     j["help"] = p.help;
@@ -457,26 +814,52 @@ std::string parameters_markdown() {
   MethodSettings paper = MethodSettings::preset("paper");
   MethodSettings improved = MethodSettings::preset("improved");
   auto value = [](const Parameter& p, MethodSettings& s) {
+    if (p.kind != Kind::method) {
+      const J v = default_json(p, s, "improved");
+      if (v.is_array() && v.empty()) return std::string("none");
+      return v.is_null() ? std::string("unset") : v.is_string() ? v.get<std::string>() : v.dump();
+    }
     std::string v = p.text(p.get(s));
     if (p.min_database && p.min_database(s) > 0)
       v += " (databases of more than " + std::to_string(p.min_database(s)) + " objects; else " + p.text(0.0) + ")";
     return v;
   };
   std::ostringstream md;
-  md << "| key | flag (older names) | unit | range | paper preset | improved preset | paper | help |\n"
-     << "|---|---|---|---|---|---|---|---|\n";
-  for (const auto& p : method_parameters()) {
-    std::string aliases;
-    for (const auto& a : p.aliases) aliases += (aliases.empty() ? "" : ", ") + ("`" + a + "`");
-    std::string range;
-    if (p.type == Type::boolean) range = "true, false";
-    else if (p.type == Type::choice)
-      for (const auto& c : p.choices) range += (range.empty() ? "" : ", ") + c;
+  const std::pair<Kind, const char*> kinds[] = {
+      {Kind::method, "Method parameters: flags of `recognize` and `bench_recognize`"},
+      {Kind::simulator, "Simulator parameters: flags of `experiment` (those marked *simulate* also of `simulate`)"},
+      {Kind::experiment, "Experiment parameters: flags of `experiment`"}};
+  for (const auto& [kind, title] : kinds) {
+    md << (kind == Kind::method ? "" : "\n") << "**" << title << ".**\n\n";
+    if (kind == Kind::method)
+      md << "| key | flag (older names) | unit | range | paper preset | improved preset | paper | help |\n"
+         << "|---|---|---|---|---|---|---|---|\n";
     else
-      range = number_text(p.lo) + " – " + (std::isinf(p.hi) ? std::string("∞") : number_text(p.hi));
-    md << "| `" << p.key << "` | `" << p.flag() << "`" << (aliases.empty() ? "" : " (" + aliases + ")") << " | "
-       << p.unit << " | " << range << " | " << value(p, paper) << " | " << value(p, improved) << " | " << p.paper
-       << " | " << p.help << " |\n";
+      md << "| key | flag (older names) | unit | range | default | paper | help |\n"
+         << "|---|---|---|---|---|---|---|\n";
+    for (const auto& p : parameters()) {
+      if (p.kind != kind) continue;
+      std::string aliases;
+      for (const auto& a : p.aliases) aliases += (aliases.empty() ? "" : ", ") + ("`" + a + "`");
+      std::string range;
+      if (p.type == Type::boolean) range = "true, false";
+      else if (p.type == Type::choice)
+        for (const auto& c : p.choices) range += (range.empty() ? "" : ", ") + c;
+      else if (p.type == Type::names) range = "all, or object names";
+      else if (p.type == Type::text) range = p.key == "ransac.samples" ? "NxR" : "text";
+      else
+        range = number_text(p.lo) + " – " + (std::isinf(p.hi) ? std::string("∞") : number_text(p.hi));
+      std::string notes;
+      if (p.kind != Kind::method && p.sweepable) notes += "sweepable";
+      if (p.simulate) notes += std::string(notes.empty() ? "" : ", ") + "*simulate*";
+      md << "| `" << p.key << "` | `" << p.flag() << "`" << (aliases.empty() ? "" : " (" + aliases + ")") << " | "
+         << p.unit << " | " << range << " | ";
+      if (kind == Kind::method)
+        md << value(p, paper) << " | " << value(p, improved);
+      else
+        md << value(p, improved);
+      md << " | " << p.paper << " | " << p.help << (notes.empty() ? "" : " (" + notes + ")") << " |\n";
+    }
   }
   return md.str();
 }

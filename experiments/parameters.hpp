@@ -1,13 +1,21 @@
-// The vocabulary of the method's parameters. Every parameter of the recognizer and of the
-// contact fusion is declared once, in parameters.cpp (`method_parameters()`): one dotted key
-// (e.g. `ransac.prune_per_object`), its type, unit and range, the paper's value and section
-// where it has one, one line of help and its older names. Each preset's value is read from the
-// preset's settings themselves (RecognizerSettings::paper() / improved()). From the declaration
-// come:
-//   - the experiment configuration's keys and `experiment --set KEY=VALUE` (config.cpp);
-//   - the flags of `recognize` and of bench_recognize: `--` + the key with `_` written `-`
-//     (`--ransac.prune-per-object 200`; booleans `--bricpsf.dedupe` / `--no-bricpsf.dedupe`, or
-//     `--bricpsf.dedupe=false`), and every older flag as an alias (`--prune-per-object`, `-W`);
+// The vocabulary of parameters. Every parameter is declared once, in parameters.cpp
+// (`parameters()`), of one of three kinds:
+//   - method: the recognizer and the contact fusion (MethodSettings; each preset's value is read
+//     from the preset's settings themselves, RecognizerSettings::paper() / improved());
+//   - simulator: the simulated grasps (noise profile and its overrides, sensors, sensing);
+//   - experiment: what is explored and how (objects, runs, steps, pool, protocol, seed, ...).
+// Each has one dotted key (e.g. `ransac.prune_per_object`), its type, unit and range, its
+// default, the paper's value and section where it has one, one line of help and its older
+// names. From the declaration come:
+//   - the experiment configuration's keys, `experiment --set KEY=VALUE` and `sweep.KEY`
+//     (config.cpp; ExperimentConfig holds the values);
+//   - the flags: `--` + the key with `_` written `-` (`--ransac.prune-per-object 200`; booleans
+//     `--bricpsf.dedupe` / `--no-bricpsf.dedupe`, or `--bricpsf.dedupe=false`), and every older
+//     flag as an alias (`--prune-per-object`, `-W`): the method parameters are flags of
+//     `recognize` and bench_recognize, the simulator and experiment parameters flags of
+//     `experiment` (`--runs 5`, `--noise.sensel-noise 0.1`; `--seed` is the common flag), the
+//     simulator parameters marked `simulate` also flags of `simulate` (`--noise ideal`,
+//     `--arm-position-sigma 0.003`);
 //   - the parameters written to result files (`/params`, one attribute per key) and run stores
 //     (the configuration's JSON);
 //   - `touchstone params [--preset P] [--json|--markdown]` and the README's parameter table.
@@ -21,6 +29,7 @@
 
 #include <functional>
 #include <map>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -43,8 +52,12 @@ struct MethodSettings {
 };
 
 struct Parameter {
-  enum class Type { integer, real, boolean, choice };
+  /// integer, real, boolean, choice: one value (method parameters hold it as a double); text:
+  /// free text or a value of its own form (seed, "NxR"); names: a list of object names.
+  enum class Type { integer, real, boolean, choice, text, names };
+  enum class Kind { method, simulator, experiment };
   std::string key;                  ///< dotted key: section.name_unit
+  Kind kind = Kind::method;
   Type type = Type::real;
   std::string unit;                 ///< "m", "deg", "" (a count or a ratio)
   double lo = 0.0, hi = 0.0;        ///< accepted range (inclusive; integer and real)
@@ -52,8 +65,18 @@ struct Parameter {
   std::string paper;                ///< the paper's value and section ("": an extension)
   std::string help;                 ///< one line
   std::vector<std::string> aliases; ///< older names: flags ("-N", "--triplets") and keys ("N")
+  bool sweepable = true;            ///< accepted as sweep.KEY
+  bool simulate = false;            ///< also a flag of `simulate` (simulator parameters)
+  /// Method parameters: the field of the settings.
   std::function<double(const MethodSettings&)> get;
   std::function<void(MethodSettings&, double)> set;
+  /// Every parameter: set it in a configuration from its textual inputs (a file item's or a
+  /// flag's; errors name `name` and `file`), and its value there as JSON (null: unset; the
+  /// getter is null for a key that only sets others, ransac.samples).
+  std::function<void(ExperimentConfig&, const std::vector<std::string>& inputs, const std::string& file,
+                     const std::string& name)>
+      set_config;
+  std::function<nlohmann::ordered_json(const ExperimentConfig&)> get_config;
   /// Extensions the improved preset turns on only on large databases: the threshold (objects)
   /// in the settings; setting the parameter explicitly makes it act on any database (0).
   std::function<std::size_t&(MethodSettings&)> min_database;
@@ -67,14 +90,18 @@ struct Parameter {
   nlohmann::ordered_json json(double value) const;
 };
 
-/// Every method parameter, in documentation order.
-const std::vector<Parameter>& method_parameters();
+/// Every parameter, in documentation order (the order of a configuration's JSON).
+const std::vector<Parameter>& parameters();
+/// The method parameters (a contiguous part of parameters()).
+std::span<const Parameter> method_parameters();
+const char* kind_name(Parameter::Kind kind);   ///< "method", "simulator", "experiment"
 
 /// The parameter of a key or of one of its aliases (with or without leading dashes, `-` or `_`
 /// alike in the name); null when none.
 const Parameter* find_parameter(const std::string& name);
 
-/// Parse a value of `p` (range checked). Throws ts::Error naming `file` and `name`.
+/// Parse a value of `p` (integer, real, boolean, choice; range checked; a choice's index only
+/// for method parameters). Throws ts::Error naming `file` and `name`.
 double parse_value(const Parameter& p, const std::string& text, const std::string& file = {},
                    const std::string& name = {});
 
@@ -88,18 +115,23 @@ void apply(MethodSettings& m, const Parameter& p, double value);
 /// The parameters as result files store them (key, value).
 std::vector<std::pair<std::string, double>> stored_parameters(const MethodSettings& m);
 
-/// Method-parameter flags of a command: every parameter's flag and its flag aliases, values
-/// kept as given (text) until apply_flags. `group` is the help group.
+/// Parameter flags of a command: the flag and flag aliases of every parameter `which` selects
+/// (default: the method parameters), values kept as given (text; checked when given, a bad
+/// value is a CLI::ValidationError naming the flag) until applied. `group` is the help group.
 struct ParameterFlags {
   std::map<std::string, std::string> given;   ///< key -> the value as given
 };
-void add_parameter_flags(CLI::App& app, ParameterFlags& flags, const std::string& group);
+void add_parameter_flags(CLI::App& app, ParameterFlags& flags, const std::string& group,
+                         const std::function<bool(const Parameter&)>& which = {});
 /// Apply the flags given on top of `m` (validated: a bad value is a CLI::ValidationError
 /// naming the flag).
 void apply_flags(const ParameterFlags& flags, MethodSettings& m);
+/// Set the flags given in a configuration, in the declaration's order (an error names the flag).
+void apply_flags(const ParameterFlags& flags, ExperimentConfig& c);
 
-/// `touchstone params`: the declaration as JSON (one object per parameter; `preset` "" gives
-/// both presets' values) or as the README's Markdown table.
+/// `touchstone params`: the declaration as JSON (one object per parameter, with its kind and the
+/// commands taking it as a flag; `preset` "" gives both presets' values) or as the README's
+/// Markdown tables (one per kind).
 nlohmann::ordered_json parameters_json(const std::string& preset = {});
 std::string parameters_markdown();
 

@@ -129,6 +129,7 @@ int main(int argc, char** argv) {
     for (const std::string& kv : sets) {   // --set KEY=VALUE: the key's flag, given
       const auto eq = kv.find('=');
       const experiments::Parameter* p = eq == std::string::npos ? nullptr : experiments::find_parameter(kv.substr(0, eq));
+      if (p && p->kind != experiments::Parameter::Kind::method) p = nullptr;
       if (!p) throw CLI::ValidationError("--set", "expects KEY=VALUE with a method parameter's key (got '" + kv + "')");
       flags.given[p->key] = kv.substr(eq + 1);
     }

@@ -687,20 +687,116 @@ TEST_CASE("cli recognize --calibration: confidences, and the open-set answer bel
   CHECK(other.err.find("database_fingerprint") != std::string::npos);
 }
 
-TEST_CASE("cli params --json: every parameter is a recognize flag (and each older flag), and an experiment --set key") {
+TEST_CASE("cli params --json: every method parameter is a recognize flag (and each older flag), every parameter an experiment --set key") {
   test::TempDir dir("cli_params");
   make_db(dir);
   REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 2 --noise ideal --out log.h5").code == 0);
   const Run list = touchstone(dir, "params --json");
   REQUIRE_MESSAGE(list.code == 0, list.err);
   const auto params = nlohmann::json::parse(list.out).at("parameters");
-  REQUIRE(params.size() >= 40);
+  REQUIRE(params.size() >= 60);
+  // The simulator and experiment parameters: each a value unlike its default and the JSON the
+  // canonical configuration must then record (under other keys for ransac.samples). Every
+  // listed parameter must have one here.
+  using J = nlohmann::json;
+  const std::map<std::string, std::pair<std::string, J>> setting = {
+      {"name", {"walk", {{"name", "walk"}}}},
+      {"description", {"every key", {{"description", "every key"}}}},
+      {"objects", {"wedge", {{"objects", {"wedge"}}}}},
+      {"database", {"wedge,box,nut", {{"database", {"wedge", "box", "nut"}}}}},
+      {"database_size", {"1", {{"database_size", 1}}}},
+      {"hidden", {"nut", {{"hidden", {"nut"}}}}},
+      {"runs", {"1", {{"runs", 1}}}},
+      {"steps", {"1", {{"steps", 1}}}},
+      {"pool", {"2", {{"pool", 2}}}},
+      {"protocol", {"shared_pool", {{"protocol", "shared_pool"}}}},
+      {"method", {"ransac-icp", {{"method", "ransac-icp"}}}},
+      {"preset", {"paper", {{"preset", "paper"}}}},
+      {"noise", {"ideal", {{"noise", "ideal"}}}},
+      {"noise.arm_position_sigma_m", {"0.001", {{"noise.arm_position_sigma_m", 0.001}}}},
+      {"noise.arm_rotation_sigma_deg", {"0.5", {{"noise.arm_rotation_sigma_deg", 0.5}}}},
+      {"noise.sensel_noise", {"0.02", {{"noise.sensel_noise", 0.02}}}},
+      {"noise.force_noise", {"0.3", {{"noise.force_noise", 0.3}}}},
+      {"noise.contact_sigma_m", {"0.0005", {{"noise.contact_sigma_m", 0.0005}}}},
+      {"sensors", {"6", {{"sensors", 6}}}},
+      {"sensing", {"probe", {{"sensing", "probe"}}}},
+      {"seed", {"7", {{"seed", 7}}}},
+      {"ransac.samples", {"3x20", {{"ransac.triplets", 3}, {"ransac.registrations", 20}}}},
+      {"memory_budget_mb", {"64", {{"memory_budget_mb", 64.0}}}},
+      {"calibration", {"", {{"calibration", ""}}}},
+      {"schedule", {"steps", {{"schedule", "steps"}}}}};
+  std::size_t others = 0;
+  for (const auto& p : params) {
+    if (p["kind"] == "method") {
+      CHECK(p["commands"] == J({"recognize", "bench_recognize"}));
+      continue;
+    }
+    ++others;
+    REQUIRE_MESSAGE(setting.count(p["key"]), p["key"]);
+    CHECK(std::find(p["commands"].begin(), p["commands"].end(), "experiment") != p["commands"].end());
+  }
+  CHECK(others == setting.size());
+  // experiment: each by --set KEY=VALUE, and each by its flag (--seed: the common flag).
+  for (const bool by_flag : {false, true}) {
+    CAPTURE(by_flag);
+    std::string args = "experiment --db db.h5 --json --out o" + std::to_string(by_flag) + ".h5";
+    for (const auto& p : params) {
+      if (p["kind"] == "method") continue;
+      const std::string& v = setting.at(p["key"]).first;
+      if (by_flag)
+        args += " " + p["flag"].get<std::string>() + " '" + v + "'";
+      else
+        args += " --set '" + p["key"].get<std::string>() + "=" + v + "'";
+    }
+    const Run e = touchstone(dir, args);
+    REQUIRE_MESSAGE(e.code == 0, (args + "\n" + e.err));
+    const auto config = nlohmann::json::parse(e.out).at("config");
+    for (const auto& [key, s] : setting)
+      for (const auto& [k, v] : s.second.items()) {
+        REQUIRE_MESSAGE(config.contains(k), k);
+        CHECK_MESSAGE(config[k] == v, (std::string(k) + " of " + key));
+      }
+  }
+  // simulate: each simulator parameter it takes by its flag, then by its older flags: the same
+  // log, and another without the noise overrides.
+  std::vector<std::string> sim_args(3, "simulate --db db.h5 --object wedge --grasps 3 --seed 3");
+  for (const auto& p : params) {
+    if (std::find(p["commands"].begin(), p["commands"].end(), "simulate") == p["commands"].end()) continue;
+    std::vector<std::string> flags{p["flag"].get<std::string>()};
+    for (const auto& a : p["aliases"]) flags.push_back(a);
+    const std::string key = p["key"];
+    const std::string v = key == "sensing" ? "pads" : setting.at(key).first;   // pads: tactile images compared
+    for (std::size_t i = 0; i < 3; ++i)
+      if (i < 2 || key.rfind("noise.", 0) != 0) sim_args[i] += " " + flags[std::min(i, flags.size() - 1)] + " " + v;
+  }
+  std::vector<TactileLog> logs;
+  for (std::size_t i = 0; i < 3; ++i) {
+    const Run r = touchstone(dir, sim_args[i] + " --out s" + std::to_string(i) + ".h5");
+    REQUIRE_MESSAGE(r.code == 0, (sim_args[i] + "\n" + r.err));
+    logs.push_back(io::read_log(dir / ("s" + std::to_string(i) + ".h5")));
+  }
+  CHECK(logs[0].noise == "ideal");
+  CHECK(logs[0].pads.size() == 6);
+  REQUIRE(logs[0].grasps.size() == logs[1].grasps.size());
+  REQUIRE(logs[0].grasps.size() == logs[2].grasps.size());
+  bool overrides_show = false;
+  for (std::size_t g = 0; g < logs[0].grasps.size(); ++g) {
+    CHECK(logs[0].grasps[g].tactile == logs[1].grasps[g].tactile);
+    CHECK(logs[0].grasps[g].arm_pose.isApprox(logs[1].grasps[g].arm_pose, 0.0));
+    overrides_show |= !logs[0].grasps[g].arm_pose.isApprox(logs[2].grasps[g].arm_pose, 1e-12);
+  }
+  CHECK(overrides_show);   // the ideal profile's arm is exact; the override moves it
+  // The method parameters.
+  nlohmann::json method_params = nlohmann::json::array();
+  for (const auto& p : params)
+    if (p["kind"] == "method") method_params.push_back(p);
+  REQUIRE(method_params.size() >= 40);
   // Each value: the improved preset's, integers one more and reals 10 % more (within range) so
   // that a flag that does not reach the settings shows; the costly counts kept small.
   const std::map<std::string, double> fast = {{"ransac.triplets", 6}, {"ransac.registrations", 40},
                                               {"ransac.prune", 800}, {"bricpsf.hypotheses", 20}, {"icp.points", 64}};
   std::map<std::string, nlohmann::json> value;
-  for (const auto& p : params) {
+  for (const auto& p : method_params) {
     const std::string key = p["key"];
     nlohmann::json v = p["default"]["improved"];
     if (v.is_object()) v = v["value"];   // an extension of large databases: asked for, on any
@@ -727,7 +823,7 @@ TEST_CASE("cli params --json: every parameter is a recognize flag (and each olde
   for (std::size_t round = 0; round <= 2; ++round) {
     CAPTURE(round);
     std::string args = "recognize --db db.h5 --log log.h5 --steps 1 --out r" + std::to_string(round) + ".h5";
-    for (const auto& p : params) {
+    for (const auto& p : method_params) {
       std::vector<std::string> flags{p["flag"].get<std::string>()};
       for (const auto& a : p["aliases"])
         if (a.get<std::string>().front() == '-') flags.push_back(a);
@@ -742,7 +838,7 @@ TEST_CASE("cli params --json: every parameter is a recognize flag (and each olde
     REQUIRE_MESSAGE(r.code == 0, (args + "\n" + r.err));
     std::map<std::string, double> written;
     for (const auto& [k, v] : io::read_result(dir / ("r" + std::to_string(round) + ".h5")).header.params) written[k] = v;
-    for (const auto& p : params) {
+    for (const auto& p : method_params) {
       const std::string key = p["key"];
       REQUIRE_MESSAGE(written.count(key), key);
       CHECK_MESSAGE(written.at(key) == stored(p, value.at(key)), key);   // the text read back exactly

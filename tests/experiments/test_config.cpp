@@ -136,7 +136,7 @@ TEST_CASE("Impossible values and unknown keys name the key") {
   CHECK(load_error("steps = 60\n").second == "pool");  // default pool 50 < 60 steps
   auto pr = load_error("protocol = shared\n");
   CHECK(pr.second == "protocol");
-  CHECK(pr.first.find("independent,shared_pool") != std::string::npos);
+  CHECK(pr.first.find("independent, shared_pool") != std::string::npos);
   CHECK(load_error("[sweep]\nprotocol = [\"independent\", \"shared_pool\"]\n").second == "sweep.protocol");
 
   auto u = load_error("[ransac]\ntriplet = 15\n");

@@ -15,9 +15,9 @@ using namespace ts::experiments;
 
 TEST_CASE("Parameters: unique keys and names, each resolving to its parameter") {
   std::set<std::string> names;
-  for (const Parameter& p : method_parameters()) {
+  for (const Parameter& p : parameters()) {
     CAPTURE(p.key);
-    CHECK(p.key.find('.') != std::string::npos);       // a dotted key
+    if (p.kind == Parameter::Kind::method) CHECK(p.key.find('.') != std::string::npos);   // a dotted key
     CHECK(p.key.find('-') == std::string::npos);
     CHECK(find_parameter(p.key) == &p);
     CHECK(find_parameter(p.flag()) == &p);
@@ -37,6 +37,57 @@ TEST_CASE("Parameters: unique keys and names, each resolving to its parameter") 
   CHECK(find_parameter("W_obj")->key == "ransac.prune_per_object");
   CHECK(find_parameter("--n-p")->key == "bricpsf.hypotheses");
   CHECK(find_parameter("--twins")->key == "twins.rivals");
+  CHECK(find_parameter("--memory-budget")->key == "memory_budget_mb");
+  CHECK(find_parameter("--signal-noise")->key == "noise.sensel_noise");
+  // The method parameters are the method kind, a contiguous part of all.
+  std::size_t method = 0;
+  for (const Parameter& p : parameters()) method += p.kind == Parameter::Kind::method;
+  CHECK(method == method_parameters().size());
+  for (const Parameter& p : method_parameters()) CHECK(p.kind == Parameter::Kind::method);
+}
+
+TEST_CASE("Parameters: each simulator and experiment parameter sets the configuration field it reads") {
+  const nlohmann::ordered_json defaults = to_json(ExperimentConfig{});
+  std::size_t others = 0;
+  for (const Parameter& p : parameters()) {
+    if (p.kind == Parameter::Kind::method) continue;
+    CAPTURE(p.key);
+    ++others;
+    CHECK(config_keys().end() != std::find(config_keys().begin(), config_keys().end(), p.key));
+    if (!p.get_config) continue;   // ransac.samples: sets the method's keys (test_config.cpp)
+    CHECK(p.get_config(ExperimentConfig{}) == defaults.at(p.key));
+    // A value unlike the default, read back from the field the setter wrote.
+    std::string value;
+    if (p.type == Parameter::Type::choice) value = p.choices.back() == defaults.at(p.key).dump() ||
+                                                           p.choices.back() == defaults.at(p.key)
+                                                       ? p.choices.front()
+                                                       : p.choices.back();
+    else if (p.type == Parameter::Type::integer) value = "3";
+    else if (p.type == Parameter::Type::real) value = "0.25";
+    else value = "cube";
+    ExperimentConfig c;
+    set_key(c, p.key, {value}, "study.toml");
+    const nlohmann::ordered_json now = to_json(c).at(p.key);
+    CHECK(now != defaults.at(p.key));
+    const nlohmann::ordered_json expect = p.type == Parameter::Type::names ? nlohmann::ordered_json({value})
+                                          : p.type == Parameter::Type::text || p.key == "sensors"
+                                              ? nlohmann::ordered_json(value)
+                                              : p.type == Parameter::Type::choice ? nlohmann::ordered_json(value)
+                                                                                  : nlohmann::ordered_json::parse(value);
+    if (p.key == "sensors") CHECK(now == std::stoi(value));
+    else CHECK(now == expect);
+    // A bad value: one error naming the file and the key.
+    if (p.type == Parameter::Type::integer || p.type == Parameter::Type::real || p.type == Parameter::Type::choice) {
+      try {
+        set_key(c, p.key, {"-7x"}, "study.toml");
+        FAIL("no error");
+      } catch (const Error& e) {
+        CHECK(e.file() == "study.toml");
+        CHECK(e.field() == p.key);
+      }
+    }
+  }
+  CHECK(others >= 20);
 }
 
 TEST_CASE("Parameters: a value set is the value read, and explicit extensions act on any database") {
