@@ -71,7 +71,7 @@ class OccupancyGrid {
   /// ordered by cube key. What sampling an octree's free leaves at res gives: such a centre is
   /// at least res / 2 per axis from anything not known free, so d_thresh = res / 2 never
   /// penalizes the true object. Same cost and caching (not thread-safe) as free_cloud; equal
-  /// to the brute-force full_free_cloud (engine/free_cloud.hpp). `res` should be a multiple
+  /// to the brute-force oracle of tests/engine/free_cloud_oracle.hpp. `res` should be a multiple
   /// of the voxel.
   std::vector<Vec3> full_free_cloud(const Eigen::AlignedBox3d& box, double res) const;
 

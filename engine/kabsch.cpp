@@ -51,6 +51,18 @@ bool triangle_well_conditioned(const Vec3& a, const Vec3& b, const Vec3& c, doub
   return s[1] >= min_sv_ratio * s[0];
 }
 
+Mat3 rotation_from_covariance(const Mat3& H, bool* reflected) {
+  Eigen::JacobiSVD<Mat3> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Mat3& U = svd.matrixU();
+  const Mat3& V = svd.matrixV();
+  // Reflection fix (Umeyama 1991): R = V diag(1, 1, det(V U^T)) U^T.
+  Mat3 D = Mat3::Identity();
+  const bool reflection = (V * U.transpose()).determinant() < 0.0;
+  if (reflection) D(2, 2) = -1.0;
+  if (reflected) *reflected = reflection;
+  return V * D * U.transpose();
+}
+
 RigidFit kabsch(std::span<const Vec3> source, std::span<const Vec3> target,
                 std::span<const double> weights, const KabschSettings& settings) {
   RigidFit fit;
@@ -79,17 +91,7 @@ RigidFit kabsch(std::span<const Vec3> source, std::span<const Vec3> target,
     const double w = weights.empty() ? 1.0 : weights[i];
     H.noalias() += w * (source[i] - cs) * (target[i] - ct).transpose();
   }
-  Eigen::JacobiSVD<Mat3> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  const Mat3& U = svd.matrixU();
-  const Mat3& V = svd.matrixV();
-  // Reflection fix (Umeyama 1991): R = V diag(1, 1, det(V U^T)) U^T.
-  const double d = (V * U.transpose()).determinant();
-  Mat3 D = Mat3::Identity();
-  if (d < 0.0) {
-    D(2, 2) = -1.0;
-    fit.reflection_fixed = true;
-  }
-  const Mat3 R = V * D * U.transpose();
+  const Mat3 R = rotation_from_covariance(H, &fit.reflection_fixed);
   if (!R.allFinite()) return fit;
 
   double sq = 0.0;

@@ -30,6 +30,13 @@ struct RigidFit {
 RigidFit kabsch(std::span<const Vec3> source, std::span<const Vec3> target,
                 std::span<const double> weights = {}, const KabschSettings& settings = {});
 
+/// The rotation R maximizing trace(R H) for a cross-covariance H = sum w s t^T of centred pairs,
+/// i.e. minimizing sum w |R s - t|^2 (Arun et al. 1987 by SVD, with Umeyama's reflection fix:
+/// R = V diag(1, 1, det(V U^T)) U^T). `reflected`: the unconstrained optimum was a reflection.
+/// Given H = M^T it is the rotation nearest to M. The one SVD step of kabsch(), the symmetry
+/// search's rotation-only ICP and recognize's ground-truth reader.
+Mat3 rotation_from_covariance(const Mat3& H, bool* reflected = nullptr);
+
 /// Singular values (descending) of the centred point set, divided by sqrt(n): the RMS spreads
 /// along the principal axes. Computed in a frame centred on the points.
 Vec3 principal_spreads(std::span<const Vec3> points);

@@ -7,7 +7,6 @@
 #include "engine/kabsch.hpp"
 
 #include <Eigen/Eigenvalues>
-#include <Eigen/SVD>
 
 #include <algorithm>
 #include <cmath>
@@ -125,10 +124,7 @@ class Checker {
         ++pairs;
       }
       if (pairs < 3) return R;
-      Eigen::JacobiSVD<Mat3> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
-      Mat3 D = Mat3::Identity();
-      if ((svd.matrixV() * svd.matrixU().transpose()).determinant() < 0.0) D(2, 2) = -1.0;
-      const Mat3 Rn = svd.matrixV() * D * svd.matrixU().transpose();
+      const Mat3 Rn = rotation_from_covariance(H);
       const double change = rotation_angle(Rn * R.transpose());
       R = Rn;
       if (change < 1e-7) break;

@@ -8,8 +8,8 @@
 #include "experiments/recognition_engine.hpp"
 
 #include "engine/feature_table.hpp"
-#include "engine/free_cloud.hpp"
 #include "engine/fusion.hpp"
+#include "engine/kabsch.hpp"
 #include "engine/pose_error.hpp"
 #include "engine/recognizer.hpp"
 #include "engine/symmetry.hpp"
@@ -18,7 +18,6 @@
 #include "io/log_store.hpp"
 #include "io/result_store.hpp"
 
-#include <Eigen/SVD>
 #include <nlohmann/json.hpp>
 
 #include <tbb/blocked_range.h>
@@ -98,9 +97,8 @@ Pose read_ground_truth(const std::string& path) {
   const Mat3 R = M.topLeftCorner<3, 3>();
   if ((R.transpose() * R - Mat3::Identity()).norm() > 1e-3 || R.determinant() < 0.0)
     throw Error("the upper-left 3x3 block is not a rotation", path);
-  Eigen::JacobiSVD<Mat3> svd(R, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Pose T = Pose::Identity();
-  T.linear() = svd.matrixU() * svd.matrixV().transpose();  // nearest rotation
+  T.linear() = rotation_from_covariance(R.transpose());  // the nearest rotation
   T.translation() = M.topRightCorner<3, 1>();
   return T;
 }

@@ -66,7 +66,16 @@ struct DatabaseGroup {
   std::vector<std::int32_t> to_file;           ///< recognizer index -> file index
   std::map<std::size_t, std::uint32_t> to_local;  ///< file index -> recognizer index
   std::unique_ptr<Database> database;
-  std::shared_ptr<const FeatureIndex> index;   ///< built in prepare() where a variant needs it
+  /// FLANN indices, one per index setting its variants search with (built in prepare() where a
+  /// variant needs one: the paper's preset); index_for() gives a variant's.
+  std::vector<std::pair<FeatureIndexSettings, std::shared_ptr<const FeatureIndex>>> indices;
+  std::shared_ptr<const FeatureIndex> index_for(const FeatureIndexSettings& s) const {
+    for (const auto& [settings, index] : indices)
+      if (settings.exact == s.exact && settings.trees == s.trees && settings.checks == s.checks &&
+          settings.seed == s.seed)
+        return index;
+    return nullptr;
+  }
   /// The FeatureTables of its variants (FeatureTable::shared keeps one only while it is held):
   /// built once in prepare(), not once per run.
   std::vector<std::shared_ptr<const FeatureTable>> tables;

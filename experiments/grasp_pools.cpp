@@ -2,6 +2,7 @@
 
 #include "engine/gripper.hpp"
 #include "experiments/driver.hpp"
+#include "io/log_store.hpp"
 
 #include <tbb/parallel_for.h>
 
@@ -49,15 +50,7 @@ std::uint64_t pool_seed(std::uint64_t seed, const std::string& object, std::opti
 }
 
 TactileLog log_from_pool(const TactileLog& pool, const std::vector<std::int32_t>& grasps) {
-  TactileLog log;
-  log.object = pool.object;
-  log.noise = pool.noise;
-  log.seed = pool.seed;
-  log.gripper = pool.gripper;
-  log.pads = pool.pads;
-  log.gains = pool.gains;
-  log.sensing = pool.sensing;   // a probe pool stays a probe log
-  log.probe = pool.probe;
+  TactileLog log = io::log_of(io::header_of(pool));   // its header: a probe pool stays a probe log
   LogGroundTruth truth;
   truth.object_pose = pool.truth->object_pose;
   for (std::int32_t g : grasps) {

@@ -206,25 +206,6 @@ MeanInterval mean_t_interval(std::span<const double> values, double level) {
   return out;
 }
 
-double position_error(const Pose& estimate, const Pose& truth) {
-  return (estimate.translation() - truth.translation()).norm();
-}
-
-double orientation_error(const Mat3& estimate, const Mat3& truth) {
-  const Eigen::Quaterniond q(Mat3(estimate.transpose() * truth));
-  const double s = q.vec().norm();
-  const double c = std::abs(q.w());
-  return 2.0 * std::atan2(s, c);
-}
-
-double symmetric_orientation_error(const Mat3& estimate, const Mat3& truth,
-                                   std::span<const Pose> symmetries) {
-  double best = orientation_error(estimate, truth);
-  for (const Pose& s : symmetries)
-    best = std::min(best, orientation_error(estimate, truth * s.linear()));
-  return best;
-}
-
 double mssd(const Pose& estimate, const Pose& truth, std::span<const Pose> symmetries,
             std::span<const Vec3> model_points) {
   if (model_points.empty()) return 0.0;

@@ -1,6 +1,6 @@
 // Metrics of an exploration experiment (paper Section 5.2): recognition rate with its Wilson
-// score interval, pose errors (position, Eq. 10 orientation, symmetry-aware orientation, BOP
-// MSSD), and their summaries per step: median, 95th percentile, and the mean bounded by the
+// score interval, the BOP MSSD (the position and orientation errors, symmetry-aware too, are the
+// engine's pose_error()), and the errors' summaries per step: median, 95th percentile, and the mean bounded by the
 // paper's limits (4 cm, 1 rad) with a Student-t 95 % confidence interval.
 //
 // Conventions: poses are T_world_object (object frame -> world). A symmetry S is a rigid
@@ -114,16 +114,8 @@ MeanInterval mean_t_interval(std::span<const double> values, double level = 0.95
 
 // --- Pose errors ---------------------------------------------------------------------------------
 
-/// Distance between the estimated and true object origins (Section 5.2).
-double position_error(const Pose& estimate, const Pose& truth);
-/// Absolute rotation angle between the two orientations, Eq. 10, in [0, pi]; computed as
-/// 2 atan2(|v|, |w|) of the relative quaternion, which is exact near 0 and pi where
-/// arccos((tr R - 1) / 2) loses half the digits.
-double orientation_error(const Mat3& estimate, const Mat3& truth);
-/// Smallest Eq. 10 angle over the object's symmetries: min_S angle(R_est, R_truth R_S).
-/// The identity is always considered, so this is never larger than orientation_error.
-double symmetric_orientation_error(const Mat3& estimate, const Mat3& truth,
-                                   std::span<const Pose> symmetries);
+// The position and orientation errors (Section 5.2, Eq. 10; symmetry-aware too) are the
+// engine's: pose_error() in engine/pose_error.hpp.
 /// BOP Maximum Symmetry-aware Surface Distance (Hodan et al. 2020):
 /// min_S max_x || T_est x - T_truth S x || over model points x (object frame). The identity is
 /// always considered. No points gives 0.

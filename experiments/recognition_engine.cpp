@@ -201,7 +201,7 @@ class RecognitionEngine final : public RunEngine {
       }
     }
     // The search structures of the databases in use: a FLANN index only where a variant searches
-    // with one (the paper's preset), a FeatureTable per object mask for the others, held for the
+    // with one (the paper's preset; one per index setting), a FeatureTable per object mask for the others, held for the
     // whole experiment. An unused index of 4 500 objects held 2.9 GB and took minutes to build,
     // and a table rebuilt for every run cost 3 GB of churn and seconds per run.
     for (std::size_t g : groups) {
@@ -213,9 +213,10 @@ class RecognitionEngine final : public RunEngine {
           if (!masks.insert(v.recognizer.objects).second) continue;
           if (note_) note_("Building the feature table of a " + std::to_string(group.objects.size()) + "-object database...");
           group.tables.push_back(FeatureTable::shared(*group.database, v.recognizer.objects));
-        } else if (!group.index) {
+        } else if (!group.index_for(v.recognizer.index)) {   // a sweep of index.* builds one per setting
           if (note_) note_("Building the feature index of a " + std::to_string(group.objects.size()) + "-object database...");
-          group.index = std::make_shared<const FeatureIndex>(build_feature_index(*group.database, v.recognizer.index));
+          group.indices.emplace_back(v.recognizer.index, std::make_shared<const FeatureIndex>(
+                                                             build_feature_index(*group.database, v.recognizer.index)));
         }
       }
     }
@@ -263,7 +264,7 @@ class RecognitionEngine final : public RunEngine {
       rs.objects.at(local_true) = 0;
     }
     rs.seed = Rng(config_.seed, kRecognizerStream, name_hash(name), static_cast<std::uint64_t>(task.run)).next();
-    Recognizer recognizer(*group.database, group.index, rs);
+    Recognizer recognizer(*group.database, rs.ransac.feature_table ? nullptr : group.index_for(rs.index), rs);
     ExplorationSettings es;  // as `touchstone recognize`: B from the database's largest object
     es.contact_voxel = v.contact_voxel;
     es.free.res_free = rs.evaluate.res_free;

@@ -1,5 +1,7 @@
 #include "io/log_store.hpp"
 
+#include "io/pose_row.hpp"
+
 #include "io/atomic_file.hpp"
 #include "io/gripper_io.hpp"
 #include "io/h5.hpp"
@@ -11,27 +13,6 @@ namespace ts::io {
 
 namespace {
 using h5::kAny;
-
-std::array<double, 7> pose_row(const Pose& T) {
-  const Eigen::Quaterniond q(T.linear());
-  const Vec3 t = T.translation();
-  return {t.x(), t.y(), t.z(), q.w(), q.x(), q.y(), q.z()};
-}
-
-// [tx, ty, tz, qw, qx, qy, qz] -> pose. A non-finite row or a quaternion far from unit norm
-// throws; a nearly-unit quaternion is normalized (user logs round their numbers).
-Pose pose_from_row(const double* r, const std::string& file, const std::string& field) {
-  for (int i = 0; i < 7; ++i)
-    if (!std::isfinite(r[i])) throw Error("pose holds a non-finite value", file, field);
-  Eigen::Quaterniond q(r[3], r[4], r[5], r[6]);
-  const double norm = q.norm();
-  if (std::abs(norm - 1.0) > 1e-3)
-    throw Error("pose quaternion has norm " + std::to_string(norm) + ", expected 1", file, field);
-  Pose T = Pose::Identity();
-  T.linear() = q.normalized().toRotationMatrix();
-  T.translation() = Vec3(r[0], r[1], r[2]);
-  return T;
-}
 
 std::string indexed(const std::string& path, std::size_t i) {
   std::string s = path;
@@ -67,19 +48,6 @@ Dims dims_of(const LogHeader& h) {
   return {h.pads.size(), static_cast<std::uint64_t>(h.gripper.sensor().rows),
           static_cast<std::uint64_t>(h.gripper.sensor().cols),
           static_cast<std::uint64_t>(h.gripper.joint_count())};
-}
-
-TactileLog log_of(const LogHeader& h) {
-  TactileLog log;
-  log.object = h.object;
-  log.noise = h.noise;
-  log.seed = h.seed;
-  log.gripper = h.gripper;
-  log.pads = h.pads;
-  log.gains = h.gains;
-  log.sensing = h.sensing;
-  log.probe = h.probe;
-  return log;
 }
 
 bool probe_log(const LogHeader& h) { return h.sensing == Sensing::probe; }
@@ -126,7 +94,7 @@ LogHeader read_header(const h5::File& file) {
   }
   if (root.has_group("ground_truth")) {
     const auto row = file.group("ground_truth").read<double>("object_pose", {7});
-    h.true_object_pose = pose_from_row(row.data(), name, "/ground_truth/object_pose");
+    h.true_object_pose = checked_pose_from_row(row.data(), name, "/ground_truth/object_pose");
   }
   // The header must already be consistent (pads exist, gains positive).
   validate(log_of(h), name);
@@ -134,16 +102,28 @@ LogHeader read_header(const h5::File& file) {
 }
 }  // namespace
 
+/// The fields a log's header and the log share.
+template <class From, class To>
+void copy_header(const From& from, To& to) {
+  to.object = from.object;
+  to.noise = from.noise;
+  to.seed = from.seed;
+  to.gripper = from.gripper;
+  to.pads = from.pads;
+  to.gains = from.gains;
+  to.sensing = from.sensing;
+  to.probe = from.probe;
+}
+
+TactileLog log_of(const LogHeader& h) {
+  TactileLog log;
+  copy_header(h, log);
+  return log;
+}
+
 LogHeader header_of(const TactileLog& log) {
   LogHeader h;
-  h.object = log.object;
-  h.noise = log.noise;
-  h.seed = log.seed;
-  h.gripper = log.gripper;
-  h.pads = log.pads;
-  h.gains = log.gains;
-  h.sensing = log.sensing;
-  h.probe = log.probe;
+  copy_header(log, h);
   if (log.truth) h.true_object_pose = log.truth->object_pose;
   return h;
 }
@@ -356,7 +336,7 @@ TactileLog read_log(const std::filesystem::path& path) {
     for (std::size_t k = 0; k < G; ++k) {
       GraspRecord& r = log.grasps[k];
       r.time = time[k];
-      r.arm_pose = pose_from_row(&pose[7 * k], name, indexed("/grasps/arm_pose", k));
+      r.arm_pose = checked_pose_from_row(&pose[7 * k], name, indexed("/grasps/arm_pose", k));
       r.probe_travel = travel[k];
       if (touched[k] > 1) throw Error("probe_touched must be 0 or 1", name, indexed("/grasps/probe_touched", k));
       r.probe_touched = touched[k] == 1;
@@ -376,7 +356,7 @@ TactileLog read_log(const std::filesystem::path& path) {
     for (std::size_t k = 0; k < G; ++k) {
       GraspRecord& r = log.grasps[k];
       r.time = time[k];
-      r.arm_pose = pose_from_row(&pose[7 * k], name, indexed("/grasps/arm_pose", k));
+      r.arm_pose = checked_pose_from_row(&pose[7 * k], name, indexed("/grasps/arm_pose", k));
       r.joints.assign(joints.begin() + k * d.joints, joints.begin() + (k + 1) * d.joints);
       r.tactile.assign(tactile.begin() + k * image, tactile.begin() + (k + 1) * image);
       if (!hints.empty()) r.past_peak.assign(hints.begin() + k * image, hints.begin() + (k + 1) * image);
@@ -391,7 +371,7 @@ TactileLog read_log(const std::filesystem::path& path) {
       throw Error("ground truth has " + std::to_string(s.at(0)) + " arm poses for " + std::to_string(G) + " grasps",
                   name, "/ground_truth/arm_pose");
     for (std::size_t k = 0; k < G; ++k)
-      truth.arm_poses.push_back(pose_from_row(&tp[7 * k], name, indexed("/ground_truth/arm_pose", k)));
+      truth.arm_poses.push_back(checked_pose_from_row(&tp[7 * k], name, indexed("/ground_truth/arm_pose", k)));
     if (t.has_dataset("joints")) {
       const auto tj = t.read<double>("joints", {kAny, J}, &s);
       if (s.at(0) != G) throw Error("ground-truth joint rows do not match the grasps", name, "/ground_truth/joints");

@@ -40,6 +40,9 @@ struct LogHeader {
 };
 
 LogHeader header_of(const TactileLog& log);
+/// A log of that header: its object, noise, seed, gripper, pads, gains and sensing, without
+/// grasps or ground truth.
+TactileLog log_of(const LogHeader& header);
 
 /// Appends grasps to a log file. Not copyable; closes on destruction (errors then are lost:
 /// call close() to see them).

@@ -1,5 +1,7 @@
 #include "io/result_store.hpp"
 
+#include "io/pose_row.hpp"
+
 #include "io/atomic_file.hpp"
 #include "io/h5.hpp"
 
@@ -13,26 +15,10 @@ namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-/// (w, x, y, z) with w >= 0.
-std::array<double, 4> quaternion(const Pose& T) {
-  Eigen::Quaterniond q(T.linear());
-  q.normalize();
-  if (q.w() < 0) q.coeffs() = -q.coeffs();
-  return {q.w(), q.x(), q.y(), q.z()};
-}
-
-Pose pose_from(const double* t, const double* q) {
-  Pose T = Pose::Identity();
-  Eigen::Quaterniond qq(q[0], q[1], q[2], q[3]);
-  if (!(qq.norm() > 0.0)) qq = Eigen::Quaterniond::Identity();
-  T.linear() = qq.normalized().toRotationMatrix();
-  T.translation() = Vec3(t[0], t[1], t[2]);
-  return T;
-}
-
 void push_pose(std::vector<double>& t, std::vector<double>& q, const Pose& T) {
-  for (int i = 0; i < 3; ++i) t.push_back(T.translation()[i]);
-  for (double v : quaternion(T)) q.push_back(v);
+  const auto row = canonical_pose_row(T);
+  t.insert(t.end(), row.begin(), row.begin() + 3);
+  q.insert(q.end(), row.begin() + 3, row.end());
 }
 
 }  // namespace
@@ -203,7 +189,7 @@ ResultData read_result(const std::filesystem::path& path) {
     const auto gt = root.open_group("ground_truth");
     const auto t = gt.read<double>("t", {3});
     const auto q = gt.read<double>("q", {4});
-    h.truth_pose = pose_from(t.data(), q.data());
+    h.truth_pose = pose_from_row(t.data(), q.data());
   }
   const std::int64_t K64 = root.int_attribute("steps");
   const auto K = static_cast<std::int64_t>(K64);
@@ -254,7 +240,7 @@ ResultData read_result(const std::filesystem::path& path) {
     s.best_weight = bw[k];
     s.best_log_weight = blw[k];
     s.best_posterior = bp[k];
-    s.best_pose = pose_from(&bt[3 * k], &bq[4 * k]);
+    s.best_pose = pose_from_row(&bt[3 * k], &bq[4 * k]);
     s.posterior.assign(post.begin() + k * n_obj, post.begin() + (k + 1) * n_obj);
     if (!std::isnan(e_pos[k]))
       s.error = PoseError{e_pos[k], e_ori[k], e_sori[k], e_spos[k]};
@@ -263,7 +249,7 @@ ResultData read_result(const std::filesystem::path& path) {
     for (std::uint64_t j = hb[k]; j < hb[k] + hc[k]; ++j) {
       Hypothesis x;
       x.object = static_cast<std::uint32_t>(hobj[j]);
-      x.pose = pose_from(&ht[3 * j], &hq[4 * j]);
+      x.pose = pose_from_row(&ht[3 * j], &hq[4 * j]);
       x.log_weight = hlw[j];
       x.weight = hw[j];
       x.born = hborn[j];

@@ -1,5 +1,7 @@
 #include "io/run_store.hpp"
 
+#include "io/pose_row.hpp"
+
 #include "io/atomic_file.hpp"
 #include "io/h5.hpp"
 
@@ -23,19 +25,6 @@ const char* kStepDoubles[] = {"weight",           "posterior_true",        "post
                               "symmetric_orientation_error_rad",            "mssd_m",
                               "time_s"};
 const char* kStepInts[] = {"best_object", "true_rank", "hypotheses", "contacts", "free_points"};
-
-std::array<double, 7> pose_row(const Pose& p) {
-  const Eigen::Quaterniond q(p.linear());
-  const Vec3 t = p.translation();
-  return {t.x(), t.y(), t.z(), q.w(), q.x(), q.y(), q.z()};
-}
-
-Pose pose_from(const double* r) {
-  Pose p = Pose::Identity();
-  p.translation() = Vec3(r[0], r[1], r[2]);
-  p.linear() = Eigen::Quaterniond(r[3], r[4], r[5], r[6]).normalized().toRotationMatrix();
-  return p;
-}
 
 double step_double(const RunStepRecord& s, int k) {
   switch (k) {
@@ -310,7 +299,7 @@ std::vector<RunRecord> read_runs(const h5::File& file, const RunStoreHeader& h,
       throw Error("run refers to missing step rows", file.name(), where);
     r.grasps.assign(grasps.begin() + static_cast<std::ptrdiff_t>(i * steps),
                     grasps.begin() + static_cast<std::ptrdiff_t>((i + 1) * steps));
-    r.truth = pose_from(&truth[7 * i]);
+    r.truth = pose_from_row(&truth[7 * i]);
     r.wall_time_s = wall[i];
     for (std::int64_t k = 0; k < steps; ++k) {
       const std::size_t row = static_cast<std::size_t>(first[i] + k);
@@ -320,7 +309,7 @@ std::vector<RunRecord> read_runs(const h5::File& file, const RunStoreHeader& h,
       for (std::size_t c = 0; c < std::size(kStepInts); ++c) step_int(s, static_cast<int>(c)) = ints[c][row];
       for (std::size_t c = 0; c < std::size(kStepDoubles); ++c)
         set_step_double(s, static_cast<int>(c), dbls[c][row]);
-      s.pose = pose_from(&pose[7 * row]);
+      s.pose = pose_from_row(&pose[7 * row]);
       s.stage_times_s.assign(stage.begin() + static_cast<std::ptrdiff_t>(S * row),
                              stage.begin() + static_cast<std::ptrdiff_t>(S * (row + 1)));
       s.values.assign(values.begin() + static_cast<std::ptrdiff_t>(V * row),

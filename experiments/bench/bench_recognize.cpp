@@ -18,7 +18,6 @@
 //
 // Prints the machine, thread counts, parameters and every figure.
 #include "datasets/simulator.hpp"
-#include "engine/free_cloud.hpp"
 #include "engine/fusion.hpp"
 #include "engine/pose_error.hpp"
 #include "engine/recognizer.hpp"

@@ -1,6 +1,6 @@
 // Occupancy grid and free-space cloud (Section 4.1.2, Eq. 3) against brute force, far from the
 // origin too, and the swept volume of the gripper.
-#include "engine/free_cloud.hpp"
+#include "engine/free_cloud_oracle.hpp"
 #include "engine/free_space.hpp"
 
 #include <doctest/doctest.h>
@@ -141,7 +141,7 @@ TEST_CASE("full free cloud: the centres of entirely free cubes, equal to brute f
   grid.mark_free_box(R, Vec3(-0.15, -0.12, -0.06), Vec3(0.15, 0.12, 0.07));
   const Eigen::AlignedBox3d B(origin - Vec3::Constant(0.2), origin + Vec3(0.2, 0.1, 0.2));
   const auto fast = grid.full_free_cloud(B, 0.04);
-  const auto oracle = full_free_cloud(grid, B, 0.04);
+  const auto oracle = test::full_free_cloud(grid, B, 0.04);
   REQUIRE(oracle.size() > 10);
   CHECK(fast == oracle);
   CHECK(fast.size() < grid.free_cloud(B, 0.04).size());  // partly free cubes are left out
@@ -155,7 +155,7 @@ TEST_CASE("full free cloud: the centres of entirely free cubes, equal to brute f
   grid.mark_occupied(fast.front() + Vec3(0.01, -0.01, 0.005));
   const auto after = grid.full_free_cloud(B, 0.04);
   CHECK(after.size() + 1 == fast.size());
-  CHECK(after == full_free_cloud(grid, B, 0.04));
+  CHECK(after == test::full_free_cloud(grid, B, 0.04));
   CHECK(grid.full_free_cloud(Eigen::AlignedBox3d(), 0.04).empty());
 }
 

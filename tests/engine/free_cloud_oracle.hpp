@@ -1,12 +1,20 @@
-#include "engine/free_cloud.hpp"
+// Test oracle of OccupancyGrid::full_free_cloud (engine/free_space.hpp): the recognizer's
+// free-space cloud PC^free (Section 4.1.2) by brute force over every free voxel: one point per
+// cube of size res that is ENTIRELY free, at the cube's centre, inside the box B of Eq. 3.
+#pragma once
+
+#include "engine/free_space.hpp"
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 
-namespace ts {
+namespace ts::test {
 
-std::vector<Vec3> full_free_cloud(const OccupancyGrid& grid, const Eigen::AlignedBox3d& box,
+/// Centres of the cubes [k * res, (k + 1) * res)^3 (k integer, relative to the grid's origin)
+/// whose every voxel is free and whose centre lies in `box` (world frame); ordered by cube key.
+/// res should be a multiple of the grid's voxel. Deterministic.
+inline std::vector<Vec3> full_free_cloud(const OccupancyGrid& grid, const Eigen::AlignedBox3d& box,
                                   double res) {
   std::vector<Vec3> out;
   if (box.isEmpty() || !(res > 0.0)) return out;
@@ -35,4 +43,4 @@ std::vector<Vec3> full_free_cloud(const OccupancyGrid& grid, const Eigen::Aligne
   return out;
 }
 
-}  // namespace ts
+}  // namespace ts::test
