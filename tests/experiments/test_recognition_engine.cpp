@@ -3,6 +3,7 @@
 #include "engine/recognition_fixture.hpp"
 #include "datasets/simulator.hpp"
 #include "experiments/calibration.hpp"
+#include "experiments/engine_database.hpp"
 #include "experiments/recognition_engine.hpp"
 #include "temp_dir.hpp"
 
@@ -306,4 +307,44 @@ TEST_CASE("Recognition engine: hidden objects (open set) are explored but never 
     CHECK(e.field() == "hidden");
     CHECK(e.message().find("teapot") != std::string::npos);
   }
+}
+
+TEST_CASE("Recognition engine: a sweep of the FLANN index settings searches each variant with its own index") {
+  // The paper's preset searches a FLANN index (not the feature table); variants of one database
+  // differing in index.exact must each give what that configuration gives alone.
+  ExperimentConfig c = small_config();
+  set_key(c, "objects", {"nut"});
+  set_key(c, "runs", {"1"});
+  set_key(c, "preset", {"paper"});
+  set_key(c, "ransac.prune", {"5"});
+  set_key(c, "index.checks", {"1"});
+  set_key(c, "sweep.index.exact", {"true", "false"});
+  test::TempDir dir("engine_index");
+  auto swept = make_recognition_engine(c, small_database(), 1);
+  REQUIRE(swept->header().variant_labels.size() == 2);
+  const auto runs = run_all(*swept, c, dir / "swept.h5", 1, true);
+  REQUIRE(runs.size() == 2);
+  const auto variants = expand_variants(c);
+  for (int v = 0; v < 2; ++v) {
+    CAPTURE(v);
+    const ExperimentConfig alone = variants[static_cast<std::size_t>(v)].config;
+    auto engine = make_recognition_engine(alone, small_database(), 1);
+    const auto own = run_all(*engine, alone, dir / ("alone" + std::to_string(v) + ".h5"), 1, true);
+    REQUIRE(own.size() == 1);
+    std::vector<io::RunRecord> from_sweep{runs[static_cast<std::size_t>(v)]};
+    from_sweep[0].variant = own[0].variant;
+    check_same_results(from_sweep, own);
+  }
+  // On this small database both settings find the same features; the group's lookup keeps
+  // one index per setting all the same.
+  DatabaseGroup group;
+  FeatureIndexSettings exact, approximate, other;
+  approximate.exact = other.exact = false;
+  approximate.checks = 7;
+  other.checks = 8;
+  const auto a = std::make_shared<const FeatureIndex>(), b = std::make_shared<const FeatureIndex>();
+  group.indices = {{exact, a}, {approximate, b}};
+  CHECK(group.index_for(exact) == a);
+  CHECK(group.index_for(approximate) == b);
+  CHECK(group.index_for(other) == nullptr);
 }
