@@ -443,7 +443,16 @@ Simulator::Grasp probe_touch(const MeshIndex& mesh, const std::vector<double>& a
 }
 }  // namespace
 
-Simulator::Grasp Simulator::grasp(std::size_t g) const {
+Simulator::Grasp Simulator::grasp(std::size_t g) const { return grasp_or_aim(g, nullptr); }
+
+GraspCommand Simulator::aim(std::size_t g) const {
+  if (impl_->settings.sensing == Sensing::probe) throw Error("a probe touch has no grasp aim", {}, "sensing");
+  GraspCommand c;
+  grasp_or_aim(g, &c);
+  return c;
+}
+
+Simulator::Grasp Simulator::grasp_or_aim(std::size_t g, GraspCommand* aim_only) const {
   const Impl& m = *impl_;
   if (m.settings.sensing == Sensing::probe)
     return probe_touch(m.mesh, m.area_cdf, m.settings, m.T_world_object, m.centre, m.radius, m.normal_sign, g);
@@ -466,6 +475,8 @@ Simulator::Grasp Simulator::grasp(std::size_t g) const {
   const auto open_links = G.link_poses(q);
   double travel = 0.0, best_shortfall = 1e300;
   Pose best_eef = Pose::Identity();
+  std::vector<double> best_nominal;
+  Vec3 best_p = Vec3::Zero(), best_d = Vec3::UnitZ();
   int attempts = 0;
   for (bool accepted = false; !accepted && attempts < gs.max_attempts; ++attempts) {
     // A random surface point (area-uniform) and its outward normal, object frame.
@@ -483,12 +494,7 @@ Simulator::Grasp Simulator::grasp(std::size_t g) const {
     const Vec3 e1 = perpendicular(-n), e2 = (-n).cross(e1);
     const Vec3 z = (cos_a * -n + sin_a * (std::cos(beta) * e1 + std::sin(beta) * e2)).normalized();
     const double roll = rng.uniform(0.0, 2.0 * std::numbers::pi);
-    const Vec3 f1 = perpendicular(z), f2 = z.cross(f1);
-    const Vec3 x = std::cos(roll) * f1 + std::sin(roll) * f2;
-    Pose T_obj_pad = Pose::Identity();
-    T_obj_pad.linear().col(0) = x;
-    T_obj_pad.linear().col(1) = z.cross(x);
-    T_obj_pad.linear().col(2) = z;
+    Pose T_obj_pad = rolled_frame(z, roll);
     const double ox = rng.uniform(-0.5, 0.5) * (sensor.rows - 1) * sensor.pitch_x;
     const double oy = rng.uniform(-0.5, 0.5) * (sensor.cols - 1) * sensor.pitch_y;
     T_obj_pad.translation() = p - T_obj_pad.linear() * Vec3(ox, oy, sensor.foam_thickness);
@@ -519,10 +525,27 @@ Simulator::Grasp Simulator::grasp(std::size_t g) const {
     if (L - travel < best_shortfall) {
       best_shortfall = L - travel;
       best_eef = T_obj_eef;
+      best_nominal = nominal;
+      best_p = p;
+      best_d = d;
     }
   }
   T_obj_eef = best_eef;
+  if (aim_only) {
+    aim_only->T_world_eef = m.T_world_object * T_obj_eef;
+    aim_only->approach = m.T_world_object.linear() * best_d;
+    aim_only->joints = best_nominal;
+    aim_only->target = m.T_world_object * best_p;
+    return {};
+  }
+  return finish(T_obj_eef, travel, attempts, g, rng);
+}
 
+Simulator::Grasp Simulator::finish(const Pose& T_obj_eef, double travel, int attempts, std::size_t g, Rng& rng) const {
+  const Impl& m = *impl_;
+  const Gripper& G = m.gripper;
+  const SensorSettings& sensor = G.sensor();
+  std::vector<double> q = G.open_angles();
   // 4. Close every finger.
   Grasp out;
   out.diagnostics.approach_travel = travel;

@@ -27,6 +27,7 @@
 // gives the same true grasps.
 #pragma once
 
+#include "engine/active_touch.hpp"
 #include "engine/fusion.hpp"
 #include "engine/mesh.hpp"
 
@@ -138,8 +139,15 @@ class Simulator {
     GraspDiagnostics diagnostics;
   };
   Grasp grasp(std::size_t g) const;   ///< a probe touch under sensing = probe
+  /// The operator's aim of grasp g (what grasp(g) executes), as a command: the hand pose where
+  /// the approach stopped (world), the approach direction, the aimed finger's nominal joint
+  /// angles (the others open), the aimed surface point. No finger closes, nothing is recorded.
+  GraspCommand aim(std::size_t g) const;
 
  private:
+  Grasp grasp_or_aim(std::size_t g, GraspCommand* aim_only) const;
+  /// Closing the fingers at T_obj_eef and recording (grasp g's noise stream).
+  Grasp finish(const Pose& T_obj_eef, double travel, int attempts, std::size_t g, Rng& rng) const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

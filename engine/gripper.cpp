@@ -209,4 +209,15 @@ std::vector<std::vector<double>> Gripper::closing_waypoints(const std::vector<do
   return out;
 }
 
+Pose rolled_frame(const Vec3& z, double roll) {
+  const Vec3 helper = std::abs(z.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+  const Vec3 f1 = z.cross(helper).normalized(), f2 = z.cross(f1);
+  const Vec3 x = std::cos(roll) * f1 + std::sin(roll) * f2;
+  Pose T = Pose::Identity();
+  T.linear().col(0) = x;
+  T.linear().col(1) = z.cross(x);
+  T.linear().col(2) = z;
+  return T;
+}
+
 }  // namespace ts

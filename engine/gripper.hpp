@@ -124,6 +124,11 @@ class Gripper {
 /// datasets/grippers/touchstone-3f.json holds the same description (a test keeps them equal).
 GripperSpec default_gripper_spec();
 
+/// A frame (rotation only) whose z axis is the unit vector `z`, its x axis turned by `roll` rad
+/// about z from a fixed perpendicular of z: how an aimed pad is oriented (the simulator's
+/// operator, the next-grasp planner).
+Pose rolled_frame(const Vec3& z, double roll);
+
 /// Rotation of `angle` rad about unit `axis` (joint rotations).
 Pose joint_rotation(const Vec3& axis, double angle);
 

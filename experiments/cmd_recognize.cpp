@@ -8,6 +8,7 @@
 #include "experiments/recognition_engine.hpp"
 
 #include "engine/feature_table.hpp"
+#include "engine/active_touch.hpp"
 #include "engine/fusion.hpp"
 #include "engine/kabsch.hpp"
 #include "engine/pose_error.hpp"
@@ -34,6 +35,7 @@
 #include <fstream>
 #include <iostream>
 #include <map>
+#include <numbers>
 #include <mutex>
 #include <set>
 #include <sstream>
@@ -61,6 +63,8 @@ struct RecognizeOptions {
   double contact_voxel = 0.002;      ///< m, voxel filter of the cumulative contact cloud
   std::optional<double> memory_budget_mb;  ///< resident object geometry; unset: the default
   bool inside_margin = false;        ///< --free-inside-margin given (unset: 0; a probe: 1 cm)
+  int suggest = 0;                   ///< --suggest N: the N best next grasps after the last step
+  ActiveSettings active;             ///< the next-grasp planner's parameters (active.*)
 };
 
 /// A 4x4 row-major object -> world matrix from a text file (whitespace or comma separated).
@@ -160,6 +164,8 @@ struct InputRun {
   std::vector<double> contact_distance;  ///< m, mean contact-to-model distance at each answer
   std::string written;           ///< the result file written ("" : none)
   std::string error;             ///< several inputs: why this one failed ("" : it did not)
+  nlohmann::ordered_json suggestions;   ///< --suggest: the best next grasps (null: not asked)
+  double suggest_time_s = 0.0;
   bool truth_outside = false;    ///< the log's object is not in the database (open set)
 };
 
@@ -273,6 +279,57 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
     if (progress) std::fprintf(stderr, "\rstep %d/%d", k, K);
   }
   if (progress) std::fprintf(stderr, "\n");
+
+  if (o.suggest > 0) {
+    // The N best next grasps on the state after the last step (engine/active_touch.hpp).
+    if (!log) throw Error("--suggest plans the next grasp of a tactile log (not a contact cloud)", in.path, "--suggest");
+    if (log->sensing == Sensing::probe)
+      throw Error("--suggest plans grasps of a gripper with pads; this is a probe log", in.path, "/sensing");
+    if (rec.hypotheses().empty())
+      throw Error("no contact yet after " + std::to_string(K) +
+                      " step(s): nothing to plan the next grasp from (touch the object first, e.g. any "
+                      "grasp toward it)",
+                  in.path, "--suggest");
+    const auto t0 = std::chrono::steady_clock::now();
+    std::optional<GraspPlanner> planner;
+    try {
+      planner.emplace(log->gripper, o.active);
+    } catch (const Error& e) {
+      throw Error(e.message(), in.path, e.field().empty() ? "/gripper" : "/gripper " + e.field());
+    }
+    ex->advance_to(static_cast<std::size_t>(K));
+    const auto best = planner->plan(rec.hypotheses(), database_plan_objects(db), rs.seed,
+                                    static_cast<std::size_t>(o.suggest), ex->contact_cloud().points);
+    run.suggest_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    run.suggestions = nlohmann::ordered_json::array();
+    const Gripper& G = log->gripper;
+    for (std::size_t i = 0; i < best.size(); ++i) {
+      const PlannedGrasp& g = best[i];
+      nlohmann::ordered_json s;
+      s["rank"] = i + 1;
+      s["T_EEF"] = pose_json(g.command.T_world_eef);
+      nlohmann::ordered_json m = nlohmann::ordered_json::array();
+      for (int r = 0; r < 4; ++r)
+        for (int col = 0; col < 4; ++col) m.push_back(g.command.T_world_eef.matrix()(r, col));
+      s["T_EEF_matrix"] = m;
+      const Vec3 a = g.command.approach;
+      s["approach"] = {a.x(), a.y(), a.z()};
+      const Vec3 t = g.command.target;
+      s["target"] = {t.x(), t.y(), t.z()};
+      nlohmann::ordered_json joints;
+      for (int j = 0; j < G.joint_count(); ++j) {
+        const int f = G.finger_of_joint(j);
+        joints[G.spec().fingers[static_cast<std::size_t>(f)].name + "." + G.link(j).name] =
+            g.command.joints[static_cast<std::size_t>(j)] * 180.0 / std::numbers::pi;
+      }
+      s["joints_deg"] = joints;
+      s["expected_information_nats"] = g.information;
+      s["blocked_weight"] = g.blocked_weight;
+      s["score"] = g.score;
+      s["aimed_object"] = db.info(g.aimed_object).name;
+      run.suggestions.push_back(std::move(s));
+    }
+  }
 
   if (!out.empty()) {
     io::ResultHeader h;
@@ -390,6 +447,10 @@ nlohmann::ordered_json input_json(const Context& c, const InputRun& run, bool wi
   j["input"] = run.in.path;
   j["truth_object"] = run.truth_name.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(run.truth_name);
   j["truth_in_database"] = run.truth_name.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(!run.truth_outside);
+  if (!run.suggestions.is_null()) {
+    j["suggestions"] = run.suggestions;
+    j["suggest_time_s"] = run.suggest_time_s;
+  }
   return j;
 }
 
@@ -615,6 +676,15 @@ int run_recognize(const RecognizeOptions& o) {
     std::cout << "method " << method_name(rs.method) << ", " << db.size() << " objects, "
               << input_label(run) << '\n';
     print_table(c, run);
+    if (!run.suggestions.is_null()) {
+      std::printf("\nnext grasps (planned in %.3f s; --json for T_EEF and the joint targets):\n", run.suggest_time_s);
+      std::printf("%5s  %-24s %12s %9s  %s\n", "rank", "aimed object", "information", "blocked", "target (world, m)");
+      for (const auto& g : run.suggestions)
+        std::printf("%5d  %-24s %12.3f %9.3f  %.4f %.4f %.4f\n", g["rank"].get<int>(),
+                    g["aimed_object"].get<std::string>().c_str(), g["expected_information_nats"].get<double>(),
+                    g["blocked_weight"].get<double>(), g["target"][0].get<double>(), g["target"][1].get<double>(),
+                    g["target"][2].get<double>());
+    }
   }
   return 0;
 }
@@ -670,6 +740,11 @@ void register_recognize(CLI::App& app) {
   // older flags; the preset's value where not given.
   experiments::add_parameter_flags(*sub, o->flags,
                                    "Method parameters (defaults: the preset's; `touchstone params` lists them)");
+  sub->add_option("--suggest", o->suggest,
+                  "After the last step, the N best next grasps (world T_EEF, approach, finger joint targets, "
+                  "expected information) in the JSON (\"suggestions\"): the next-grasp planner, active.* "
+                  "parameters. A single tactile log; an error when no grasp touched yet")
+      ->check(CLI::Range(1, 1000));
   sub->add_option("--memory-budget", o->memory_budget_mb,
                   "Resident object geometry in MB, loaded on demand and evicted least-recently-used "
                   "(default 256; 0: no limit). Never changes results")
@@ -681,11 +756,14 @@ void register_recognize(CLI::App& app) {
     experiments::apply_flags(o->flags, m);
     o->rs = m.recognizer;
     o->contact_voxel = m.contact_voxel;
+    o->active = m.active;
     o->inside_margin = o->flags.given.count("evaluate.free_inside_margin_m") > 0;
     if (o->logs.empty() && o->clouds.empty())
       throw CLI::RequiredError("--log or --cloud");
     o->batch = o->logs.size() + o->clouds.size() > 1 ||
                std::any_of(o->clouds.begin(), o->clouds.end(), [](const std::string& p) { return fs::is_directory(p); });
+    if (o->suggest > 0 && (o->batch || o->logs.empty()))
+      throw CLI::ValidationError("--suggest", "takes a single --log (the next grasp of that exploration)");
     if (o->batch && !o->free.empty())
       throw CLI::ValidationError("--free", "takes a single --cloud (its free space)");
     for (const auto& [flag, value] : {std::pair{"--ground-truth", &o->ground_truth}, {"--object", &o->object}})

@@ -239,6 +239,37 @@ std::vector<Parameter> declaration() {
   // Contact fusion.
   d.push_back(real("exploration.contact_voxel_m", "m", 1e-6, 1, "", "Voxel filter of the cumulative contact cloud",
                    {"--contact-voxel", "contact_voxel"}, TS_FIELD(contact_voxel)));
+  // Active touch (engine/active_touch.hpp): experiments choose each grasp after the first with
+  // the planner; `recognize --suggest` reads the planner's parameters.
+  {
+    Parameter p = declare("exploration.strategy", Type::choice, "", 0, 1, "random (Section 5.1: the operator's grasps)",
+                          "Experiments: grasps after the first drawn at random from the pool, or chosen by the "
+                          "next-grasp planner (active) and executed on the true object",
+                          {"--exploration", "exploration"}, TS_FIELD(exploration));
+    p.choices = {"random", "active"};
+    d.push_back(std::move(p));
+  }
+  d.push_back(integer("active.candidates", 1, 100000, "", "Active touch: candidate grasps scored per step",
+                      {"active_candidates"}, TS_FIELD(active.candidates)));
+  d.push_back(integer("active.hypotheses", 1, 100000, "",
+                      "Active touch: K, hypotheses the outcomes are predicted under (the best of each object first)",
+                      {"active_hypotheses"}, TS_FIELD(active.hypotheses)));
+  d.push_back(integer("active.leaders", 1, 100000, "", "Active touch: hypotheses whose models the candidates aim at",
+                      {"active_leaders"}, TS_FIELD(active.leaders)));
+  d.push_back(real("active.aim_radius_m", "m", 0, 100, "",
+                   "Active touch: aims only at model points within this of a contact so far (0: anywhere)",
+                   {"active_aim_radius"}, TS_FIELD(active.aim_radius)));
+  d.push_back(integer("active.attempts", 1, 10000, "",
+                      "Active touch: aims per candidate (one the open hand cannot reach on its own model is redrawn)",
+                      {"active_attempts"}, TS_FIELD(active.attempts)));
+  d.push_back(real("active.sigma_m", "m", 1e-5, 1, "", "Active touch: noise of a predicted pad distance",
+                   {"active_sigma"}, TS_FIELD(active.sigma)));
+  d.push_back(real("active.collision_weight", "", 0, 1e6, "",
+                   "Active touch: score penalty (nats) per unit of hypothesis weight that blocks the hand",
+                   {"active_collision_weight"}, TS_FIELD(active.collision_weight)));
+  d.push_back(real("active.temperature", "", 1e-6, 1e12, "",
+                   "Active touch: ln wt divided by this before the hypotheses' weights are normalized",
+                   {"active_temperature"}, TS_FIELD(active.temperature)));
   return d;
 }
 

@@ -2,6 +2,7 @@
 
 #include "datasets/simulator.hpp"
 #include "experiments/calibration.hpp"
+#include "engine/active_touch.hpp"
 #include "engine/feature_table.hpp"
 #include "engine/fusion.hpp"
 #include "engine/pose_error.hpp"
@@ -17,6 +18,8 @@
 #include <tbb/version.h>
 
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -39,6 +42,7 @@ double seconds_since(Clock::time_point t) {
 }
 
 constexpr std::uint64_t kRecognizerStream = 0x72656367ULL;  // "recg"
+constexpr std::uint64_t kPlannerStream = 0x706c616eULL;     // "plan"
 
 struct VariantData {
   ExperimentConfig config;
@@ -50,6 +54,8 @@ struct VariantData {
   datasets::SimulatorSettings simulation;      ///< without grasps count and seed
   RecognizerSettings recognizer;
   double contact_voxel = 0.002;                ///< m, voxel filter of the cumulative contacts
+  bool active = false;                         ///< exploration.strategy = active
+  ActiveSettings planner;                      ///< the next-grasp planner's settings
 };
 
 std::size_t index_of(const std::vector<std::string>& names, const std::string& name) {
@@ -118,6 +124,11 @@ class RecognitionEngine final : public RunEngine {
       d.hide_each = r.hide_each;
       d.recognizer = rs;
       d.contact_voxel = ms.contact_voxel;
+      d.active = ms.exploration == 1;
+      d.planner = ms.active;
+      if (d.active && d.simulation.sensing == Sensing::probe)
+        throw Error("active exploration plans grasps of a gripper with pads, not probe touches", {},
+                    "exploration.strategy");
       variants_.push_back(std::move(d));
       labels_.push_back(v.label);
       configs_.push_back(to_json(v.config).dump());
@@ -257,6 +268,28 @@ class RecognitionEngine final : public RunEngine {
     TactileLog log = v.shared_pool ? log_from_pool(pools_.at({v.pool_key, task.object}), rec.grasps)
                                    : simulate_run_log(v, task, rec.grasps);
     rec.truth = log.truth->object_pose;
+    // Active exploration: the first grasp is the run's first drawn grasp; each later one is the
+    // planner's choice among the pool's other grasps (the operator's aims, scored on the
+    // recognizer's state), executed on the true object by the run's own simulator: the same
+    // object pose, gains and per-grasp noise streams as the random runs' pool.
+    std::optional<datasets::Simulator> simulator;
+    std::optional<GraspPlanner> planner;
+    if (v.active) {
+      datasets::SimulatorSettings ss = v.simulation;
+      ss.seed = pool_seed(config_.seed, name, v.shared_pool ? std::nullopt : std::optional<int>(task.run));
+      simulator.emplace(db_.load_mesh(file_index), name, log.gripper, ss);
+      planner.emplace(log.gripper, v.planner);
+      log.grasps.resize(1);
+      log.truth->arm_poses.resize(1);
+      if (!log.truth->joints.empty()) log.truth->joints.resize(1);
+    }
+    const PlanObjects plan_objects = database_plan_objects(*group.database);
+    std::set<std::size_t> used;                          // pool grasps executed so far
+    std::vector<std::optional<GraspCommand>> aims;       // the operator's aims, by pool grasp
+    if (v.active) {
+      used.insert(static_cast<std::size_t>(rec.grasps.front()));
+      aims.resize(static_cast<std::size_t>(v.config.pool));
+    }
 
     RecognizerSettings rs = v.recognizer;
     if (v.hide_each) {
@@ -273,6 +306,47 @@ class RecognitionEngine final : public RunEngine {
     const auto run_start = Clock::now();
     for (int k = 1; k <= v.config.steps; ++k) {
       if (stop && stop->load()) return std::nullopt;
+      double plan_s = 0.0;
+      if (v.active && k > 1) {
+        // The operator's aims at the pool's grasps not yet executed (as many as
+        // active.candidates, a seeded choice when more remain), ranked by the planner on the
+        // state after the previous step; the best one is executed. Nothing to plan from (no
+        // hypothesis yet): the drawn grasp.
+        std::size_t g = static_cast<std::size_t>(rec.grasps.at(static_cast<std::size_t>(k - 1)));
+        if (used.count(g) || !recognizer.hypotheses().empty()) {
+          const auto tp = Clock::now();
+          const std::uint64_t seed =
+              Rng(config_.seed, kPlannerStream, name_hash(name), static_cast<std::uint64_t>(task.run) * 4096u + k).next();
+          std::vector<std::size_t> unused;
+          for (std::size_t i = 0; i < aims.size(); ++i)
+            if (!used.count(i)) unused.push_back(i);
+          Rng pick(seed);
+          for (std::size_t i = unused.size(); i > 1; --i) std::swap(unused[i - 1], unused[pick.index(i)]);
+          if (unused.size() > v.planner.candidates) unused.resize(v.planner.candidates);
+          std::sort(unused.begin(), unused.end());
+          tbb::parallel_for(std::size_t{0}, unused.size(), [&](std::size_t i) {
+            if (!aims[unused[i]]) aims[unused[i]] = simulator->aim(unused[i]);
+          });
+          if (!recognizer.hypotheses().empty()) {
+            std::vector<GraspCommand> commands;
+            for (std::size_t i : unused) commands.push_back(*aims[i]);
+            const auto scored = planner->evaluate(commands, recognizer.hypotheses(), plan_objects);
+            std::size_t best = 0;
+            for (std::size_t i = 1; i < scored.size(); ++i)
+              if (scored[i].score > scored[best].score) best = i;
+            g = unused.at(best);
+          } else {
+            g = unused.front();   // the drawn grasp was executed already: the first unused one
+          }
+          plan_s = seconds_since(tp);
+        }
+        used.insert(g);
+        rec.grasps[static_cast<std::size_t>(k - 1)] = static_cast<std::int32_t>(g);
+        datasets::Simulator::Grasp next = simulator->grasp(g);
+        log.grasps.push_back(std::move(next.measured));
+        log.truth->arm_poses.push_back(next.true_arm_pose);
+        if (!next.true_joints.empty()) log.truth->joints.push_back(next.true_joints);
+      }
       const auto t0 = Clock::now();
       exploration.advance_to(static_cast<std::size_t>(k));
       const PointCloud contacts = exploration.contact_cloud();
@@ -315,11 +389,11 @@ class RecognitionEngine final : public RunEngine {
       s.orientation_error_rad = e.orientation_deg * std::numbers::pi / 180.0;
       s.symmetric_orientation_error_rad = e.symmetric_orientation_deg * std::numbers::pi / 180.0;
       s.mssd_m = group_mssd(s.pose, rec.truth, model);
-      s.time_s = fusion_s + recognize_s;
+      s.time_s = fusion_s + recognize_s + plan_s;
       const StageTimes& t = sr.times;
       const double known = t.prepare_s + t.prune_s + t.register_s + t.icp_s + t.evaluate_s;
       s.stage_times_s = {fusion_s, t.prepare_s, t.prune_s, t.register_s, t.icp_s, t.evaluate_s,
-                         std::max(0.0, recognize_s - known)};
+                         std::max(0.0, recognize_s - known), plan_s};
       rec.steps.push_back(std::move(s));
     }
     rec.wall_time_s = seconds_since(run_start);
@@ -364,7 +438,7 @@ const std::vector<std::string>& recognition_step_values() {
 
 const std::vector<std::string>& recognition_stages() {
   static const std::vector<std::string> stages{"fusion", "prepare", "prune", "register",
-                                               "icp", "evaluate", "other"};
+                                               "icp", "evaluate", "other", "plan"};
   return stages;
 }
 

@@ -865,3 +865,68 @@ TEST_CASE("cli params --json: every method parameter is a recognize flag (and ea
   CHECK(unknown.code != 0);
   CHECK(unknown.err.find("did you mean 'ransac.triplets'") != std::string::npos);
 }
+
+TEST_CASE("cli recognize --suggest: the N best next grasps in the world frame, the same for any --threads") {
+  test::TempDir dir("cli_suggest");
+  make_db(dir);
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 3 --noise underwater --seed 4 --out log.h5").code == 0);
+  const std::string args = "recognize --db db.h5 --log log.h5 --json --suggest 3 --active.candidates 24" + kFast;
+  const Run a = touchstone(dir, args + " --threads 1");
+  REQUIRE_MESSAGE(a.code == 0, a.err);
+  const Run b = touchstone(dir, args + " --threads 2");
+  REQUIRE_MESSAGE(b.code == 0, b.err);
+  auto ja = nlohmann::json::parse(a.out), jb = nlohmann::json::parse(b.out);
+  const auto& s = ja["suggestions"];
+  REQUIRE(s.size() == 3);
+  CHECK(s == jb["suggestions"]);
+  const TactileLog log = io::read_log(dir / "log.h5");
+  const std::size_t K = std::min<std::size_t>(16, ja["steps"].back()["hypotheses"].size());
+  double previous = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    const auto& g = s[i];
+    CHECK(g["rank"] == i + 1);
+    CHECK(g["score"].get<double>() <= previous);
+    previous = g["score"].get<double>();
+    CHECK(g["T_EEF"]["t"].size() == 3);
+    CHECK(g["T_EEF"]["q"].size() == 4);
+    CHECK(g["T_EEF_matrix"].size() == 16);
+    CHECK(g["joints_deg"].size() == static_cast<std::size_t>(log.gripper.joint_count()));
+    const double info = g["expected_information_nats"].get<double>();
+    CHECK(info >= 0.0);
+    CHECK(info <= std::log(static_cast<double>(std::max<std::size_t>(K, 16))) + 1e-9);
+    // The hand's pose and the aim agree: the approach is a unit vector, the target within the
+    // hand's reach of the EEF origin, and near the explored contacts (the object is under 20 cm).
+    const Vec3 t(g["T_EEF"]["t"][0].get<double>(), g["T_EEF"]["t"][1].get<double>(), g["T_EEF"]["t"][2].get<double>());
+    const Vec3 target(g["target"][0].get<double>(), g["target"][1].get<double>(), g["target"][2].get<double>());
+    const Vec3 approach(g["approach"][0].get<double>(), g["approach"][1].get<double>(), g["approach"][2].get<double>());
+    CHECK(approach.norm() == doctest::Approx(1.0).scale(0).epsilon(1e-9));
+    CHECK((target - t).norm() <= log.gripper.reach() + 1e-9);
+    CHECK((target - log.truth->object_pose.translation()).norm() < 0.3);
+  }
+  CHECK(ja["suggest_time_s"].get<double>() >= 0.0);
+}
+
+TEST_CASE("cli recognize --suggest: bad input is one clear error") {
+  test::TempDir dir("cli_suggest_bad");
+  make_db(dir);
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 2 --noise ideal --seed 4 --out log.h5").code == 0);
+  auto expect_error = [&](const std::string& args, const std::string& what) {
+    const Run r = touchstone(dir, args);
+    INFO(args);
+    CHECK(r.code != 0);
+    CHECK_MESSAGE(r.err.find(what) != std::string::npos, r.err);
+  };
+  expect_error("recognize --db db.h5 --log log.h5 --suggest 0" + kFast, "--suggest");
+  expect_error("recognize --db db.h5 --log log.h5 --suggest 2 --active.candidates 0" + kFast, "active.candidates");
+  {  // no contact yet: every sensel silent
+    TactileLog silent = io::read_log(dir / "log.h5");
+    for (auto& g : silent.grasps)
+      for (auto& e : g.tactile) e = 0.0f;
+    io::write_log(dir / "silent.h5", silent);
+    expect_error("recognize --db db.h5 --log silent.h5 --suggest 2" + kFast, "no contact yet");
+  }
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 2 --sensing probe --noise ideal --out probe.h5").code == 0);
+  expect_error("recognize --db db.h5 --log probe.h5 --suggest 2" + kFast, "probe log");
+  REQUIRE(touchstone(dir, "log export log.h5 --out c.ply").code == 0);
+  expect_error("recognize --db db.h5 --cloud c.ply --suggest 2" + kFast, "--suggest");
+}

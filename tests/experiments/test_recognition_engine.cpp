@@ -12,6 +12,7 @@
 #include <tbb/task_arena.h>
 
 #include <cmath>
+#include <set>
 
 using namespace ts;
 using namespace ts::experiments;
@@ -347,4 +348,46 @@ TEST_CASE("Recognition engine: a sweep of the FLANN index settings searches each
   CHECK(group.index_for(exact) == a);
   CHECK(group.index_for(approximate) == b);
   CHECK(group.index_for(other) == nullptr);
+}
+
+TEST_CASE("Recognition engine: active exploration plans each grasp after the first, deterministically") {
+  test::TempDir dir("engine_active");
+  ExperimentConfig c = small_config();
+  set_key(c, "sweep.exploration.strategy", {"random", "active"});   // one variant each, paired runs
+  set_key(c, "active.candidates", {"12"});
+  validate(c);
+  auto engine = make_recognition_engine(c, small_database(), 2);
+  const auto serial = run_all(*engine, c, dir / "serial.h5", 1, false);
+  REQUIRE(serial.size() == 8);
+  const auto plan = static_cast<std::size_t>(
+      std::find(recognition_stages().begin(), recognition_stages().end(), "plan") - recognition_stages().begin());
+  REQUIRE(plan < recognition_stages().size());
+  int differing = 0;
+  for (const auto& r : serial) {
+    const bool active = r.variant == 1;
+    // The paired random run: same object and run, the other variant.
+    const io::RunRecord* twin = nullptr;
+    for (const auto& o : serial)
+      if (o.variant != r.variant && o.object == r.object && o.run == r.run) twin = &o;
+    REQUIRE(twin);
+    CHECK(r.truth.isApprox(twin->truth, 0.0));        // same object pose
+    CHECK(r.grasps.front() == twin->grasps.front());    // the same first grasp
+    std::set<std::int32_t> distinct(r.grasps.begin(), r.grasps.end());
+    CHECK(distinct.size() == r.grasps.size());          // pool grasps, each at most once
+    CHECK(*distinct.begin() >= 0);
+    CHECK(*distinct.rbegin() < 5);
+    CHECK(r.steps[0].contacts == twin->steps[0].contacts);   // the first grasp is the drawn one
+    for (std::size_t k = 0; k < r.steps.size(); ++k) {
+      const double t = r.steps[k].stage_times_s.at(plan);
+      // Planned after a step that left hypotheses; otherwise (and in random runs) the drawn grasp.
+      if (!active || k == 0 || r.steps[k - 1].hypotheses == 0)
+        CHECK(t == 0.0);
+      else
+        CHECK(t > 0.0);
+    }
+    if (active) differing += r.grasps != twin->grasps;
+  }
+  CHECK(differing > 0);   // the planner's choices are not the drawn order
+  const auto parallel = run_all(*engine, c, dir / "parallel.h5", 2, true);
+  check_same_results(serial, parallel);
 }
