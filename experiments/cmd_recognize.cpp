@@ -65,6 +65,7 @@ struct RecognizeOptions {
   bool inside_margin = false;        ///< --free-inside-margin given (unset: 0; a probe: 1 cm)
   int suggest = 0;                   ///< --suggest N: the N best next grasps after the last step
   ActiveSettings active;             ///< the next-grasp planner's parameters (active.*)
+  int exploration = 0;               ///< exploration.strategy (recorded; experiments act on it)
 };
 
 /// A 4x4 row-major object -> world matrix from a text file (whitespace or comma separated).
@@ -121,10 +122,12 @@ nlohmann::ordered_json number_or_null(const std::optional<double>& x) {
 }
 
 std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& s,
-                                                     double contact_voxel) {
+                                                     const RecognizeOptions& o) {
   experiments::MethodSettings m;
   m.recognizer = s;
-  m.contact_voxel = contact_voxel;
+  m.contact_voxel = o.contact_voxel;
+  m.exploration = o.exploration;
+  m.active = o.active;
   return experiments::stored_parameters(m);
 }
 
@@ -286,9 +289,9 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
     if (log->sensing == Sensing::probe)
       throw Error("--suggest plans grasps of a gripper with pads; this is a probe log", in.path, "/sensing");
     if (rec.hypotheses().empty())
-      throw Error("no contact yet after " + std::to_string(K) +
-                      " step(s): nothing to plan the next grasp from (touch the object first, e.g. any "
-                      "grasp toward it)",
+      throw Error("no hypothesis after " + std::to_string(K) +
+                      " step(s) to plan the next grasp from: no contact yet, or no database object fits "
+                      "the contacts (touch the object again, e.g. any grasp toward it)",
                   in.path, "--suggest");
     const auto t0 = std::chrono::steady_clock::now();
     std::optional<GraspPlanner> planner;
@@ -341,7 +344,7 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
     for (std::size_t i = 0; i < db.size(); ++i) h.objects.push_back(db.info(i).name);
     h.truth_object = run.truth_name;
     h.truth_pose = run.truth_pose;
-    h.params = params_of(c.rs, o.contact_voxel);
+    h.params = params_of(c.rs, o);
     io::write_result(out, h, run.stored);
     run.written = out;
   }
@@ -461,7 +464,7 @@ void add_shared_json(nlohmann::ordered_json& j, const Context& c) {
   j["machine"] = machine_description();
   j["congruent_classes_known"] = c.congruence != nullptr;   // else "object_class" is the object alone
   nlohmann::ordered_json p;
-  for (const auto& [name, value] : params_of(c.rs, c.o.contact_voxel)) p[name] = value;
+  for (const auto& [name, value] : params_of(c.rs, c.o)) p[name] = value;
   j["params"] = p;
 }
 
@@ -757,6 +760,7 @@ void register_recognize(CLI::App& app) {
     o->rs = m.recognizer;
     o->contact_voxel = m.contact_voxel;
     o->active = m.active;
+    o->exploration = m.exploration;
     o->inside_margin = o->flags.given.count("evaluate.free_inside_margin_m") > 0;
     if (o->logs.empty() && o->clouds.empty())
       throw CLI::RequiredError("--log or --cloud");
