@@ -299,7 +299,9 @@ void sweep_candidates(const CongruenceShape& a, const CongruenceShape& b, int un
   const Mat3 reflect = Mat3::Identity() - 2.0 * n * n.transpose();
   constexpr int kSteps = 120;
   for (double sign : {1.0, -1.0}) {
-    const Mat3 R0 = Eigen::Quaterniond::FromTwoVectors(ua, sign * ub).toRotationMatrix();
+    // normalized(): for nearly opposite vectors (1 + cos small, but above Eigen's threshold
+    // for its exact branch) FromTwoVectors' quaternion is off unit length by up to 1e-4.
+    const Mat3 R0 = Eigen::Quaterniond::FromTwoVectors(ua, sign * ub).normalized().toRotationMatrix();
     for (int k = 0; k < kSteps; ++k) {
       const Mat3 R = Eigen::AngleAxisd(2.0 * std::numbers::pi * k / kSteps, ub).toRotationMatrix() * R0;
       out.push_back(R);

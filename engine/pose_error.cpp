@@ -13,9 +13,10 @@ namespace {
 
 constexpr double kDeg = 180.0 / std::numbers::pi;
 
-/// Minimal rotation taking unit vector `from` to unit vector `to`.
+/// Minimal rotation taking unit vector `from` to unit vector `to` (the quaternion normalized:
+/// see sweep_candidates in congruence.cpp).
 Mat3 minimal_rotation(const Vec3& from, const Vec3& to) {
-  return Eigen::Quaterniond::FromTwoVectors(from, to).toRotationMatrix();
+  return Eigen::Quaterniond::FromTwoVectors(from, to).normalized().toRotationMatrix();
 }
 
 }  // namespace
