@@ -5,13 +5,14 @@ intervals, which assume independent runs) and the median time per step, from run
 
     /usr/bin/python3 scripts/study7_figure.py STORE.h5 [STORE.h5 ...] --out FIG.png \
         [--label STORE.h5=catalogue ...] [--memory STORE.h5=1.6 ...] [--db-size STORE.h5=1.0 ...]
-        [--build-time STORE.h5=5.6 ...]
+        [--build-time STORE.h5=5.6 ...] [--shared STORE.h5 ...]
 
 A store's database size is its configuration's database_size, else the number of objects of
 its database. Stores with the same label are joined by a line (default label: the store's
 experiment name). --memory, --db-size and --build-time each add a panel: peak resident memory
 of the experiment (GB), the database file (GB) and its build time (minutes), measured outside
-(the stores do not hold them). Needs h5py and matplotlib (Debian's python3-h5py, python3-matplotlib).
+(the stores do not hold them). --shared leaves a store out of the time panel: its steps were timed
+on a machine shared with other jobs, so its times are not speed figures. Needs h5py and matplotlib (Debian's python3-h5py, python3-matplotlib).
 """
 import argparse
 import json
@@ -63,6 +64,7 @@ def main():
     ap.add_argument("--memory", action="append", default=[], help="STORE=GB")
     ap.add_argument("--db-size", action="append", default=[], help="STORE=GB")
     ap.add_argument("--build-time", action="append", default=[], help="STORE=minutes")
+    ap.add_argument("--shared", action="append", default=[], help="STORE timed on a shared machine")
     ap.add_argument("--steps", default="5,10,20,40")
     a = ap.parse_args()
     os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")
@@ -87,6 +89,7 @@ def main():
             sys.exit(f"study7_figure: error: cannot read {path}: {e}")
         for key, given, _ in extra:
             d[key] = given.get(path)
+        d["shared"] = path in a.shared
         series.setdefault(labels.get(path, d["name"]), []).append(d)
     panels = 2 + len(extra)
     rows = 1 if panels <= 3 else 2
@@ -112,8 +115,9 @@ def main():
             axes[0].errorbar(xs, y, yerr=err, marker=markers[li % len(markers)], capsize=3,
                              color=f"C{si}", linestyle="-" if li == 0 else "--",
                              label=f"{label}, step {s}")
-        t = [d["time"].get(20, d["time"][max(d["time"])]) for d in points]
-        axes[1].plot(x, t, marker=markers[li % len(markers)], label=label)
+        timed = [d for d in points if not d["shared"]]
+        t = [d["time"].get(20, d["time"][max(d["time"])]) for d in timed]
+        axes[1].plot([d["size"] for d in timed], t, marker=markers[li % len(markers)], label=label)
         for pi, (key, _, _) in enumerate(extra):
             m = [(d["size"], d[key]) for d in points if d[key] is not None]
             if m:
