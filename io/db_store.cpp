@@ -236,6 +236,14 @@ void write_object(h5::Group objects, const StoredObject& stored, const DbWriteSe
 // --- congruence ------------------------------------------------------------------------------
 constexpr int kSignatureColumns = 4;   // size, spread[0..2]
 
+/// The motion of pair row k is rigid: finite, its 3 x 3 orthogonal to 1e-6 (the reader's test,
+/// which the writer applies too, so that no database is written that cannot be read back).
+void check_motion(const CongruentPair& p, std::size_t k, const std::string& file, const h5::Group& g) {
+  if (!p.linear.allFinite() || !finite(p.translation) || (p.linear * p.linear.transpose() - Mat3::Identity()).norm() > 1e-6)
+    throw Error("row " + std::to_string(k) + " is not a rigid motion (orthogonal 3 x 3 and a finite translation)", file,
+                g.child_path("motion"));
+}
+
 void write_congruence_group(h5::Group root, const CongruenceRecord& c, std::size_t objects, const std::string& file) {
   if (c.signatures.size() != objects)
     throw Error("congruence record has " + std::to_string(c.signatures.size()) + " signatures for " +
@@ -250,7 +258,14 @@ void write_congruence_group(h5::Group root, const CongruenceRecord& c, std::size
   g.write("signatures", sig.data(), {c.signatures.size(), static_cast<std::uint64_t>(kSignatureColumns)});
   std::vector<std::int64_t> pairs, kind;
   std::vector<double> distance, motion;
-  for (const auto& p : c.pairs) {
+  for (std::size_t k = 0; k < c.pairs.size(); ++k) {
+    const auto& p = c.pairs[k];
+    if (!(p.a < p.b && p.b < objects))
+      throw Error("row " + std::to_string(k) + " is not a pair of objects a < b < " + std::to_string(objects), file,
+                  g.child_path("pairs"));
+    if (!(p.distance >= 0.0) || !std::isfinite(p.distance))
+      throw Error("row " + std::to_string(k) + " is not a non-negative number", file, g.child_path("distance"));
+    check_motion(p, k, file, g);
     pairs.insert(pairs.end(), {static_cast<std::int64_t>(p.a), static_cast<std::int64_t>(p.b)});
     kind.push_back(static_cast<std::int64_t>(p.kind));
     distance.push_back(p.distance);
@@ -304,10 +319,7 @@ CongruenceRecord read_congruence_group(const h5::Group& root, std::size_t object
       for (int q = 0; q < 3; ++q) p.linear(r, q) = motion[12 * k + 3 * r + q];
       p.translation[r] = motion[12 * k + 9 + r];
     }
-    if (!p.linear.allFinite() || !finite(p.translation) ||
-        (p.linear * p.linear.transpose() - Mat3::Identity()).norm() > 1e-6)
-      throw Error("row " + std::to_string(k) + " is not a rigid motion (orthogonal 3 x 3 and a finite translation)", file,
-                  g.child_path("motion"));
+    check_motion(p, k, file, g);
     c.pairs.push_back(p);
   }
   return c;

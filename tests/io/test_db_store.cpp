@@ -408,6 +408,16 @@ TEST_CASE("db store: the congruence record round-trips; databases without one op
     CHECK(c->mirrors()[0].a == 1);
   };
   check_record(ts::io::DbReader(dir / "new.h5"));
+  // A motion that is not rigid (as the 4 500-object catalogue's build once produced) is refused
+  // before anything is written, since the reader would refuse the file; nothing is left behind.
+  auto skew = rec;
+  skew.pairs[0].linear(2, 2) = 1.0 + 1e-5;
+  CHECK_THROWS_WITH_AS(ts::io::write_database(dir / "skew.h5", stored(objects), custom_settings(), 5, {}, &skew),
+                       doctest::Contains("row 0 is not a rigid motion"), ts::Error);
+  CHECK_FALSE(std::filesystem::exists(dir / "skew.h5"));
+  skew.pairs[0].linear(2, 2) = 1.0 + 1e-9;   // within the reader's 1e-6: written and read back
+  ts::io::write_database(dir / "skew.h5", stored(objects), custom_settings(), 5, {}, &skew);
+  CHECK(ts::io::DbReader(dir / "skew.h5").congruence()->pairs.size() == 2);
   // Added to the old database in place (on a copy): the objects' bytes are untouched.
   ts::io::write_congruence(dir / "old.h5", rec);
   check_record(ts::io::DbReader(dir / "old.h5"));
