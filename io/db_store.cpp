@@ -236,9 +236,16 @@ void write_object(h5::Group objects, const StoredObject& stored, const DbWriteSe
 // --- congruence ------------------------------------------------------------------------------
 constexpr int kSignatureColumns = 4;   // size, spread[0..2]
 
-/// The motion of pair row k is rigid: finite, its 3 x 3 orthogonal to 1e-6 (the reader's test,
-/// which the writer applies too, so that no database is written that cannot be read back).
-void check_motion(const CongruentPair& p, std::size_t k, const std::string& file, const h5::Group& g) {
+/// Pair row k as the reader accepts it and the writer writes it (so that no database is written
+/// that cannot be read back): objects a < b < objects, a non-negative distance, a rigid motion
+/// (finite, its 3 x 3 orthogonal to 1e-6).
+void check_pair(std::int64_t a, std::int64_t b, const CongruentPair& p, std::size_t k, std::size_t objects,
+                const std::string& file, const h5::Group& g) {
+  if (a < 0 || b <= a || b >= static_cast<std::int64_t>(objects))
+    throw Error("row " + std::to_string(k) + " is not a pair of objects a < b < " + std::to_string(objects), file,
+                g.child_path("pairs"));
+  if (!(p.distance >= 0.0) || !std::isfinite(p.distance))
+    throw Error("row " + std::to_string(k) + " is not a non-negative number", file, g.child_path("distance"));
   if (!p.linear.allFinite() || !finite(p.translation) || (p.linear * p.linear.transpose() - Mat3::Identity()).norm() > 1e-6)
     throw Error("row " + std::to_string(k) + " is not a rigid motion (orthogonal 3 x 3 and a finite translation)", file,
                 g.child_path("motion"));
@@ -260,12 +267,7 @@ void write_congruence_group(h5::Group root, const CongruenceRecord& c, std::size
   std::vector<double> distance, motion;
   for (std::size_t k = 0; k < c.pairs.size(); ++k) {
     const auto& p = c.pairs[k];
-    if (!(p.a < p.b && p.b < objects))
-      throw Error("row " + std::to_string(k) + " is not a pair of objects a < b < " + std::to_string(objects), file,
-                  g.child_path("pairs"));
-    if (!(p.distance >= 0.0) || !std::isfinite(p.distance))
-      throw Error("row " + std::to_string(k) + " is not a non-negative number", file, g.child_path("distance"));
-    check_motion(p, k, file, g);
+    check_pair(p.a, p.b, p, k, objects, file, g);
     pairs.insert(pairs.end(), {static_cast<std::int64_t>(p.a), static_cast<std::int64_t>(p.b)});
     kind.push_back(static_cast<std::int64_t>(p.kind));
     distance.push_back(p.distance);
@@ -307,19 +309,14 @@ CongruenceRecord read_congruence_group(const h5::Group& root, std::size_t object
   const auto motion = g.read<double>("motion", {rows, 12});
   for (std::size_t k = 0; k < shape[0]; ++k) {
     const std::int64_t a = pairs[2 * k], b = pairs[2 * k + 1];
-    if (a < 0 || b <= a || b >= static_cast<std::int64_t>(objects))
-      throw Error("row " + std::to_string(k) + " is not a pair of objects a < b < " + std::to_string(objects), file,
-                  g.child_path("pairs"));
     if (kind[k] != static_cast<std::int64_t>(Congruence::congruent) && kind[k] != static_cast<std::int64_t>(Congruence::mirror))
       throw Error("row " + std::to_string(k) + " is neither 1 (congruent) nor 2 (mirror image)", file, g.child_path("kind"));
-    if (!(distance[k] >= 0.0) || !std::isfinite(distance[k]))
-      throw Error("row " + std::to_string(k) + " is not a non-negative number", file, g.child_path("distance"));
     CongruentPair p{static_cast<std::uint32_t>(a), static_cast<std::uint32_t>(b), static_cast<Congruence>(kind[k]), distance[k]};
     for (int r = 0; r < 3; ++r) {
       for (int q = 0; q < 3; ++q) p.linear(r, q) = motion[12 * k + 3 * r + q];
       p.translation[r] = motion[12 * k + 9 + r];
     }
-    check_motion(p, k, file, g);
+    check_pair(a, b, p, k, objects, file, g);
     c.pairs.push_back(p);
   }
   return c;

@@ -102,7 +102,6 @@ def main():
     markers = "osD^v"
     for li, (label, points) in enumerate(sorted(series.items())):
         points.sort(key=lambda d: d["size"])
-        x = [d["size"] for d in points]
         for si, s in enumerate(steps):
             have = [d for d in points if s in d["rate"]]
             if not have:

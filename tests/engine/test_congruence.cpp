@@ -26,6 +26,23 @@ Mesh box(double x, double y, double z) { return box_mesh(Vec3(-x, -y, -z), Vec3(
 
 Mesh moved(const Mesh& m, const Mat3& L, const Vec3& t) { return moved_mesh(m, L, t); }
 
+/// A 10 x 10 x 1 cm plate with four tabs on its top face in a pinwheel: a 4-fold turn maps it
+/// onto itself, no reflection does; its principal axes in the plate's plane are undefined.
+Mesh pinwheel() {
+  std::vector<Mesh> parts{box(0.05, 0.05, 0.005)};
+  for (int k = 0; k < 4; ++k) {
+    const Mat3 turn = Eigen::AngleAxisd(k * std::numbers::pi / 2, Vec3::UnitZ()).toRotationMatrix();
+    parts.push_back(moved(box_mesh(Vec3(0.01, 0.035, 0.005), Vec3(0.05, 0.05, 0.015)), turn, Vec3::Zero()));
+  }
+  Mesh wheel;
+  for (const Mesh& p : parts) {
+    const int base = static_cast<int>(wheel.vertices.size());
+    wheel.vertices.insert(wheel.vertices.end(), p.vertices.begin(), p.vertices.end());
+    for (const auto& f : p.faces) wheel.faces.emplace_back(f + Eigen::Vector3i::Constant(base));
+  }
+  return wheel;
+}
+
 Mesh octahedron(double r) {
   Mesh m;
   m.vertices = {{r, 0, 0}, {-r, 0, 0}, {0, r, 0}, {0, -r, 0}, {0, 0, r}, {0, 0, -r}};
@@ -101,19 +118,7 @@ TEST_CASE("Congruence: a regular octahedron turned by 45 degrees (no principal a
 }
 
 TEST_CASE("Congruence: a flat pinwheel (two spreads alike: one axis defined) turned about any axis, and its mirror image") {
-  // A 10 x 10 x 1 cm plate with four tabs on its top face in a pinwheel: a 4-fold turn maps it
-  // onto itself, no reflection does; its principal axes in the plate's plane are undefined.
-  std::vector<Mesh> parts{box(0.05, 0.05, 0.005)};
-  for (int k = 0; k < 4; ++k) {
-    const Mat3 turn = Eigen::AngleAxisd(k * std::numbers::pi / 2, Vec3::UnitZ()).toRotationMatrix();
-    parts.push_back(moved(box_mesh(Vec3(0.01, 0.035, 0.005), Vec3(0.05, 0.05, 0.015)), turn, Vec3::Zero()));
-  }
-  Mesh wheel;
-  for (const Mesh& p : parts) {
-    const int base = static_cast<int>(wheel.vertices.size());
-    wheel.vertices.insert(wheel.vertices.end(), p.vertices.begin(), p.vertices.end());
-    for (const auto& f : p.faces) wheel.faces.emplace_back(f + Eigen::Vector3i::Constant(base));
-  }
+  const Mesh wheel = pinwheel();
   const Mat3 R = Eigen::AngleAxisd(0.3, Vec3(0.2, -1, 0.4).normalized()).toRotationMatrix() *
                  Eigen::AngleAxisd(1.234, Vec3::UnitZ()).toRotationMatrix();   // 1.234 rad: no 3 degree step
   const auto turned = compare_meshes(wheel, moved(wheel, R, Vec3(0.2, 0, 0)));
@@ -129,17 +134,7 @@ TEST_CASE("Congruence: nearly opposite axes give a rigid motion (4 500-object ca
   // FromTwoVectors lose the quaternion's unit length (1 + cos close to, but not within its
   // threshold of, zero), and the stored motion was 1.5e-5 away from orthogonal: the database
   // could not be read back. Here: the pinwheel turned upside down and tilted by 1e-5 rad or less.
-  std::vector<Mesh> parts{box(0.05, 0.05, 0.005)};
-  for (int k = 0; k < 4; ++k) {
-    const Mat3 turn = Eigen::AngleAxisd(k * std::numbers::pi / 2, Vec3::UnitZ()).toRotationMatrix();
-    parts.push_back(moved(box_mesh(Vec3(0.01, 0.035, 0.005), Vec3(0.05, 0.05, 0.015)), turn, Vec3::Zero()));
-  }
-  Mesh wheel;
-  for (const Mesh& p : parts) {
-    const int base = static_cast<int>(wheel.vertices.size());
-    wheel.vertices.insert(wheel.vertices.end(), p.vertices.begin(), p.vertices.end());
-    for (const auto& f : p.faces) wheel.faces.emplace_back(f + Eigen::Vector3i::Constant(base));
-  }
+  const Mesh wheel = pinwheel();
   double worst = 0.0;
   for (double tilt : {1e-5, 3e-6, 1e-6, 3e-7}) {
     const Mat3 R = Eigen::AngleAxisd(tilt, Vec3::UnitY()).toRotationMatrix() *
