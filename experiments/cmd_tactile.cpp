@@ -36,8 +36,6 @@ struct SimulateOptions {
   /// The simulator parameters simulate takes (experiments/parameters.cpp: noise, sensors,
   /// sensing and the noise overrides; --noise defaults to ideal here)
   experiments::ParameterFlags flags;
-  // Overrides of the noise profile simulate alone has (negative: keep the profile's value)
-  double joint_sigma_deg = -1, lateral_sigma = -1;
   std::vector<double> offset;
   datasets::ProbeSettings probe;
 };
@@ -62,13 +60,10 @@ int run_simulate(const SimulateOptions& o) {
   datasets::SimulatorSettings s = experiments::simulation_settings(c);
   s.grasps = o.grasps;
   s.seed = o.common.seed;
+  const double probe_sigma = s.probe.contact_sigma;   // noise.contact_sigma_m, when given
   s.probe = o.probe;
+  s.probe.contact_sigma = probe_sigma;
   s.probe.spec.shaft_radius = std::min(s.probe.spec.shaft_radius, s.probe.spec.ball_radius);
-  auto set = [](double v, double& field) {
-    if (v >= 0) field = v;
-  };
-  set(o.joint_sigma_deg, s.noise.joint_sigma_deg);
-  set(o.lateral_sigma, s.noise.lateral_sigma);
   if (!o.offset.empty()) s.world_offset = Vec3(o.offset[0], o.offset[1], o.offset[2]);
 
   const datasets::Simulator sim(db.load_mesh(index), db.info(index).name, gripper, s);
@@ -76,9 +71,18 @@ int run_simulate(const SimulateOptions& o) {
   std::ostringstream source;
   source << "touchstone simulate --object " << o.object << " --grasps " << o.grasps << " --noise " << c.noise
          << " --sensors " << c.sensors << " --seed " << o.common.seed;
+  // The noise overrides given, so that the source reproduces the log.
+  const experiments::NoiseOverrides& n = c.noise_params;
+  for (const auto& [flag, value] : {std::pair{"--arm-position-sigma", n.arm_position_sigma_m},
+                                    std::pair{"--arm-rotation-sigma", n.arm_rotation_sigma_deg},
+                                    std::pair{"--signal-noise", n.sensel_noise}, std::pair{"--force-noise", n.force_noise},
+                                    std::pair{"--joint-sigma", n.joint_sigma_deg}})
+    if (value) source << ' ' << flag << ' ' << *value;
   if (s.sensing == Sensing::probe)
     source << " --sensing probe --ball-radius " << o.probe.spec.ball_radius << " --probe-tilt " << o.probe.max_tilt_deg
-           << " --contact-sigma " << o.probe.contact_sigma << " --quantization " << o.probe.quantization;
+           << " --contact-sigma " << s.probe.contact_sigma << " --quantization " << o.probe.quantization;
+  else if (n.contact_sigma_m)
+    source << " --lateral-sigma " << *n.contact_sigma_m;
   io::LogHeader header = io::header_of(result.log);
   header.source = source.str();
   io::LogWriter writer = io::LogWriter::create(o.out, header, true);
@@ -221,7 +225,9 @@ void register_tactile(CLI::App& app) {
     sub->add_option("--grasps", opt->grasps, "Number of grasps")->required()->check(CLI::Range(1, 1000000));
     sub->add_option("--out", opt->out, "Tactile log to write (HDF5)")->required();
     // --noise (default ideal here), --sensors, --sensing, --arm-position-sigma, --arm-rotation-sigma,
-    // --signal-noise, --force-noise: the simulator parameters of experiments/parameters.cpp.
+    // --signal-noise, --force-noise, --joint-sigma, --lateral-sigma / --contact-sigma (one key,
+    // noise.contact_sigma_m: a sensel's lateral error, or the probe's own noise): the simulator
+    // parameters of experiments/parameters.cpp.
     experiments::add_parameter_flags(*sub, opt->flags, "Simulator parameters (touchstone params)",
                                      [](const experiments::Parameter& p) { return p.simulate; });
     const std::string pg = "Probe (--sensing probe)";
@@ -229,14 +235,9 @@ void register_tactile(CLI::App& app) {
         ->check(CLI::Range(1e-4, 0.05))->capture_default_str();
     sub->add_option("--probe-tilt", opt->probe.max_tilt_deg, "deg, approach within this cone about the surface normal")
         ->group(pg)->check(CLI::Range(0.0, 89.0))->capture_default_str();
-    sub->add_option("--contact-sigma", opt->probe.contact_sigma, "m per axis, probe noise beyond the arm's")->group(pg)
-        ->check(CLI::Range(0.0, 0.1))->capture_default_str();
     sub->add_option("--quantization", opt->probe.quantization, "m, recorded positions rounded to this (0: none)")
         ->group(pg)->check(CLI::Range(0.0, 0.1))->capture_default_str();
     sub->add_option("--gripper", opt->gripper, "Gripper description (JSON; default: the built-in touchstone-3f)");
-    auto mc = "Noise overrides (Monte Carlo studies)";
-    sub->add_option("--joint-sigma", opt->joint_sigma_deg, "deg, finger joint readings")->group(mc)->check(CLI::NonNegativeNumber);
-    sub->add_option("--lateral-sigma", opt->lateral_sigma, "m, lateral sampling error of a sensel")->group(mc)->check(CLI::NonNegativeNumber);
     sub->add_option("--offset", opt->offset, "X Y Z: world position of the object (m; e.g. a dive site far from the origin)")
         ->expected(3);
     add_common(sub, opt->common);

@@ -31,6 +31,7 @@ struct NoiseOverrides {
   std::optional<double> sensel_noise;            ///< fraction of the signal (0.05 = 5 %)
   std::optional<double> force_noise;             ///< fraction of the force (deep sea: 0.5)
   std::optional<double> contact_sigma_m;         ///< m, contact position noise (Q = diag)
+  std::optional<double> joint_sigma_deg;         ///< deg, finger joint readings
 };
 
 struct SweepAxis {

@@ -25,6 +25,7 @@ datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
   if (n.sensel_noise) s.noise.signal_noise = *n.sensel_noise;
   if (n.force_noise) s.noise.force_noise = *n.force_noise;
   if (n.contact_sigma_m) s.noise.lateral_sigma = *n.contact_sigma_m;
+  if (n.joint_sigma_deg) s.noise.joint_sigma_deg = *n.joint_sigma_deg;
   s.sensing = parse_sensing(c.sensing, {}, "sensing");
   if (s.sensing == Sensing::probe && n.contact_sigma_m) {   // the probe's own contact noise
     s.probe.contact_sigma = *n.contact_sigma_m;

@@ -454,7 +454,9 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
               {"--force-noise"}, TS_CONFIG(noise_params.force_noise));
   override_of("noise.contact_sigma_m", "m", 1,
               "Contact position noise per axis: a sensel's lateral error, or the probe's own noise (unset: the profile's)",
-              {}, TS_CONFIG(noise_params.contact_sigma_m));
+              {"--lateral-sigma", "--contact-sigma"}, TS_CONFIG(noise_params.contact_sigma_m));
+  override_of("noise.joint_sigma_deg", "deg", 90, "Finger joint reading error per joint and grasp (unset: the profile's)",
+              {"--joint-sigma"}, TS_CONFIG(noise_params.joint_sigma_deg));
   {
     Parameter p = setting("sensors", S, Type::choice, "", 0, 1, "1 (Section 5.1)",
                           "Tactile pads logged: 1 (the middle finger's distal pad) or 6");

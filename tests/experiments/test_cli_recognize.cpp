@@ -718,6 +718,7 @@ TEST_CASE("cli params --json: every method parameter is a recognize flag (and ea
       {"noise.sensel_noise", {"0.02", {{"noise.sensel_noise", 0.02}}}},
       {"noise.force_noise", {"0.3", {{"noise.force_noise", 0.3}}}},
       {"noise.contact_sigma_m", {"0.0005", {{"noise.contact_sigma_m", 0.0005}}}},
+      {"noise.joint_sigma_deg", {"0.2", {{"noise.joint_sigma_deg", 0.2}}}},
       {"sensors", {"6", {{"sensors", 6}}}},
       {"sensing", {"probe", {{"sensing", "probe"}}}},
       {"seed", {"7", {{"seed", 7}}}},

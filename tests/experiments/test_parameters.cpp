@@ -1,6 +1,7 @@
 // The vocabulary of method parameters (experiments/parameters.hpp): one declaration, its names,
 // values that reach the settings, the presets, and the README's table generated from it.
 #include "experiments/config.hpp"
+#include "experiments/grasp_pools.hpp"
 #include "experiments/parameters.hpp"
 
 #include <doctest/doctest.h>
@@ -39,6 +40,9 @@ TEST_CASE("Parameters: unique keys and names, each resolving to its parameter") 
   CHECK(find_parameter("--twins")->key == "twins.rivals");
   CHECK(find_parameter("--memory-budget")->key == "memory_budget_mb");
   CHECK(find_parameter("--signal-noise")->key == "noise.sensel_noise");
+  CHECK(find_parameter("--joint-sigma")->key == "noise.joint_sigma_deg");
+  CHECK(find_parameter("--lateral-sigma")->key == "noise.contact_sigma_m");
+  CHECK(find_parameter("--contact-sigma")->key == "noise.contact_sigma_m");
   // The method parameters are the method kind, a contiguous part of all.
   std::size_t method = 0;
   for (const Parameter& p : parameters()) method += p.kind == Parameter::Kind::method;
@@ -170,4 +174,23 @@ TEST_CASE("Parameters: the README's table is the declaration's (touchstone param
   REQUIRE(b != std::string::npos);
   CHECK_MESSAGE(readme.substr(a + begin.size(), b - a - begin.size()) == parameters_markdown(),
                 "README.md's parameter table is stale: replace it by `touchstone params --markdown`");
+}
+
+TEST_CASE("Parameters: the noise overrides reach the simulator (simulate's flags and experiment keys alike)") {
+  ExperimentConfig c;
+  c.noise = "deepsea";
+  const datasets::SimulatorSettings profile = simulation_settings(c);
+  CHECK(profile.noise.lateral_sigma == 0.002);   // the deep-sea profile's
+  CHECK(profile.noise.joint_sigma_deg == 0.0);
+  set_key(c, "noise.joint_sigma_deg", {"0.5"}, "study.toml");
+  set_key(c, "noise.contact_sigma_m", {"0.0007"}, "study.toml");
+  const datasets::SimulatorSettings pads = simulation_settings(c);
+  CHECK(pads.noise.joint_sigma_deg == 0.5);
+  CHECK(pads.noise.lateral_sigma == 0.0007);      // pads: a sensel's lateral error
+  CHECK(pads.probe.contact_sigma == 0.0);
+  set_key(c, "sensing", {"probe"}, "study.toml");
+  const datasets::SimulatorSettings probe = simulation_settings(c);
+  CHECK(probe.probe.contact_sigma == 0.0007);     // a probe: its own noise, and no sensel error
+  CHECK(probe.noise.lateral_sigma == 0.0);
+  CHECK(probe.noise.joint_sigma_deg == 0.5);
 }

@@ -2,6 +2,7 @@
 // interface contract, byte-identical logs for any --threads, exported clouds, clear errors.
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
+#include "io/h5.hpp"
 #include "io/log_store.hpp"
 #include "mesh_fixtures.hpp"
 #include "cli_run.hpp"
@@ -103,6 +104,34 @@ TEST_CASE("same seed: byte-identical logs for --threads 1 and 2") {
     REQUIRE_MESSAGE(r.code == 0, r.err);
   }
   CHECK(test::read_bytes(dir / "t1.h5") == test::read_bytes(dir / "t2.h5"));
+}
+
+TEST_CASE("simulate's noise overrides reach the log, and its source reproduces it") {
+  test::TempDir dir("cli");
+  const auto db = make_db(dir);
+  const std::string base = "simulate --db " + db.string() + " --object brick --grasps 6 --noise underwater --seed 3";
+  Run r = touchstone(dir, base + " --out " + (dir / "plain.h5").string());
+  REQUIRE_MESSAGE(r.code == 0, r.err);
+  r = touchstone(dir, base + " --joint-sigma 0.5 --lateral-sigma 0.001 --out " + (dir / "noisy.h5").string());
+  REQUIRE_MESSAGE(r.code == 0, r.err);
+  const TactileLog plain = io::read_log(dir / "plain.h5"), noisy = io::read_log(dir / "noisy.h5");
+  REQUIRE(plain.grasps.size() == noisy.grasps.size());
+  bool joints_differ = false, tactile_differ = false;
+  for (std::size_t g = 0; g < plain.grasps.size(); ++g) {
+    joints_differ = joints_differ || plain.grasps[g].joints != noisy.grasps[g].joints;
+    tactile_differ = tactile_differ || plain.grasps[g].tactile != noisy.grasps[g].tactile;
+  }
+  CHECK(joints_differ);    // --joint-sigma: the finger joint readings
+  CHECK(tactile_differ);   // --lateral-sigma: where the sensels sample the surface
+  const std::string source = io::h5::File::open(dir / "noisy.h5").root().string_attribute("source");
+  CHECK(source.find("--joint-sigma 0.5") != std::string::npos);
+  CHECK(source.find("--lateral-sigma 0.001") != std::string::npos);
+  // The recorded command, run again with the database and output added, writes the same bytes.
+  const std::string again = source.substr(std::string("touchstone ").size());
+  r = touchstone(dir, again.substr(0, again.find(" --object")) + " --db " + db.string() +
+                          again.substr(again.find(" --object")) + " --out " + (dir / "again.h5").string());
+  REQUIRE_MESSAGE(r.code == 0, r.err);
+  CHECK(test::read_bytes(dir / "again.h5") == test::read_bytes(dir / "noisy.h5"));
 }
 
 TEST_CASE("bad input: one error line, exit 1 (usage: 2), no output left behind") {
