@@ -71,18 +71,16 @@ int run_simulate(const SimulateOptions& o) {
   std::ostringstream source;
   source << "touchstone simulate --object " << o.object << " --grasps " << o.grasps << " --noise " << c.noise
          << " --sensors " << c.sensors << " --seed " << o.common.seed;
-  // The noise overrides given, so that the source reproduces the log.
-  const experiments::NoiseOverrides& n = c.noise_params;
-  for (const auto& [flag, value] : {std::pair{"--arm-position-sigma", n.arm_position_sigma_m},
-                                    std::pair{"--arm-rotation-sigma", n.arm_rotation_sigma_deg},
-                                    std::pair{"--signal-noise", n.sensel_noise}, std::pair{"--force-noise", n.force_noise},
-                                    std::pair{"--joint-sigma", n.joint_sigma_deg}})
-    if (value) source << ' ' << flag << ' ' << *value;
   if (s.sensing == Sensing::probe)
     source << " --sensing probe --ball-radius " << o.probe.spec.ball_radius << " --probe-tilt " << o.probe.max_tilt_deg
-           << " --contact-sigma " << s.probe.contact_sigma << " --quantization " << o.probe.quantization;
-  else if (n.contact_sigma_m)
-    source << " --lateral-sigma " << *n.contact_sigma_m;
+           << " --quantization " << o.probe.quantization;
+  // The other simulator parameters given (the noise overrides), as given, so that the source
+  // reproduces the log.
+  for (const experiments::Parameter& p : experiments::parameters()) {
+    const auto it = o.flags.given.find(p.key);
+    if (it == o.flags.given.end() || p.key == "noise" || p.key == "sensors" || p.key == "sensing") continue;
+    source << ' ' << (p.aliases.empty() ? p.flag() : p.aliases.front()) << ' ' << it->second;
+  }
   io::LogHeader header = io::header_of(result.log);
   header.source = source.str();
   io::LogWriter writer = io::LogWriter::create(o.out, header, true);
