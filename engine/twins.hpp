@@ -42,6 +42,11 @@ struct TwinSettings {
   /// leader is judged at the right pose even when RANSAC found it nowhere (0: off).
   std::size_t transfer = 0;
   std::size_t transfer_min_database = 0;   ///< transfer acts only on databases of more objects
+  /// With the shape prior active, only the prior's this-many best objects of the step are
+  /// screened for the transfer (0: every allowed object). A look-alike of the leader fits the
+  /// contacts' pair statistics about as well as the leader, so it ranks near it; screening the
+  /// rest of a large database each step costs time for objects that cannot win.
+  std::size_t transfer_pool = 0;
 };
 
 /// V of one hypothesis (see above), or +inf when the scene has no grasp groups or the object

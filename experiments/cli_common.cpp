@@ -1,5 +1,7 @@
 #include "experiments/cli_common.hpp"
 
+#include "experiments/allocator.hpp"
+
 #include "engine/database.hpp"
 
 #include "engine/core.hpp"
@@ -78,7 +80,8 @@ std::string machine_description() {
       break;
     }
   }
-  return model + ", " + std::to_string(tbb::info::default_concurrency()) + " cores";
+  return model + ", " + std::to_string(tbb::info::default_concurrency()) + " cores, " +
+         experiments::allocator_name();
 }
 
 bool stderr_is_terminal() { return isatty(STDERR_FILENO) == 1; }

@@ -32,7 +32,7 @@ int exit_code();
 
 /// Resolved thread count (options.threads or all cores).
 int thread_count(const CommonOptions& options);
-/// Host description for reports: "<cpu model>, <n> cores".
+/// Host description for reports: "<cpu model>, <n> cores, <allocator>" (allocator.hpp).
 std::string machine_description();
 
 /// Default resident object geometry of `recognize`, `experiment` and the benchmarks (MB).

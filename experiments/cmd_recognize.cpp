@@ -2,6 +2,7 @@
 // tactile log (or from a plain contact cloud as a single step without free space). Several
 // logs or clouds (or a folder of clouds) are recognized in parallel in one process, sharing
 // the loaded database; each input gets its own recognizer with the seed it would have alone.
+#include "experiments/allocator.hpp"
 #include "experiments/calibration.hpp"
 #include "experiments/cli_common.hpp"
 #include "experiments/parameters.hpp"
@@ -582,6 +583,8 @@ int recognize_many(const Context& c, const std::vector<Input>& inputs,
   // Every input's recognizer shares one FeatureTable, held here for the whole batch
   // (FeatureTable::shared keeps a table only while someone holds it).
   const auto table = c.rs.ransac.feature_table ? FeatureTable::shared(c.db, c.rs.objects) : nullptr;
+  const auto prior = Recognizer::shape_prior(c.db, c.rs);   // the same: built once, not per input
+  experiments::release_free_memory();   // what building them freed (experiments/allocator.hpp)
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, inputs.size(), 1),
       [&](const tbb::blocked_range<std::size_t>& range) {
@@ -596,6 +599,7 @@ int recognize_many(const Context& c, const std::vector<Input>& inputs,
               runs[i].error = input_error(inputs[i], e);
             }
           });
+          experiments::release_free_memory();   // what the input freed, before the next
           if (progress) {
             std::lock_guard<std::mutex> lock(progress_mutex);
             std::fprintf(stderr, "\rinputs %zu/%zu", ++done, inputs.size());

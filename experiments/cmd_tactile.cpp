@@ -34,10 +34,9 @@ struct SimulateOptions {
   std::string db, object, out, gripper;
   std::size_t grasps = 40;
   /// The simulator parameters simulate takes (experiments/parameters.cpp: noise, sensors,
-  /// sensing and the noise overrides; --noise defaults to ideal here)
+  /// sensing, the noise and probe overrides; --noise defaults to ideal here)
   experiments::ParameterFlags flags;
   std::vector<double> offset;
-  datasets::ProbeSettings probe;
 };
 
 int run_simulate(const SimulateOptions& o) {
@@ -60,10 +59,6 @@ int run_simulate(const SimulateOptions& o) {
   datasets::SimulatorSettings s = experiments::simulation_settings(c);
   s.grasps = o.grasps;
   s.seed = o.common.seed;
-  const double probe_sigma = s.probe.contact_sigma;   // noise.contact_sigma_m, when given
-  s.probe = o.probe;
-  s.probe.contact_sigma = probe_sigma;
-  s.probe.spec.shaft_radius = std::min(s.probe.spec.shaft_radius, s.probe.spec.ball_radius);
   if (!o.offset.empty()) s.world_offset = Vec3(o.offset[0], o.offset[1], o.offset[2]);
 
   const datasets::Simulator sim(db.load_mesh(index), db.info(index).name, gripper, s);
@@ -71,11 +66,9 @@ int run_simulate(const SimulateOptions& o) {
   std::ostringstream source;
   source << "touchstone simulate --object " << o.object << " --grasps " << o.grasps << " --noise " << c.noise
          << " --sensors " << c.sensors << " --seed " << o.common.seed;
-  if (s.sensing == Sensing::probe)
-    source << " --sensing probe --ball-radius " << o.probe.spec.ball_radius << " --probe-tilt " << o.probe.max_tilt_deg
-           << " --quantization " << o.probe.quantization;
-  // The other simulator parameters given (the noise overrides), as given, so that the source
-  // reproduces the log.
+  if (s.sensing == Sensing::probe) source << " --sensing probe";
+  // The other simulator parameters given (the noise and probe overrides), as given, so that the
+  // source reproduces the log.
   for (const experiments::Parameter& p : experiments::parameters()) {
     const auto it = o.flags.given.find(p.key);
     if (it == o.flags.given.end() || p.key == "noise" || p.key == "sensors" || p.key == "sensing") continue;
@@ -224,17 +217,10 @@ void register_tactile(CLI::App& app) {
     sub->add_option("--out", opt->out, "Tactile log to write (HDF5)")->required();
     // --noise (default ideal here), --sensors, --sensing, --arm-position-sigma, --arm-rotation-sigma,
     // --signal-noise, --force-noise, --joint-sigma, --lateral-sigma / --contact-sigma (one key,
-    // noise.contact_sigma_m: a sensel's lateral error, or the probe's own noise): the simulator
-    // parameters of experiments/parameters.cpp.
+    // noise.contact_sigma_m: a sensel's lateral error, or the probe's own noise), --ball-radius,
+    // --probe-tilt, --quantization: the simulator parameters of experiments/parameters.cpp.
     experiments::add_parameter_flags(*sub, opt->flags, "Simulator parameters (touchstone params)",
                                      [](const experiments::Parameter& p) { return p.simulate; });
-    const std::string pg = "Probe (--sensing probe)";
-    sub->add_option("--ball-radius", opt->probe.spec.ball_radius, "m, probe ball radius")->group(pg)
-        ->check(CLI::Range(1e-4, 0.05))->capture_default_str();
-    sub->add_option("--probe-tilt", opt->probe.max_tilt_deg, "deg, approach within this cone about the surface normal")
-        ->group(pg)->check(CLI::Range(0.0, 89.0))->capture_default_str();
-    sub->add_option("--quantization", opt->probe.quantization, "m, recorded positions rounded to this (0: none)")
-        ->group(pg)->check(CLI::Range(0.0, 0.1))->capture_default_str();
     sub->add_option("--gripper", opt->gripper, "Gripper description (JSON; default: the built-in touchstone-3f)");
     sub->add_option("--offset", opt->offset, "X Y Z: world position of the object (m; e.g. a dive site far from the origin)")
         ->expected(3);

@@ -34,6 +34,13 @@ struct NoiseOverrides {
   std::optional<double> joint_sigma_deg;         ///< deg, finger joint readings
 };
 
+/// Overrides of the simulated touch probe (sensing = "probe"; unset: the simulator's default).
+struct ProbeOverrides {
+  std::optional<double> ball_radius_m;           ///< m, ball-tip radius
+  std::optional<double> tilt_deg;                ///< deg, approach cone about the surface normal
+  std::optional<double> quantization_m;          ///< m, recorded positions rounded to this
+};
+
 struct SweepAxis {
   std::string key;                              ///< a scalar key, e.g. "ransac.samples"
   std::vector<std::vector<std::string>> values; ///< one entry per variant value (a key's inputs)
@@ -57,6 +64,7 @@ struct ExperimentConfig {
   std::string preset = "improved";      ///< paper | improved: the defaults the params start from
   std::string noise = "underwater";
   NoiseOverrides noise_params;
+  ProbeOverrides probe_params;
   int sensors = 1;
   std::string sensing = "pads";         ///< pads | probe (datasets::ProbeSettings)
   std::uint64_t seed = 1;

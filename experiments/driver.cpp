@@ -1,5 +1,6 @@
 #include "experiments/driver.hpp"
 
+#include "experiments/allocator.hpp"
 #include "experiments/config.hpp"
 
 #include <tbb/blocked_range.h>
@@ -45,6 +46,7 @@ DriveOutcome drive(RunEngine& engine, const std::vector<RunTask>& tasks,
   progress.done = tasks.size() - todo.size();
   if (todo.empty()) return outcome;
   engine.prepare(todo);
+  release_free_memory();   // what the set-up freed (allocator.hpp)
 
   const auto start = std::chrono::steady_clock::now();
   std::mutex store_mutex;
@@ -52,6 +54,7 @@ DriveOutcome drive(RunEngine& engine, const std::vector<RunTask>& tasks,
   auto execute = [&](const RunTask& task) {
     if (stopped()) return;
     std::optional<io::RunRecord> record = engine.run(task, settings.stop);
+    release_free_memory();   // what the run freed, before the next one
     if (!record) return;
     std::lock_guard<std::mutex> lock(store_mutex);
     io::RunStore::append(store, {*record});

@@ -6,6 +6,7 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <sstream>
 
 namespace ts::experiments {
@@ -31,6 +32,11 @@ datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
     s.probe.contact_sigma = *n.contact_sigma_m;
     s.noise.lateral_sigma = 0.0;
   }
+  const ProbeOverrides& p = c.probe_params;
+  if (p.ball_radius_m) s.probe.spec.ball_radius = *p.ball_radius_m;
+  s.probe.spec.shaft_radius = std::min(s.probe.spec.shaft_radius, s.probe.spec.ball_radius);
+  if (p.tilt_deg) s.probe.max_tilt_deg = *p.tilt_deg;
+  if (p.quantization_m) s.probe.quantization = *p.quantization_m;
   s.grasps = static_cast<std::size_t>(c.pool);
   return s;
 }
@@ -41,7 +47,8 @@ std::string pool_key(const datasets::SimulatorSettings& s) {
   k << s.noise.name << '|' << s.noise.arm_position_sigma << '|' << s.noise.arm_rotation_sigma_deg
     << '|' << s.noise.joint_sigma_deg << '|' << s.noise.signal_noise << '|' << s.noise.force_noise
     << '|' << s.noise.lateral_sigma << '|' << s.noise.fold_detect << '|' << s.sensors << '|'
-    << s.grasps << '|' << to_string(s.sensing) << '|' << s.probe.contact_sigma;
+    << s.grasps << '|' << to_string(s.sensing) << '|' << s.probe.contact_sigma << '|' << s.probe.spec.ball_radius
+    << '|' << s.probe.spec.shaft_radius << '|' << s.probe.max_tilt_deg << '|' << s.probe.quantization;
   return k.str();
 }
 

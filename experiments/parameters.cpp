@@ -230,6 +230,10 @@ std::vector<Parameter> declaration() {
               "Extension: the leading pose is also tried on this many look-alike objects (0: off)",
               {"--transfer", "transfer"}, TS_FIELD(recognizer.twins.transfer)),
       TS_FIELD(recognizer.twins.transfer_min_database)));
+  d.push_back(integer("twins.transfer_pool", 0, kLarge, "",
+                      "Extension: with the shape prior, pose transfer screens only its this-many best objects of "
+                      "the step (0: every object)",
+                      {"--transfer-pool", "transfer_pool"}, TS_FIELD(recognizer.twins.transfer_pool)));
   d.push_back(integer("prior.angle_bins", 1, 64, "", "Shape prior: bins of each angle term",
                       {"--prior-angle-bins"}, TS_FIELD(recognizer.prior.angle_bins)));
   d.push_back(real("prior.distance_bin_m", "m", 1e-4, 1, "", "Shape prior: pair-distance bin",
@@ -475,6 +479,22 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
                     {"pads", "probe"}, TS_CONFIG(sensing)));
   d.back().sweepable = false;
   d.back().simulate = true;
+  auto probe_setting = [&](std::string key, std::string unit, double lo, double hi, std::string help,
+                           std::string alias, auto field) {
+    Parameter p = number(setting(std::move(key), S, Type::real, std::move(unit), lo, hi, "", std::move(help),
+                                 {std::move(alias)}),
+                         field);
+    p.simulate = true;
+    d.push_back(std::move(p));
+  };
+  probe_setting("probe.ball_radius_m", "m", 1e-4, 0.05, "Probe ball-tip radius (unset: 3 mm; sensing = probe)",
+                "--ball-radius", TS_CONFIG(probe_params.ball_radius_m));
+  probe_setting("probe.tilt_deg", "deg", 0, 89,
+                "Probe approach within this cone about the surface normal (unset: 20; sensing = probe)",
+                "--probe-tilt", TS_CONFIG(probe_params.tilt_deg));
+  probe_setting("probe.quantization_m", "m", 0, 0.1,
+                "Probe positions recorded rounded to this (unset, 0: none; sensing = probe)", "--quantization",
+                TS_CONFIG(probe_params.quantization_m));
   {
     Parameter p = setting("seed", E, Type::integer, "", 0, kInf, "", "Seed of every random draw (unsigned integer)");
     p.set_config = [](ExperimentConfig& c, const Inputs& in, const std::string& file, const std::string& name) {
@@ -774,6 +794,11 @@ void apply_flags(const ParameterFlags& flags, MethodSettings& m) {
   }
 }
 
+bool bench_run_parameter(const Parameter& p) {
+  return p.key == "method" || p.key == "preset" ||
+         (p.simulate && p.key != "sensing" && !p.key.starts_with("probe."));
+}
+
 void apply_flags(const ParameterFlags& flags, ExperimentConfig& c) {
   for (const Parameter& p : parameters()) {
     const auto it = flags.given.find(p.key);
@@ -791,8 +816,10 @@ namespace {
 /// The commands that take `p` as a flag (besides `experiment --set KEY=VALUE`, which takes all).
 std::vector<std::string> flag_commands(const Parameter& p) {
   if (p.kind == Kind::method) return {"recognize", "bench_recognize"};
-  if (p.simulate) return {"experiment", "simulate"};
-  return {"experiment"};
+  std::vector<std::string> out{"experiment"};
+  if (p.simulate) out.push_back("simulate");
+  if (bench_run_parameter(p)) out.push_back("bench_recognize");
+  return out;
 }
 
 /// A parameter's default as JSON in each preset (a method parameter's from the preset; the

@@ -129,6 +129,9 @@ void add_parameter_flags(CLI::App& app, ParameterFlags& flags, const std::string
 /// Apply the flags given on top of `m` (validated: a bad value is a CLI::ValidationError
 /// naming the flag).
 void apply_flags(const ParameterFlags& flags, MethodSettings& m);
+/// The experiment and simulator parameters bench_recognize takes as flags besides the method's:
+/// method, preset and the pads' simulator parameters (noise, its overrides, sensors).
+bool bench_run_parameter(const Parameter& p);
 /// Set the flags given in a configuration, in the declaration's order (an error names the flag).
 void apply_flags(const ParameterFlags& flags, ExperimentConfig& c);
 

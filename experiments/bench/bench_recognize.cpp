@@ -15,6 +15,9 @@
 //   Method parameters (experiments/parameters.cpp, `touchstone params`) as `touchstone recognize`
 //   takes them: the preset's values (improved by default), then each --KEY (e.g. --ransac.triplets
 //   15, or an older flag, -N 15) or --set KEY=VALUE (a key or an older name: --set N=15).
+//   --method, --preset, --noise, its overrides (--arm-position-sigma, ...) and --sensors are the
+//   declared experiment and simulator parameters (the noise defaults to underwater here);
+//   --objects N (the first N objects of the database) is the benchmark's own selection.
 //
 // Prints the machine, thread counts, parameters and every figure.
 #include "datasets/simulator.hpp"
@@ -23,6 +26,8 @@
 #include "engine/recognizer.hpp"
 #include "engine/symmetry.hpp"
 #include "experiments/cli_common.hpp"
+#include "experiments/config.hpp"
+#include "experiments/grasp_pools.hpp"
 #include "experiments/parameters.hpp"
 #include "io/db_store.hpp"
 
@@ -90,11 +95,10 @@ Steps clouds_of(const TactileLog& log, std::size_t grasps, double s_obj_max, dou
   return s;
 }
 
-Log simulate(const io::DbReader& db, std::size_t object, std::size_t grasps, const std::string& noise,
-             std::uint64_t seed) {
-  datasets::SimulatorSettings ss;
+Log simulate(const io::DbReader& db, std::size_t object, std::size_t grasps,
+             const datasets::SimulatorSettings& base, std::uint64_t seed) {
+  datasets::SimulatorSettings ss = base;
   ss.grasps = grasps;
-  ss.noise = datasets::noise_profile(noise);
   ss.seed = seed;
   datasets::Simulator sim(db.load_mesh(object), db.info(object).name, Gripper(), ss);
   return {object, sim.run().log};
@@ -103,25 +107,25 @@ Log simulate(const io::DbReader& db, std::size_t object, std::size_t grasps, con
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string db_path, noise = "underwater", method = "bricpsf", preset = "improved";
+  std::string db_path, noise, method, preset;
   std::size_t grasps = 20, speed_logs = 6, seeds = 3, objects = 0;
   bool skip_speed = false, skip_accuracy = false;
   std::vector<std::string> sets;
-  experiments::ParameterFlags flags;
+  experiments::ParameterFlags flags, run_flags;
   experiments::MethodSettings settings;
+  datasets::SimulatorSettings simulation;
   CLI::App app{"bench_recognize: recognizer speed and accuracy on simulated logs"};
   app.add_option("--db", db_path, "Object database (HDF5)")->required();
   app.add_option("--grasps", grasps, "Steps (grasps) of each log")->check(CLI::Range(1, 100000));
   app.add_option("--speed-logs", speed_logs, "Logs of the speed part")->check(CLI::Range(1, 100000));
   app.add_option("--seeds", seeds, "Logs per object of the accuracy part")->check(CLI::Range(1, 100000));
-  app.add_option("--noise", noise, "Noise profile: ideal | underwater | deepsea");
-  app.add_option("--method", method, "bricpsf | batch-ransac | ransac-icp | ransac-icp-fs");
   app.add_option("--objects", objects, "First N objects of the database (0: all)");
   app.add_flag("--skip-speed", skip_speed, "Skip the speed part");
   app.add_flag("--skip-accuracy", skip_accuracy, "Skip the accuracy part");
-  app.add_option("--preset", preset, "improved (default) | paper: the parameters the others change")
-      ->check(CLI::IsMember({"paper", "improved"}));
   app.add_option("--set", sets, "KEY=VALUE: a method parameter by its key or an older name (touchstone params)");
+  // --method, --preset and the simulator's pad parameters (--noise, its overrides, --sensors).
+  experiments::add_parameter_flags(app, run_flags, "Experiment and simulator parameters (touchstone params)",
+                                   experiments::bench_run_parameter);
   experiments::add_parameter_flags(app, flags, "Method parameters (touchstone params)");
   try {
     app.parse(argc, argv);
@@ -132,6 +136,17 @@ int main(int argc, char** argv) {
       if (!p) throw CLI::ValidationError("--set", "expects KEY=VALUE with a method parameter's key (got '" + kv + "')");
       flags.given[p->key] = kv.substr(eq + 1);
     }
+    experiments::ExperimentConfig c;
+    c.noise = "underwater";
+    try {
+      experiments::apply_flags(run_flags, c);
+    } catch (const Error& e) {   // a value out of its declared range: name the flag
+      throw CLI::ValidationError(e.field(), e.message());
+    }
+    noise = c.noise;
+    method = c.method;
+    preset = c.preset;
+    simulation = experiments::simulation_settings(c);
     experiments::MethodSettings ms = experiments::MethodSettings::preset(preset);
     experiments::apply_flags(flags, ms);
     settings = ms;
@@ -182,7 +197,7 @@ int main(int argc, char** argv) {
       for (std::size_t i = 0; i < speed_logs; ++i) {
         const std::size_t obj = (i * 7 + 3) % n_obj;
         sim_arena.execute([&] {
-          logs.push_back(simulate(*reader, obj, grasps, noise, 1000 + i));
+          logs.push_back(simulate(*reader, obj, grasps, simulation, 1000 + i));
           steps.push_back(clouds_of(logs.back().log, grasps, s_obj_max, rs.evaluate.res_free, settings.contact_voxel));
         });
       }
@@ -247,7 +262,7 @@ int main(int argc, char** argv) {
       double time_total = 0.0;
       for (std::size_t obj = 0; obj < n_obj; ++obj) {
         for (std::size_t seed = 1; seed <= seeds; ++seed) {
-          const Log log = simulate(*reader, obj, grasps, noise, seed);
+          const Log log = simulate(*reader, obj, grasps, simulation, seed);
           const Steps st = clouds_of(log.log, grasps, s_obj_max, rs.evaluate.res_free, settings.contact_voxel);
           Recognizer rec(db, index, rs);
           StepResult r;

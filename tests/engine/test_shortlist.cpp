@@ -83,6 +83,17 @@ RecognizerSettings fast() {
   return s;
 }
 
+/// A skewed wedge (no symmetry) and its twin 5 mm taller, among other shapes.
+std::shared_ptr<test::TestSource> lookalike_source() {
+  auto src = std::make_shared<test::TestSource>();
+  src->add("wedge", test::prism_mesh(3, 0.07, 0.05, 0.25), 1);
+  src->add("wedge_tall", test::prism_mesh(3, 0.07, 0.055, 0.25), 2);
+  src->add("nut", test::prism_mesh(5, 0.06, 0.04), 3);
+  src->add("box", test::box_mesh(Vec3(0.12, 0.08, 0.05)), 4);
+  src->add("hexbar", test::prism_mesh(6, 0.03, 0.14), 5);
+  return src;
+}
+
 }  // namespace
 
 TEST_CASE("FeatureTable: per-object search restricted to a mask equals brute force") {
@@ -418,14 +429,9 @@ TEST_CASE("Shortlist: each object's best score, cut short where a candidate cann
 }
 
 TEST_CASE("Pose transfer: the leader's pose tried on its look-alikes, at that pose; off on small databases") {
-  // A skewed wedge (no symmetry) and its twin 5 mm taller, among other shapes; the scene
-  // touches the twin.
-  auto src = std::make_shared<test::TestSource>();
-  src->add("wedge", test::prism_mesh(3, 0.07, 0.05, 0.25), 1);
-  src->add("wedge_tall", test::prism_mesh(3, 0.07, 0.055, 0.25), 2);
-  src->add("nut", test::prism_mesh(5, 0.06, 0.04), 3);
-  src->add("box", test::box_mesh(Vec3(0.12, 0.08, 0.05)), 4);
-  src->add("hexbar", test::prism_mesh(6, 0.03, 0.14), 5);
+  // The wedge, its taller twin and three other shapes (lookalike_source); the scene touches the
+  // twin.
+  const auto src = lookalike_source();
   const std::uint32_t truth = 1;
   const Pose T = test::random_pose(77, Vec3(0.1, -0.2, 0.3));
   auto run = [&](int threads, std::size_t transfer, std::size_t min_database) {
@@ -479,4 +485,57 @@ TEST_CASE("Pose transfer: the leader's pose tried on its look-alikes, at that po
       CHECK(with[k].hypotheses[i].pose.matrix() == with1[k].hypotheses[i].pose.matrix());
     }
   }
+}
+
+TEST_CASE("Pose transfer's pool: with the shape prior, only the prior's best objects are screened") {
+  // The database of the test above; the shape prior on (any database size), each object
+  // watched in turn. An object the prior ranks below the pool is never screened for the
+  // transfer (no transfer rank) nor moved to; a pool as large as the database changes nothing.
+  const auto src = lookalike_source();
+  const std::uint32_t truth = 1;
+  const Pose T = test::random_pose(77, Vec3(0.1, -0.2, 0.3));
+  auto run = [&](std::size_t pool, std::optional<std::uint32_t> watch) {
+    Database db(src);
+    RecognizerSettings s = fast();
+    s.n_p = 20;
+    s.twins.transfer = 2;
+    s.twins.transfer_min_database = 0;
+    s.twins.transfer_pool = pool;
+    s.ransac.object_draws = 3;
+    s.ransac.prior_draws = 2;
+    s.prior_min_database = 0;
+    Recognizer rec(db, s);
+    rec.watch(watch);
+    std::vector<StepResult> out;
+    for (int k = 1; k <= 8; ++k) out.push_back(rec.step(test::touch(src->fines[truth], T, k, 31, 0.0003, 0.0001), {}));
+    return out;
+  };
+  const auto all = run(0, std::nullopt), wide = run(src->size(), std::nullopt);
+  for (std::size_t k = 0; k < all.size(); ++k) {   // the pool holds every object: no change
+    REQUIRE(all[k].hypotheses.size() == wide[k].hypotheses.size());
+    for (std::size_t i = 0; i < all[k].hypotheses.size(); ++i) {
+      CHECK(all[k].hypotheses[i].object == wide[k].hypotheses[i].object);
+      CHECK(all[k].hypotheses[i].pose.matrix() == wide[k].hypotheses[i].pose.matrix());
+    }
+  }
+  const std::size_t pool = 2;
+  std::size_t outside = 0, inside_ranked = 0;
+  for (std::uint32_t o = 0; o < src->size(); ++o) {
+    for (const StepResult& r : run(pool, o)) {
+      REQUIRE(r.watched.has_value());
+      const Funnel& f = *r.watched;
+      if (f.prior_rank == 0) continue;   // no prior this step (too few contacts)
+      if (f.prior_rank > pool) {
+        ++outside;
+        CHECK(f.transfer_rank == 0);
+        CHECK_FALSE(f.transferred);
+        for (const Hypothesis& h : r.hypotheses)   // none moved to it this step
+          if (h.slot >= kTransferSlot && h.born == r.step) CHECK(h.object != o);
+      } else if (f.transfer_rank > 0) {
+        ++inside_ranked;
+      }
+    }
+  }
+  CHECK(outside > 0);         // the case arose
+  CHECK(inside_ranked > 0);   // and objects within the pool were screened
 }

@@ -60,6 +60,9 @@ TEST_CASE("cli db: build is byte-identical for any --threads; info lists every o
   const auto built = nlohmann::json::parse(b.out);
   CHECK(built["objects"] == nlohmann::json({"ball", "bar", "box"}));
   CHECK(built["times_s"].contains("scan"));
+  // The machine line names the allocator the program was built with (TS_SCALABLE_MALLOC).
+  const std::string machine = built["machine"].get<std::string>();
+  CHECK_MESSAGE(machine.ends_with(std::string(", ") + TS_EXPECT_ALLOCATOR), machine);
 
   const auto info = touchstone(dir, "db info t1.h5 --json");
   REQUIRE(info.code == 0);

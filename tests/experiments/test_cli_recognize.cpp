@@ -721,6 +721,9 @@ TEST_CASE("cli params --json: every method parameter is a recognize flag (and ea
       {"noise.joint_sigma_deg", {"0.2", {{"noise.joint_sigma_deg", 0.2}}}},
       {"sensors", {"6", {{"sensors", 6}}}},
       {"sensing", {"probe", {{"sensing", "probe"}}}},
+      {"probe.ball_radius_m", {"0.002", {{"probe.ball_radius_m", 0.002}}}},
+      {"probe.tilt_deg", {"30", {{"probe.tilt_deg", 30.0}}}},
+      {"probe.quantization_m", {"0.001", {{"probe.quantization_m", 0.001}}}},
       {"seed", {"7", {{"seed", 7}}}},
       {"ransac.samples", {"3x20", {{"ransac.triplets", 3}, {"ransac.registrations", 20}}}},
       {"memory_budget_mb", {"64", {{"memory_budget_mb", 64.0}}}},
@@ -735,6 +738,11 @@ TEST_CASE("cli params --json: every method parameter is a recognize flag (and ea
     ++others;
     REQUIRE_MESSAGE(setting.count(p["key"]), p["key"]);
     CHECK(std::find(p["commands"].begin(), p["commands"].end(), "experiment") != p["commands"].end());
+    // bench_recognize takes the method, the preset and the pads' simulator parameters
+    const bool bench = p["key"] == "method" || p["key"] == "preset" || p["key"] == "noise" ||
+                       p["key"] == "sensors" || p["key"].get<std::string>().starts_with("noise.");
+    CHECK_MESSAGE((std::find(p["commands"].begin(), p["commands"].end(), "bench_recognize") != p["commands"].end()) ==
+                      bench, p["key"]);
   }
   CHECK(others == setting.size());
   // experiment: each by --set KEY=VALUE, and each by its flag (--seed: the common flag).

@@ -43,6 +43,9 @@ TEST_CASE("Parameters: unique keys and names, each resolving to its parameter") 
   CHECK(find_parameter("--joint-sigma")->key == "noise.joint_sigma_deg");
   CHECK(find_parameter("--lateral-sigma")->key == "noise.contact_sigma_m");
   CHECK(find_parameter("--contact-sigma")->key == "noise.contact_sigma_m");
+  CHECK(find_parameter("--ball-radius")->key == "probe.ball_radius_m");
+  CHECK(find_parameter("--probe-tilt")->key == "probe.tilt_deg");
+  CHECK(find_parameter("--quantization")->key == "probe.quantization_m");
   // The method parameters are the method kind, a contiguous part of all.
   std::size_t method = 0;
   for (const Parameter& p : parameters()) method += p.kind == Parameter::Kind::method;
@@ -67,7 +70,7 @@ TEST_CASE("Parameters: each simulator and experiment parameter sets the configur
                                                        ? p.choices.front()
                                                        : p.choices.back();
     else if (p.type == Parameter::Type::integer) value = "3";
-    else if (p.type == Parameter::Type::real) value = "0.25";
+    else if (p.type == Parameter::Type::real) value = p.hi < 0.25 ? "0.01" : "0.25";
     else value = "cube";
     ExperimentConfig c;
     set_key(c, p.key, {value}, "study.toml");
@@ -193,4 +196,31 @@ TEST_CASE("Parameters: the noise overrides reach the simulator (simulate's flags
   CHECK(probe.probe.contact_sigma == 0.0007);     // a probe: its own noise, and no sensel error
   CHECK(probe.noise.lateral_sigma == 0.0);
   CHECK(probe.noise.joint_sigma_deg == 0.5);
+}
+
+TEST_CASE("Parameters: the probe overrides reach the simulator; unset, its defaults stay") {
+  ExperimentConfig c;
+  c.sensing = "probe";
+  const datasets::SimulatorSettings plain = simulation_settings(c);
+  const datasets::ProbeSettings defaults;
+  CHECK(plain.probe.spec.ball_radius == defaults.spec.ball_radius);
+  CHECK(plain.probe.spec.shaft_radius == defaults.spec.shaft_radius);
+  CHECK(plain.probe.max_tilt_deg == defaults.max_tilt_deg);
+  CHECK(plain.probe.quantization == defaults.quantization);
+  set_key(c, "probe.ball_radius_m", {"0.0015"}, "study.toml");
+  set_key(c, "probe.tilt_deg", {"35"}, "study.toml");
+  set_key(c, "probe.quantization_m", {"0.001"}, "study.toml");
+  const datasets::SimulatorSettings s = simulation_settings(c);
+  CHECK(s.probe.spec.ball_radius == 0.0015);
+  CHECK(s.probe.spec.shaft_radius == 0.0015);   // the shaft is never wider than the ball
+  CHECK(s.probe.max_tilt_deg == 35.0);
+  CHECK(s.probe.quantization == 0.001);
+  CHECK(pool_key(s) != pool_key(plain));         // different pools
+  // Out of range: one error naming the key.
+  try {
+    set_key(c, "probe.tilt_deg", {"95"}, "study.toml");
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.field() == "probe.tilt_deg");
+  }
 }
