@@ -9,12 +9,14 @@
 #include "experiments/cli_common.hpp"
 #include "io/db_store.hpp"
 
+#include <CLI/CLI.hpp>
 #include <sys/resource.h>
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <optional>
 #include <fstream>
 #include <chrono>
 #include <cstdio>
@@ -40,14 +42,20 @@ std::string load_average() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string manifest = argc > 1 ? argv[1] : "datasets/dev45.tsv";
-  const int threads = argc > 2 ? std::stoi(argv[2]) : tbb::info::default_concurrency();
+  std::string manifest = "datasets/dev45.tsv";
+  int threads = tbb::info::default_concurrency();
+  std::optional<int> compress;
+  CLI::App app{"bench_db_build: build a database and open its summary"};
+  app.add_option("manifest", manifest, "Mesh manifest (default datasets/dev45.tsv)");
+  app.add_option("threads", threads, "Threads (default: all)")->check(CLI::Range(1, 1024));
+  app.add_option("compress", compress, "zlib level of the stored data (default: as db build)")->check(CLI::Range(0, 9));
+  CLI11_PARSE(app, argc, argv);
   const auto out = std::filesystem::temp_directory_path() / ("bench_db_" + std::to_string(::getpid()) + ".h5");
   using Clock = std::chrono::steady_clock;
   try {
     const auto inputs = ts::datasets::inputs_from_manifest(manifest);
     ts::datasets::BuildSettings settings;
-    if (argc > 3) settings.write.deflate = std::stoi(argv[3]);
+    if (compress) settings.write.deflate = *compress;
     tbb::task_arena arena(threads);
     const std::string load_before = load_average();
     const double cpu0 = cpu_seconds();

@@ -22,6 +22,7 @@
 #include "experiments/cli_common.hpp"
 #include "io/mesh_import.hpp"
 
+#include <CLI/CLI.hpp>
 #include <flann/algorithms/dist.h>
 #include <flann/algorithms/kdtree_index.h>
 #include <tbb/parallel_for.h>
@@ -93,11 +94,16 @@ std::vector<ts::Feature> make_queries(const std::vector<Object>& objs, int n, tb
 }  // namespace
 
 int main(int argc, char** argv) {
+  std::string manifest = "datasets/dev45.tsv";
+  int threads = 2, nqueries = 300;
+  std::size_t max_objects = 1000000;
+  CLI::App app{"bench_features: FPFH throughput, FeatureIndex recall and speed, DistanceField accuracy"};
+  app.add_option("manifest", manifest, "Mesh manifest (default datasets/dev45.tsv)");
+  app.add_option("threads", threads, "Threads (default 2)")->check(CLI::Range(1, 1024));
+  app.add_option("queries", nqueries, "Feature queries (default 300)")->check(CLI::Range(10, 100000000));
+  app.add_option("objects", max_objects, "The manifest's first objects only (default all)")->check(CLI::Range(1, 1000000));
+  CLI11_PARSE(app, argc, argv);
   try {
-    const std::string manifest = argc > 1 ? argv[1] : "datasets/dev45.tsv";
-    const int threads = argc > 2 ? std::max(1, std::atoi(argv[2])) : 2;
-    const int nqueries = argc > 3 ? std::max(10, std::atoi(argv[3])) : 300;
-    const std::size_t max_objects = argc > 4 ? static_cast<std::size_t>(std::max(1, std::atoi(argv[4]))) : 1000000;
     auto entries = ts::datasets::read_manifest(manifest);
     if (entries.size() > max_objects) entries.resize(max_objects);
     std::printf("bench_features: %zu objects from %s, %d thread(s), %s\n", entries.size(), manifest.c_str(),

@@ -10,6 +10,8 @@
 #include "experiments/cli_common.hpp"
 #include "io/db_store.hpp"
 
+#include <CLI/CLI.hpp>
+
 #include <tbb/info.h>
 
 #include <algorithm>
@@ -35,21 +37,14 @@ struct Row {
 }  // namespace
 
 int main(int argc, char** argv) {
+  std::string db_path;
+  std::size_t objects = 40, repeat = 2;
+  CLI::App app{"bench_geometry: what loading an object's geometry costs"};
+  app.add_option("--db", db_path, "Object database (HDF5)")->required();
+  app.add_option("--objects", objects, "Objects loaded, spread over the database")->check(CLI::Range(1, 1000000));
+  app.add_option("--repeat", repeat, "Loads of each object (the last reported)")->check(CLI::Range(1, 1000));
+  CLI11_PARSE(app, argc, argv);
   try {
-    std::string db_path;
-    std::size_t objects = 40, repeat = 2;
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw Error("missing value", {}, a);
-        return argv[++i];
-      };
-      if (a == "--db") db_path = next();
-      else if (a == "--objects") objects = std::stoul(next());
-      else if (a == "--repeat") repeat = std::max<std::size_t>(1, std::stoul(next()));
-      else throw Error("unknown argument (see the header of bench_geometry.cpp)", {}, a);
-    }
-    if (db_path.empty()) throw Error("--db DB.h5 is required");
     io::DbReader reader(db_path);
     std::vector<std::size_t> pick;
     const std::size_t n = std::min(objects, reader.size());

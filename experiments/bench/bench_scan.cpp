@@ -15,6 +15,7 @@
 #include "experiments/cli_common.hpp"
 #include "io/mesh_import.hpp"
 
+#include <CLI/CLI.hpp>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -53,15 +54,15 @@ double median(std::vector<double> v) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  std::string manifest = "datasets/dev45.tsv";
+  int threads = 1;
+  bool build = false;
+  CLI::App app{"bench_scan: the simulated laser scanner's time and coverage per object"};
+  app.add_option("manifest", manifest, "Mesh manifest (default datasets/dev45.tsv)");
+  app.add_option("threads", threads, "Threads (default 1)")->check(CLI::Range(1, 1024));
+  app.add_flag("--build", build, "Build each object completely and print the per-stage times");
+  CLI11_PARSE(app, argc, argv);
   try {
-    std::vector<std::string> args;
-    bool build = false;
-    for (int i = 1; i < argc; ++i) {
-      if (std::string(argv[i]) == "--build") build = true;
-      else args.emplace_back(argv[i]);
-    }
-    const std::string manifest = args.size() > 0 ? args[0] : "datasets/dev45.tsv";
-    const int threads = args.size() > 1 ? std::max(1, std::atoi(args[1].c_str())) : 1;
     const auto entries = ts::datasets::read_manifest(manifest);
 
     // Read every archive once.

@@ -17,7 +17,10 @@
 #include "engine/recognizer.hpp"
 #include "engine/shortlist.hpp"
 #include "experiments/cli_common.hpp"
+#include "experiments/parameters.hpp"
 #include "io/db_store.hpp"
+
+#include <CLI/CLI.hpp>
 
 #include <tbb/info.h>
 
@@ -39,27 +42,26 @@ using Clock = std::chrono::steady_clock;
 }  // namespace
 
 int main(int argc, char** argv) {
+  std::string db_path, noise = "underwater", explore = "all";
+  std::size_t seeds = 2, grasps = 20, max_explore = 45, queries_n = 64;
+  CLI::App app{"bench_shortlist: recall of the object shortlist per step, and its cost"};
+  app.add_option("--db", db_path, "Object database (HDF5)")->required();
+  app.add_option("--seeds", seeds, "Logs per explored object")->check(CLI::Range(1, 100000));
+  app.add_option("--grasps", grasps, "Steps (grasps) of each log")->check(CLI::Range(1, 100000));
+  app.add_option("--explore", explore, "all | originals (objects without a _v<k> suffix)")
+      ->check(CLI::IsMember({"all", "originals"}));
+  app.add_option("--max-explore", max_explore, "At most this many explored objects, evenly spread")
+      ->check(CLI::Range(1, 1000000));
+  app.add_option("--queries", queries_n, "Contact features that vote (features alone)")->check(CLI::Range(1, 1000000));
+  // --noise: the declared simulator parameter (touchstone params), underwater by default here.
+  experiments::ParameterFlags run_flags;
+  experiments::add_parameter_flags(app, run_flags, "Simulator parameters (touchstone params)",
+                                   [](const experiments::Parameter& p) { return p.key == "noise"; });
+  CLI11_PARSE(app, argc, argv);
+  if (const auto it = run_flags.given.find("noise"); it != run_flags.given.end()) noise = it->second;
   try {
-    std::string db_path, noise = "underwater", explore = "all";
-    std::size_t seeds = 2, grasps = 20, max_explore = 45, queries_n = 64;
     std::vector<std::size_t> steps = {5, 10, 20};
     const std::vector<std::size_t> Ks = {4, 8, 16, 24, 32, 48, 64};
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw Error("missing value", {}, a);
-        return argv[++i];
-      };
-      if (a == "--db") db_path = next();
-      else if (a == "--seeds") seeds = std::stoul(next());
-      else if (a == "--grasps") grasps = std::stoul(next());
-      else if (a == "--noise") noise = next();
-      else if (a == "--explore") explore = next();
-      else if (a == "--max-explore") max_explore = std::stoul(next());
-      else if (a == "--queries") queries_n = std::stoul(next());
-      else throw Error("unknown argument (see the header of bench_shortlist.cpp)", {}, a);
-    }
-    if (db_path.empty()) throw Error("--db DB.h5 is required");
     steps.erase(std::remove_if(steps.begin(), steps.end(), [&](std::size_t s) { return s > grasps; }), steps.end());
     steps.push_back(grasps);
     std::sort(steps.begin(), steps.end());

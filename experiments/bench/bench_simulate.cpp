@@ -13,7 +13,12 @@
 #include "datasets/manifest.hpp"
 #include "datasets/simulator.hpp"
 #include "experiments/cli_common.hpp"
+#include "experiments/config.hpp"
+#include "experiments/grasp_pools.hpp"
+#include "experiments/parameters.hpp"
 #include "io/log_store.hpp"
+
+#include <CLI/CLI.hpp>
 #include "io/mesh_import.hpp"
 
 #include <tbb/task_arena.h>
@@ -41,28 +46,32 @@ double percentile(std::vector<double> v, double p) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  int threads = 2, sensors = 1;
+  int threads = 2;
   std::size_t grasps = 40;
   std::uint64_t seed = 1;
-  std::string noise = "underwater";
   // Default manifest: datasets/dev45.tsv from the working directory, else beside build/bench/.
   std::filesystem::path manifest = "datasets/dev45.tsv";
   if (!std::filesystem::exists(manifest))
     manifest = std::filesystem::path(argv[0]).parent_path() / "../../datasets/dev45.tsv";
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string a = argv[i], v = argv[i + 1];
-    if (a == "--threads") threads = std::stoi(v);
-    else if (a == "--grasps") grasps = std::stoul(v);
-    else if (a == "--noise") noise = v;
-    else if (a == "--seed") seed = std::stoull(v);
-    else if (a == "--manifest") manifest = v;
-    else if (a == "--sensors") sensors = std::stoi(v);
-    else {
-      std::fprintf(stderr, "unknown option %s\n", a.c_str());
-      return 2;
-    }
-  }
+  CLI::App app{"bench_simulate: the exploration simulator's speed and contact rate"};
+  app.add_option("--threads", threads, "Threads of the task arena")->check(CLI::Range(1, 1024));
+  app.add_option("--grasps", grasps, "Grasps per object")->check(CLI::Range(1, 1000000));
+  app.add_option("--seed", seed, "Simulator seed");
+  app.add_option("--manifest", manifest, "Mesh manifest");
+  // --noise (underwater here), its overrides and --sensors: the declared simulator parameters.
+  experiments::ParameterFlags run_flags;
+  experiments::add_parameter_flags(app, run_flags, "Simulator parameters (touchstone params)",
+                                   [](const experiments::Parameter& p) {
+                                     return experiments::bench_run_parameter(p) && p.kind == experiments::Parameter::Kind::simulator;
+                                   });
+  CLI11_PARSE(app, argc, argv);
   try {
+    experiments::ExperimentConfig config;
+    config.noise = "underwater";
+    experiments::apply_flags(run_flags, config);
+    const datasets::SimulatorSettings base = experiments::simulation_settings(config);
+    const std::string noise = config.noise;
+    const int sensors = config.sensors;
     const auto entries = datasets::read_manifest(manifest);
     std::printf("bench_simulate: %zu grasps per object, %d pad(s), noise %s, seed %llu, %d threads; %s\n", grasps,
                 sensors, noise.c_str(), static_cast<unsigned long long>(seed), threads,
@@ -79,11 +88,9 @@ int main(int argc, char** argv) {
           e.member.empty() ? io::import_mesh(e.path)
                            : io::import_mesh_from_memory(datasets::read_archive_member(e.path, e.member),
                                                          e.path.filename().string() + ":" + e.member);
-      datasets::SimulatorSettings s;
+      datasets::SimulatorSettings s = base;
       s.grasps = grasps;
-      s.sensors = sensors;
       s.seed = seed;
-      s.noise = datasets::noise_profile(noise);
       const auto t0 = std::chrono::steady_clock::now();
       const auto result = arena.execute([&] {
         const datasets::Simulator sim(m.mesh, e.name, Gripper(), s);
