@@ -5,6 +5,7 @@
 // at the natural pauses (after the set-up, between runs and inputs).
 #pragma once
 
+#include <cstddef>
 #include <string>
 
 namespace ts::experiments {
@@ -17,5 +18,11 @@ std::string allocator_name();
 /// global caches; glibc: malloc_trim). Thread-safe; costs page faults when the memory is needed
 /// again, so call it between units of work, not inside a step.
 void release_free_memory();
+
+/// What writing fresh memory costs on this machine, in ms per MB: `mb` MB of anonymous memory
+/// mapped and written once, a byte per page (the page faults and whatever the host does to back
+/// the pages). The benchmarks print it beside the machine: on a virtual machine it varies from day
+/// to day, and a process that loads much (a one-shot recognition) pays it for every page.
+double first_touch_ms_per_mb(std::size_t mb = 64);
 
 }  // namespace ts::experiments

@@ -25,6 +25,7 @@
 #include "engine/pose_error.hpp"
 #include "engine/recognizer.hpp"
 #include "engine/symmetry.hpp"
+#include "experiments/allocator.hpp"
 #include "experiments/cli_common.hpp"
 #include "experiments/config.hpp"
 #include "experiments/grasp_pools.hpp"
@@ -164,8 +165,9 @@ int main(int argc, char** argv) {
     Database db(reader);
     db.set_surface(needs_surface(rs, db.settings()));   // as `touchstone recognize` does
     const std::size_t n_obj = objects > 0 ? std::min(objects, db.size()) : db.size();
-    std::printf("bench_recognize: %s\nmachine: %s\ndatabase: %s (%zu objects), method %s, %zu grasps, noise %s\n",
-                "recognizer speed and accuracy", cli::machine_description().c_str(), db_path.c_str(),
+    std::printf("bench_recognize: %s\nmachine: %s; first touch of fresh memory %.2f ms/MB\ndatabase: %s (%zu objects), method %s, %zu grasps, noise %s\n",
+                "recognizer speed and accuracy", cli::machine_description().c_str(),
+                experiments::first_touch_ms_per_mb(), db_path.c_str(),
                 db.size(), method.c_str(), grasps, noise.c_str());
     std::printf("parameters (preset %s):", preset.c_str());
     {

@@ -1,4 +1,5 @@
 // `touchstone db ...` end to end: the built program on small generated meshes.
+#include "experiments/allocator.hpp"
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
 #include "io/h5.hpp"
@@ -13,6 +14,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <numbers>
@@ -47,6 +49,16 @@ bool leftovers(const fs::path& dir) {
 }
 
 }  // namespace
+
+TEST_CASE("Machine: the cost of first touching fresh memory is a positive time per MB") {
+  // The benchmarks print it beside the machine line. Writing 4 MB of fresh pages takes some
+  // time; nothing to write costs nothing.
+  const double t = ts::experiments::first_touch_ms_per_mb(4);
+  CHECK(std::isfinite(t));
+  CHECK(t > 0.0);
+  CHECK(t < 1000.0);   // a second per MB would be a broken measurement, not a slow machine
+  CHECK(ts::experiments::first_touch_ms_per_mb(0) == 0.0);
+}
 
 TEST_CASE("cli db: build is byte-identical for any --threads; info lists every object") {
   TempDir dir("cli");
