@@ -51,7 +51,7 @@ bool stderr_is_terminal();
 void register_db(CLI::App& app);          // db build|add|info|export
 void register_tactile(CLI::App& app);     // simulate, log info|export
 void register_recognize(CLI::App& app);   // recognize
-void register_experiment(CLI::App& app);  // experiment, report
+void register_experiment(CLI::App& app);  // experiment, report, merge, calibrate
 void register_catalogue(CLI::App& app);   // catalogue
 void register_stress(CLI::App& app);      // stress
 void register_params(CLI::App& app);      // params

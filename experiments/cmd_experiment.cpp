@@ -8,6 +8,7 @@
 #include "experiments/parameters.hpp"
 #include "experiments/recognition_engine.hpp"
 #include "experiments/report.hpp"
+#include "experiments/shards.hpp"
 #include "io/run_store.hpp"
 
 #include <algorithm>
@@ -33,8 +34,15 @@ struct ExperimentOptions {
   std::string db, config_file, out, plots;
   experiments::ParameterFlags flags;   ///< the simulator and experiment parameters' flags
   std::vector<std::string> set;   ///< KEY=VALUE, any configuration key
+  std::string shard;              ///< "I/N": this process runs shard I of N (shards.hpp)
   bool resume = false;
   bool seed_given = false;
+};
+
+struct MergeOptions {
+  CommonOptions common;
+  std::string out;
+  std::vector<std::string> shards;
 };
 
 struct ReportOptions {
@@ -188,6 +196,8 @@ void emit_report(const io::RunStoreContents& contents, const experiments::Report
 
 int run_experiment(const ExperimentOptions& o) {
   const ExperimentConfig config = build_config(o);
+  std::optional<experiments::Shard> shard;
+  if (!o.shard.empty()) shard = experiments::parse_shard(o.shard, "--shard");
   const int threads = thread_count(o.common);
   std::function<void(const std::string&)> note;
   if (stderr_is_terminal()) note = [](const std::string& line) { std::cerr << line << "\n"; };
@@ -205,7 +215,8 @@ int run_experiment(const ExperimentOptions& o) {
     if (const auto at = message.find(lacks); at != std::string::npos) message.replace(at, lacks.size(), "(not in the database " + o.db + ")");
     throw Error(message, o.config_file, e.field());
   }
-  const io::RunStoreHeader& header = engine->header();
+  io::RunStoreHeader header = engine->header();
+  if (shard) header.shard = shard->label();
   const std::filesystem::path out = o.out;
   std::error_code ec;
   if (std::filesystem::exists(out, ec)) {
@@ -217,7 +228,8 @@ int run_experiment(const ExperimentOptions& o) {
     io::RunStore::create(out, header);
   }
 
-  const auto tasks = experiments::all_tasks(header, config.runs);
+  auto tasks = experiments::all_tasks(header, config.runs);
+  if (shard) tasks = experiments::shard_tasks(tasks, *shard);
   experiments::DriveSettings ds;
   ds.parallel_runs = config.schedule == "runs";
   g_stop = false;
@@ -236,6 +248,7 @@ int run_experiment(const ExperimentOptions& o) {
   }
   if (stderr_is_terminal())
     std::cerr << "Experiment '" << config.name << "': " << tasks.size() << " runs ("
+              << (shard ? "shard " + shard->label() + " of " : std::string())
               << header.variant_labels.size() << " variant(s) x " << header.objects.size()
               << " object(s) x " << config.runs << " runs x " << config.steps << " steps), "
               << threads << " threads\n";
@@ -252,10 +265,29 @@ int run_experiment(const ExperimentOptions& o) {
     return 130;
   }
   io::RunStore::compact(out, true);
+  if (shard && stderr_is_terminal())
+    std::cerr << "Shard " << shard->label() << " is complete in " << o.out
+              << "; fold the shards into one store with: touchstone merge OUT.h5 SHARD.h5 ...\n";
   experiments::ReportSettings rs;
   rs.threads = threads;
   rs.machine = machine_description();
   emit_report(io::RunStore::read(out), rs, o.out, o.common.json, o.plots);
+  return 0;
+}
+
+int run_merge(const MergeOptions& o) {
+  std::vector<std::filesystem::path> shards(o.shards.begin(), o.shards.end());
+  const std::size_t runs = experiments::merge_shards(o.out, shards);
+  if (o.common.json) {
+    nlohmann::ordered_json j;
+    j["out"] = o.out;
+    j["shards"] = o.shards;
+    j["runs"] = runs;
+    std::cout << j.dump(1) << "\n";
+  } else {
+    std::cout << "Merged " << shards.size() << " shard stores (" << runs << " runs) into " << o.out
+              << "; report it with: touchstone report " << o.out << "\n";
+  }
   return 0;
 }
 
@@ -431,12 +463,23 @@ void register_experiment(CLI::App& app) {
   e->add_option("--out", eo->out, "Run store to write (HDF5)")->required();
   e->add_flag("--resume", eo->resume,
               "Continue an interrupted experiment in --out (same configuration and database)");
+  e->add_option("--shard", eo->shard,
+                "Run only shard I of N of the runs (I/N; every N-th run in key order) into --out; "
+                "fold the N shard stores with `touchstone merge`");
   e->add_option("--plots", eo->plots, "Also write the figures (PNG) into this folder");
   add_common(e, eo->common);
   e->callback([eo, e] {
     eo->seed_given = e->get_option("--seed")->count() > 0;
     run_command(eo->common, [eo] { return run_experiment(*eo); });
   });
+
+  auto mo = std::make_shared<MergeOptions>();
+  CLI::App* m = app.add_subcommand(
+      "merge", "Fold the shard stores of one experiment (experiment --shard I/N) into one run store");
+  m->add_option("out", mo->out, "Run store to write (HDF5; must not exist)")->required();
+  m->add_option("shards", mo->shards, "The N shard stores, in any order")->required();
+  add_common(m, mo->common);
+  m->callback([mo] { run_command(mo->common, [mo] { return run_merge(*mo); }); });
 
   auto ro = std::make_shared<ReportOptions>();
   CLI::App* r = app.add_subcommand("report", "Report a run store: tables, JSON (--json), figures (--plots)");

@@ -104,6 +104,10 @@ void check_resumable(const io::RunStoreHeader& stored, const io::RunStoreHeader&
       stored.variant_labels != now.variant_labels || stored.steps != now.steps)
     throw Error("the run store's objects or variants differ from this configuration's (the store "
                 "is left untouched)", path, "objects");
+  if (stored.shard != now.shard)
+    throw Error("the run store holds " + (stored.shard.empty() ? std::string("a whole experiment") : "shard " + stored.shard) +
+                ", not " + (now.shard.empty() ? std::string("the whole experiment") : "shard " + now.shard) +
+                " (the store is left untouched)", path, "/@shard");
   if (stored.stages != now.stages)
     throw Error("the run store was written by a build with other timing stages", path, "/header/stages");
   if (stored.step_values != now.step_values)

@@ -6,6 +6,7 @@
 #include "io/h5.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <cstdio>
 #include <array>
 #include <chrono>
@@ -70,6 +71,7 @@ void write_header(h5::Group root, const RunStoreHeader& h) {
   root.set_attribute("steps", static_cast<std::int64_t>(h.steps));
   root.set_attribute("machine", h.machine);
   root.set_attribute("complete", std::int64_t{0});
+  if (!h.shard.empty()) root.set_attribute("shard", h.shard);
   h5::Group hg = root.create_group("header");
   hg.write_strings("config", {h.config_json});
   hg.write_strings("database", {h.database_json});
@@ -100,6 +102,16 @@ void write_header(h5::Group root, const RunStoreHeader& h) {
   if (!h.step_values.empty()) st.create_extendible<double>("values", {h.step_values.size()});
 }
 
+/// "I/N" with 1 <= I <= N <= 1e6, digits only.
+bool valid_shard(const std::string& text) {
+  const auto slash = text.find('/');
+  if (slash == std::string::npos || slash == 0 || slash + 1 >= text.size() || text.size() > 15) return false;
+  for (std::size_t k = 0; k < text.size(); ++k)
+    if (k != slash && !std::isdigit(static_cast<unsigned char>(text[k]))) return false;
+  const long i = std::stol(text.substr(0, slash)), n = std::stol(text.substr(slash + 1));
+  return i >= 1 && i <= n && n <= 1000000;
+}
+
 RunStoreHeader parse_header(const h5::File& file) {
   h5::Group root = file.root();
   if (!root.has_attribute("format") || root.string_attribute("format") != kFormat)
@@ -113,6 +125,11 @@ RunStoreHeader parse_header(const h5::File& file) {
   h.steps = static_cast<std::int32_t>(root.int_attribute("steps"));
   if (h.steps < 1) throw Error("steps must be at least 1", file.name(), "/@steps");
   h.machine = root.string_attribute("machine");
+  if (root.has_attribute("shard")) {
+    h.shard = root.string_attribute("shard");
+    if (!valid_shard(h.shard))
+      throw Error("a shard is written I/N with 1 <= I <= N (got '" + h.shard + "')", file.name(), "/@shard");
+  }
   h5::Group hg = root.open_group("header");
   auto one = [&](const char* name) {
     auto v = hg.read_strings(name);
@@ -391,7 +408,8 @@ void check_pending_header(const RunStoreHeader& store, const RunStoreHeader& pen
       pending.steps != store.steps ||
       pending.stages != store.stages || pending.step_values != store.step_values ||
       pending.objects != store.objects ||
-      pending.variant_labels != store.variant_labels || pending.database_objects != store.database_objects)
+      pending.variant_labels != store.variant_labels || pending.database_objects != store.database_objects ||
+      pending.shard != store.shard)
     throw Error("these runs belong to another experiment than their store (remove the file, or the store)",
                 file.string(), "/config");
 }
@@ -560,23 +578,16 @@ void take_row(std::vector<T>& to, const std::vector<T>& from, std::size_t r, std
             from.begin() + static_cast<std::ptrdiff_t>((r + 1) * width));
 }
 
-}  // namespace
-
-void RunStore::compact(const std::filesystem::path& path, bool complete) {
-  // Copy the stored values themselves (no round trip through Pose), so compacting twice changes
-  // nothing and equal runs give equal bytes however often their store was resumed. The pending
-  // files are folded in; the new store is renamed in before they are removed (a kill between
-  // the two leaves runs present twice, which read as once).
-  const Merged m = read_consistent(path);
-  const RunStoreHeader& h = m.contents.header;
-  std::vector<Columns> in;
-  for (const auto& file : m.files) in.push_back(read_columns(file, h));
+/// Write the runs `source` names ((file, row) pairs into `in`, in order) as a new store with
+/// header `h` to `path` (atomically), copying the stored values themselves.
+void write_folded(const std::filesystem::path& path, const RunStoreHeader& h, const std::vector<Columns>& in,
+                  const std::vector<std::pair<std::size_t, std::size_t>>& source, bool complete) {
   const auto steps = static_cast<std::size_t>(h.steps);
   const std::size_t S = h.stages.size(), V = h.step_values.size();
   Columns c;
   c.ints.resize(std::size(kStepInts));
   c.dbls.resize(std::size(kStepDoubles));
-  for (const auto& [part, r] : m.source) {
+  for (const auto& [part, r] : source) {
     const Columns& x = in[part];
     take_row(c.variant, x.variant, r, 1);
     take_row(c.object, x.object, r, 1);
@@ -595,7 +606,7 @@ void RunStore::compact(const std::filesystem::path& path, bool complete) {
       if (V) take_row(c.values, x.values, row, V);
     }
   }
-  const std::size_t n = m.source.size(), rows = n * steps;
+  const std::size_t n = source.size(), rows = n * steps;
   AtomicOutput out(path);
   {
     h5::File f = h5::File::create(out);
@@ -622,9 +633,65 @@ void RunStore::compact(const std::filesystem::path& path, bool complete) {
     f.close();
   }
   out.commit();
+}
+
+}  // namespace
+
+void RunStore::compact(const std::filesystem::path& path, bool complete) {
+  // Copy the stored values themselves (no round trip through Pose), so compacting twice changes
+  // nothing and equal runs give equal bytes however often their store was resumed. The pending
+  // files are folded in; the new store is renamed in before they are removed (a kill between
+  // the two leaves runs present twice, which read as once).
+  const Merged m = read_consistent(path);
+  std::vector<Columns> in;
+  for (const auto& file : m.files) in.push_back(read_columns(file, m.contents.header));
+  write_folded(path, m.contents.header, in, m.source, complete);
   for (std::size_t i = 1; i < m.files.size(); ++i) std::filesystem::remove(m.files[i]);
   std::error_code ec;
   std::filesystem::remove(pending_dir(path), ec);   // only when empty (no writer's temporary)
+}
+
+void RunStore::merge(const std::filesystem::path& out, const RunStoreHeader& header,
+                     const std::vector<std::filesystem::path>& inputs, bool complete) {
+  std::error_code ec;
+  if (std::filesystem::exists(out, ec) || std::filesystem::exists(pending_dir(out), ec))
+    throw Error("the merged store already exists (remove it, or choose another name)", out.string());
+  struct Entry {
+    std::int32_t variant, object, run;
+    std::size_t input;            // which of `inputs`
+    std::pair<std::size_t, std::size_t> where;   // (file in `in`, row)
+  };
+  std::vector<Columns> in;
+  std::vector<Entry> entries;
+  for (std::size_t k = 0; k < inputs.size(); ++k) {
+    const Merged m = read_consistent(inputs[k]);
+    const RunStoreHeader& h = m.contents.header;
+    if (h.steps != header.steps || h.stages != header.stages || h.step_values != header.step_values ||
+        h.objects != header.objects || h.variant_labels != header.variant_labels ||
+        h.database_objects != header.database_objects)
+      throw Error("the store's layout (steps, stages, values, objects or variants) differs from the merged "
+                  "store's", inputs[k].string(), "/header");
+    const std::size_t base = in.size();
+    for (const auto& file : m.files) in.push_back(read_columns(file, h));
+    for (std::size_t i = 0; i < m.contents.runs.size(); ++i) {
+      const RunRecord& r = m.contents.runs[i];
+      entries.push_back({r.variant, r.object, r.run, k, {base + m.source[i].first, m.source[i].second}});
+    }
+  }
+  std::stable_sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
+    return std::tie(a.variant, a.object, a.run) < std::tie(b.variant, b.object, b.run);
+  });
+  std::vector<std::pair<std::size_t, std::size_t>> source;
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    const Entry& e = entries[i];
+    if (i > 0 && std::tie(e.variant, e.object, e.run) ==
+                     std::tie(entries[i - 1].variant, entries[i - 1].object, entries[i - 1].run))
+      throw Error("run " + std::to_string(e.run) + " of object " + header.objects.at(static_cast<std::size_t>(e.object)) +
+                      " (variant " + std::to_string(e.variant) + ") is also in " + inputs[entries[i - 1].input].string(),
+                  inputs[e.input].string(), "/runs");
+    source.push_back(e.where);
+  }
+  write_folded(out, header, in, source, complete);
 }
 
 }  // namespace ts::io

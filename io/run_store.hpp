@@ -74,6 +74,8 @@ struct RunStoreHeader {
   std::vector<std::string> stages;          ///< names of the per-stage timing columns
   std::vector<std::string> step_values;     ///< names of the per-step value columns (optional:
                                             ///< none in stores written before them)
+  std::string shard;                        ///< "I/N" for shard I of N of an experiment's runs
+                                            ///< (`experiment --shard`); "" for the whole
 };
 
 struct RunStoreContents {
@@ -99,6 +101,13 @@ class RunStore {
   /// by key, mark it complete when `complete`, then remove the pending files. Equal results give
   /// equal bytes except the timing columns.
   static void compact(const std::filesystem::path& path, bool complete);
+  /// Write a new store at `out` (which must not exist; written atomically) with `header` and
+  /// every run of the stores `inputs` (their pending files included), sorted by key, each run's
+  /// stored values copied as they are (equal runs give equal bytes, as compact()). The inputs
+  /// must have `header`'s layout (steps, stages, step values, objects, variants); a run present
+  /// in two inputs is an error naming both. The inputs are left as they are.
+  static void merge(const std::filesystem::path& out, const RunStoreHeader& header,
+                    const std::vector<std::filesystem::path>& inputs, bool complete);
 };
 
 }  // namespace ts::io

@@ -11,6 +11,7 @@
 #include "io/result_store.hpp"
 #include "engine/recognition_fixture.hpp"
 #include "cli_run.hpp"
+#include "db_fixture.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>
@@ -32,29 +33,7 @@ namespace {
 using Run = ts::test::CliRun;
 using ts::test::touchstone;
 
-/// The engine tests' six analytic shapes written as a database file.
-fs::path make_db(const test::TempDir& dir, const std::string& name = "db.h5",
-                 std::vector<std::string> skip = {}) {
-  auto src = test::make_source();
-  std::vector<BuiltObject> objects;
-  for (std::size_t i = 0; i < src->size(); ++i) {
-    if (std::find(skip.begin(), skip.end(), src->infos[i].name) != skip.end()) continue;
-    BuiltObject o;
-    o.info = src->infos[i];
-    o.info.source = "test";
-    o.info.mesh_sha256 = std::string(64, '0');
-    o.mesh = src->meshes[i];
-    o.features = src->feats[i];
-    o.fine = src->fines[i];
-    o.field = src->load_field(i);
-    objects.push_back(std::move(o));
-  }
-  std::vector<io::StoredObject> stored;
-  for (const auto& o : objects) stored.push_back({&o, 1});
-  const auto path = dir / name;
-  io::write_database(path, stored, src->db_settings, 1);
-  return path;
-}
+using ts::test::make_db;
 
 // Small method parameters: the tests check plumbing, determinism and errors, not accuracy.
 const std::string kFast = " -N 6 -R 40 -W 800 --n-p 20 --icp-points 64";

@@ -1,0 +1,188 @@
+// `touchstone experiment --shard I/N` and `touchstone merge` (issue 16): shards of one
+// experiment merge into a store whose results equal one process's, and a wrong set of shards is
+// one clear error naming the store at fault, with nothing written.
+#include "io/run_store.hpp"
+#include "cli_run.hpp"
+#include "db_fixture.hpp"
+#include "temp_dir.hpp"
+
+#include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
+
+#include <bit>
+#include <cstdint>
+#include <fstream>
+#include <string>
+#include <vector>
+
+using namespace ts;
+namespace fs = std::filesystem;
+
+namespace {
+
+using ts::test::touchstone;
+
+// 3 objects x 3 runs, short runs and small method parameters: the tests check the partition and
+// the merge, not accuracy.
+const std::string kExperiment =
+    "experiment --db db.h5 --objects box,nut,wedge --runs 3 --steps 3 --pool 5 --seed 3 "
+    "--set bricpsf.hypotheses=20 --set ransac.samples=5x40 --threads 1";
+
+bool same_bits(double a, double b) { return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b); }
+
+/// Every stored result of two stores equal, bit for bit (NaN confidences included); timings
+/// (wall and stage times) may differ.
+void check_same_results(const io::RunStoreContents& a, const io::RunStoreContents& b) {
+  CHECK(a.header.config_json == b.header.config_json);
+  CHECK(a.header.objects == b.header.objects);
+  REQUIRE(a.runs.size() == b.runs.size());
+  for (std::size_t i = 0; i < a.runs.size(); ++i) {
+    const io::RunRecord &x = a.runs[i], &y = b.runs[i];
+    CHECK(x.same_key(y));
+    CHECK(x.grasps == y.grasps);
+    CHECK(x.truth.matrix() == y.truth.matrix());
+    REQUIRE(x.steps.size() == y.steps.size());
+    for (std::size_t k = 0; k < x.steps.size(); ++k) {
+      const auto &p = x.steps[k], &q = y.steps[k];
+      CHECK(p.best_object == q.best_object);
+      CHECK(p.correct == q.correct);
+      CHECK(same_bits(p.weight, q.weight));
+      CHECK(same_bits(p.posterior_true, q.posterior_true));
+      CHECK(same_bits(p.posterior_entropy, q.posterior_entropy));
+      CHECK(p.true_rank == q.true_rank);
+      CHECK(p.hypotheses == q.hypotheses);
+      CHECK(p.contacts == q.contacts);
+      CHECK(p.free_points == q.free_points);
+      CHECK(p.pose.matrix() == q.pose.matrix());
+      CHECK(same_bits(p.position_error_m, q.position_error_m));
+      CHECK(same_bits(p.symmetric_orientation_error_rad, q.symmetric_orientation_error_rad));
+      CHECK(same_bits(p.mssd_m, q.mssd_m));
+      REQUIRE(p.values.size() == q.values.size());
+      for (std::size_t v = 0; v < p.values.size(); ++v) CHECK(same_bits(p.values[v], q.values[v]));
+    }
+  }
+}
+
+std::string shard_name(int n, int i) { return "s" + std::to_string(n) + "_" + std::to_string(i) + ".h5"; }
+
+/// Run shards 1..n of n; returns the merge arguments ("s3_1.h5 s3_2.h5 s3_3.h5").
+std::string run_shards(const test::TempDir& dir, int n) {
+  std::string names;
+  for (int i = 1; i <= n; ++i) {
+    const auto r = touchstone(dir, kExperiment + " --shard " + std::to_string(i) + "/" + std::to_string(n) +
+                                       " --json --out " + shard_name(n, i));
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    names += " " + shard_name(n, i);
+  }
+  return names;
+}
+
+}  // namespace
+
+TEST_CASE("experiment --shard I/N, then merge: the results of one process, for N = 1, 2, 3, 7") {
+  test::TempDir dir("shards");
+  test::make_db(dir);
+  const auto whole = touchstone(dir, kExperiment + " --json --out whole.h5");
+  REQUIRE_MESSAGE(whole.code == 0, whole.err);
+  const io::RunStoreContents single = io::RunStore::read(dir / "whole.h5");
+  REQUIRE(single.runs.size() == 9);
+  CHECK(single.header.shard.empty());
+  for (const int n : {1, 2, 3, 7}) {
+    CAPTURE(n);
+    const std::string names = run_shards(dir, n);
+    // Each shard holds every n-th run in key order, and says which shard it is.
+    std::size_t held = 0;
+    for (int i = 1; i <= n; ++i) {
+      const auto c = io::RunStore::read(dir / shard_name(n, i));
+      CHECK(c.header.shard == std::to_string(i) + "/" + std::to_string(n));
+      CHECK(c.complete);
+      const std::size_t want = (9 + static_cast<std::size_t>(n - i)) / static_cast<std::size_t>(n);
+      CHECK(c.runs.size() == want);
+      held += c.runs.size();
+    }
+    CHECK(held == 9);
+    const std::string merged = "merged" + std::to_string(n) + ".h5";
+    const auto m = touchstone(dir, "merge " + merged + names + " --json");
+    REQUIRE_MESSAGE(m.code == 0, m.err);
+    CHECK(nlohmann::json::parse(m.out)["runs"] == 9);
+    const io::RunStoreContents c = io::RunStore::read(dir / merged);
+    CHECK(c.complete);
+    CHECK(c.header.shard.empty());
+    check_same_results(single, c);
+    // The report reads the merged store as it reads the single process's.
+    const auto ra = touchstone(dir, "report whole.h5 --json"), rb = touchstone(dir, "report " + merged + " --json");
+    REQUIRE(ra.code == 0);
+    REQUIRE(rb.code == 0);
+    auto results = [](const std::string& out) {   // the per-step figures, timings left out
+      nlohmann::json steps = nlohmann::json::parse(out)["per_step"];
+      for (auto& s : steps)
+        for (const char* k : {"time_s_mean", "time_s_median", "time_s_p95", "stage_times_s_median"}) {
+          REQUIRE(s.contains(k));
+          s.erase(k);
+        }
+      return steps.dump();
+    };
+    const bool same_report = results(ra.out) == results(rb.out);
+    CHECK(same_report);
+  }
+}
+
+TEST_CASE("merge: a missing, repeated, foreign, unsharded or incomplete shard is one error naming it") {
+  test::TempDir dir("shards");
+  test::make_db(dir);
+  const std::string names = run_shards(dir, 3);   // s3_1.h5 s3_2.h5 s3_3.h5
+  auto refused = [&](const std::string& args, const std::string& file, const std::string& words) {
+    CAPTURE(args);
+    const auto r = touchstone(dir, "merge out.h5 " + args);
+    CHECK(r.code != 0);
+    CHECK_MESSAGE(r.err.find(words) != std::string::npos, r.err);
+    CHECK_MESSAGE(r.err.find(file) != std::string::npos, r.err);
+    CHECK(r.err.find('\n') == r.err.size() - 1);   // one line
+    CHECK_FALSE(fs::exists(dir / "out.h5"));
+    CHECK_FALSE(fs::exists(dir / "out.h5.runs"));
+  };
+  refused("s3_1.h5 s3_3.h5", "out.h5", "shard 2/3 is missing");
+  refused("s3_1.h5 s3_2.h5 s3_2.h5 s3_3.h5", "s3_2.h5", "given twice");
+  // Another configuration (seed) for shard 2: named, with the key.
+  REQUIRE(touchstone(dir, "experiment --db db.h5 --objects box,nut,wedge --runs 3 --steps 3 --pool 5 --seed 4 "
+                          "--set bricpsf.hypotheses=20 --set ransac.samples=5x40 --threads 1 --shard 2/3 --json "
+                          "--out other2.h5").code == 0);
+  refused("s3_1.h5 other2.h5 s3_3.h5", "other2.h5", "seed");
+  // Shards of another split.
+  REQUIRE(touchstone(dir, kExperiment + " --shard 2/2 --json --out half2.h5").code == 0);
+  refused("s3_1.h5 half2.h5 s3_3.h5", "half2.h5", "split into 2");
+  // A whole experiment is not a shard.
+  REQUIRE(touchstone(dir, kExperiment + " --json --out whole.h5").code == 0);
+  refused("s3_1.h5 whole.h5 s3_3.h5", "whole.h5", "not a shard store");
+  // An incomplete shard: shard 2's header with one of its runs.
+  {
+    const auto c = io::RunStore::read(dir / "s3_2.h5");
+    REQUIRE(c.runs.size() == 3);
+    io::RunStore::create(dir / "part2.h5", c.header);
+    io::RunStore::append(dir / "part2.h5", {c.runs.front()});
+  }
+  refused("s3_1.h5 part2.h5 s3_3.h5", "part2.h5", "incomplete: 1 of its 3 runs");
+  // The output exists: refused, and left as it was.
+  {
+    std::ofstream(dir / "taken.h5") << "mine";
+    const auto r = touchstone(dir, "merge taken.h5" + names);
+    CHECK(r.code != 0);
+    CHECK(r.err.find("already exists") != std::string::npos);
+    CHECK(test::read_bytes(dir / "taken.h5") == "mine");
+  }
+  // A shard store resumed as another shard is refused, untouched.
+  {
+    const auto before = test::read_bytes(dir / "s3_1.h5");
+    const auto r = touchstone(dir, kExperiment + " --shard 2/3 --resume --out s3_1.h5");
+    CHECK(r.code != 0);
+    CHECK_MESSAGE(r.err.find("holds shard 1/3, not shard 2/3") != std::string::npos, r.err);
+    CHECK(test::read_bytes(dir / "s3_1.h5") == before);
+  }
+  // Bad --shard values: one error naming the flag.
+  for (const std::string bad : {"0/3", "4/3", "3", "1/0", "a/b", "1/3x"}) {
+    const auto r = touchstone(dir, kExperiment + " --shard " + bad + " --out bad.h5");
+    CHECK(r.code != 0);
+    CHECK_MESSAGE(r.err.find("--shard") != std::string::npos, r.err);
+    CHECK_FALSE(fs::exists(dir / "bad.h5"));
+  }
+}
