@@ -1,10 +1,12 @@
 // `touchstone experiment` and `touchstone report`: run an experiment into a run store (resumable)
 // and report it as tables, the interface's JSON, and figures. `touchstone calibrate`: fit the
 // step confidence (experiments/calibration.hpp) on run stores.
+#include "experiments/allocator.hpp"
 #include "experiments/calibration.hpp"
 #include "experiments/cli_common.hpp"
 #include "experiments/config.hpp"
 #include "experiments/driver.hpp"
+#include "experiments/mpi_runs.hpp"
 #include "experiments/parameters.hpp"
 #include "experiments/recognition_engine.hpp"
 #include "experiments/report.hpp"
@@ -35,6 +37,7 @@ struct ExperimentOptions {
   experiments::ParameterFlags flags;   ///< the simulator and experiment parameters' flags
   std::vector<std::string> set;   ///< KEY=VALUE, any configuration key
   std::string shard;              ///< "I/N": this process runs shard I of N (shards.hpp)
+  bool mpi = false;               ///< one rank of an MPI job (mpi_runs.hpp)
   bool resume = false;
   bool seed_given = false;
 };
@@ -194,7 +197,94 @@ void emit_report(const io::RunStoreContents& contents, const experiments::Report
   }
 }
 
+/// The MPI mode: every rank reads what is done (the store and the rank stores of an earlier job),
+/// the runs left are handed out over the job, and rank 0 folds the rank stores into --out.
+int run_mpi(const ExperimentOptions& o, const ExperimentConfig& config, experiments::RunEngine& engine,
+            const io::RunStoreHeader& header, int threads, experiments::MpiSession& mpi) {
+  const std::filesystem::path out = o.out;
+  const auto earlier = experiments::rank_stores(out);
+  std::error_code ec;
+  const bool have_out = std::filesystem::exists(out, ec);
+  if ((have_out || !earlier.empty()) && !o.resume)
+    throw Error("the run store already exists: continue it with --resume, or remove it" +
+                    std::string(have_out ? "" : " (and its folder of rank stores)"), o.out, "--out");
+  std::set<experiments::RunTask> done;
+  auto take_done = [&](const std::filesystem::path& path) {
+    experiments::check_resumable(io::RunStore::read_header(path), header, path.string());
+    for (const auto& r : io::RunStore::read(path).runs) done.insert({r.variant, r.object, r.run});
+  };
+  if (have_out) take_done(out);
+  for (const auto& r : earlier) take_done(r);
+  const auto tasks = experiments::all_tasks(header, config.runs);
+  std::vector<experiments::RunTask> todo;
+  for (const auto& t : tasks)
+    if (!done.count(t)) todo.push_back(t);
+  mpi.barrier();   // every rank has read what is done before any rank writes
+  const bool root = mpi.rank() == 0;
+  try {
+    const auto own = experiments::rank_store(out, mpi.rank());
+    if (root && !todo.empty()) std::filesystem::create_directories(experiments::rank_folder(out));
+    mpi.barrier();
+    if (!todo.empty() && !std::filesystem::exists(own, ec)) io::RunStore::create(own, header);
+    if (root && stderr_is_terminal())
+      std::cerr << "Experiment '" << config.name << "': " << todo.size() << " of " << tasks.size()
+                << " runs to do over " << mpi.size() << " MPI ranks x " << threads << " threads\n";
+    experiments::DriveOutcome outcome;
+    if (!todo.empty()) {
+      engine.prepare(todo);
+      experiments::release_free_memory();
+      experiments::DriveSettings ds;
+      g_stop = false;
+      ds.stop = &g_stop;
+      SignalGuard guard;
+      outcome = mpi.drive(engine, todo, own, threads, ds);
+    }
+    mpi.barrier();
+    if (outcome.interrupted || g_stop) {
+      if (root)
+        std::cerr << "touchstone: interrupted: the finished runs are in " << experiments::rank_folder(out).string()
+                  << "; continue with the same command and --resume\n";
+      return 130;
+    }
+    if (!root) return 0;
+    // Fold: the store (when resuming) and every rank store into a new store renamed over --out.
+    std::vector<std::filesystem::path> inputs;
+    if (have_out) inputs.push_back(out);
+    for (const auto& r : experiments::rank_stores(out)) inputs.push_back(r);
+    if (!inputs.empty() && !(inputs.size() == 1 && have_out)) {
+      const std::filesystem::path folded = out.string() + ".fold.h5";
+      std::filesystem::remove(folded, ec);   // left by a fold that was killed
+      io::RunStore::merge(folded, header, inputs, false, true);
+      std::filesystem::rename(folded, out);
+      for (const auto& r : experiments::rank_stores(out)) {
+        std::filesystem::remove(r);
+        std::filesystem::remove_all(r.string() + ".runs", ec);
+      }
+      std::filesystem::remove(experiments::rank_folder(out), ec);
+    }
+    const std::size_t stored = io::RunStore::read(out).runs.size();
+    if (stored != tasks.size())
+      throw Error("the folded store holds " + std::to_string(stored) + " of " + std::to_string(tasks.size()) +
+                  " runs", o.out, "--out");
+    io::RunStore::compact(out, true);
+    experiments::ReportSettings rs;
+    rs.threads = threads;
+    rs.machine = machine_description() + ", " + std::to_string(mpi.size()) + " MPI ranks";
+    emit_report(io::RunStore::read(out), rs, o.out, o.common.json, o.plots);
+    return 0;
+  } catch (const std::exception& e) {
+    // After the first barrier the other ranks may wait for this one: stop the whole job.
+    std::cerr << "touchstone: error (MPI rank " << mpi.rank() << "): " << e.what() << "\n";
+    mpi.abort(1);
+  }
+}
+
 int run_experiment(const ExperimentOptions& o) {
+  std::unique_ptr<experiments::MpiSession> mpi;
+  if (o.mpi) {
+    if (!o.shard.empty()) throw Error("--mpi hands the runs out itself: give --shard or --mpi, not both", {}, "--mpi");
+    mpi = std::make_unique<experiments::MpiSession>();
+  }
   const ExperimentConfig config = build_config(o);
   std::optional<experiments::Shard> shard;
   if (!o.shard.empty()) shard = experiments::parse_shard(o.shard, "--shard");
@@ -217,6 +307,7 @@ int run_experiment(const ExperimentOptions& o) {
   }
   io::RunStoreHeader header = engine->header();
   if (shard) header.shard = shard->label();
+  if (mpi) return run_mpi(o, config, *engine, header, threads, *mpi);
   const std::filesystem::path out = o.out;
   std::error_code ec;
   if (std::filesystem::exists(out, ec)) {
@@ -466,6 +557,9 @@ void register_experiment(CLI::App& app) {
   e->add_option("--shard", eo->shard,
                 "Run only shard I of N of the runs (I/N; every N-th run in key order) into --out; "
                 "fold the N shard stores with `touchstone merge`");
+  e->add_flag("--mpi", eo->mpi,
+              "One rank of an MPI job (mpirun -n K touchstone experiment --mpi ...): the runs are "
+              "handed out over the ranks, each appends to OUT.ranks/rank-R.h5, rank 0 folds them into --out");
   e->add_option("--plots", eo->plots, "Also write the figures (PNG) into this folder");
   add_common(e, eo->common);
   e->callback([eo, e] {

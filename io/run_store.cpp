@@ -652,7 +652,7 @@ void RunStore::compact(const std::filesystem::path& path, bool complete) {
 }
 
 void RunStore::merge(const std::filesystem::path& out, const RunStoreHeader& header,
-                     const std::vector<std::filesystem::path>& inputs, bool complete) {
+                     const std::vector<std::filesystem::path>& inputs, bool complete, bool first_copy) {
   std::error_code ec;
   if (std::filesystem::exists(out, ec) || std::filesystem::exists(pending_dir(out), ec))
     throw Error("the merged store already exists (remove it, or choose another name)", out.string());
@@ -684,8 +684,10 @@ void RunStore::merge(const std::filesystem::path& out, const RunStoreHeader& hea
   std::vector<std::pair<std::size_t, std::size_t>> source;
   for (std::size_t i = 0; i < entries.size(); ++i) {
     const Entry& e = entries[i];
-    if (i > 0 && std::tie(e.variant, e.object, e.run) ==
-                     std::tie(entries[i - 1].variant, entries[i - 1].object, entries[i - 1].run))
+    const bool repeat = i > 0 && std::tie(e.variant, e.object, e.run) ==
+                                     std::tie(entries[i - 1].variant, entries[i - 1].object, entries[i - 1].run);
+    if (repeat && first_copy) continue;   // stable sort: the earlier input's copy came first
+    if (repeat)
       throw Error("run " + std::to_string(e.run) + " of object " + header.objects.at(static_cast<std::size_t>(e.object)) +
                       " (variant " + std::to_string(e.variant) + ") is also in " + inputs[entries[i - 1].input].string(),
                   inputs[e.input].string(), "/runs");

@@ -105,9 +105,11 @@ class RunStore {
   /// every run of the stores `inputs` (their pending files included), sorted by key, each run's
   /// stored values copied as they are (equal runs give equal bytes, as compact()). The inputs
   /// must have `header`'s layout (steps, stages, step values, objects, variants); a run present
-  /// in two inputs is an error naming both. The inputs are left as they are.
+  /// in two inputs is an error naming both, or with `first_copy` the first input's copy is kept
+  /// (a fold that was killed after its rename leaves runs in two places). The inputs are left as
+  /// they are.
   static void merge(const std::filesystem::path& out, const RunStoreHeader& header,
-                    const std::vector<std::filesystem::path>& inputs, bool complete);
+                    const std::vector<std::filesystem::path>& inputs, bool complete, bool first_copy = false);
 };
 
 }  // namespace ts::io

@@ -16,10 +16,11 @@ struct CliRun {
 };
 
 /// `touchstone <args>` with `dir` as the working directory; stdout, stderr and the exit code.
-/// The capture files are removed again, so `dir` holds only what the command wrote.
-inline CliRun touchstone(const TempDir& dir, const std::string& args) {
+/// The capture files are removed again, so `dir` holds only what the command wrote. `launcher`
+/// goes before the program (e.g. "mpirun -n 2").
+inline CliRun touchstone(const TempDir& dir, const std::string& args, const std::string& launcher = "") {
   const auto out = dir / ".stdout.txt", err = dir / ".stderr.txt";
-  const std::string cmd = "cd '" + dir.path().string() + "' && '" TS_BINARY_DIR "/touchstone' " + args +
+  const std::string cmd = "cd '" + dir.path().string() + "' && " + launcher + " '" TS_BINARY_DIR "/touchstone' " + args +
                           " >'" + out.string() + "' 2>'" + err.string() + "'";
   const int status = std::system(cmd.c_str());
   CliRun r;

@@ -1,6 +1,9 @@
 // `touchstone experiment --shard I/N` and `touchstone merge` (issue 16): shards of one
 // experiment merge into a store whose results equal one process's, and a wrong set of shards is
-// one clear error naming the store at fault, with nothing written.
+// one clear error naming the store at fault, with nothing written. The MPI mode (--mpi under
+// mpirun) gives one process's results too, and a rank killed mid-run loses only its runs in
+// flight.
+#include "experiments/mpi_runs.hpp"
 #include "io/run_store.hpp"
 #include "cli_run.hpp"
 #include "db_fixture.hpp"
@@ -10,6 +13,8 @@
 #include <nlohmann/json.hpp>
 
 #include <bit>
+#include <chrono>
+#include <thread>
 #include <cstdint>
 #include <fstream>
 #include <string>
@@ -185,4 +190,87 @@ TEST_CASE("merge: a missing, repeated, foreign, unsharded or incomplete shard is
     CHECK_MESSAGE(r.err.find("--shard") != std::string::npos, r.err);
     CHECK_FALSE(fs::exists(dir / "bad.h5"));
   }
+}
+
+namespace {
+
+// Open MPI refuses root without these flags; --oversubscribe lets 4 ranks share 2 cores.
+const std::string kMpirun = "mpirun --allow-run-as-root --oversubscribe -n ";
+
+}  // namespace
+
+TEST_CASE("experiment --mpi: one rank, mpirun -n 2 and an oversubscribed -n 4 give one process's results" *
+          doctest::skip(!ts::experiments::mpi_built())) {
+  test::TempDir dir("mpi");
+  test::make_db(dir);
+  const auto whole = touchstone(dir, kExperiment + " --json --out whole.h5");
+  REQUIRE_MESSAGE(whole.code == 0, whole.err);
+  const io::RunStoreContents single = io::RunStore::read(dir / "whole.h5");
+  for (const int ranks : {0, 2, 4}) {   // 0: started without mpirun (a singleton job)
+    CAPTURE(ranks);
+    const std::string out = "mpi" + std::to_string(ranks) + ".h5";
+    const auto r = touchstone(dir, kExperiment + " --mpi --json --out " + out,
+                              ranks ? kMpirun + std::to_string(ranks) : "");
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    const io::RunStoreContents c = io::RunStore::read(dir / out);
+    CHECK(c.complete);
+    check_same_results(single, c);
+    CHECK_FALSE(fs::exists(dir / (out + ".ranks")));   // the rank stores were folded in and removed
+  }
+  // --shard and --mpi together: one error naming --mpi, nothing written.
+  const auto both = touchstone(dir, kExperiment + " --mpi --shard 1/2 --out both.h5");
+  CHECK(both.code != 0);
+  CHECK(both.err.find("--mpi") != std::string::npos);
+  CHECK_FALSE(fs::exists(dir / "both.h5"));
+}
+
+TEST_CASE("experiment --mpi: a rank killed mid-run loses only its runs in flight; --resume completes the store" *
+          doctest::skip(!ts::experiments::mpi_built())) {
+  test::TempDir dir("mpi");
+  test::make_db(dir);
+  const std::string args =
+      "experiment --db db.h5 --objects box,nut,wedge --runs 12 --steps 6 --pool 8 --seed 5 "
+      "--set bricpsf.hypotheses=20 --set ransac.samples=5x40 --threads 1";
+  const auto whole = touchstone(dir, args + " --json --out whole.h5");
+  REQUIRE_MESSAGE(whole.code == 0, whole.err);
+  const io::RunStoreContents single = io::RunStore::read(dir / "whole.h5");
+  REQUIRE(single.runs.size() == 36);
+  // Start the job in the background; once some runs are stored, kill -9 one rank.
+  const std::string start = "cd '" + dir.path().string() + "' && (" + kMpirun + "2 '" TS_BINARY_DIR
+                            "/touchstone' " + args + " --mpi --json --out killed.h5 >job.out 2>job.err; echo $? > job.rc) "
+                            ">/dev/null 2>&1 &";
+  REQUIRE(std::system(start.c_str()) == 0);
+  auto stored = [&] {
+    std::size_t n = 0;
+    for (const auto& r : ts::experiments::rank_stores(dir / "killed.h5")) {
+      try {
+        n += io::RunStore::read(r).runs.size();
+      } catch (const std::exception&) {   // a rank store being created
+      }
+    }
+    return n;
+  };
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  while (stored() < 4 && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  // A rank's command line starts with the program's path (mpirun's and the shells' do not).
+  const std::string kill = "pkill -9 -n -f '^[^ ]*/touchstone experiment .*--out killed[.]h5'";
+  REQUIRE(std::system(kill.c_str()) == 0);
+  while (!fs::exists(dir / "job.rc") && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  REQUIRE(fs::exists(dir / "job.rc"));
+  const std::size_t kept = stored();
+  INFO("runs stored when the job died: " << kept);
+  CHECK(kept >= 4);
+  CHECK(kept < 36);   // killed mid-run, not after the end
+  CHECK_FALSE(fs::exists(dir / "killed.h5"));   // never folded
+  // The same command without --resume is refused; with it the job computes the rest only.
+  const auto again = touchstone(dir, args + " --mpi --out killed.h5", kMpirun + "2");
+  CHECK(again.code != 0);
+  CHECK(again.err.find("--resume") != std::string::npos);
+  const auto resumed = touchstone(dir, args + " --mpi --resume --json --out killed.h5", kMpirun + "2");
+  REQUIRE_MESSAGE(resumed.code == 0, resumed.err);
+  const io::RunStoreContents c = io::RunStore::read(dir / "killed.h5");
+  CHECK(c.complete);
+  check_same_results(single, c);
 }
