@@ -231,7 +231,7 @@ int run_mpi(const ExperimentOptions& o, const ExperimentConfig& config, experime
                 << " runs to do over " << mpi.size() << " MPI ranks x " << threads << " threads\n";
     experiments::DriveOutcome outcome;
     if (!todo.empty()) {
-      engine.prepare(todo);
+      engine.prepare_lazily(todo);   // the grasp pools by the runs that need them, on their rank
       experiments::release_free_memory();
       experiments::DriveSettings ds;
       g_stop = false;

@@ -44,6 +44,10 @@ class RunEngine {
   virtual std::optional<io::RunRecord> run(const RunTask& task, const std::atomic<bool>* stop) = 0;
   /// Work to do once before the runs (e.g. simulate the grasp pools), in the caller's arena.
   virtual void prepare(const std::vector<RunTask>& tasks) { (void)tasks; }
+  /// As prepare(), but what only some runs need (the grasp pools of protocol shared_pool) is
+  /// made by the first run that needs it: for a process that gets an unknown share of the runs
+  /// (a rank of an MPI job). Results are the same.
+  virtual void prepare_lazily(const std::vector<RunTask>& tasks) { prepare(tasks); }
 };
 
 struct Progress {

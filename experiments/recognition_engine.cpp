@@ -182,28 +182,14 @@ class RecognitionEngine final : public RunEngine {
     std::vector<std::pair<std::string, int>> todo;
     for (const auto& k : needed)
       if (!pools_.count(k)) todo.push_back(k);
+    if (lazy_pools_) todo.clear();   // each simulated by the first run that needs it (pool())
     if (!todo.empty()) {
       if (note_) note_("Simulating " + std::to_string(todo.size()) + " grasp pool(s) of " +
                        std::to_string(config_.pool) + " grasps...");
-      std::map<std::string, const VariantData*> by_key;
-      for (const VariantData& v : variants_)
-        if (v.shared_pool) by_key.emplace(v.pool_key, &v);
-      std::vector<datasets::SimulationResult> results(todo.size());
+      std::vector<TactileLog> results(todo.size());
       const auto start = Clock::now();
-      tbb::parallel_for(std::size_t{0}, todo.size(), [&](std::size_t i) {
-        const auto& [key, object] = todo[i];
-        datasets::SimulatorSettings s = by_key.at(key)->simulation;
-        const std::string& name = explored_[static_cast<std::size_t>(object)];
-        s.seed = pool_seed(config_.seed, name, std::nullopt);
-        datasets::Simulator sim(db_.load_mesh(explored_file_[static_cast<std::size_t>(object)]),
-                                name, Gripper(), s);
-        results[i] = sim.run();
-      });
-      for (std::size_t i = 0; i < todo.size(); ++i) {
-        if (!results[i].log.truth)
-          throw Error("the simulator gave no ground truth", {}, explored_[static_cast<std::size_t>(todo[i].second)]);
-        pools_.emplace(todo[i], std::move(results[i].log));
-      }
+      tbb::parallel_for(std::size_t{0}, todo.size(), [&](std::size_t i) { results[i] = simulate_pool(todo[i]); });
+      for (std::size_t i = 0; i < todo.size(); ++i) pools_.emplace(todo[i], std::move(results[i]));
       if (note_) {
         std::ostringstream s;
         s.precision(3);
@@ -266,7 +252,7 @@ class RecognitionEngine final : public RunEngine {
     rec.run = task.run;
     rec.grasps = draw_grasps(config_.seed, name, task.run, v.config.pool, v.config.steps);
     // The run's log: the drawn grasps of its pool, in order.
-    TactileLog log = v.shared_pool ? log_from_pool(pools_.at({v.pool_key, task.object}), rec.grasps)
+    TactileLog log = v.shared_pool ? log_from_pool(pool({v.pool_key, task.object}), rec.grasps)
                                    : simulate_run_log(v, task, rec.grasps);
     rec.truth = log.truth->object_pose;
     // Active exploration: the first grasp is the run's first drawn grasp; each later one is the
@@ -412,7 +398,53 @@ class RecognitionEngine final : public RunEngine {
   std::vector<VariantData> variants_;
   std::vector<std::string> labels_, configs_;
   io::RunStoreHeader header_;
-  std::map<std::pair<std::string, int>, TactileLog> pools_;
+  std::map<std::pair<std::string, int>, TactileLog> pools_;   // simulated by prepare()
+  /// With lazy pools (prepare_lazily), a pool is simulated by the first run that needs it.
+  struct LazyPool {
+    std::once_flag once;
+    TactileLog log;
+  };
+  bool lazy_pools_ = false;
+  std::mutex lazy_mutex_;
+  std::map<std::pair<std::string, int>, LazyPool> lazy_;
+
+  /// The grasp pool of (pool key, explored object): the same log however and wherever it is
+  /// simulated (its seed depends only on the experiment's seed and the object's name).
+  TactileLog simulate_pool(const std::pair<std::string, int>& key) const {
+    const VariantData* v = nullptr;
+    for (const VariantData& d : variants_)
+      if (d.shared_pool && d.pool_key == key.first) {
+        v = &d;
+        break;
+      }
+    if (!v) throw Error("no variant simulates the grasp pool " + key.first, {}, "pool");
+    datasets::SimulatorSettings s = v->simulation;
+    const std::string& name = explored_[static_cast<std::size_t>(key.second)];
+    s.seed = pool_seed(config_.seed, name, std::nullopt);
+    datasets::Simulator sim(db_.load_mesh(explored_file_[static_cast<std::size_t>(key.second)]), name, Gripper(), s);
+    TactileLog log = sim.run().log;
+    if (!log.truth) throw Error("the simulator gave no ground truth", {}, name);
+    return log;
+  }
+
+  const TactileLog& pool(const std::pair<std::string, int>& key) {
+    if (const auto it = pools_.find(key); it != pools_.end()) return it->second;
+    LazyPool* entry = nullptr;
+    {
+      std::lock_guard<std::mutex> lock(lazy_mutex_);
+      entry = &lazy_[key];   // std::map nodes stay where they are
+    }
+    std::call_once(entry->once, [&] { entry->log = simulate_pool(key); });
+    return entry->log;
+  }
+
+ public:
+  void prepare_lazily(const std::vector<RunTask>& tasks) override {
+    lazy_pools_ = true;
+    prepare(tasks);
+  }
+
+ private:
   std::map<int, std::unique_ptr<ObjectTruthModel>> truth_models_;
   std::optional<Calibration> calibration_;
 

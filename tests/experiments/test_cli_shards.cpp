@@ -217,6 +217,16 @@ TEST_CASE("experiment --mpi: one rank, mpirun -n 2 and an oversubscribed -n 4 gi
     check_same_results(single, c);
     CHECK_FALSE(fs::exists(dir / (out + ".ranks")));   // the rank stores were folded in and removed
   }
+  // The paper's protocol (one grasp pool per object, shared by its runs): each rank simulates the
+  // pools its runs need, the same pools one process simulates.
+  {
+    const std::string shared = kExperiment + " --set protocol=shared_pool --json";
+    const auto one = touchstone(dir, shared + " --out shared.h5");
+    REQUIRE_MESSAGE(one.code == 0, one.err);
+    const auto r = touchstone(dir, shared + " --mpi --out shared_mpi.h5", kMpirun + "2");
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    check_same_results(io::RunStore::read(dir / "shared.h5"), io::RunStore::read(dir / "shared_mpi.h5"));
+  }
   // --shard and --mpi together: one error naming --mpi, nothing written.
   const auto both = touchstone(dir, kExperiment + " --mpi --shard 1/2 --out both.h5");
   CHECK(both.code != 0);
