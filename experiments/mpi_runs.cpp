@@ -85,7 +85,7 @@ DriveOutcome MpiSession::drive(RunEngine& engine, const std::vector<RunTask>& to
   const auto n = static_cast<std::int64_t>(todo.size());
   std::atomic<std::int64_t> next{0};   // rank 0: the next run of `todo` to hand out
   // Rank 0's dispatcher: answers the other ranks' requests until each has said it is done.
-  // It polls (MPI_Iprobe, then sleeps 200 us) instead of blocking in a receive, which in Open MPI
+  // It polls (MPI_Iprobe, then sleeps 2 ms: a run takes seconds) instead of blocking in a receive, which in Open MPI
   // spins a core.
   std::thread dispatcher;
   if (rank_ == 0 && size_ > 1) {
@@ -108,7 +108,7 @@ DriveOutcome MpiSession::drive(RunEngine& engine, const std::vector<RunTask>& to
             }
           }
         }
-        if (!flag) std::this_thread::sleep_for(std::chrono::microseconds(200));
+        if (!flag) std::this_thread::sleep_for(std::chrono::milliseconds(2));
       }
     });
   }
