@@ -233,6 +233,9 @@ int run_mpi(const ExperimentOptions& o, const ExperimentConfig& config, experime
     if (!todo.empty()) {
       engine.prepare_lazily(todo);   // the grasp pools by the runs that need them, on their rank
       experiments::release_free_memory();
+    }
+    {
+      // Every rank takes part, even with nothing to do: rank 0 waits for each rank's "done".
       experiments::DriveSettings ds;
       g_stop = false;
       ds.stop = &g_stop;
@@ -256,9 +259,9 @@ int run_mpi(const ExperimentOptions& o, const ExperimentConfig& config, experime
       std::filesystem::remove(folded, ec);   // left by a fold that was killed
       io::RunStore::merge(folded, header, inputs, false, true);
       std::filesystem::rename(folded, out);
-      for (const auto& r : experiments::rank_stores(out)) {
-        std::filesystem::remove(r);
+      for (const auto& r : experiments::rank_stores(out)) {   // its pending runs first, then the store
         std::filesystem::remove_all(r.string() + ".runs", ec);
+        std::filesystem::remove(r);
       }
       std::filesystem::remove(experiments::rank_folder(out), ec);
     }
@@ -279,12 +282,28 @@ int run_mpi(const ExperimentOptions& o, const ExperimentConfig& config, experime
   }
 }
 
+int run_experiment_in(const ExperimentOptions& o, experiments::MpiSession* mpi);
+
 int run_experiment(const ExperimentOptions& o) {
   std::unique_ptr<experiments::MpiSession> mpi;
   if (o.mpi) {
     if (!o.shard.empty()) throw Error("--mpi hands the runs out itself: give --shard or --mpi, not both", {}, "--mpi");
     mpi = std::make_unique<experiments::MpiSession>();
+    if (mpi->size() > 1) {
+      // An error in one rank (a database it cannot read, memory) would leave the others waiting
+      // at a barrier: stop the whole job.
+      try {
+        return run_experiment_in(o, mpi.get());
+      } catch (const std::exception& e) {
+        std::cerr << "touchstone: error (MPI rank " << mpi->rank() << "): " << e.what() << "\n";
+        mpi->abort(1);
+      }
+    }
   }
+  return run_experiment_in(o, mpi.get());
+}
+
+int run_experiment_in(const ExperimentOptions& o, experiments::MpiSession* mpi) {
   const ExperimentConfig config = build_config(o);
   std::optional<experiments::Shard> shard;
   if (!o.shard.empty()) shard = experiments::parse_shard(o.shard, "--shard");

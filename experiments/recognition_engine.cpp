@@ -15,6 +15,7 @@
 #include "experiments/truth_model.hpp"
 
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 #include <tbb/version.h>
 
 #include <algorithm>
@@ -434,7 +435,9 @@ class RecognitionEngine final : public RunEngine {
       std::lock_guard<std::mutex> lock(lazy_mutex_);
       entry = &lazy_[key];   // std::map nodes stay where they are
     }
-    std::call_once(entry->once, [&] { entry->log = simulate_pool(key); });
+    // Isolated: while the simulator's parallel loop waits, this thread must not pick up another
+    // run (which could need this same pool and enter call_once again: a deadlock).
+    std::call_once(entry->once, [&] { tbb::this_task_arena::isolate([&] { entry->log = simulate_pool(key); }); });
     return entry->log;
   }
 

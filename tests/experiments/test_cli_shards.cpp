@@ -17,6 +17,8 @@
 #include <thread>
 #include <cstdint>
 #include <fstream>
+#include <map>
+#include <tuple>
 #include <string>
 #include <vector>
 
@@ -226,6 +228,13 @@ TEST_CASE("experiment --mpi: one rank, mpirun -n 2 and an oversubscribed -n 4 gi
     const auto r = touchstone(dir, shared + " --mpi --out shared_mpi.h5", kMpirun + "2");
     REQUIRE_MESSAGE(r.code == 0, r.err);
     check_same_results(io::RunStore::read(dir / "shared.h5"), io::RunStore::read(dir / "shared_mpi.h5"));
+    // Two workers a rank: requests from two threads of a rank, pools simulated while the other
+    // worker runs.
+    std::string two = shared;
+    two.replace(two.find("--threads 1"), 11, "--threads 2");
+    const auto t = touchstone(dir, two + " --mpi --out shared_mpi2.h5", kMpirun + "2 --bind-to none");
+    REQUIRE_MESSAGE(t.code == 0, t.err);
+    check_same_results(io::RunStore::read(dir / "shared.h5"), io::RunStore::read(dir / "shared_mpi2.h5"));
   }
   // --shard and --mpi together: one error naming --mpi, nothing written.
   const auto both = touchstone(dir, kExperiment + " --mpi --shard 1/2 --out both.h5");
@@ -271,6 +280,12 @@ TEST_CASE("experiment --mpi: a rank killed mid-run loses only its runs in flight
   REQUIRE(fs::exists(dir / "job.rc"));
   const std::size_t kept = stored();
   INFO("runs stored when the job died: " << kept);
+  // The runs finished before the kill, with their wall times (a run computed again has another):
+  // the resumed store must hold them as they were.
+  std::map<std::tuple<int, int, int>, double> finished;
+  for (const auto& r : ts::experiments::rank_stores(dir / "killed.h5"))
+    for (const auto& run : io::RunStore::read(r).runs) finished[{run.variant, run.object, run.run}] = run.wall_time_s;
+  CHECK(finished.size() == kept);
   CHECK(kept >= 4);
   CHECK(kept < 36);   // killed mid-run, not after the end
   CHECK_FALSE(fs::exists(dir / "killed.h5"));   // never folded
@@ -283,4 +298,9 @@ TEST_CASE("experiment --mpi: a rank killed mid-run loses only its runs in flight
   const io::RunStoreContents c = io::RunStore::read(dir / "killed.h5");
   CHECK(c.complete);
   check_same_results(single, c);
+  std::size_t same = 0;
+  for (const auto& run : c.runs)
+    if (const auto it = finished.find({run.variant, run.object, run.run}); it != finished.end())
+      same += same_bits(it->second, run.wall_time_s) ? 1 : 0;
+  CHECK(same == finished.size());   // every finished run kept as it was
 }
