@@ -219,7 +219,11 @@ int run_mpi(const ExperimentOptions& o, const ExperimentConfig& config, experime
   std::vector<experiments::RunTask> todo;
   for (const auto& t : tasks)
     if (!done.count(t)) todo.push_back(t);
-  mpi.barrier();   // every rank has read what is done before any rank writes
+  // Every rank has read what is done before any rank writes; and all read the same.
+  if (!mpi.same_on_every_rank(experiments::plan_fingerprint(header, todo)))
+    throw Error("the MPI ranks disagree on the experiment or on the runs left to do: each rank must see "
+                "the same configuration, database and stores (on a cluster: --out on a file system "
+                "shared by every node)", o.out, "--out");
   const bool root = mpi.rank() == 0;
   try {
     const auto own = experiments::rank_store(out, mpi.rank());

@@ -43,6 +43,46 @@ std::vector<std::filesystem::path> rank_stores(const std::filesystem::path& out)
   return files;
 }
 
+namespace {
+
+/// FNV-1a, 64 bits: the same on every machine (unlike std::hash).
+struct Fnv {
+  std::uint64_t h = 1469598103934665603ull;
+  void bytes(const void* data, std::size_t n) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
+  }
+  void text(const std::string& s) {
+    integer(static_cast<std::int64_t>(s.size()));
+    bytes(s.data(), s.size());
+  }
+  void integer(std::int64_t v) {
+    unsigned char b[8];
+    for (int i = 0; i < 8; ++i) b[i] = static_cast<unsigned char>((static_cast<std::uint64_t>(v) >> (8 * i)) & 0xff);
+    bytes(b, 8);
+  }
+};
+
+}  // namespace
+
+std::uint64_t plan_fingerprint(const io::RunStoreHeader& header, const std::vector<RunTask>& todo) {
+  Fnv f;
+  f.text(header.config_json);
+  f.text(header.database_json);
+  f.integer(header.steps);
+  for (const auto* list : {&header.variant_configs, &header.objects, &header.database_objects}) {
+    f.integer(static_cast<std::int64_t>(list->size()));
+    for (const auto& s : *list) f.text(s);
+  }
+  f.integer(static_cast<std::int64_t>(todo.size()));
+  for (const RunTask& t : todo) {
+    f.integer(t.variant);
+    f.integer(t.object);
+    f.integer(t.run);
+  }
+  return f.h;
+}
+
 #ifdef TS_HAVE_MPI
 
 namespace {
@@ -78,6 +118,14 @@ void MpiSession::barrier() {
 }
 
 void MpiSession::abort(int code) { MPI_Abort(MPI_COMM_WORLD, code); std::abort(); }
+
+bool MpiSession::same_on_every_rank(std::uint64_t value) {
+  std::lock_guard<std::mutex> lock(mpi_mutex());
+  std::uint64_t lo = 0, hi = 0;
+  MPI_Allreduce(&value, &lo, 1, MPI_UINT64_T, MPI_MIN, MPI_COMM_WORLD);
+  MPI_Allreduce(&value, &hi, 1, MPI_UINT64_T, MPI_MAX, MPI_COMM_WORLD);
+  return lo == hi;
+}
 
 DriveOutcome MpiSession::drive(RunEngine& engine, const std::vector<RunTask>& todo,
                                const std::filesystem::path& store, int threads, const DriveSettings& settings) {
@@ -174,6 +222,7 @@ MpiSession::MpiSession() {
 MpiSession::~MpiSession() = default;
 void MpiSession::barrier() {}
 void MpiSession::abort(int code) { std::exit(code); }
+bool MpiSession::same_on_every_rank(std::uint64_t) { return true; }
 DriveOutcome MpiSession::drive(RunEngine&, const std::vector<RunTask>&, const std::filesystem::path&, int,
                                const DriveSettings&) {
   return {};

@@ -11,6 +11,7 @@
 
 #include "experiments/driver.hpp"
 
+#include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -33,6 +34,8 @@ class MpiSession {
   void barrier();
   /// Stop every rank of the job (after an error in one rank: the others would wait forever).
   [[noreturn]] void abort(int code);
+  /// True when every rank passed the same value (a collective call: every rank must make it).
+  bool same_on_every_rank(std::uint64_t value);
 
   /// Run the tasks `todo` (the same list on every rank) over the job: each rank computes the runs
   /// it is handed with `threads` workers and appends each to its store `rank_store` (which must
@@ -43,6 +46,12 @@ class MpiSession {
  private:
   int rank_ = 0, size_ = 1;
 };
+
+/// A fingerprint of what a rank is about to do: the experiment (configuration, database,
+/// variants, objects, steps) and the list of runs left. Ranks that see different files (another
+/// configuration or database under the same path on another node, or a store folder that is not
+/// shared between nodes) get different fingerprints.
+std::uint64_t plan_fingerprint(const io::RunStoreHeader& header, const std::vector<RunTask>& todo);
 
 /// Where the ranks of an MPI experiment writing `out` keep their stores.
 std::filesystem::path rank_folder(const std::filesystem::path& out);

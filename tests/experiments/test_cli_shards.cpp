@@ -236,6 +236,23 @@ TEST_CASE("experiment --mpi: one rank, mpirun -n 2 and an oversubscribed -n 4 gi
     REQUIRE_MESSAGE(t.code == 0, t.err);
     check_same_results(io::RunStore::read(dir / "shared.h5"), io::RunStore::read(dir / "shared_mpi2.h5"));
   }
+  // Ranks that disagree on the experiment (here another seed on rank 1, as another configuration
+  // file under the same path on another node would): one error naming --out, before any run.
+  {
+    const std::string other = kExperiment.substr(0, kExperiment.find("--seed 3")) + "--seed 4" +
+                              kExperiment.substr(kExperiment.find("--seed 3") + 8);
+    const std::string program = "'" TS_BINARY_DIR "/touchstone' ";
+    const std::string cmd = "cd '" + dir.path().string() + "' && " + kMpirun + "1 " + program + kExperiment +
+                            " --mpi --out split.h5 : -n 1 " + program + other +
+                            " --mpi --out split.h5 >split.out 2>split.err";
+    const int status = std::system(cmd.c_str());
+    CHECK((!WIFEXITED(status) || WEXITSTATUS(status) != 0));
+    const std::string err = test::read_bytes(dir / "split.err");
+    CHECK(err.find("disagree") != std::string::npos);
+    CHECK(err.find("--out") != std::string::npos);
+    CHECK_FALSE(fs::exists(dir / "split.h5"));
+    CHECK_FALSE(fs::exists(dir / "split.h5.ranks"));
+  }
   // --shard and --mpi together: one error naming --mpi, nothing written.
   const auto both = touchstone(dir, kExperiment + " --mpi --shard 1/2 --out both.h5");
   CHECK(both.code != 0);
