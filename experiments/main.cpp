@@ -7,6 +7,7 @@ int main(int argc, char** argv) {
   CLI::App app{"touchstone: tactile object recognition and 6-DOF localization"};
   app.require_subcommand(1);
   app.set_help_all_flag("--help-all", "Help for every subcommand");
+  app.set_version_flag("--version", "touchstone " TS_VERSION);
   ts::cli::register_db(app);
   ts::cli::register_tactile(app);
   ts::cli::register_recognize(app);
