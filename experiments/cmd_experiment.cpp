@@ -219,16 +219,26 @@ int run_mpi(const ExperimentOptions& o, const ExperimentConfig& config, experime
   std::vector<experiments::RunTask> todo;
   for (const auto& t : tasks)
     if (!done.count(t)) todo.push_back(t);
-  // Every rank has read what is done before any rank writes; and all read the same.
-  if (!mpi.same_on_every_rank(experiments::plan_fingerprint(header, todo)))
-    throw Error("the MPI ranks disagree on the experiment or on the runs left to do: each rank must see "
-                "the same configuration, database and stores (on a cluster: --out on a file system "
-                "shared by every node)", o.out, "--out");
+  // Every rank has read what is done before any rank writes; and all read the same. The error
+  // is printed once, by rank 0 (the others end quietly; rank 0's error stops the job).
   const bool root = mpi.rank() == 0;
+  const std::string shared = " (on a cluster: --out on a file system shared by every node)";
+  if (!mpi.same_on_every_rank(experiments::plan_fingerprint(header, todo))) {
+    if (!root) return 1;
+    throw Error("the MPI ranks disagree on the experiment or on the runs left to do: each rank must see "
+                "the same configuration, database and stores" + shared, o.out, "--out");
+  }
   try {
     const auto own = experiments::rank_store(out, mpi.rank());
     if (root && !todo.empty()) std::filesystem::create_directories(experiments::rank_folder(out));
     mpi.barrier();
+    // The folder rank 0 made must be the one every rank sees.
+    const bool sees = todo.empty() || std::filesystem::is_directory(experiments::rank_folder(out), ec);
+    if (!mpi.same_on_every_rank(sees ? 1 : 0) || !sees) {
+      if (!root) return 1;
+      throw Error("some MPI ranks do not see the folder of rank stores rank 0 made, " +
+                  experiments::rank_folder(out).string() + shared, o.out, "--out");
+    }
     if (!todo.empty() && !std::filesystem::exists(own, ec)) io::RunStore::create(own, header);
     if (root && stderr_is_terminal())
       std::cerr << "Experiment '" << config.name << "': " << todo.size() << " of " << tasks.size()

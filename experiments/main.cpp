@@ -2,6 +2,10 @@
 #include "experiments/cli_common.hpp"
 #include "io/atomic_file.hpp"
 
+#ifndef TS_VERSION
+#define TS_VERSION "unknown"
+#endif
+
 int main(int argc, char** argv) {
   ts::io::remove_temporaries_on_interrupt();  // Ctrl-C leaves no <out>.tmp-<pid> behind
   CLI::App app{"touchstone: tactile object recognition and 6-DOF localization"};

@@ -3,6 +3,8 @@
 #include "experiments/allocator.hpp"
 #include "io/run_store.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/partitioner.h>
@@ -68,9 +70,13 @@ struct Fnv {
 std::uint64_t plan_fingerprint(const io::RunStoreHeader& header, const std::vector<RunTask>& todo) {
   Fnv f;
   f.text(header.config_json);
-  f.text(header.database_json);
+  // The database by its content (its path may differ between nodes that mount one file system
+  // at different places).
+  const auto db = nlohmann::json::parse(header.database_json, nullptr, false);
+  f.text(!db.is_discarded() && db.contains("fingerprint") ? db["fingerprint"].dump() : header.database_json);
   f.integer(header.steps);
-  for (const auto* list : {&header.variant_configs, &header.objects, &header.database_objects}) {
+  for (const auto* list : {&header.variant_configs, &header.objects, &header.database_objects, &header.stages,
+                           &header.step_values}) {
     f.integer(static_cast<std::int64_t>(list->size()));
     for (const auto& s : *list) f.text(s);
   }

@@ -3,6 +3,8 @@
 // --version. Prints "consumer: ok" and exits 0 when everything holds.
 #include "engine/core.hpp"
 #include "engine/distance_field.hpp"
+#include "engine/kabsch.hpp"   // C++20 headers (std::span): the package asks for C++20
+#include "engine/search.hpp"
 #include "io/cloud_io.hpp"
 
 #include <algorithm>
@@ -11,6 +13,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <string>
+
+int consumer_part();   // the consumer's own static library
 
 namespace {
 
@@ -42,6 +46,7 @@ int fail(const std::string& what) {
 
 int main(int argc, char** argv) {
   if (argc != 2) return fail("usage: consumer WORK_DIR");
+  if (consumer_part() != 1) return fail("the consumer's own library");
   const std::filesystem::path work = argv[1];
 
   // engine: a field of a 12 x 8 x 5 cm box; points in its narrow band, inside and outside.
