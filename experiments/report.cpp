@@ -754,11 +754,15 @@ std::filesystem::path plot_script() {
   namespace fs = std::filesystem;
   if (const char* env = std::getenv("TOUCHSTONE_PLOT_SCRIPT"); env && *env) return env;
   const fs::path rel = fs::path("scripts") / "plots" / "touchstone_plots.py";
+  // An installed command: PREFIX/bin/touchstone, the script in PREFIX/share/touchstone.
+  const fs::path installed = fs::path("share") / "touchstone" / "touchstone_plots.py";
   std::error_code ec;
   const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
   if (!ec)
-    for (fs::path dir = exe.parent_path(); !dir.empty() && dir != dir.root_path(); dir = dir.parent_path())
+    for (fs::path dir = exe.parent_path(); !dir.empty() && dir != dir.root_path(); dir = dir.parent_path()) {
       if (fs::is_regular_file(dir / rel, ec)) return dir / rel;
+      if (fs::is_regular_file(dir / installed, ec)) return dir / installed;
+    }
   const fs::path src = fs::path(TS_SOURCE_DIR) / rel;
   if (!std::string(TS_SOURCE_DIR).empty() && fs::is_regular_file(src, ec)) return src;
   throw Error("cannot find the plot script scripts/plots/touchstone_plots.py (set "
