@@ -13,6 +13,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <iostream>
 #include <mutex>
 #include <thread>
 
@@ -196,6 +197,16 @@ DriveOutcome MpiSession::drive(RunEngine& engine, const std::vector<RunTask>& to
         io::RunStore::append(store, {*record});
         ++outcome.completed;
       }
+    } catch (const std::exception& e) {
+      if (size_ > 1) {
+        // Stop the whole job now, not after the other ranks have run everything left: the
+        // finished runs are in the rank stores, and --resume computes the rest.
+        std::lock_guard<std::mutex> lock(mpi_mutex());
+        std::cerr << "touchstone: error (MPI rank " << rank_ << "): " << e.what() << "\n";
+        MPI_Abort(MPI_COMM_WORLD, 1);
+      }
+      std::lock_guard<std::mutex> lock(failure_mutex);
+      if (!failure) failure = std::current_exception();
     } catch (...) {
       std::lock_guard<std::mutex> lock(failure_mutex);
       if (!failure) failure = std::current_exception();
