@@ -340,13 +340,18 @@ BuildReport build_database(const std::vector<MeshInput>& given, const std::files
   report.warnings.resize(n);
   report.flipped.resize(n);
   std::vector<double> import_s(n, 0.0);
+  // One byte per mesh while the tasks run: report.flipped is a std::vector<bool>, whose
+  // neighbouring bits share a word, so writing it from several tasks at once lost flags
+  // (ThreadSanitizer, 2026-11-26).
+  std::vector<std::uint8_t> flipped(n, 0);
   parallel_each(n, false, [&](std::size_t i) {
     Imported im = import_input(inputs[i], settings.database, bytes_of(inputs[i]));
     sha[i] = im.mesh.sha256;
     report.warnings[i] = im.mesh.warnings;
-    report.flipped[i] = im.mesh.flipped;
+    flipped[i] = im.mesh.flipped ? 1 : 0;
     import_s[i] = im.import_s;
   });
+  for (std::size_t i = 0; i < n; ++i) report.flipped[i] = flipped[i] != 0;
 
   // 3. The parts folder: new, or a stopped build of the same inputs to resume.
   const std::filesystem::path parts = settings.parts.empty() ? std::filesystem::path(out.string() + ".parts") : settings.parts;
