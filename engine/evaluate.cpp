@@ -1,10 +1,12 @@
 #include "engine/evaluate.hpp"
 
+#include <Eigen/Eigenvalues>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <functional>
 #include <set>
@@ -82,6 +84,57 @@ GraspFit fit_grasp_offsets(const Scene& scene, const DistanceField& field, const
   }
   fit.offset_rms = std::sqrt(off2 / static_cast<double>(G.grasps()));
   return fit;
+}
+
+GraspDiagnostics grasp_diagnostics(const Scene& scene, const DistanceField& field, const Pose& T_so,
+                                   const GraspFit& fit, const EvaluateSettings& s) {
+  GraspDiagnostics out;
+  const GraspGroups& G = scene.grasps;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  out.rms.assign(G.grasps(), nan);
+  out.normal_angle.assign(G.grasps(), nan);
+  if (field.empty() || !T_so.matrix().allFinite()) return out;
+  const Pose T_os = T_so.inverse();
+  const double clamp2 = 9.0 * s.grasp_contact_sigma * s.grasp_contact_sigma;
+  std::vector<double> d;
+  std::vector<Vec3> g;
+  for (std::size_t k = 0; k < G.grasps(); ++k) {
+    const Vec3* p = G.points.data() + G.first[k];
+    const std::size_t m = G.first[k + 1] - G.first[k];
+    if (m == 0) continue;
+    const Vec3 t = k < fit.offsets.size() ? fit.offsets[k] : Vec3::Zero();
+    Pose T = T_os;
+    T.translation() += T_os.linear() * t;
+    d.resize(m);
+    g.resize(m);
+    field.distances_gradients(p, m, T, d.data(), g.data());
+    double sq = 0.0;
+    Vec3 model = Vec3::Zero();
+    for (std::size_t i = 0; i < m; ++i) {
+      sq += std::min(d[i] * d[i], clamp2);
+      const double gn = g[i].norm();
+      if (gn > 0.5) {   // a gradient of a distance field has norm ~1 where it is defined
+        const Vec3 u = g[i] / gn;
+        model += model.dot(u) < 0.0 ? Vec3(-u) : u;   // sign-agnostic mean
+      }
+    }
+    out.rms[k] = std::sqrt(sq / static_cast<double>(m));
+    if (m < 6 || model.norm() < 1e-9) continue;
+    // The patch's normal: the least eigenvector of its contacts' covariance, when the patch is
+    // spread in two directions and flat in the third (else a line or blob has none).
+    Vec3 c = Vec3::Zero();
+    for (std::size_t i = 0; i < m; ++i) c += p[i];
+    c /= static_cast<double>(m);
+    Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+    for (std::size_t i = 0; i < m; ++i) C.noalias() += (p[i] - c) * (p[i] - c).transpose();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(C);
+    const Vec3 ev = eig.eigenvalues();
+    if (!(ev(1) > 0.0) || ev(0) > 0.25 * ev(1)) continue;
+    const Vec3 n_scene = eig.eigenvectors().col(0);
+    const Vec3 n_model = T_so.linear() * model.normalized();   // to the scene frame
+    out.normal_angle[k] = std::acos(std::clamp(std::abs(n_scene.dot(n_model)), 0.0, 1.0));
+  }
+  return out;
 }
 
 GraspFit contact_fit(const Scene& scene, const DistanceField& field, const Pose& T_so,

@@ -103,6 +103,20 @@ GraspFit fit_grasp_offsets(const Scene& scene, const DistanceField& field, const
 GraspFit contact_fit(const Scene& scene, const DistanceField& field, const Pose& T_scene_object,
                      const EvaluateSettings& settings);
 
+/// Per-grasp view of a fit (the open-set features of AnswerFit): how well each grasp's patch
+/// is explained once shifted by its offset of `fit` (offsets empty: unshifted).
+struct GraspDiagnostics {
+  std::vector<double> rms;            ///< m, RMS distance of the grasp's shifted contacts, each
+                                      ///< clamped to 3 grasp_contact_sigma (NaN: no contacts)
+  std::vector<double> normal_angle;   ///< rad, angle between the patch's normal (PCA of its
+                                      ///< contacts) and the model's mean surface normal there,
+                                      ///< sign-agnostic, in [0, pi/2] (NaN: the patch has fewer
+                                      ///< than 6 contacts, is not flat enough to have a normal,
+                                      ///< or the field has no gradient there)
+};
+GraspDiagnostics grasp_diagnostics(const Scene& scene, const DistanceField& field, const Pose& T_scene_object,
+                                   const GraspFit& fit, const EvaluateSettings& settings);
+
 /// A contact term computed beforehand (sum of Eq. 4 over n contacts).
 struct ContactTerm {
   double sum = 0.0;

@@ -90,6 +90,19 @@ AnswerFit answer_fit(const Scene& scene, const Database& db, const Working& h, c
   out.far10_share = static_cast<double>(fit.far10) / n;
   out.offset_rms_sigma = s.grasp_offset_sigma > 0.0 ? fit.offset_rms / s.grasp_offset_sigma : 0.0;
   out.free_conflict = h.eval.free_error / static_cast<double>(std::max<std::size_t>(scene.free_space.size(), 1));
+  const GraspDiagnostics per = grasp_diagnostics(scene, geo.field, h.cand.T_scene_object, fit, s);
+  const double cap = 30.0 * std::numbers::pi / 180.0;
+  double angle_sq = 0.0;
+  std::size_t angles = 0;
+  for (std::size_t k = 0; k < per.rms.size(); ++k) {
+    if (std::isfinite(per.rms[k])) out.worst_grasp_sigma = std::max(out.worst_grasp_sigma, per.rms[k] / sigma);
+    if (!std::isfinite(per.normal_angle[k])) continue;
+    const double a = std::min(per.normal_angle[k], cap);
+    angle_sq += a * a;
+    ++angles;
+    out.normal_worst_deg = std::max(out.normal_worst_deg, a * 180.0 / std::numbers::pi);
+  }
+  if (angles > 0) out.normal_rms_deg = std::sqrt(angle_sq / static_cast<double>(angles)) * 180.0 / std::numbers::pi;
   return out;
 }
 

@@ -138,6 +138,12 @@ struct AnswerFit {
   double far10_share = 0.0;         ///< share of contacts farther than 10 sigma
   double offset_rms_sigma = 0.0;    ///< RMS per-grasp offset / grasp_offset_sigma (0: no offsets)
   double free_conflict = 0.0;       ///< Eq. 8 error summed over the free points, per free point
+  // Per grasp (grasp_diagnostics; 0 without grasp groups):
+  double worst_grasp_sigma = 0.0;   ///< largest RMS distance of one grasp's contacts (clamped to
+                                    ///< 3 sigma) in sigmas: the grasp the answer explains worst
+  double normal_rms_deg = 0.0;      ///< RMS over the grasps of the angle between the patch's
+                                    ///< normal and the model's (each clamped to 30 degrees)
+  double normal_worst_deg = 0.0;    ///< the largest of those angles (clamped likewise)
 };
 
 struct StepResult {

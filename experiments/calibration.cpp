@@ -30,14 +30,19 @@ const std::vector<std::string>& confidence_feature_names() {
       "fit_far_share",      // share of its contacts farther than 3 sigma
       "fit_far10_share",    // ... farther than 10 sigma
       "fit_offset_sigma",   // RMS per-grasp offset in offset sigmas
-      "free_conflict"};     // Eq. 8 error of the free space per free point
+      "free_conflict",      // Eq. 8 error of the free space per free point
+      "fit_worst_grasp_sigma",  // the worst-explained grasp's RMS contact distance (AnswerFit)
+      "fit_normal_rms_deg",     // RMS angle between the grasps' patch normals and the model's
+      "fit_normal_worst_deg",   // the largest of those angles
+      "posterior_entropy"}; // nats, of the posterior over objects
   return names;
 }
 
 std::vector<double> confidence_features(const StepResult& r) {
   double best = 0.0, other = 0.0, misfit = 1.0, agreement = 0.0;
   // No answer: the worst fit (every contact far, the offsets at their bound).
-  double rms = 3.0, far = 1.0, far10 = 1.0, offset = 3.0, free = 0.0;
+  double rms = 3.0, far = 1.0, far10 = 1.0, offset = 3.0, free = 0.0, worst = 3.0, normal_rms = 30.0,
+         normal_worst = 30.0, entropy = 0.0;
   if (r.valid) {
     best = r.posterior;
     for (std::size_t i = 0; i < r.posteriors.size(); ++i)
@@ -55,10 +60,16 @@ std::vector<double> confidence_features(const StepResult& r) {
       far10 = r.fit.far10_share;
       offset = r.fit.offset_rms_sigma;
       free = r.fit.free_conflict;
+      worst = r.fit.worst_grasp_sigma;
+      normal_rms = r.fit.normal_rms_deg;
+      normal_worst = r.fit.normal_worst_deg;
     }
+    for (double p : r.posteriors)
+      if (p > 0.0) entropy -= p * std::log(p);
   }
   return {best, best - other, std::log(misfit), agreement, std::log1p(static_cast<double>(r.contacts)),
-          std::log(static_cast<double>(std::max(r.step, 1))), rms, far, far10, offset, free};
+          std::log(static_cast<double>(std::max(r.step, 1))), rms, far, far10, offset, free, worst, normal_rms,
+          normal_worst, entropy};
 }
 
 int feature_step(std::span<const double> f) {
@@ -204,7 +215,7 @@ std::vector<double> out_of_fold_in_database(const std::vector<CalibrationRow>& r
         continue;
       }
       train.push_back(r.features);
-      y.push_back(r.hidden ? 0 : 1);
+      y.push_back(in_database_label(r));
     }
     if (!held || train.empty()) continue;
     const LogisticModel m = fit_logistic(train, y, l2);
@@ -228,7 +239,7 @@ std::vector<StepModels> fit_step_models(const std::vector<CalibrationRow>& rows,
     for (const CalibrationRow& r : rows) {
       if (r.step < lo || r.step >= hi) continue;
       all.push_back(r.features);
-      in_db.push_back(r.hidden ? 0 : 1);
+      in_db.push_back(in_database_label(r));
       all_group.push_back(r.group);
       if (r.hidden) continue;
       known.push_back(r.features);

@@ -101,9 +101,16 @@ struct CalibrationRow {
   int step = 1;
   int group = 0;                      ///< the explored object (cross-validation folds by it)
   bool hidden = false;
+  /// Hidden, but the answer names an object congruent with it (the database's classes): a copy
+  /// of the explored solid is in the database, so the open-set score counts it as known.
+  bool copy_in_database = false;
   bool right = false;                 ///< the named object is the explored one
   bool pose_right = false;            ///< ... and its position error is below 1 cm
 };
+
+/// The in-database score's outcome of a row: 1 for a known object or a hidden one whose
+/// congruent copy was named, 0 otherwise.
+inline int in_database_label(const CalibrationRow& r) { return !r.hidden || r.copy_in_database ? 1 : 0; }
 
 /// The L2 penalty of fit_logistic, among `grid`, with the least log loss on held-out groups
 /// (`folds`-fold cross-validation, group g in fold g mod folds): answers of one explored object

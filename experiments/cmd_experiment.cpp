@@ -470,6 +470,7 @@ int run_calibrate(const CalibrateOptions& o) {
       cols.push_back(static_cast<std::size_t>(it - v.begin()));
     }
     const std::set<int> hidden = experiments::hidden_explored_objects(c.header);
+    const experiments::ClassMap classes = experiments::class_map(c.header);
     std::size_t steps = 0, hidden_runs = 0;
     for (const io::RunRecord& r : c.runs) {
       hidden_runs += hidden.count(r.object) ? 1 : 0;
@@ -478,6 +479,7 @@ int run_calibrate(const CalibrateOptions& o) {
         for (std::size_t k : cols) row.features.push_back(s.values.at(k));
         row.step = static_cast<int>(&s - r.steps.data()) + 1;
         row.hidden = hidden.count(r.object) > 0;
+        row.copy_in_database = row.hidden && experiments::correct_in_class(c.header, r, s, classes);
         row.group = object_group(c.header.objects.at(static_cast<std::size_t>(r.object)));
         row.right = s.correct;
         row.pose_right = s.correct && s.position_error_m < 0.01;
@@ -525,6 +527,7 @@ int run_calibrate(const CalibrateOptions& o) {
     }
     cal.open_set_threshold = experiments::choose_open_set_threshold(right_at, runs_at, o.open_set_drop);
     cal.provenance["open_set"] = {{"score", "in_database, out of fold (5 folds by object)"},
+                                  {"in_database", "known objects, and hidden ones whose congruent copy was named"},
                                   {"max_drop", o.open_set_drop}, {"step", at},
                                   {"known_runs", runs_at}, {"right", right_at.size()}};
   } else {

@@ -27,6 +27,31 @@
 
 namespace ts::experiments {
 
+ClassMap class_map(const io::RunStoreHeader& h) {
+  ClassMap out;
+  const auto db = nlohmann::json::parse(h.database_json, nullptr, false);
+  if (!db.is_object() || !db.contains("congruent_classes") || !db["congruent_classes"].is_array()) return out;
+  std::size_t k = 0;
+  for (const auto& members : db["congruent_classes"]) {
+    if (!members.is_array()) continue;
+    for (const auto& name : members)
+      if (name.is_string()) out[name.get<std::string>()] = k;
+    ++k;
+  }
+  return out;
+}
+
+bool correct_in_class(const io::RunStoreHeader& h, const io::RunRecord& r, const io::RunStepRecord& s,
+                      const ClassMap& classes) {
+  if (s.correct) return true;
+  if (s.best_object < 0 || static_cast<std::size_t>(s.best_object) >= h.database_objects.size() ||
+      static_cast<std::size_t>(r.object) >= h.objects.size())
+    return false;
+  const auto a = classes.find(h.database_objects[static_cast<std::size_t>(s.best_object)]);
+  const auto b = classes.find(h.objects[static_cast<std::size_t>(r.object)]);
+  return a != classes.end() && b != classes.end() && a->second == b->second;
+}
+
 namespace {
 
 using J = nlohmann::ordered_json;
@@ -45,36 +70,6 @@ void put_error(J& j, const std::string& prefix, const ErrorSummary& e, double sc
   j[prefix + "_p95"] = opt(e.p95, scale);
   j[prefix + "_mean_bounded"] = e.bounded_mean * scale;
   j[prefix + "_mean_bounded_ci95"] = interval(e.bounded_mean_ci95, scale);
-}
-
-/// Classes of congruent objects of the store's database (header database_json
-/// "congruent_classes", names): object name -> class number. Empty when none are known.
-using ClassMap = std::map<std::string, std::size_t>;
-
-ClassMap class_map(const io::RunStoreHeader& h) {
-  ClassMap out;
-  const J db = J::parse(h.database_json, nullptr, false);
-  if (!db.is_object() || !db.contains("congruent_classes") || !db["congruent_classes"].is_array()) return out;
-  std::size_t k = 0;
-  for (const auto& members : db["congruent_classes"]) {
-    if (!members.is_array()) continue;
-    for (const auto& name : members)
-      if (name.is_string()) out[name.get<std::string>()] = k;
-    ++k;
-  }
-  return out;
-}
-
-/// The step's answer lies in the explored object's class (strictly right answers included).
-bool correct_in_class(const io::RunStoreHeader& h, const io::RunRecord& r, const io::RunStepRecord& s,
-                      const ClassMap& classes) {
-  if (s.correct) return true;
-  if (s.best_object < 0 || static_cast<std::size_t>(s.best_object) >= h.database_objects.size() ||
-      static_cast<std::size_t>(r.object) >= h.objects.size())
-    return false;
-  const auto a = classes.find(h.database_objects[static_cast<std::size_t>(s.best_object)]);
-  const auto b = classes.find(h.objects[static_cast<std::size_t>(r.object)]);
-  return a != classes.end() && b != classes.end() && a->second == b->second;
 }
 
 /// Per-step JSON rows for a set of runs (all of the same step count). `clustered`: the runs span
@@ -316,16 +311,23 @@ J confidence_json(const io::RunStoreHeader& h, const std::vector<const io::RunRe
 /// without hidden runs) and the known objects' recognition with and without the threshold. Null
 /// without a threshold.
 J open_set_json(const io::RunStoreHeader& h, const std::vector<const io::RunRecord*>& known,
-                const std::vector<const io::RunRecord*>& hidden, const ReportSettings& settings) {
+                const std::vector<const io::RunRecord*>& hidden, const ReportSettings& settings,
+                const ClassMap& classes) {
   if (!settings.calibration || !settings.calibration->open_set_threshold) return nullptr;
   const double t = *settings.calibration->open_set_threshold;
   const ConfidenceSource source(h, settings);
   J rows = J::array();
   for (int k = 0; k < h.steps; ++k) {
     const auto step = static_cast<std::size_t>(k);
-    std::size_t accepts = 0, right_closed = 0, right_open = 0;
-    for (const io::RunRecord* r : hidden)
-      accepts += r->steps[step].best_object >= 0 && source.in_database(r->steps[step], k + 1) >= t ? 1 : 0;
+    std::size_t accepts = 0, accepts_class = 0, right_closed = 0, right_open = 0;
+    for (const io::RunRecord* r : hidden) {
+      const io::RunStepRecord& s = r->steps[step];
+      const bool accepted = s.best_object >= 0 && source.in_database(s, k + 1) >= t;
+      accepts += accepted ? 1 : 0;
+      // Class-aware: naming an object congruent with the hidden one names the same solid (a
+      // copy of it is in the database), which is not a false accept.
+      accepts_class += accepted && !correct_in_class(h, *r, s, classes) ? 1 : 0;
+    }
     for (const io::RunRecord* r : known) {
       const io::RunStepRecord& s = r->steps[step];
       right_closed += s.correct ? 1 : 0;
@@ -336,11 +338,17 @@ J open_set_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
     row["step"] = k + 1;
     row["hidden_runs"] = hidden.size();
     row["false_accepts"] = accepts;
+    row["false_accepts_class"] = accepts_class;
     if (hidden.empty()) {   // no hidden objects: only the known objects' side
       row["false_accept_rate"] = row["false_accept_rate_ci95"] = nullptr;
+      row["false_accept_rate_class"] = row["false_accept_rate_class_ci95"] = nullptr;
     } else {
-      row["false_accept_rate"] = static_cast<double>(accepts) / static_cast<double>(hidden.size());
+      const double n = static_cast<double>(hidden.size());
+      row["false_accept_rate"] = static_cast<double>(accepts) / n;
       row["false_accept_rate_ci95"] = J::array({fa.lo, fa.hi});
+      const Interval fc = wilson_interval(accepts_class, hidden.size());
+      row["false_accept_rate_class"] = static_cast<double>(accepts_class) / n;
+      row["false_accept_rate_class_ci95"] = J::array({fc.lo, fc.hi});
     }
     row["known_runs"] = known.size();
     if (known.empty()) {
@@ -391,7 +399,7 @@ VariantJson variant_json(const io::RunStoreContents& store, int variant, const R
   for (const io::RunRecord* r : all) (hidden_set.count(r->object) ? hidden : known).push_back(r);
   if (!hidden.empty() && !known.empty()) all = known;
   VariantJson v;
-  v.open_set = open_set_json(h, known, hidden, settings);
+  v.open_set = open_set_json(h, known, hidden, settings, classes);
   std::set<int> objects;
   for (const io::RunRecord* r : all) objects.insert(r->object);
   v.per_step = per_step_json(h, all, h.steps, bounds, classes, objects.size() > 1);
@@ -619,8 +627,9 @@ void print_open_set(const J& report, std::ostream& out) {
   if (!o.is_object()) return;
   out << "\nOpen set (threshold " << fmt(o["threshold"], 1, 3) << " on the in-database score, from "
       << o["source"].get<std::string>() << "): hidden objects named as a database object, and the "
-      << "known objects' recognition without / with the threshold\n"
-         "  step  hidden  false accepts (%)  Wilson (%)  known  closed (%)  open (%)  drop (points)\n";
+      << "known objects' recognition without / with the threshold (strict; class-aware: naming an "
+         "object congruent with the hidden one is not a false accept)\n"
+         "  step  hidden  false accepts (%)  Wilson (%)  class-aware (%)  known  closed (%)  open (%)  drop (points)\n";
   const J& rows = o["per_step"];
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const J& r = rows[i];
@@ -633,7 +642,7 @@ void print_open_set(const J& report, std::ostream& out) {
       ci << "-";
     out << "  " << std::setw(4) << step << "  " << std::setw(6) << r["hidden_runs"].get<std::size_t>() << "  "
         << std::setw(17) << fmt(r["false_accept_rate"], 100, 1) << "  " << std::setw(10) << ci.str() << "  "
-        << std::setw(5) << r["known_runs"].get<std::size_t>() << "  " << std::setw(10)
+        << std::setw(15) << fmt(r.value("false_accept_rate_class", J(nullptr)), 100, 1) << "  " << std::setw(5) << r["known_runs"].get<std::size_t>() << "  " << std::setw(10)
         << fmt(r["known_rate_closed"], 100, 1) << "  " << std::setw(8) << fmt(r["known_rate_open"], 100, 1)
         << "  " << std::setw(13) << fmt(r["known_drop"], 100, 1) << "\n";
   }

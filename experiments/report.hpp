@@ -11,6 +11,7 @@
 
 #include <filesystem>
 #include <iosfwd>
+#include <map>
 #include <set>
 #include <string>
 
@@ -41,6 +42,17 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
 /// The explored objects (indices into the header's objects) that the runs hid from the
 /// recognizer (config `hidden`; "each": all of them): open-set runs.
 std::set<int> hidden_explored_objects(const io::RunStoreHeader& header);
+
+/// Classes of congruent objects of the store's database (header database_json
+/// "congruent_classes", names): object name -> class number. Empty when none are known.
+using ClassMap = std::map<std::string, std::size_t>;
+ClassMap class_map(const io::RunStoreHeader& header);
+
+/// The step's answer lies in the explored object's class (strictly right answers included; with
+/// no classes known, the strict outcome). For a run of a hidden object: its answer names a copy
+/// of it that is in the database.
+bool correct_in_class(const io::RunStoreHeader& header, const io::RunRecord& run, const io::RunStepRecord& step,
+                      const ClassMap& classes);
 
 /// Human tables (recognition and errors per step, per object at a few steps, sweep variants and
 /// the Pareto front) written to `out`.

@@ -330,6 +330,48 @@ TEST_CASE("Per-grasp offsets: a single flat patch keeps its unobservable offsets
   CHECK(unshifted.clamped_sq_sum == doctest::Approx(4e-6 * double(sc.contacts.size())).epsilon(0.03));
 }
 
+TEST_CASE("Grasp diagnostics: each patch's distance and the angle of its normal to the model's") {
+  const ObjectGeometry box = field_geometry(test::make_box(Vec3(0.04, 0.04, 0.04), 4));
+  const double tilt = 10.0 * std::numbers::pi / 180.0;
+  Scene sc = make_scene({Vec3(0, 0, 0.04)});
+  std::vector<Vec3> flat, tilted, few, line;
+  double tilted_sq = 0.0;
+  for (int i = -4; i <= 4; ++i)
+    for (int j = -4; j <= 4; ++j) {
+      const double x = 0.003 * i, y = 0.003 * j;
+      flat.push_back(Vec3(x, y, 0.04 + 0.001));         // 1 mm above the top face, parallel
+      tilted.push_back(Vec3(x, y, 0.04 + y * std::tan(tilt)));   // turned 10 degrees about x
+      tilted_sq += std::pow(y * std::tan(tilt), 2);
+    }
+  for (int i = 0; i < 5; ++i) few.push_back(Vec3(0.003 * i, 0.002 * i * i, 0.04));  // 5 contacts
+  for (int i = 0; i < 9; ++i) line.push_back(Vec3(0.003 * i - 0.012, 0.0, 0.04));   // no normal
+  for (const auto* g : {&flat, &tilted, &few, &line}) sc.grasps.add(*g);
+  EvaluateSettings s;
+  const GraspDiagnostics d = grasp_diagnostics(sc, box.field, Pose::Identity(), GraspFit{}, s);
+  REQUIRE(d.rms.size() == 4);
+  REQUIRE(d.normal_angle.size() == 4);
+  CHECK(d.rms[0] == doctest::Approx(0.001).epsilon(0.05).scale(0));
+  CHECK(d.normal_angle[0] < 0.2 * std::numbers::pi / 180.0);
+  CHECK(d.rms[1] == doctest::Approx(std::sqrt(tilted_sq / 81.0)).epsilon(0.05).scale(0));
+  CHECK(d.normal_angle[1] == doctest::Approx(tilt).epsilon(0.03).scale(0));
+  CHECK(std::isnan(d.normal_angle[2]));   // too few contacts for a normal
+  CHECK(d.rms[2] < 1e-4);
+  CHECK(std::isnan(d.normal_angle[3]));   // a line has no normal
+  // The offsets of a fit shift each patch before it is measured: the flat patch lowered by its
+  // 1 mm lies on the face; a box turned 10 degrees about x meets the tilted patch flat.
+  GraspFit fit;
+  fit.offsets = {Vec3(0, 0, -0.001), Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};
+  const GraspDiagnostics shifted = grasp_diagnostics(sc, box.field, Pose::Identity(), fit, s);
+  CHECK(shifted.rms[0] < 1e-4);
+  Pose turned = Pose::Identity();
+  turned.linear() = Eigen::AngleAxisd(tilt, Vec3::UnitX()).toRotationMatrix();
+  turned.translation() = Vec3(0, 0, 0.04) - turned.linear() * Vec3(0, 0, 0.04);   // about the face's centre
+  const GraspDiagnostics t = grasp_diagnostics(sc, box.field, turned, GraspFit{}, s);
+  CHECK(t.normal_angle[1] < 0.2 * std::numbers::pi / 180.0);
+  CHECK(t.rms[1] < 1e-4);
+  CHECK(t.normal_angle[0] == doctest::Approx(tilt).epsilon(0.03).scale(0));
+}
+
 TEST_CASE("Per-grasp offsets separate a sphere from a faceted look-alike that plain Eq. 4 prefers") {
   const ObjectGeometry sphere = field_geometry(test::make_sphere(kR, 4));
   // An icosahedron subdivided once, scaled so that its faces cut the sphere: it fits the

@@ -220,6 +220,30 @@ TEST_CASE("Step-aware fit: each range of steps recovers its own model; one model
   std::erase_if(rows, [](const CalibrationRow& r) { return r.hidden && r.step >= 3; });
   CHECK_THROWS_AS(fit_step_models(rows, {1, 3}), Error);
   CHECK(fit_step_models(rows, {1})[0].in_database);
+
+  // A hidden object whose answer names a congruent copy of it counts as known to the open-set
+  // score. Unpenalized, a logistic fit with a bias matches the share of 1s exactly (the score
+  // equations): half the rows known, and half of the hidden ones copies, gives a mean score of
+  // 3/4 where it was 1/2.
+  auto mean_in_database = [&](const std::vector<CalibrationRow>& rs) {
+    const auto m = fit_step_models(rs, {1}, {0.0});
+    double sum = 0.0;
+    for (const CalibrationRow& r : rs) sum += m[0].in_database->predict(r.features);
+    return sum / static_cast<double>(rs.size());
+  };
+  std::size_t known = 0;
+  for (const CalibrationRow& r : rows) known += r.hidden ? 0 : 1;
+  const double share = static_cast<double>(known) / static_cast<double>(rows.size());
+  CHECK(mean_in_database(rows) == doctest::Approx(share).epsilon(1e-6).scale(0));
+  std::size_t copies = 0;
+  for (std::size_t i = 0; i < rows.size(); ++i)
+    if (rows[i].hidden && i % 2 == 0) {
+      rows[i].copy_in_database = true;
+      ++copies;
+    }
+  CHECK(copies > rows.size() / 8);
+  CHECK(mean_in_database(rows) ==
+        doctest::Approx(static_cast<double>(known + copies) / static_cast<double>(rows.size())).epsilon(1e-6).scale(0));
 }
 
 TEST_CASE("L2 penalty by cross-validation over objects: strong for noise, weak for a clear signal") {

@@ -327,6 +327,7 @@ TEST_CASE("Report: open set, false accepts of hidden objects and the known objec
     CHECK(row["hidden_runs"] == 4);
     CHECK(row["false_accepts"] == 2);   // the sphere's runs 2 and 3 name an object confidently
     CHECK(row["false_accept_rate"].get<double>() == doctest::Approx(0.5));
+    CHECK(row["false_accepts_class"] == 2);   // no congruent classes known: the strict count
     CHECK(row["known_runs"] == 4);
     // Cube: runs 0..k right; of those, runs >= 2 pass the threshold.
     const int right = k + 1, kept = std::max(0, k - 1);
@@ -337,6 +338,18 @@ TEST_CASE("Report: open set, false accepts of hidden objects and the known objec
   std::ostringstream text;
   print_report(j, text);
   CHECK(text.str().find("Open set (threshold 0.800") != std::string::npos);
+  // Class-aware: with `sphere` and `cube` congruent, a hidden sphere's run naming the sphere's
+  // twin (or, in this synthetic store, the sphere itself) is no false accept; naming `bunny` is.
+  // Accepted runs 2 and 3: run 2 names bunny at steps 1-2 and the sphere at step 3, run 3 bunny.
+  h.database_json = R"({"congruent_classes": [["sphere", "cube"]]})";
+  const auto classed = report_json(c, rs)["open_set"];
+  for (int k = 0; k < 3; ++k) {
+    const auto& row = classed["per_step"][static_cast<std::size_t>(k)];
+    CHECK(row["false_accepts"] == 2);
+    CHECK(row["false_accepts_class"] == (k < 2 ? 2 : 1));
+    CHECK(row["false_accept_rate_class"].get<double>() == doctest::Approx((k < 2 ? 2 : 1) / 4.0));
+  }
+  h.database_json = "{}";
   // Without hidden objects: the known side alone.
   h.config_json = R"({"name":"closed","runs":4,"steps":3})";
   const auto closed = report_json(c, rs)["open_set"];
