@@ -7,6 +7,8 @@
 #include "experiments/cli_common.hpp"
 #include "experiments/parameters.hpp"
 #include "experiments/recognition_engine.hpp"
+#include "experiments/report.hpp"
+#include "experiments/scene.hpp"
 
 #include "engine/feature_table.hpp"
 #include "engine/active_touch.hpp"
@@ -66,6 +68,8 @@ struct RecognizeOptions {
   bool inside_margin = false;        ///< --free-inside-margin given (unset: 0; a probe: 1 cm)
   int suggest = 0;                   ///< --suggest N: the N best next grasps after the last step
   ActiveSettings active;             ///< the next-grasp planner's parameters (active.*)
+  std::string scene;                 ///< --scene DIR: pictures of chosen steps (experiments/scene.hpp)
+  std::vector<int> scene_steps;      ///< --scene-steps (empty: the last step)
   int exploration = 0;               ///< exploration.strategy (recorded; experiments act on it)
 };
 
@@ -171,6 +175,7 @@ struct InputRun {
   nlohmann::ordered_json suggestions;   ///< --suggest: the best next grasps (null: not asked)
   double suggest_time_s = 0.0;
   bool truth_outside = false;    ///< the log's object is not in the database (open set)
+  std::vector<nlohmann::ordered_json> scenes;   ///< --scene: the chosen steps' scenes
 };
 
 /// The whole recognition of one input with its own recognizer (the context's seed), the result
@@ -243,6 +248,9 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
   std::optional<Exploration> ex;
   if (log) ex.emplace(*log, es);
   const bool with_free = c.rs.method == Method::bricpsf || c.rs.method == Method::ransac_icp_fs;
+  std::vector<int> draw;   // --scene: the steps to draw
+  if (!o.scene.empty()) draw = experiments::scene_steps(o.scene_steps, K, in.path);
+  const std::string stem = fs::path(in.path).stem().string();
 
   for (int k = 1; k <= K; ++k) {
     PointCloud contacts;
@@ -277,6 +285,9 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
         r.valid && !contacts.empty()
             ? mean_contact_distance(*db.geometry(r.best.object), r.best.pose, contacts.points)
             : std::numeric_limits<double>::quiet_NaN());
+    if (std::find(draw.begin(), draw.end(), k) != draw.end())
+      run.scenes.push_back(experiments::scene_json(db, r, contacts, free, truth_object, run.truth_pose, stem,
+                                                   stem + ", step " + std::to_string(k)));
     run.stored.push_back(io::to_result_step(r, truth_object, run.truth_pose, sym));
     if (run.truth_outside) run.stored.back().correct = !r.valid;
     run.results.push_back(std::move(r));
@@ -572,6 +583,20 @@ std::string input_error(const Input& in, const std::exception& e) {
 
 /// Several inputs in parallel (each with its own recognizer and the shared database); a
 /// failing input is reported and the others go on. Exit code 1 when any failed.
+/// --scene: every recognized input's chosen steps drawn into the folder (a PNG and an HTML page
+/// each, by the plot script); the scenes' data in DIR/scenes.json.
+void draw_scenes(const RecognizeOptions& o, const std::vector<const InputRun*>& runs) {
+  if (o.scene.empty()) return;
+  nlohmann::ordered_json j;
+  j["scenes"] = nlohmann::ordered_json::array();
+  for (const InputRun* run : runs)
+    for (const auto& s : run->scenes) j["scenes"].push_back(s);
+  if (j["scenes"].empty()) return;
+  const auto files = experiments::write_plots(j, o.scene, "scenes.json");
+  if (!o.common.json)
+    std::cerr << "scene: " << files.size() << " files written to " << o.scene << "\n";
+}
+
 int recognize_many(const Context& c, const std::vector<Input>& inputs,
                    const std::vector<std::string>& outs) {
   const RecognizeOptions& o = c.o;
@@ -608,6 +633,10 @@ int recognize_many(const Context& c, const std::vector<Input>& inputs,
       },
       tbb::simple_partitioner());
   if (progress) std::fprintf(stderr, "\n");
+  std::vector<const InputRun*> drawn;
+  for (const InputRun& run : runs)
+    if (run.error.empty()) drawn.push_back(&run);
+  draw_scenes(o, drawn);
 
   std::size_t failed = 0;
   for (const InputRun& run : runs)
@@ -675,6 +704,7 @@ int run_recognize(const RecognizeOptions& o) {
   if (many) return recognize_many(c, inputs, outs);
 
   const InputRun run = recognize_one(c, inputs.front(), o.out, stderr_is_terminal() && !o.common.json);
+  draw_scenes(o, {&run});
   if (o.common.json) {
     nlohmann::ordered_json j = input_json(c, run, true);
     add_shared_json(j, c);
@@ -752,6 +782,12 @@ void register_recognize(CLI::App& app) {
                   "expected information) in the JSON (\"suggestions\"): the next-grasp planner, active.* "
                   "parameters. A single tactile log; an error when no grasp touched yet")
       ->check(CLI::Range(1, 1000));
+  sub->add_option("--scene", o->scene,
+                  "Pictures of the scene into this folder: for each input and chosen step, the contacts, the "
+                  "free-space points, the leading hypotheses' objects at their poses and the true object when "
+                  "known, as scene_<input>_step<k>.png (two views) and .html (interactive, self-contained)");
+  sub->add_option("--scene-steps", o->scene_steps, "The steps --scene draws (default: the last)")
+      ->delimiter(',');
   sub->add_option("--memory-budget", o->memory_budget_mb,
                   "Resident object geometry in MB, loaded on demand and evicted least-recently-used "
                   "(default 256; 0: no limit). Never changes results")

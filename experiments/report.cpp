@@ -779,12 +779,12 @@ std::filesystem::path plot_script() {
 }
 
 std::vector<std::filesystem::path> write_plots(const nlohmann::ordered_json& report,
-                                               const std::filesystem::path& dir) {
+                                               const std::filesystem::path& dir, const std::string& json_name) {
   namespace fs = std::filesystem;
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) throw Error("cannot create the plot folder: " + ec.message(), dir.string());
-  const fs::path json_path = dir / "report.json";
+  const fs::path json_path = dir / json_name;
   {
     io::AtomicOutput out(json_path);
     std::ofstream f(out.temp_path());

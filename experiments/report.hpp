@@ -58,11 +58,13 @@ bool correct_in_class(const io::RunStoreHeader& header, const io::RunRecord& run
 /// the Pareto front) written to `out`.
 void print_report(const nlohmann::ordered_json& report, std::ostream& out);
 
-/// Write `report` to DIR/report.json and run the plot script (/usr/bin/python3, or
-/// $TOUCHSTONE_PYTHON) on it, which writes DIR/*.png. Throws ts::Error when the script cannot be
-/// found or fails. Returns the PNG files written.
+/// Write `report` to DIR/`json_name` (a report, or {"scenes": [...]} of experiments/scene.hpp)
+/// and run the plot script (/usr/bin/python3, or $TOUCHSTONE_PYTHON) on it, which writes
+/// DIR/*.png (and a scene's .html). Throws ts::Error when the script cannot be found or fails.
+/// Returns the files written.
 std::vector<std::filesystem::path> write_plots(const nlohmann::ordered_json& report,
-                                               const std::filesystem::path& dir);
+                                               const std::filesystem::path& dir,
+                                               const std::string& json_name = "report.json");
 
 /// Where the plot script is: $TOUCHSTONE_PLOT_SCRIPT, else scripts/plots/touchstone_plots.py
 /// beside the executable's source tree (../scripts from the build folder, or the source

@@ -11,6 +11,13 @@ Writes into DIR:
   error_vs_time.png           error against time per step: per step, or the Pareto front of a sweep
   recognition_per_object.png  recognition rate per object and step (several objects only)
 
+Given the scenes of `touchstone recognize --scene DIR` (DIR/scenes.json, {"scenes": [...]})
+instead, writes for each scene:
+  scene_<input>_step<k>.png   contacts, free space, the leading hypotheses' objects at their poses
+                              and the true object, seen from two sides
+  scene_<input>_step<k>.html  the same as an interactive page (drag to turn, wheel to zoom); the
+                              data and the viewer are inside the file, nothing is fetched
+
 Uses only matplotlib and numpy (Debian's python3-matplotlib for /usr/bin/python3).
 """
 import argparse
@@ -316,15 +323,137 @@ def plot_reliability(report, out, written):
     finish(fig, os.path.join(out, "reliability.png"), written)
 
 
+SCENE_COLOURS = {"contacts": "#d62728", "free": "#9ecae1", "truth": "#7f7f7f",
+                 "hypotheses": ["#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2"]}
+
+
+def scene_layers(scene):
+    """The drawn layers, back to front: (label, points N x 3, colour, size, opacity). The leading
+    hypothesis is drawn solid, its rivals faint, the truth as a larger grey shell behind them."""
+    layers = []
+    if scene.get("free"):
+        layers.append(("free space (%d of %d points)" % (len(scene["free"]), scene.get("free_total", 0)),
+                       np.asarray(scene["free"], float), SCENE_COLOURS["free"], 1.5, 0.6))
+    truth = scene.get("truth")
+    if truth:
+        layers.append(("truth: %s" % truth["object"], np.asarray(truth["points"], float),
+                       SCENE_COLOURS["truth"], 3.0, 0.25))
+    hypotheses = scene.get("hypotheses", [])
+    for i, h in reversed(list(enumerate(hypotheses))):   # the leader drawn last, on top
+        colour = SCENE_COLOURS["hypotheses"][i % len(SCENE_COLOURS["hypotheses"])]
+        layers.append(("#%d %s (object posterior %.3f)" % (h["rank"], h["object"], h["posterior"]),
+                       np.asarray(h["points"], float), colour, 1.6 if i == 0 else 1.0, 0.9 if i == 0 else 0.25))
+    if scene.get("contacts"):
+        layers.append(("contacts (%d)" % len(scene["contacts"]), np.asarray(scene["contacts"], float),
+                       SCENE_COLOURS["contacts"], 5.0, 1.0))
+    return [layer for layer in layers if layer[1].size]
+
+
+def plot_scene(scene, out, written):
+    layers = scene_layers(scene)
+    stem = os.path.join(out, "scene_%s_step%d" % (scene["name"], scene["step"]))
+    fig = plt.figure(figsize=(10, 5))
+    everything = np.vstack([layer[1] for layer in layers]) if layers else np.zeros((1, 3))
+    centre = 0.5 * (everything.min(0) + everything.max(0))
+    half = 0.5 * max(float((everything.max(0) - everything.min(0)).max()), 1e-3)
+    for k, (elev, azim) in enumerate([(25, -60), (25, 30)]):
+        ax = fig.add_subplot(1, 2, k + 1, projection="3d")
+        for label, pts, colour, size, alpha in layers:
+            ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], s=size, c=colour, alpha=alpha, label=label,
+                       depthshade=False, linewidths=0)
+        for axis, c in zip("xyz", centre):
+            getattr(ax, "set_%slim" % axis)(c - half, c + half)
+        ax.set_box_aspect((1, 1, 1))
+        ax.view_init(elev=elev, azim=azim)
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_zlabel("z (m)")
+        ax.set_title("azimuth %d°" % azim)
+    handles, labels = fig.axes[0].get_legend_handles_labels()
+    legend = fig.legend(handles, labels, loc="lower center", ncol=3, markerscale=4, frameon=False)
+    for handle in legend.legend_handles if hasattr(legend, "legend_handles") else legend.legendHandles:
+        handle.set_alpha(1.0)
+    best = scene["hypotheses"][0]["object"] if scene.get("hypotheses") else "nothing"
+    fig.suptitle("%s: named %s%s" % (scene["label"], best,
+                                     ", truth %s" % scene["truth"]["object"] if scene.get("truth") else ""))
+    fig.subplots_adjust(bottom=0.16)
+    fig.savefig(stem + ".png")
+    plt.close(fig)
+    written.append(stem + ".png")
+    with open(stem + ".html", "w") as f:
+        f.write(scene_html(scene, layers))
+    written.append(stem + ".html")
+
+
+SCENE_VIEWER = """<!DOCTYPE html>
+<html><head><meta charset="utf-8"><title>%(title)s</title>
+<style>body{font:13px sans-serif;margin:8px}canvas{border:1px solid #ccc;cursor:grab}
+.key span{display:inline-block;width:10px;height:10px;margin:0 4px 0 12px}</style></head>
+<body><div><b>%(title)s</b> &mdash; drag to turn, wheel to zoom</div>
+<canvas id="c" width="900" height="650"></canvas><div class="key" id="key"></div>
+<script>
+const layers = %(layers)s;
+const cv = document.getElementById("c"), g = cv.getContext("2d");
+let yaw = -0.9, pitch = 0.45, zoom = 1.0, drag = null;
+let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+for (const L of layers) for (const p of L.points) for (let i = 0; i < 3; i++) {
+  lo[i] = Math.min(lo[i], p[i]); hi[i] = Math.max(hi[i], p[i]); }
+const mid = lo.map((v, i) => (v + hi[i]) / 2);
+const span = Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 1e-3);
+function draw() {
+  g.fillStyle = "#fff"; g.fillRect(0, 0, cv.width, cv.height);
+  const cy = Math.cos(yaw), sy = Math.sin(yaw), cp = Math.cos(pitch), sp = Math.sin(pitch);
+  const s = zoom * 0.8 * Math.min(cv.width, cv.height) / span, pts = [];
+  for (const L of layers) for (const p of L.points) {
+    const x = p[0] - mid[0], y = p[1] - mid[1], z = p[2] - mid[2];
+    const u = cy * x - sy * y, w = sy * x + cy * y;          // turn about z (up)
+    const v = cp * z - sp * w, d = sp * z + cp * w;          // tilt
+    pts.push([cv.width / 2 + s * u, cv.height / 2 - s * v, d, L.colour, L.size, L.alpha]);
+  }
+  pts.sort((a, b) => b[2] - a[2]);                            // far first
+  for (const q of pts) { g.globalAlpha = q[5]; g.fillStyle = q[3]; g.fillRect(q[0] - q[4] / 2, q[1] - q[4] / 2, q[4], q[4]); }
+  g.globalAlpha = 1;
+}
+cv.onmousedown = e => { drag = [e.clientX, e.clientY]; };
+window.onmouseup = () => { drag = null; };
+window.onmousemove = e => { if (!drag) return;
+  yaw += (e.clientX - drag[0]) * 0.01; pitch += (e.clientY - drag[1]) * 0.01;
+  pitch = Math.max(-1.5, Math.min(1.5, pitch)); drag = [e.clientX, e.clientY]; draw(); };
+cv.onwheel = e => { e.preventDefault(); zoom *= e.deltaY < 0 ? 1.1 : 1 / 1.1; draw(); };
+document.getElementById("key").innerHTML = layers.map(L =>
+  '<span style="background:' + L.colour + '"></span>' + L.label).join("");
+draw();
+</script></body></html>
+"""
+
+
+def scene_html(scene, layers):
+    import html
+    data = [{"label": label, "colour": colour, "size": max(2, round(size)), "alpha": alpha,
+             "points": np.round(pts, 4).tolist()} for label, pts, colour, size, alpha in layers]
+    best = scene["hypotheses"][0]["object"] if scene.get("hypotheses") else "nothing"
+    title = html.escape("%s: named %s" % (scene["label"], best))
+    # The data inside a <script>: no "</" may close it early.
+    return SCENE_VIEWER % {"title": title, "layers": json.dumps(data).replace("</", "<\\/")}
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("report", help="report JSON (touchstone report RUN.h5 --json)")
+    parser.add_argument("report", help="report JSON (touchstone report RUN.h5 --json), or scenes.json")
     parser.add_argument("--out", required=True, help="folder for the PNG files")
     parser.add_argument("--list", help="write the paths of the files written here, one a line")
     args = parser.parse_args()
     with open(args.report) as f:
         report = json.load(f)
     os.makedirs(args.out, exist_ok=True)
+    if "scenes" in report:   # touchstone recognize --scene
+        written = []
+        for scene in report["scenes"]:
+            plot_scene(scene, args.out, written)
+        if args.list:
+            with open(args.list, "w") as f:
+                f.write("\n".join(written) + "\n")
+        return 0
     if not report.get("per_step") and "variants" not in report:
         print("touchstone_plots: the report has no completed runs", file=sys.stderr)
         return 1

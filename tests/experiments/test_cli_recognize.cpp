@@ -24,6 +24,7 @@
 #include <fstream>
 #include <map>
 #include <regex>
+#include <set>
 
 using namespace ts;
 namespace fs = std::filesystem;
@@ -917,4 +918,87 @@ TEST_CASE("cli recognize --suggest: bad input is one clear error") {
   expect_error("recognize --db db.h5 --log probe.h5 --suggest 2" + kFast, "probe log");
   REQUIRE(touchstone(dir, "log export log.h5 --out c.ply").code == 0);
   expect_error("recognize --db db.h5 --cloud c.ply --suggest 2" + kFast, "--suggest");
+}
+
+TEST_CASE("cli recognize --scene: each chosen step drawn in the world frame, a PNG and a self-contained page") {
+  test::TempDir dir("cli_scene");
+  make_db(dir);
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 6 --noise ideal --seed 4 --out log.h5").code == 0);
+  const Run a = touchstone(dir, "recognize --db db.h5 --log log.h5 --scene pics --scene-steps 6,3" + kFast);
+  REQUIRE_MESSAGE(a.code == 0, a.err);
+  for (const char* f : {"scene_log_step3.png", "scene_log_step6.png", "scene_log_step3.html", "scene_log_step6.html"})
+    CHECK_MESSAGE(fs::file_size(dir / "pics" / f) > 2000, f);
+  CHECK(test::read_bytes(dir / "pics" / "scene_log_step6.png").substr(1, 3) == "PNG");
+  const std::string page = test::read_bytes(dir / "pics" / "scene_log_step6.html");
+  CHECK(page.find("<canvas") != std::string::npos);
+  CHECK(page.find("http://") == std::string::npos);    // nothing fetched at viewing time
+  CHECK(page.find("https://") == std::string::npos);
+  CHECK(page.find("src=") == std::string::npos);
+
+  const auto scenes = nlohmann::json::parse(test::read_bytes(dir / "pics" / "scenes.json"))["scenes"];
+  REQUIRE(scenes.size() == 2);
+  CHECK(scenes[0]["step"] == 3);   // ascending, whatever the order asked
+  const auto& s = scenes[1];
+  CHECK(s["step"] == 6);
+  REQUIRE(s["truth"].is_object());
+  CHECK(s["truth"]["object"] == "wedge");
+  REQUIRE(!s["hypotheses"].empty());
+  CHECK(s["hypotheses"].size() <= 3);
+  std::set<std::string> objects;
+  for (const auto& h : s["hypotheses"]) CHECK(objects.insert(h["object"].get<std::string>()).second);  // one per object
+  // The frames agree: the contacts (ideal sensing) lie on the true object's surface points and
+  // the truth points around the log's true pose; points farther than the object's size would
+  // mean one of them is in another frame.
+  auto points = [](const nlohmann::json& a) {
+    std::vector<Vec3> out;
+    for (const auto& p : a) out.emplace_back(p[0].get<double>(), p[1].get<double>(), p[2].get<double>());
+    return out;
+  };
+  const std::vector<Vec3> contacts = points(s["contacts"]), truth = points(s["truth"]["points"]);
+  REQUIRE(contacts.size() > 10);
+  REQUIRE(truth.size() > 100);
+  double sum = 0.0;
+  for (const Vec3& c : contacts) {
+    double best = std::numeric_limits<double>::infinity();
+    for (const Vec3& t : truth) best = std::min(best, (c - t).norm());
+    sum += best;
+  }
+  CHECK(sum / static_cast<double>(contacts.size()) < 0.004);   // the surface points' spacing, about 2-3 mm
+  const TactileLog log = io::read_log(dir / "log.h5");
+  Vec3 centre = Vec3::Zero();
+  for (const Vec3& t : truth) centre += t;
+  centre /= static_cast<double>(truth.size());
+  CHECK((centre - log.truth->object_pose.translation()).norm() < 0.05);
+  // Every drawn object is its database surface points (evenly spread) moved by the drawn pose:
+  // moved back, each point is the database's, to the 0.1 mm the scene rounds to.
+  auto pose = [](const nlohmann::json& m) {
+    Pose T = Pose::Identity();
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) T.matrix()(i, j) = m[i][j].get<double>();
+    return T;
+  };
+  const Database db(std::make_shared<io::DbReader>((dir / "db.h5").string()));
+  std::vector<nlohmann::json> drawn{s["truth"]};
+  for (const auto& sc : scenes)
+    for (const auto& h : sc["hypotheses"]) drawn.push_back(h);
+  for (const auto& d : drawn) {
+    const std::size_t i = db.find(d["object"].get<std::string>());
+    REQUIRE(i < db.size());
+    const std::vector<Vec3> fine = db.load_fine(i).points, pts = points(d["points"]);
+    REQUIRE(pts.size() == std::min<std::size_t>(fine.size(), 1500));
+    const Pose back = pose(d["pose"]).inverse();
+    double worst = 0.0;
+    for (std::size_t j = 0; j < pts.size(); ++j)
+      worst = std::max(worst, (back * pts[j] - fine[j * fine.size() / pts.size()]).norm());
+    CHECK(worst < 1e-4);
+  }
+  CHECK(s["free"].size() <= 4000);
+  CHECK(s["free"].size() <= s["free_total"].get<std::size_t>());
+
+  // A step outside the log: one error naming the flag, nothing drawn.
+  const Run bad = touchstone(dir, "recognize --db db.h5 --log log.h5 --scene pics2 --scene-steps 9" + kFast);
+  CHECK(bad.code != 0);
+  CHECK(bad.err.find("--scene-steps") != std::string::npos);
+  CHECK(bad.err.find("log.h5") != std::string::npos);
+  CHECK_FALSE(fs::exists(dir / "pics2"));
 }
