@@ -370,6 +370,8 @@ def plot_scene(scene, out, written):
         ax.set_zlabel("z (m)")
         ax.set_title("azimuth %d°" % azim)
     handles, labels = fig.axes[0].get_legend_handles_labels()
+    # The legend reads contacts, hypotheses #1 to #3, truth, free space (the drawing order reversed).
+    handles, labels = handles[::-1], labels[::-1]
     legend = fig.legend(handles, labels, loc="lower center", ncol=3, markerscale=4, frameon=False)
     for handle in legend.legend_handles if hasattr(legend, "legend_handles") else legend.legendHandles:
         handle.set_alpha(1.0)
@@ -420,7 +422,7 @@ window.onmousemove = e => { if (!drag) return;
   yaw += (e.clientX - drag[0]) * 0.01; pitch += (e.clientY - drag[1]) * 0.01;
   pitch = Math.max(-1.5, Math.min(1.5, pitch)); drag = [e.clientX, e.clientY]; draw(); };
 cv.onwheel = e => { e.preventDefault(); zoom *= e.deltaY < 0 ? 1.1 : 1 / 1.1; draw(); };
-document.getElementById("key").innerHTML = layers.map(L =>
+document.getElementById("key").innerHTML = layers.slice().reverse().map(L =>
   '<span style="background:' + L.colour + '"></span>' + L.label).join("");
 draw();
 </script></body></html>
