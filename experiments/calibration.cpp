@@ -38,6 +38,13 @@ const std::vector<std::string>& confidence_feature_names() {
   return names;
 }
 
+double posterior_entropy(std::span<const double> posteriors) {
+  double h = 0.0;
+  for (double p : posteriors)
+    if (p > 0.0) h -= p * std::log(p);
+  return h;
+}
+
 std::vector<double> confidence_features(const StepResult& r) {
   double best = 0.0, other = 0.0, misfit = 1.0, agreement = 0.0;
   // No answer: the worst fit (every contact far, the offsets at their bound).
@@ -64,8 +71,7 @@ std::vector<double> confidence_features(const StepResult& r) {
       normal_rms = r.fit.normal_rms_deg;
       normal_worst = r.fit.normal_worst_deg;
     }
-    for (double p : r.posteriors)
-      if (p > 0.0) entropy -= p * std::log(p);
+    entropy = posterior_entropy(r.posteriors);
   }
   return {best, best - other, std::log(misfit), agreement, std::log1p(static_cast<double>(r.contacts)),
           std::log(static_cast<double>(std::max(r.step, 1))), rms, far, far10, offset, free, worst, normal_rms,

@@ -35,6 +35,9 @@ const std::vector<std::string>& confidence_feature_names();
 /// the values of "no evidence" (posterior 0, evidence at its floor).
 std::vector<double> confidence_features(const StepResult& r);
 
+/// Entropy (nats) of a posterior over objects (zeros skipped).
+double posterior_entropy(std::span<const double> posteriors);
+
 /// The step a feature vector of confidence_features() was computed at (its "log_step").
 int feature_step(std::span<const double> features);
 

@@ -581,8 +581,6 @@ std::string input_error(const Input& in, const std::exception& e) {
   return std::string(e.what()) + " (input " + in.path + ")";
 }
 
-/// Several inputs in parallel (each with its own recognizer and the shared database); a
-/// failing input is reported and the others go on. Exit code 1 when any failed.
 /// --scene: every recognized input's chosen steps drawn into the folder (a PNG and an HTML page
 /// each, by the plot script); the scenes' data in DIR/scenes.json.
 void draw_scenes(const RecognizeOptions& o, const std::vector<const InputRun*>& runs) {
@@ -597,6 +595,8 @@ void draw_scenes(const RecognizeOptions& o, const std::vector<const InputRun*>& 
     std::cerr << "scene: " << files.size() << " files written to " << o.scene << "\n";
 }
 
+/// Several inputs in parallel (each with its own recognizer and the shared database); a
+/// failing input is reported and the others go on. Exit code 1 when any failed.
 int recognize_many(const Context& c, const std::vector<Input>& inputs,
                    const std::vector<std::string>& outs) {
   const RecognizeOptions& o = c.o;

@@ -364,8 +364,7 @@ class RecognitionEngine final : public RunEngine {
           for (double p : sr.posteriors) s.true_rank += p > pt ? 1 : 0;
         }
       }
-      for (double p : sr.posteriors)
-        if (p > 0.0) s.posterior_entropy -= p * std::log(p);
+      s.posterior_entropy = posterior_entropy(sr.posteriors);
       // The confidences (NaN without a calibration) and the features they come from.
       const std::vector<double> features = confidence_features(sr);
       const double nan = std::numeric_limits<double>::quiet_NaN();

@@ -642,7 +642,8 @@ void print_open_set(const J& report, std::ostream& out) {
       ci << "-";
     out << "  " << std::setw(4) << step << "  " << std::setw(6) << r["hidden_runs"].get<std::size_t>() << "  "
         << std::setw(17) << fmt(r["false_accept_rate"], 100, 1) << "  " << std::setw(10) << ci.str() << "  "
-        << std::setw(15) << fmt(r.value("false_accept_rate_class", J(nullptr)), 100, 1) << "  " << std::setw(5) << r["known_runs"].get<std::size_t>() << "  " << std::setw(10)
+        << std::setw(15) << fmt(r.value("false_accept_rate_class", J(nullptr)), 100, 1) << "  "
+        << std::setw(5) << r["known_runs"].get<std::size_t>() << "  " << std::setw(10)
         << fmt(r["known_rate_closed"], 100, 1) << "  " << std::setw(8) << fmt(r["known_rate_open"], 100, 1)
         << "  " << std::setw(13) << fmt(r["known_drop"], 100, 1) << "\n";
   }
