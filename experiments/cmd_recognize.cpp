@@ -5,6 +5,7 @@
 #include "experiments/allocator.hpp"
 #include "experiments/calibration.hpp"
 #include "experiments/cli_common.hpp"
+#include "experiments/log_steps.hpp"
 #include "experiments/parameters.hpp"
 #include "experiments/recognition_engine.hpp"
 #include "experiments/report.hpp"
@@ -229,24 +230,15 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
     run.truth_name = o.object;
   }
 
-  RecognizerSettings rs = c.rs;
-  // A probe's path: free by the ball radius only, measured with the arm's error
-  // (kProbeFreeThreshold, kProbeInsideMargin), unless the flags say otherwise.
-  if (log && log->sensing == Sensing::probe) {
-    if (!(rs.evaluate.d_thresh > 0.0)) rs.evaluate.d_thresh = kProbeFreeThreshold;
-    if (!o.inside_margin) rs.evaluate.free_inside_margin = kProbeInsideMargin;
-  }
+  // A probe's path: free by the ball radius only, unless the flags say otherwise (log_steps.hpp).
+  const RecognizerSettings rs = log ? experiments::log_settings(c.rs, *log, o.inside_margin) : c.rs;
   Recognizer rec(db, rs);
   if (truth_object) rec.watch(static_cast<std::uint32_t>(*truth_object));   // the JSON's truth_funnel
   const SymmetryGroup* sym = nullptr;
   if (truth_object && run.truth_pose) sym = &c.symmetries.get(db, *truth_object);
 
-  ExplorationSettings es;
-  es.contact_voxel = o.contact_voxel;
-  es.free.res_free = c.rs.evaluate.res_free;
-  es.free.s_obj_max = largest_object_extent(db);
   std::optional<Exploration> ex;
-  if (log) ex.emplace(*log, es);
+  if (log) ex.emplace(*log, experiments::log_exploration(db, c.rs, o.contact_voxel));
   const bool with_free = c.rs.method == Method::bricpsf || c.rs.method == Method::ransac_icp_fs;
   std::vector<int> draw;   // --scene: the steps to draw
   if (!o.scene.empty()) draw = experiments::scene_steps(o.scene_steps, K, in.path);
@@ -258,11 +250,10 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
     GraspGroups grasps;
     const auto t0 = std::chrono::steady_clock::now();
     if (ex) {
-      ex->advance_to(static_cast<std::size_t>(k));
-      contacts = ex->contact_cloud();
-      if (with_free)
-        free = ex->free_cloud().points;
-      grasps = ex->grasp_groups();  // unused when the offsets are off
+      experiments::StepInput step = experiments::step_input(*ex, static_cast<std::size_t>(k), c.rs.method);
+      contacts = std::move(step.contacts);
+      free = std::move(step.free);
+      grasps = std::move(step.grasps);
     } else {
       contacts = single;
       if (with_free) free = single_free;

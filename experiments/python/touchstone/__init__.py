@@ -1,0 +1,171 @@
+"""Touchstone: recognize a known object and localize it in 6 DOF from touch alone.
+
+The Python face of Touchstone's C++ library (not of the command line)::
+
+    import touchstone as ts
+    db = ts.Database("build/dev45.h5")
+    log = ts.simulate(db, "bunny", grasps=20, noise="underwater", seed=3)
+    rec = ts.Recognizer(db, seed=1)
+    for step in rec.recognize_log(log):        # what `touchstone recognize --log` answers
+        print(step.step, step.object, step.posterior, step.position_error_m)
+
+    rec.reset()
+    r = rec.step(contacts, free)               # your own N x 3 arrays (world frame, metres)
+    r.pose                                     # 4 x 4 T_world_object
+
+Errors of the library raise :class:`Error` (its ``message``, ``file`` and ``field``); long
+calls release the GIL, so recognizers in several Python threads run in parallel.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Mapping, Optional, Sequence
+
+import numpy as np
+
+from . import _touchstone as _ts
+
+__version__: str = _ts.__version__
+Error = _ts.Error
+Database = _ts.Database
+TactileLog = _ts.TactileLog
+Exploration = _ts.Exploration
+read_log = _ts.read_log
+set_threads = _ts.set_threads
+
+__all__ = [
+    "Error", "Database", "TactileLog", "Exploration", "Hypothesis", "StepResult", "Recognizer",
+    "read_log", "simulate", "parameters", "run_experiment", "report", "read_runs", "set_threads",
+    "__version__",
+]
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """One hypothesis of the recognizer's state: an object at a pose with its weight."""
+
+    object: str
+    object_index: int
+    pose: np.ndarray          # 4 x 4, T_world_object
+    log_weight: float         # ln wt (Eq. 6)
+    weight: float
+    born: int                 # the step that created it
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """One recognition step: the answer (the best hypothesis), the posterior over objects, the
+    state, and, for a log with ground truth, the errors as `touchstone recognize` reports them."""
+
+    step: int
+    valid: bool                           # at least one hypothesis
+    object: Optional[str]                 # the answer's object (None: no hypothesis)
+    object_index: Optional[int]
+    pose: Optional[np.ndarray]            # 4 x 4 T_world_object of the answer
+    log_weight: Optional[float]
+    weight: Optional[float]
+    posterior: Optional[float]            # posterior of the answer's object
+    posteriors: np.ndarray                # per database object
+    hypotheses: List[Hypothesis]          # the state, best first
+    contacts: int
+    free_points: int
+    unobservable_dof: int
+    pose_ambiguous: bool
+    candidates: int
+    times_s: Dict[str, float]             # per stage and "total"
+    correct: Optional[bool] = None        # the log's object was named (None: truth unknown)
+    position_error_m: Optional[float] = None
+    orientation_error_deg: Optional[float] = None
+    symmetric_orientation_error_deg: Optional[float] = None
+    _raw: Dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @staticmethod
+    def _of(d: Dict[str, Any]) -> "StepResult":
+        hs = [Hypothesis(**h) for h in d["hypotheses"]]
+        return StepResult(**{**d, "hypotheses": hs}, _raw=d)
+
+
+class Recognizer:
+    """The sequential recognizer (BRICPSF by default) over a database.
+
+    ``preset`` is ``"improved"`` (Touchstone's extensions, the default of the command) or
+    ``"paper"``; ``params`` sets method parameters by their keys (``touchstone.parameters()``,
+    the names of ``touchstone params``), e.g. ``{"ransac.object_draws": 60}``; ``only`` limits
+    the answer to these object names. Same database, settings and seed: the same answers as
+    ``touchstone recognize`` for any thread count.
+    """
+
+    def __init__(self, db: Database, preset: str = "improved", method: str = "bricpsf", seed: int = 1,
+                 params: Optional[Mapping[str, Any]] = None, only: Optional[Sequence[str]] = None) -> None:
+        self._impl = _ts.Recognizer(db, preset, method, seed, dict(params or {}),
+                                    None if only is None else list(only))
+
+    def step(self, contacts: Any, free: Any = None, grasps: Optional[Sequence[Any]] = None) -> StepResult:
+        """One exploration step with the cumulative contacts (N x 3, world frame, metres), the
+        free-space points (M x 3, or None) and optionally the same contacts grouped by grasp (a
+        list of K_g x 3 arrays: the per-grasp offsets of the evaluation take out each grasp's
+        arm error)."""
+        return StepResult._of(self._impl.step(contacts, free, grasps))
+
+    def recognize_log(self, log: TactileLog, steps: int = 0) -> List[StepResult]:
+        """Every step of a tactile log (the first ``steps`` grasps; 0: all), fused and recognized
+        exactly as ``touchstone recognize --log`` does, from a fresh state."""
+        return [StepResult._of(d) for d in self._impl.recognize_log(log, steps)]
+
+    def reset(self) -> None:
+        """Forget the hypotheses: the next step is step 1."""
+        self._impl.reset()
+
+    @property
+    def settings(self) -> Dict[str, float]:
+        """The method parameters in effect, as result files store them."""
+        return self._impl.settings
+
+    @property
+    def hypotheses(self) -> List[Hypothesis]:
+        """The current state, best first."""
+        return [Hypothesis(**h) for h in self._impl.hypotheses]
+
+
+def simulate(db: Database, object: str, grasps: int = 20, noise: str = "underwater", sensors: int = 1,
+             seed: int = 1, params: Optional[Mapping[str, Any]] = None) -> TactileLog:
+    """Simulate ``grasps`` random grasps of the default gripper on a database object at a random
+    pose (what ``touchstone simulate`` writes); ``params``: simulator parameters by key (the
+    noise overrides, ``sensing = "probe"``, ...). The log as simulated: written and read back
+    (``TactileLog.write``, ``read_log``) it is what ``touchstone simulate`` writes, with its arm
+    poses rounded in the last bit (the file stores each pose as a translation and a unit
+    quaternion), which is enough to change later RANSAC draws: compare recognitions of the same
+    file."""
+    return _ts.simulate(db, object, grasps, noise, sensors, seed, dict(params or {}))
+
+
+def parameters(kind: Optional[str] = None) -> List[Dict[str, Any]]:
+    """The declared parameters (``touchstone params --json``): key, kind, unit, range, the
+    presets' defaults, help. ``kind``: "method", "simulator" or "experiment" to select."""
+    ps = json.loads(_ts.parameters_json())
+    if isinstance(ps, dict) and "parameters" in ps:
+        ps = ps["parameters"]
+    return [p for p in ps if kind is None or p.get("kind") == kind]
+
+
+def run_experiment(db: str, out: str, config: Optional[str] = None, set: Optional[Mapping[str, Any]] = None,
+                   threads: int = 0, resume: bool = False) -> Dict[str, Any]:
+    """Run an experiment (``touchstone experiment``) into the run store ``out``: the configuration
+    file ``config`` (optional), then ``set`` (any configuration key, as ``--set KEY=VALUE``; a
+    list for a sweep key). Returns the report (``touchstone report --json``)."""
+    return json.loads(_ts.run_experiment_json(db, out, config or "", dict(set or {}), threads, resume))
+
+
+def report(store: str) -> Dict[str, Any]:
+    """The report of a run store (``touchstone report --json``)."""
+    return json.loads(_ts.report_json(store))
+
+
+def read_runs(path: str) -> Dict[str, Any]:
+    """A run store as NumPy arrays: ``header`` (configuration JSON, objects, stages, ...),
+    ``runs`` (per run: variant, object, run, truth 4 x 4, wall time) and ``steps`` (runs x steps
+    per column: best_object, correct, weight, posteriors, errors, pose runs x steps x 4 x 4,
+    stage_times_s and values runs x steps x columns)."""
+    return _ts.read_runs(path)

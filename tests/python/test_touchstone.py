@@ -1,0 +1,258 @@
+"""The touchstone Python module against the touchstone command and the library's own outputs.
+
+Run by ctest (tests/CMakeLists.txt: PYTHONPATH=build/python, TS_BINARY_DIR=build); a small
+catalogue database of four objects is built once per session by the command itself.
+"""
+
+import ast
+import json
+import os
+import subprocess
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import touchstone as ts
+
+BINARY_DIR = Path(os.environ.get("TS_BINARY_DIR", Path(__file__).resolve().parents[2] / "build"))
+TOUCHSTONE = BINARY_DIR / "touchstone"
+STUB = Path(ts.__file__).with_name("__init__.pyi")
+
+
+def run(*args):
+    p = subprocess.run([str(TOUCHSTONE), *map(str, args)], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    return p.stdout
+
+
+@pytest.fixture(scope="session")
+def built(tmp_path_factory):
+    root = tmp_path_factory.mktemp("db")
+    run("catalogue", "--count", 4, "--seed", 1, "--out", root / "cat")
+    run("db", "build", "--manifest", root / "cat" / "manifest.tsv", "--out", root / "db.h5", "--scale", "keep",
+        "--threads", 2)
+    names = [line.split("\t")[2] for line in (root / "cat" / "manifest.tsv").read_text().splitlines()
+             if line and not line.startswith("#")]
+    return root, names
+
+
+@pytest.fixture(scope="session")
+def db(built):
+    return ts.Database(str(built[0] / "db.h5"))
+
+
+def rotation_to_quaternion(R):
+    """(w, x, y, z) with w >= 0, as the command's JSON writes poses (Eigen's conversion)."""
+    w = np.sqrt(max(0.0, 1.0 + R[0, 0] + R[1, 1] + R[2, 2])) / 2.0
+    x = np.copysign(np.sqrt(max(0.0, 1.0 + R[0, 0] - R[1, 1] - R[2, 2])) / 2.0, R[2, 1] - R[1, 2])
+    y = np.copysign(np.sqrt(max(0.0, 1.0 - R[0, 0] + R[1, 1] - R[2, 2])) / 2.0, R[0, 2] - R[2, 0])
+    z = np.copysign(np.sqrt(max(0.0, 1.0 - R[0, 0] - R[1, 1] + R[2, 2])) / 2.0, R[1, 0] - R[0, 1])
+    return np.array([w, x, y, z])
+
+
+def test_database_lists_the_manifest(built, db):
+    _, names = built
+    assert len(db) == 4
+    assert db.objects == [n for n in names if n in db.objects] and sorted(db.objects) == sorted(names)
+    for i, name in enumerate(db.objects):
+        assert db.index(name) == i
+        info = db.object_info(name)
+        assert info["name"] == name and info["index"] == i
+        assert info["extent_m"].shape == (3,) and np.all(info["extent_m"] > 0.005)
+        assert info["fine_points"] > info["coarse_points"] > 0
+        assert db.object_info(i)["name"] == name
+    with pytest.raises(ts.Error) as e:
+        db.index("no_such_object")
+    assert "no_such_object" in str(e.value) and e.value.field == "object"
+    with pytest.raises(IndexError):
+        db.object_info(4)
+
+
+def test_errors_name_the_file(tmp_path):
+    missing = tmp_path / "missing.h5"
+    with pytest.raises(ts.Error) as e:
+        ts.Database(str(missing))
+    assert e.value.file == str(missing) and str(missing) in str(e.value)
+    bad = tmp_path / "bad.h5"
+    bad.write_bytes(b"not an HDF5 file" * 8)
+    with pytest.raises(ts.Error) as e:
+        ts.read_log(str(bad))
+    assert e.value.file == str(bad)
+
+
+def test_simulate_writes_what_the_command_writes(built, db, tmp_path):
+    root, names = built
+    log = ts.simulate(db, names[0], grasps=6, noise="underwater", sensors=1, seed=3)
+    assert len(log) == 6 and log.object == names[0] and log.noise == "underwater" and log.pads == 1
+    log.write(str(tmp_path / "py.h5"))
+    run("simulate", "--db", root / "db.h5", "--object", names[0], "--grasps", 6, "--noise", "underwater",
+        "--sensors", 1, "--seed", 3, "--out", tmp_path / "cli.h5")
+    a, b = ts.read_log(str(tmp_path / "py.h5")), ts.read_log(str(tmp_path / "cli.h5"))
+    assert np.array_equal(a.arm_poses(), b.arm_poses())
+    assert np.array_equal(a.truth_pose, b.truth_pose) and a.truth_pose.shape == (4, 4)
+    with pytest.raises(ts.Error):
+        ts.simulate(db, names[0], params={"ransac.object_draws": 5})   # a method parameter
+
+
+def test_recognize_log_returns_what_the_command_returns(built, db, tmp_path):
+    root, names = built
+    log = ts.simulate(db, names[1], grasps=8, seed=5)
+    path = tmp_path / "log.h5"
+    log.write(str(path))
+    cli = json.loads(run("recognize", "--db", root / "db.h5", "--log", path, "--json", "--seed", 2,
+                         "--threads", 2))
+    steps = ts.Recognizer(db, seed=2).recognize_log(ts.read_log(str(path)))
+    assert len(steps) == len(cli["steps"]) == 8
+    for py, c in zip(steps, cli["steps"]):
+        assert py.step == c["step"] and py.object == c["object"]
+        assert py.log_weight == c["log_weight"] and py.posterior == c["posterior"]
+        assert py.contacts == c["contacts"] and py.free_points == c["free_points"]
+        assert py.valid == (c["pose"] is not None)
+        if not py.valid:
+            continue
+        assert np.array_equal(py.pose[:3, 3], np.array(c["pose"]["t"]))
+        np.testing.assert_allclose(rotation_to_quaternion(py.pose[:3, :3]), c["pose"]["q"], rtol=0, atol=1e-12)
+        assert py.correct == c["correct"]
+        assert py.position_error_m == c["position_error_m"]
+    last = steps[-1]
+    assert last.valid and last.hypotheses[0].object == last.object
+    assert np.array_equal(last.hypotheses[0].pose, last.pose)
+    assert last.posteriors.shape == (4,) and abs(last.posteriors.sum() - 1.0) < 1e-9
+    assert last.posterior == pytest.approx(last.posteriors[last.object_index], rel=1e-12)
+
+
+def test_stepping_with_arrays_equals_recognize_log(db, built):
+    _, names = built
+    log = ts.simulate(db, names[2], grasps=5, seed=7)
+    expected = ts.Recognizer(db, seed=4).recognize_log(log)
+    rec = ts.Recognizer(db, seed=4)
+    ex = ts.Exploration(log, db)
+    for k, want in enumerate(expected, start=1):
+        ex.advance_to(k)
+        assert ex.steps == k
+        got = rec.step(ex.contacts(), ex.free(), ex.grasps())
+        assert sum(len(g) for g in ex.grasps()) >= len(ex.contacts()) > 0
+        assert got.object == want.object and got.log_weight == want.log_weight
+        assert np.array_equal(got.pose, want.pose)
+        assert got.correct is None and want.correct is not None   # no truth given to step()
+    assert [h.object for h in rec.hypotheses] == [h.object for h in expected[-1].hypotheses]
+    rec.reset()
+    assert rec.hypotheses == []
+
+
+def test_thread_count_changes_no_answer(db, built):
+    _, names = built
+    log = ts.simulate(db, names[3], grasps=5, seed=9)
+    try:
+        ts.set_threads(1)
+        one = ts.Recognizer(db, seed=3).recognize_log(log)
+        ts.set_threads(2)
+        two = ts.Recognizer(db, seed=3).recognize_log(log)
+    finally:
+        ts.set_threads(0)
+    assert [(s.object, s.log_weight) for s in one] == [(s.object, s.log_weight) for s in two]
+    assert all(np.array_equal(a.pose, b.pose) for a, b in zip(one, two) if a.valid)
+
+
+def test_recognizers_in_python_threads(db, built):
+    """Two recognizers in two Python threads (the GIL released in the long calls) give what
+    each gives alone."""
+    _, names = built
+    logs = [ts.simulate(db, names[i], grasps=4, seed=11) for i in (0, 1)]
+    alone = [ts.Recognizer(db, seed=1).recognize_log(log) for log in logs]
+    together = [None, None]
+
+    def work(i):
+        together[i] = ts.Recognizer(db, seed=1).recognize_log(logs[i])
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in (0, 1)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for a, b in zip(alone, together):
+        assert [(s.object, s.log_weight) for s in a] == [(s.object, s.log_weight) for s in b]
+
+
+def test_parameters_and_settings(db):
+    keys = {p["key"]: p for p in ts.parameters()}
+    assert "ransac.object_draws" in keys and keys["ransac.object_draws"]["kind"] == "method"
+    assert all(p["kind"] == "simulator" for p in ts.parameters("simulator"))
+    rec = ts.Recognizer(db, params={"ransac.object_draws": 60, "twins.rivals": 3})
+    assert rec.settings["ransac.object_draws"] == 60 and rec.settings["twins.rivals"] == 3
+    default = ts.Recognizer(db).settings
+    assert default["ransac.object_draws"] == keys["ransac.object_draws"]["default"]["improved"]
+    with pytest.raises(ts.Error) as e:
+        ts.Recognizer(db, params={"ransac.no_such_key": 1})
+    assert e.value.field == "ransac.no_such_key"
+    with pytest.raises(ts.Error) as e:
+        ts.Recognizer(db, params={"ransac.object_draws": -4})   # out of range
+    assert e.value.field == "ransac.object_draws"
+    with pytest.raises(ts.Error):
+        ts.Recognizer(db, params={"noise": "deepsea"})           # a simulator parameter
+    with pytest.raises(ts.Error):
+        ts.Recognizer(db, method="no-such-method")
+
+
+def test_step_rejects_bad_arrays(db):
+    rec = ts.Recognizer(db)
+    with pytest.raises(ValueError):
+        rec.step(np.zeros((5, 2)))
+    with pytest.raises(ValueError):
+        rec.step(np.array([[0.0, 0.0, np.nan]]))
+    with pytest.raises(ValueError):
+        rec.step(np.zeros((4, 3)), free=np.zeros(3))
+
+
+def test_only_limits_the_answer(db, built):
+    _, names = built
+    log = ts.simulate(db, names[1], grasps=6, seed=13)
+    steps = ts.Recognizer(db, only=[names[1]]).recognize_log(log)   # localize a known object
+    assert all(s.object in (None, names[1]) for s in steps) and steps[-1].valid
+    limited = ts.Recognizer(db, only=[names[0], names[2], names[3]]).recognize_log(log)
+    assert all(s.object != names[1] for s in limited)
+    assert all(h.object != names[1] for s in limited for h in s.hypotheses)
+
+
+def test_experiment_and_its_run_store(built, tmp_path):
+    root, names = built
+    out = tmp_path / "runs.h5"
+    report = ts.run_experiment(str(root / "db.h5"), str(out),
+                               set={"objects": names[:2], "runs": 2, "steps": 3, "seed": 4}, threads=2)
+    runs = ts.read_runs(str(out))
+    h = runs["header"]
+    assert h["complete"] and h["steps"] == 3 and h["objects"] == names[:2]
+    assert runs["steps"]["correct"].shape == (4, 3) and runs["steps"]["pose"].shape == (4, 3, 4, 4)
+    assert runs["steps"]["stage_times_s"].shape == (4, 3, len(h["stages"]))
+    assert sorted(zip(runs["runs"]["object"], runs["runs"]["run"])) == [(0, 0), (0, 1), (1, 0), (1, 1)]
+    # The report's recognition per step is the share of correct runs the arrays hold.
+    for k, row in enumerate(report["per_step"]):
+        assert row["recognition_rate"] == pytest.approx(runs["steps"]["correct"][:, k].mean(), abs=1e-12)
+    names_of = h["database_objects"]
+    best = runs["steps"]["best_object"]
+    correct = np.array([[b >= 0 and names_of[b] == h["objects"][o] for b in row]
+                        for row, o in zip(best, runs["runs"]["object"])])
+    assert np.array_equal(correct, runs["steps"]["correct"])
+    assert ts.report(str(out))["per_step"] == report["per_step"]
+    with pytest.raises(ts.Error) as e:   # never silently overwritten
+        ts.run_experiment(str(root / "db.h5"), str(out), set={"objects": names[:2], "runs": 2, "steps": 3})
+    assert e.value.file == str(out)
+    with pytest.raises(ts.Error) as e:
+        ts.run_experiment(str(root / "db.h5"), str(tmp_path / "x.h5"), set={"runs": "many"})
+    assert e.value.field == "runs"
+
+
+def test_every_public_name_has_a_stub():
+    tree = ast.parse(STUB.read_text())
+    stubbed = {n.name for n in tree.body if isinstance(n, (ast.ClassDef, ast.FunctionDef))}
+    stubbed |= {n.target.id for n in tree.body if isinstance(n, ast.AnnAssign)}
+    missing = [name for name in ts.__all__ if name not in stubbed]
+    assert not missing, missing
+    classes = {n.name: n for n in tree.body if isinstance(n, ast.ClassDef)}
+    for name in ("Database", "TactileLog", "Exploration", "Recognizer"):
+        public = {a for a in dir(getattr(ts, name)) if not a.startswith("_")} | (
+            {"__len__"} if hasattr(getattr(ts, name), "__len__") else set())
+        members = {f.name for f in classes[name].body if isinstance(f, ast.FunctionDef)}
+        assert public <= members, (name, public - members)
