@@ -95,6 +95,38 @@ struct Node {
   std::int32_t count = 0;  ///< leaf: number of triangles (> 0); inner: 0 (left child = this + 1)
 };
 
+/// A node as the closest-point search reads it: the box in floats rounded outward (it holds the
+/// exact box, so pruning stays conservative), 32 bytes instead of 56.
+struct SearchNode {
+  float lo[3], hi[3];
+  std::int32_t start = 0;  ///< as Node
+  std::int32_t count = 0;
+};
+
+/// Squared distance from p to a search node's box (0 inside); never more than box_sq_distance
+/// of the node it was made from.
+inline double box_sq_distance(const SearchNode& n, const Vec3& p) {
+  double d2 = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    const double e = std::max({double(n.lo[k]) - p[k], 0.0, p[k] - double(n.hi[k])});
+    d2 += e * e;
+  }
+  return d2;
+}
+
+SearchNode search_node(const Node& n) {
+  SearchNode s;
+  for (int k = 0; k < 3; ++k) {
+    s.lo[k] = static_cast<float>(n.lo[k]);
+    if (double(s.lo[k]) > n.lo[k]) s.lo[k] = std::nextafter(s.lo[k], -std::numeric_limits<float>::infinity());
+    s.hi[k] = static_cast<float>(n.hi[k]);
+    if (double(s.hi[k]) < n.hi[k]) s.hi[k] = std::nextafter(s.hi[k], std::numeric_limits<float>::infinity());
+  }
+  s.start = n.start;
+  s.count = n.count;
+  return s;
+}
+
 /// One triangle in leaf order, with what the queries need precomputed.
 struct Tri {
   Vec3 a, e1, e2;   ///< vertex a and edges b - a, c - a
@@ -234,6 +266,7 @@ void split_reference(const std::vector<Vec3>& poly, double max_extent, double pa
 struct MeshIndex::Impl {
   Mesh mesh;
   std::vector<Node> nodes;
+  std::vector<SearchNode> search_nodes;   ///< nodes, as the closest-point search reads them
   std::vector<Tri> tris;
 
   void build();
@@ -292,6 +325,8 @@ void MeshIndex::Impl::build() {
     t.normal = t.e1.cross(t.e2).normalized();  // Eigen leaves a zero vector unchanged
     t.face = f;
   }
+  search_nodes.reserve(nodes.size());
+  for (const Node& n : nodes) search_nodes.push_back(search_node(n));
 }
 
 int MeshIndex::Impl::build_node(std::vector<int>& order, std::vector<Eigen::AlignedBox3d>& boxes,
@@ -436,6 +471,34 @@ std::optional<RayHit> MeshIndex::raycast(const Vec3& origin, const Vec3& dir, do
   return hit;
 }
 
+bool MeshIndex::occluded(const Vec3& origin, const Vec3& dir, double t_max, double t_min) const {
+  // raycast's tests, without its search for the nearest hit: a hit is any t with
+  // t_min < t <= t_max (t_best never shrinks below t_max before the first hit).
+  const double len = dir.norm();
+  if (!(len > 0.0) || !std::isfinite(len) || !finite(origin)) return false;
+  const Ray r = make_ray(origin, dir / len);
+  const auto& tris = impl_->tris;
+  const auto& nodes = impl_->nodes;
+  if (nodes.empty() || box_entry(nodes[0], r, t_min, t_max) == kInf()) return false;
+  int stack[kStackSize];
+  int top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const Node& n = nodes[stack[--top]];
+    if (n.count > 0) {
+      for (int i = n.start; i < n.start + n.count; ++i) {
+        const double t = intersect(tris[i], r.o, r.d, 1e-9);
+        if (t > t_min && t <= t_max && t != kInf()) return true;
+      }
+      continue;
+    }
+    const int li = static_cast<int>(&n - nodes.data()) + 1, ri = n.start;
+    if (box_entry(nodes[ri], r, t_min, t_max) != kInf()) stack[top++] = ri;
+    if (box_entry(nodes[li], r, t_min, t_max) != kInf()) stack[top++] = li;
+  }
+  return false;
+}
+
 namespace {
 
 struct Best {
@@ -446,15 +509,21 @@ struct Best {
 
 }  // namespace
 
-static void closest_search(const std::vector<Node>& nodes, const std::vector<Tri>& tris,
+static void closest_search(const std::vector<SearchNode>& nodes, const std::vector<Tri>& tris,
                            const Vec3& p, Best& best) {
   if (nodes.empty()) return;
-  int stack[kStackSize];
+  // Depth first, nearer child first. A child's box distance is computed once, by its parent,
+  // and kept on the stack with it: a node is entered while that distance is <= best.d2.
+  struct Entry {
+    int node;
+    double d2;
+  };
+  Entry stack[kStackSize];
   int top = 0;
-  stack[top++] = 0;
-  while (top > 0) {
-    const Node& n = nodes[stack[--top]];
-    if (box_sq_distance(n, p) > best.d2) continue;
+  int cur = 0;
+  if (box_sq_distance(nodes[0], p) > best.d2) return;
+  for (;;) {
+    const SearchNode& n = nodes[cur];
     if (n.count > 0) {
       for (int i = n.start; i < n.start + n.count; ++i) {
         // The distance to the triangle's plane bounds the distance from below: a triangle whose
@@ -471,16 +540,27 @@ static void closest_search(const std::vector<Node>& nodes, const std::vector<Tri
           best.point = q;
         }
       }
-      continue;
-    }
-    const int li = static_cast<int>(&n - nodes.data()) + 1, ri = n.start;
-    const double dl = box_sq_distance(nodes[li], p), dr = box_sq_distance(nodes[ri], p);
-    if (dl <= dr) {
-      if (dr <= best.d2) stack[top++] = ri;
-      if (dl <= best.d2) stack[top++] = li;
     } else {
-      if (dl <= best.d2) stack[top++] = li;
-      if (dr <= best.d2) stack[top++] = ri;
+      const int li = cur + 1, ri = n.start;
+      const double dl = box_sq_distance(nodes[li], p), dr = box_sq_distance(nodes[ri], p);
+      // The nearer child next (the left one on a tie), the other one on the stack.
+      const bool left_first = dl <= dr;
+      const int near = left_first ? li : ri, far = left_first ? ri : li;
+      const double dn = left_first ? dl : dr, df = left_first ? dr : dl;
+      if (dn <= best.d2) {
+        if (df <= best.d2) stack[top++] = {far, df};
+        cur = near;
+        continue;
+      }
+    }
+    // The next stacked node still within the best distance, if any.
+    for (;;) {
+      if (top == 0) return;
+      const Entry& e = stack[--top];
+      if (e.d2 <= best.d2) {
+        cur = e.node;
+        break;
+      }
     }
   }
 }
@@ -492,7 +572,7 @@ ClosestPoint MeshIndex::closest(const Vec3& p) const {
     out.distance = std::numeric_limits<double>::infinity();
     return out;
   }
-  closest_search(impl_->nodes, impl_->tris, p, best);
+  closest_search(impl_->search_nodes, impl_->tris, p, best);
   if (best.tri < 0) {
     out.distance = std::numeric_limits<double>::infinity();
     return out;
@@ -508,7 +588,7 @@ std::optional<ClosestPoint> MeshIndex::closest_within(const Vec3& p, double max_
   if (!finite(p) || !(max_distance > 0.0)) return std::nullopt;
   // Search with the bound itself: anything at exactly max_distance is rejected below.
   Best best{max_distance * max_distance, -1, Vec3::Zero()};
-  closest_search(impl_->nodes, impl_->tris, p, best);
+  closest_search(impl_->search_nodes, impl_->tris, p, best);
   if (best.tri < 0 || !(best.d2 < max_distance * max_distance)) return std::nullopt;
   ClosestPoint out;
   out.distance = std::sqrt(best.d2);

@@ -49,6 +49,9 @@ class MeshIndex {
   /// First hit along origin + t * dir, t in (t_min, t_max]; dir need not be unit.
   std::optional<RayHit> raycast(const Vec3& origin, const Vec3& dir, double t_max = 1e30,
                                 double t_min = 0.0) const;
+  /// Whether raycast(origin, dir, t_max, t_min) would hit anything; stops at the first hit found
+  /// (no nearest hit to find), so occluded rays cost a fraction of a raycast.
+  bool occluded(const Vec3& origin, const Vec3& dir, double t_max = 1e30, double t_min = 0.0) const;
   /// Exact closest point on the surface.
   ClosestPoint closest(const Vec3& p) const;
   /// Closest point, but only if closer than max_distance (faster for far-away points).

@@ -280,7 +280,7 @@ class ViewPlanner {
       const Vec3& d = candidates_[c];
       if (!(facing(n, d, two_sided_) >= min_facing_)) continue;
       const Vec3 lift = (n.dot(d) < 0.0 ? n : Vec3(-n)) * offset_;  // off the surface, toward the scanner
-      visible_[i * candidates_.size() + c] = index_.raycast(p + lift, -d) ? 0 : 1;
+      visible_[i * candidates_.size() + c] = index_.occluded(p + lift, -d) ? 0 : 1;
     }
   }
 

@@ -134,6 +134,7 @@ TEST_CASE("MeshIndex raycast agrees with brute force on random rays") {
       const double expect = brute_raycast(m, o, d.normalized());
       const auto hit = index.raycast(o, d);
       REQUIRE(hit.has_value() == (expect < kInf));
+      CHECK(index.occluded(o, d) == hit.has_value());   // the any-hit form of the same test
       if (!hit) continue;
       ++hits;
       CHECK(hit->t == doctest::Approx(expect).epsilon(1e-9));
@@ -145,8 +146,10 @@ TEST_CASE("MeshIndex raycast agrees with brute force on random rays") {
       CHECK(std::abs(n.dot(hit->point - vtx(m, f, 0))) < 1e-12);
       // t_max cuts the ray short; t_min skips the first hit.
       CHECK_FALSE(index.raycast(o, d, 0.999 * expect).has_value());
+      CHECK_FALSE(index.occluded(o, d, 0.999 * expect));
       const auto second = index.raycast(o, d, 1e30, hit->t * (1.0 + 1e-9));
       if (second) CHECK(second->t > hit->t);
+      CHECK(index.occluded(o, d, 1e30, hit->t * (1.0 + 1e-9)) == second.has_value());
     }
     CHECK(hits > 300);
   }
@@ -288,11 +291,15 @@ TEST_CASE("MeshIndex queries are thread-safe and equal to serial ones") {
 TEST_CASE("MeshIndex handles empty meshes, bad rays and bad indices") {
   const MeshIndex empty{Mesh{}};
   CHECK_FALSE(empty.raycast(Vec3::Zero(), Vec3::UnitX()).has_value());
+  CHECK_FALSE(empty.occluded(Vec3::Zero(), Vec3::UnitX()));
   CHECK(empty.closest(Vec3::Zero()).face == -1);
   CHECK_FALSE(empty.inside(Vec3::Zero()));
   const MeshIndex sphere(make_sphere(1.0, 1));
   CHECK_FALSE(sphere.raycast(Vec3(0, 0, 5), Vec3::Zero()).has_value());
   CHECK_FALSE(sphere.raycast(Vec3(0, 0, std::nan("")), Vec3::UnitZ()).has_value());
+  CHECK_FALSE(sphere.occluded(Vec3(0, 0, 5), Vec3::Zero()));
+  CHECK_FALSE(sphere.occluded(Vec3(0, 0, std::nan("")), Vec3::UnitZ()));
+  CHECK(sphere.occluded(Vec3(0, 0, 5), Vec3(0, 0, -1)));
   CHECK_FALSE(sphere.closest_within(Vec3(0, 0, 5), 1.0).has_value());
   // A degenerate (zero-area) triangle neither crashes nor produces NaN.
   Mesh m = make_sphere(1.0, 1);
