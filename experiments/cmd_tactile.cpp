@@ -1,4 +1,7 @@
-// `touchstone simulate`, `touchstone log info`, `touchstone log export`: tactile logs.
+// `touchstone simulate`, `touchstone log info`, `touchstone log export`: tactile logs;
+// `touchstone log topics`, `touchstone log import`: what a ROS 2 recording (MCAP) holds, and the
+// tactile log it makes.
+#include "datasets/ros2_import.hpp"
 #include "datasets/simulator.hpp"
 #include "engine/fusion.hpp"
 #include "experiments/cli_common.hpp"
@@ -9,12 +12,14 @@
 #include "io/db_store.hpp"
 #include "io/gripper_io.hpp"
 #include "io/log_store.hpp"
+#include "io/mcap.hpp"
 
 #include <nlohmann/json.hpp>
 
 #include <chrono>
 #include <iomanip>
 #include <iostream>
+#include <map>
 #include <sstream>
 
 namespace ts::cli {
@@ -204,6 +209,102 @@ int run_log_export(const LogExportOptions& o) {
   }
   return 0;
 }
+// ---- log topics ------------------------------------------------------------------------------
+struct LogTopicsOptions {
+  CommonOptions common;
+  std::string recording;
+};
+
+/// The channels of an MCAP recording with their schemas and message counts (the whole data
+/// section is read, so every checksum is checked too).
+int run_log_topics(const LogTopicsOptions& o) {
+  struct Topic {
+    io::McapChannel channel;
+    std::uint64_t messages = 0, bytes = 0, first = 0, last = 0;
+  };
+  io::McapHeader header;
+  std::map<std::uint16_t, io::McapSchema> schemas;
+  std::map<std::uint16_t, Topic> topics;
+  io::McapHandlers h;
+  h.header = [&](const io::McapHeader& x) { header = x; };
+  h.schema = [&](const io::McapSchema& x) { schemas[x.id] = x; };
+  h.channel = [&](const io::McapChannel& x) { topics[x.id].channel = x; };
+  h.message = [&](const io::McapMessage& m) {
+    Topic& t = topics[m.channel_id];
+    t.first = t.messages ? std::min(t.first, m.log_time) : m.log_time;
+    t.last = t.messages ? std::max(t.last, m.log_time) : m.log_time;
+    ++t.messages;
+    t.bytes += m.data.size();
+  };
+  const io::McapReadSummary s = io::read_mcap(o.recording, h);
+  auto schema_of = [&](const Topic& t) -> std::pair<std::string, std::string> {
+    const auto it = schemas.find(t.channel.schema_id);
+    if (it == schemas.end()) return {"", ""};
+    return {it->second.name, it->second.encoding};
+  };
+  if (o.common.json) {
+    ojson j;
+    j["recording"] = o.recording;
+    j["profile"] = header.profile;
+    j["library"] = header.library;
+    j["chunks"] = s.chunks;
+    j["messages"] = s.messages;
+    j["data_section_crc_checked"] = s.data_section_crc != 0;
+    j["topics"] = ojson::array();
+    for (const auto& [id, t] : topics) {
+      const auto [name, encoding] = schema_of(t);
+      j["topics"].push_back({{"channel", id}, {"topic", t.channel.topic}, {"message_encoding", t.channel.message_encoding},
+                             {"schema", name}, {"schema_encoding", encoding}, {"messages", t.messages},
+                             {"bytes", t.bytes}, {"first_log_time_ns", t.first}, {"last_log_time_ns", t.last}});
+    }
+    std::cout << j.dump(2) << '\n';
+    return 0;
+  }
+  std::cout << o.recording << ": MCAP, profile '" << header.profile << "', library '" << header.library << "', "
+            << s.messages << " messages in " << s.chunks << " chunks"
+            << (s.data_section_crc ? ", data CRC checked" : "") << "\n";
+  std::cout << std::left << std::setw(28) << "topic" << std::setw(40) << "schema" << std::right << std::setw(10)
+            << "messages" << std::setw(12) << "seconds" << "\n";
+  for (const auto& [id, t] : topics) {
+    const auto [name, encoding] = schema_of(t);
+    std::cout << std::left << std::setw(28) << t.channel.topic << std::setw(40)
+              << (name.empty() ? "(none)" : name + " (" + encoding + ")") << std::right << std::setw(10) << t.messages
+              << std::setw(12) << std::fixed << std::setprecision(3) << 1e-9 * static_cast<double>(t.last - t.first)
+              << "\n";
+  }
+  return 0;
+}
+// ---- log import ------------------------------------------------------------------------------
+struct LogImportOptions {
+  CommonOptions common;
+  std::string recording, map, out;
+};
+
+int run_log_import(const LogImportOptions& o) {
+  const datasets::Ros2Map map = datasets::read_ros2_map(o.map);
+  datasets::Ros2ImportReport rep;
+  const TactileLog log = datasets::import_ros2(o.recording, map, o.map, &rep);
+  io::LogHeader header = io::header_of(log);
+  header.source = "touchstone log import " + o.recording + " --map " + o.map;
+  io::LogWriter writer = io::LogWriter::create(o.out, header, true);
+  for (const GraspRecord& g : log.grasps) writer.append(g);
+  writer.close();
+  if (o.common.json) {
+    ojson j;
+    j["recording"] = o.recording;
+    j["out"] = o.out;
+    j["grasps"] = rep.grasps;
+    j["arm_messages"] = rep.arm_messages;
+    j["joint_messages"] = rep.joint_messages;
+    j["largest_skew_s"] = rep.largest_skew_s;
+    std::cout << j.dump() << '\n';
+  } else {
+    std::cout << "imported " << rep.grasps << " grasps (" << rep.arm_messages << " arm poses, " << rep.joint_messages
+              << " joint states; largest time skew " << std::fixed << std::setprecision(3) << rep.largest_skew_s
+              << " s) -> " << o.out << "\n";
+  }
+  return 0;
+}
 }  // namespace
 
 void register_tactile(CLI::App& app) {
@@ -228,7 +329,7 @@ void register_tactile(CLI::App& app) {
     sub->callback([opt] { run_command(opt->common, [opt] { return run_simulate(*opt); }); });
   }
   // log info | export
-  CLI::App* log = app.add_subcommand("log", "Inspect and export tactile logs");
+  CLI::App* log = app.add_subcommand("log", "Inspect and export tactile logs; list what a ROS 2 recording holds");
   log->require_subcommand(1);
   {
     auto opt = std::make_shared<LogInfoOptions>();
@@ -236,6 +337,24 @@ void register_tactile(CLI::App& app) {
     sub->add_option("log", opt->log, "Tactile log (HDF5)")->required();
     add_common(sub, opt->common);
     sub->callback([opt] { run_command(opt->common, [opt] { return run_log_info(*opt); }); });
+  }
+  {
+    auto opt = std::make_shared<LogTopicsOptions>();
+    CLI::App* sub = log->add_subcommand("topics", "Channels of a ROS 2 recording (MCAP): topics, schemas, message counts");
+    sub->add_option("recording", opt->recording, "Recording (.mcap; chunks plain, lz4 or zstd)")->required();
+    add_common(sub, opt->common);
+    sub->callback([opt] { run_command(opt->common, [opt] { return run_log_topics(*opt); }); });
+  }
+  {
+    auto opt = std::make_shared<LogImportOptions>();
+    CLI::App* sub = log->add_subcommand("import", "A tactile log from a ROS 2 recording (MCAP): one grasp per tactile "
+                                                  "message, the arm pose and joints nearest in time");
+    sub->add_option("recording", opt->recording, "Recording (.mcap)")->required();
+    sub->add_option("--map", opt->map, "Which topics hold the arm pose, the joints and the tactile images (TOML; "
+                                        "README, ROS 2 recordings)")->required();
+    sub->add_option("--out", opt->out, "Tactile log to write (HDF5)")->required();
+    add_common(sub, opt->common);
+    sub->callback([opt] { run_command(opt->common, [opt] { return run_log_import(*opt); }); });
   }
   {
     auto opt = std::make_shared<LogExportOptions>();

@@ -6,6 +6,7 @@
 #include "io/log_store.hpp"
 #include "mesh_fixtures.hpp"
 #include "cli_run.hpp"
+#include "ros2_recording.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>
@@ -165,4 +166,58 @@ TEST_CASE("bad input: one error line, exit 1 (usage: 2), no output left behind")
   CHECK_FALSE(std::filesystem::exists(dir / "c.ply"));
   r = touchstone(dir, "log export " + db.string() + " --out " + (dir / "c.xyz").string());
   CHECK(r.code == 1);
+}
+
+TEST_CASE("log topics lists a ROS 2 recording's channels (MCAP), and names a damaged one") {
+  ts::test::TempDir dir("topics");
+  const std::string corpus = TS_SOURCE_DIR "/tests/fuzz/corpus/mcap/";
+  const Run r = touchstone(dir, "log topics --json '" + corpus + "chunk-zstd.mcap'");
+  REQUIRE(r.code == 0);
+  const auto j = nlohmann::json::parse(r.out);
+  CHECK(j["profile"] == "ros2");
+  CHECK(j["messages"] == 12);
+  CHECK(j["chunks"] == 1);
+  REQUIRE(j["topics"].size() == 1);
+  CHECK(j["topics"][0]["topic"] == "/touch");
+  CHECK(j["topics"][0]["schema"] == "std_msgs/msg/UInt8MultiArray");
+  CHECK(j["topics"][0]["messages"] == 12);
+  CHECK(j["topics"][0]["first_log_time_ns"] == 100);
+  CHECK(j["topics"][0]["last_log_time_ns"] == 111);
+  CHECK(j["data_section_crc_checked"] == true);
+  const Run text = touchstone(dir, "log topics '" + corpus + "plain-attachment-metadata.mcap'");
+  CHECK(text.code == 0);
+  CHECK(text.out.find("/arm/eef_pose") != std::string::npos);
+  // Cut short: one error line naming the file, exit 1.
+  const std::string full = ts::test::read_bytes(corpus + "chunk-zstd.mcap");
+  ts::test::write_text(dir / "cut.mcap", full.substr(0, full.size() / 2));
+  const Run cut = touchstone(dir, "log topics cut.mcap");
+  CHECK(cut.code == 1);
+  CHECK(cut.err.find("cut.mcap") != std::string::npos);
+  CHECK(cut.err.find("truncated") != std::string::npos);
+}
+
+TEST_CASE("log import: a recording of a simulated log becomes that log again") {
+  ts::test::TempDir dir("import");
+  const Run sim = touchstone(dir, "simulate --db '" + make_db(dir).string() + "' --object brick --grasps 5 --noise underwater --seed 2 --out sim.h5");
+  REQUIRE(sim.code == 0);
+  const TactileLog log = io::read_log(dir / "sim.h5");
+  ts::test::record_ros2(log, dir / "rec.mcap");
+  const Run r = touchstone(dir, "log import rec.mcap --map '" TS_SOURCE_DIR "/datasets/ros2/map.toml' --out imported.h5 --json");
+  REQUIRE(r.code == 0);
+  const auto j = nlohmann::json::parse(r.out);
+  CHECK(j["grasps"] == 5);
+  const TactileLog back = io::read_log(dir / "imported.h5");
+  REQUIRE(back.grasps.size() == 5);
+  for (std::size_t g = 0; g < 5; ++g) {
+    CHECK((back.grasps[g].arm_pose.matrix() - log.grasps[g].arm_pose.matrix()).cwiseAbs().maxCoeff() < 1e-12);
+    CHECK(back.grasps[g].tactile == log.grasps[g].tactile);
+  }
+  // A map naming a topic the recording lacks: one error naming the recording, nothing written.
+  ts::test::write_text(dir / "map.toml", "[arm]\ntopic = \"/arm/eef_pose\"\n[joints]\ntopic = \"/hand/joint_states\"\n"
+                                         "[tactile]\ntopic = \"/hand/touch\"\n");
+  const Run missing = touchstone(dir, "log import rec.mcap --map map.toml --out missing.h5");
+  CHECK(missing.code == 1);
+  CHECK(missing.err.find("rec.mcap") != std::string::npos);
+  CHECK(missing.err.find("/hand/touch") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(dir / "missing.h5"));
 }

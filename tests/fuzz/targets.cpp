@@ -10,6 +10,7 @@
 #include "io/db_store.hpp"
 #include "io/gripper_io.hpp"
 #include "io/log_store.hpp"
+#include "io/mcap.hpp"
 #include "io/mesh_import.hpp"
 #include "io/result_store.hpp"
 #include "io/run_store.hpp"
@@ -70,6 +71,25 @@ bool refusal_ok(F&& read) {
   } catch (const ts::Error&) {
     return false;
   }
+}
+
+/// A ROS 2 recording (MCAP): every record of the data section streamed, its bytes touched.
+bool mcap(std::span<const std::uint8_t> b) {
+  const auto p = as_file(b, "in.mcap");
+  return refusal_ok([&] {
+    std::uint64_t sum = 0;
+    io::McapHandlers h;
+    h.schema = [&](const io::McapSchema& x) { sum += x.data.size() + x.name.size(); };
+    h.channel = [&](const io::McapChannel& x) { sum += x.topic.size() + x.metadata.size(); };
+    h.message = [&](const io::McapMessage& m) {
+      for (std::uint8_t v : m.data) sum += v;
+    };
+    h.attachment = [&](const io::McapAttachment& a) {
+      for (std::uint8_t v : a.data) sum += v;
+    };
+    (void)io::read_mcap(p, h);
+    (void)sum;
+  });
 }
 
 bool pcd(std::span<const std::uint8_t> b) {
@@ -177,6 +197,7 @@ const std::vector<Target>& targets() {
       {"log", "tactile log (HDF5 edit script on a log)", log},
       {"runs", "experiment run store (HDF5 edit script on a store)", runs},
       {"result", "recognition result (HDF5 edit script on a result)", result},
+      {"mcap", "ROS 2 recording (MCAP: chunks plain, lz4, zstd)", mcap},
       {"hdf5", "raw bytes as any HDF5 store (first byte: database, log, runs, result): libhdf5's own parsing", hdf5},
   };
   return all;
