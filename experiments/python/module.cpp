@@ -296,14 +296,8 @@ class PyRecognizer {
     c.points = points_of(contacts, "contacts");
     const std::vector<Vec3> f = points_of(free, "free");
     GraspGroups g;
-    if (!grasps.is_none()) {
-      std::size_t n = 0;
-      for (const auto& item : grasps) {
-        g.add(points_of(py::reinterpret_borrow<py::object>(item), "grasps[]"));
-        ++n;
-      }
-      (void)n;
-    }
+    if (!grasps.is_none())
+      for (const auto& item : grasps) g.add(points_of(py::reinterpret_borrow<py::object>(item), "grasps[]"));
     StepResult r;
     {
       py::gil_scoped_release release;
