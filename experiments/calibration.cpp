@@ -9,6 +9,7 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
+#include <tuple>
 
 namespace ts::experiments {
 
@@ -281,6 +282,47 @@ double choose_open_set_threshold(std::vector<double> right, std::size_t runs, do
   if (k >= right.size()) return 1.0;
   std::sort(right.begin(), right.end());
   return right[k];
+}
+
+double choose_open_set_threshold_clustered(std::vector<KnownAnswer> answers, double max_drop, double confidence,
+                                           int resamples, std::uint64_t seed) {
+  if (!(max_drop >= 0.0 && max_drop < 1.0))
+    throw Error("the open-set drop must lie in [0, 1)", {}, "--open-set-drop");
+  if (!(confidence >= 0.0 && confidence < 1.0))
+    throw Error("the open-set confidence must lie in [0, 1)", {}, "--open-set-confidence");
+  if (resamples < 1) throw Error("at least one resample is needed", {}, "resamples");
+  auto right_scores = [](const std::vector<const KnownAnswer*>& a) {
+    std::vector<double> r;
+    for (const KnownAnswer* x : a)
+      if (x->right) r.push_back(x->score);
+    return r;
+  };
+  // Clusters in a canonical order, each its answers sorted, so the input order does not matter.
+  std::sort(answers.begin(), answers.end(), [](const KnownAnswer& a, const KnownAnswer& b) {
+    return std::tie(a.group, a.right, a.score) < std::tie(b.group, b.right, b.score);
+  });
+  std::vector<std::vector<const KnownAnswer*>> clusters;
+  for (std::size_t i = 0; i < answers.size(); ++i) {
+    if (i == 0 || answers[i].group != answers[i - 1].group) clusters.emplace_back();
+    clusters.back().push_back(&answers[i]);
+  }
+  std::vector<const KnownAnswer*> all;
+  for (const auto& c : clusters) all.insert(all.end(), c.begin(), c.end());
+  if (confidence == 0.0 || clusters.empty()) return choose_open_set_threshold(right_scores(all), all.size(), max_drop);
+  Rng rng(seed);
+  std::vector<double> t(static_cast<std::size_t>(resamples));
+  std::vector<const KnownAnswer*> sample;
+  for (double& x : t) {
+    sample.clear();
+    for (std::size_t k = 0; k < clusters.size(); ++k) {
+      const auto& c = clusters[rng.index(clusters.size())];
+      sample.insert(sample.end(), c.begin(), c.end());
+    }
+    x = choose_open_set_threshold(right_scores(sample), sample.size(), max_drop);
+  }
+  std::sort(t.begin(), t.end());
+  const auto k = static_cast<std::size_t>(std::floor((1.0 - confidence) * static_cast<double>(resamples) + 1e-9));
+  return t[std::min(k, t.size() - 1)];
 }
 
 namespace {

@@ -147,6 +147,29 @@ std::vector<StepModels> fit_step_models(const std::vector<CalibrationRow>& rows,
 /// answers at one step; `runs`: all answers at that step. Throws for max_drop outside [0, 1).
 double choose_open_set_threshold(std::vector<double> right_confidences, std::size_t runs, double max_drop);
 
+/// One known object's answer at the open-set step: its explored object (the cluster), whether it
+/// was right, and its in-database score.
+struct KnownAnswer {
+  int group = 0;
+  bool right = false;
+  double score = 0.0;
+};
+
+/// The open-set threshold with the explored objects' clustering taken into account. The runs of
+/// one object fail together (they share its shape, and its low scores), so the share of right
+/// answers a threshold costs varies far more between samples of objects than a count of runs
+/// suggests, and a threshold that costs exactly `max_drop` on the calibration runs costs new
+/// runs more about half the time. This draws `resamples` samples of the objects with replacement
+/// (each drawn object with all its answers; ts::Rng(seed)), takes choose_open_set_threshold on
+/// each, and returns the (1 - confidence) quantile of those thresholds (the
+/// (floor((1 - confidence) * resamples) + 1)-th smallest): in `confidence` of the resamples the
+/// threshold costs at most `max_drop`. confidence 0 gives choose_open_set_threshold on all
+/// answers. Deterministic; the order of `answers` does not matter. Throws ts::Error for
+/// max_drop outside [0, 1) (key "--open-set-drop"), confidence outside [0, 1)
+/// ("--open-set-confidence"), or no resamples.
+double choose_open_set_threshold_clustered(std::vector<KnownAnswer> answers, double max_drop, double confidence,
+                                           int resamples = 2000, std::uint64_t seed = 1);
+
 nlohmann::ordered_json to_json(const Calibration& c);
 /// Write atomically (a temporary file renamed).
 void write_calibration(const std::filesystem::path& file, const Calibration& c);

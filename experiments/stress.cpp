@@ -210,7 +210,9 @@ void add_grasp(const StressCase& c, double f, const MeshIndex& mesh, const std::
                const Pose& T, Rng& rng, Touch& touch) {
   const double radius = 0.012 * f;
   const double noise_f = c.scale_noise ? f : 1.0;
-  const auto [centre, n] = surface_point(mesh.mesh(), faces, rng);
+  // Named, not a structured binding: the lambda below captures it (clang 14, the fuzz build).
+  const std::pair<Vec3, Vec3> at = surface_point(mesh.mesh(), faces, rng);
+  const Vec3 &centre = at.first, &n = at.second;
   const Vec3 t1 = n.unitOrthogonal(), t2 = n.cross(t1);
   const double phi = rng.uniform(0.0, 2 * kPi);
   const Vec3 dir = std::cos(phi) * t1 + std::sin(phi) * t2, side = n.cross(dir);

@@ -289,6 +289,46 @@ TEST_CASE("ECE of an exactly calibrated model: what sampling alone gives") {
   CHECK(ece_sampling_noise(half).mean == n.mean);   // fixed seed
 }
 
+TEST_CASE("Open-set threshold over resamples of the explored objects: an object whose runs fail together lowers it") {
+  // 20 objects x 5 right answers. 19 score high (0.80 to 0.99); object 7's five runs all score
+  // low (0.10 to 0.14), as the runs of one hard object do. 3 % of 100 runs may be lost.
+  std::vector<KnownAnswer> a;
+  for (int g = 0; g < 20; ++g)
+    for (int r = 0; r < 5; ++r)
+      a.push_back({g, true, g == 7 ? 0.10 + 0.01 * r : 0.80 + 0.01 * ((g * 5 + r) % 20)});
+  std::vector<double> right;
+  for (const auto& x : a) right.push_back(x.score);
+  // On the runs as they are: the 4th smallest score, one of object 7's.
+  const double plain = choose_open_set_threshold(right, a.size(), 0.03);
+  CHECK(plain == doctest::Approx(0.13).scale(0));
+  CHECK(choose_open_set_threshold_clustered(a, 0.03, 0.0) == plain);
+  // Object 7 drawn once in 38 % of resamples (threshold 0.13), never in 36 % (a high one), twice
+  // or more in 26 % (0.11 or lower): the median is the plain rule's, the 10 % quantile is lower.
+  CHECK(choose_open_set_threshold_clustered(a, 0.03, 0.5) == doctest::Approx(0.13).scale(0));
+  const double robust = choose_open_set_threshold_clustered(a, 0.03, 0.9);
+  CHECK(robust <= 0.11 + 1e-12);
+  CHECK(robust >= 0.10 - 1e-12);
+  // Monotone in the confidence; the order of the answers does not matter; deterministic.
+  double last = 2.0;
+  for (double c : {0.0, 0.5, 0.8, 0.9, 0.95}) {
+    const double t = choose_open_set_threshold_clustered(a, 0.03, c);
+    CHECK(t <= last);
+    last = t;
+  }
+  std::vector<KnownAnswer> reversed(a.rbegin(), a.rend());
+  CHECK(choose_open_set_threshold_clustered(reversed, 0.03, 0.9) == robust);
+  CHECK(choose_open_set_threshold_clustered(a, 0.03, 0.9) == robust);
+  // Wrong answers count as runs but carry no score to refuse.
+  std::vector<KnownAnswer> wrong = a;
+  for (int g = 0; g < 20; ++g) wrong.push_back({g, false, 0.0});
+  CHECK(choose_open_set_threshold_clustered(wrong, 0.03, 0.0) ==
+        choose_open_set_threshold(right, wrong.size(), 0.03));
+  CHECK_THROWS_AS(choose_open_set_threshold_clustered(a, 1.0, 0.9), Error);
+  CHECK_THROWS_AS(choose_open_set_threshold_clustered(a, 0.03, 1.0), Error);
+  CHECK_THROWS_AS(choose_open_set_threshold_clustered(a, 0.03, -0.5), Error);
+  CHECK_THROWS_AS(choose_open_set_threshold_clustered(a, 0.03, 0.9, 0), Error);
+}
+
 TEST_CASE("Open-set threshold: the most confidence refused while at most the allowed share of runs loses its right answer") {
   // 100 runs at the step, 4 right answers: refusing below t costs the right answers under t.
   const std::vector<double> right{0.9, 0.2, 0.5, 0.7};
