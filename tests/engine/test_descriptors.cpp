@@ -341,6 +341,33 @@ TEST_CASE("SHOT's frame radius is its own setting") {
   CHECK(other.values != same.values);
 }
 
+TEST_CASE("SHOT needs 5 neighbours in its support, and 5 besides the keypoint for its frame") {
+  // A ring of 4 points at 2 mm around the keypoint and 12 more at 6 mm, all in z = 0 but tilted
+  // normals: over 3 mm the support has 4 points (5 with the keypoint's own point).
+  PointCloud c;
+  c.points.emplace_back(0, 0, 0.0001);
+  c.normals.push_back(Vec3(0.1, 0, 1).normalized());
+  for (int k = 0; k < 16; ++k) {
+    const double a = 2 * M_PI * (k + 0.3) / (k < 4 ? 4 : 12), r = k < 4 ? 0.002 : 0.006;
+    c.points.emplace_back(r * std::cos(a), r * std::sin(a), 0.0005 * std::sin(3 * a));
+    c.normals.push_back(Vec3(0.2 * std::cos(a), 0.3, 1).normalized());
+  }
+  const KdTree3 tree(c.points);
+  DescriptorSettings set;
+  set.feature_radius = 0.003;
+  set.shot_lrf_radius = 0.008;
+  // on the centre point: 5 in the support (itself included), 16 others for the frame
+  CHECK(compute_descriptors(Descriptor::shot, {c.points[0]}, {}, c, tree, set).valid[0]);
+  // the same keypoint without its own point in the cloud: 4 in the support, 15 for the frame
+  PointCloud ring = c;
+  ring.points.erase(ring.points.begin());
+  ring.normals.erase(ring.normals.begin());
+  CHECK_FALSE(compute_descriptors(Descriptor::shot, {c.points[0]}, {}, ring, KdTree3(ring.points), set).valid[0]);
+  // the frame over 3 mm has only the 4 ring points besides the keypoint
+  set.shot_lrf_radius = 0.0;
+  CHECK_FALSE(compute_descriptors(Descriptor::shot, {c.points[0]}, {}, c, tree, set).valid[0]);
+}
+
 TEST_CASE("Spin images match the brute-force formulation") {
   Patch patch(13, 500, 0.02, 0.006, false);
   auto& [rng, s, tree, set] = patch;
