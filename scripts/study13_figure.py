@@ -1,12 +1,12 @@
 #!/usr/bin/python3
-"""Study 10's figure, the paper's Figure 9 redrawn: one heat map per descriptor (FPFH, PFH,
+"""Study 13's figure, the paper's Figure 9 redrawn: one heat map per descriptor (FPFH, PFH,
 SHOT, Spin Images) of the normalized mean Euclidean distances between the 19 basic shapes, for
 the simulated scanner's clouds (top row) and the noisy taxel-like clouds (bottom row), coloured
 as the paper's from yellow (no difference) to red (large), each panel titled with its
 separability (mean between-shape / mean within-shape distance) and 1-NN same-shape rate.
 
-    build/bench/study10_descriptors --out study10
-    /usr/bin/python3 scripts/study10_figure.py study10 --out study10/figure9.png
+    build/bench/study13_descriptors --out study13
+    /usr/bin/python3 scripts/study13_figure.py study13 --out study13/figure9.png
 
 Needs matplotlib and numpy (Debian's python3-matplotlib).
 """
@@ -34,7 +34,7 @@ def read_matrix(path):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("folder", help="output folder of study10_descriptors")
+    ap.add_argument("folder", help="output folder of study13_descriptors")
     ap.add_argument("--out", required=True, help="PNG to write")
     args = ap.parse_args()
 
@@ -56,7 +56,7 @@ def main():
             ax.set_xticklabels(names, rotation=90, fontsize=6.5)
             ax.set_yticklabels(names if col == 0 else [""] * len(names), fontsize=6.5)
     fig.colorbar(im, ax=axes, shrink=0.6, label="mean Euclidean distance / largest entry")
-    fig.suptitle("Study 10: distances between the descriptors of the 19 basic shapes (the paper's Figure 9); "
+    fig.suptitle("Study 13: distances between the descriptors of the 19 basic shapes (the paper's Figure 9); "
                  "feature radius 1.5 cm, normal radius 1 cm")
     fig.savefig(args.out, dpi=110, bbox_inches="tight")
     print(f"wrote {args.out}")
