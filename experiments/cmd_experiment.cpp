@@ -564,8 +564,9 @@ int run_calibrate(const CalibrateOptions& o) {
               << ", Brier " << b.brier;
     if (cal.open_set_threshold)
       std::cout << "; open-set threshold " << *cal.open_set_threshold << " on the in-database score (at most "
-                << o.open_set_drop * 100 << " % of the known objects' runs lose their right answer at step " << at
-                << ", in " << o.open_set_confidence * 100 << " % of resamples of the explored objects)";
+                << std::setprecision(1) << o.open_set_drop * 100 << " % of the known objects' runs lose their right "
+                << "answer at step " << at << ", in " << o.open_set_confidence * 100
+                << " % of resamples of the explored objects)" << std::setprecision(3);
     else
       std::cout << "; no open-set score (no runs of hidden objects)";
     std::cout << "; judge it on other runs: touchstone report STORE --calibration " << o.out << "\n";

@@ -220,7 +220,8 @@ PointCloud roughened(PointCloud c, Rng& rng) {
 }
 
 /// A quadric patch (roughened or not), its tree, and settings with the given feature radius;
-/// rng continues the stream that drew the patch. Unpack with auto& [rng, s, tree, set] = patch.
+/// rng continues the stream that drew the patch. Unpack with TS_UNPACK_PATCH(patch): references, not a
+/// structured binding, which clang 14 cannot capture in a lambda.
 struct Patch {
   Rng rng;
   PointCloud s;
@@ -233,6 +234,12 @@ struct Patch {
     set.feature_radius = radius;
   }
 };
+
+#define TS_UNPACK_PATCH(p) \
+  Rng& rng = (p).rng;          \
+  PointCloud& s = (p).s;       \
+  KdTree3& tree = (p).tree;    \
+  DescriptorSettings& set = (p).set
 
 std::vector<Vec3> pick_keypoints(Rng& rng, const PointCloud& s, int on, int off, double half) {
   std::vector<Vec3> k;
@@ -294,7 +301,7 @@ TEST_CASE("descriptor names, dimensions and the parser") {
 
 TEST_CASE("PFH matches the brute-force formulation") {
   Patch patch(11, 500, 0.02, 0.006, true);
-  auto& [rng, s, tree, set] = patch;
+  TS_UNPACK_PATCH(patch);
   auto kps = pick_keypoints(rng, s, 25, 15, 0.024);
   kps.emplace_back(1, 1, 1);   // nothing around it
   const auto got = compute_descriptors(Descriptor::pfh, kps, {}, s, tree, set);
@@ -313,7 +320,7 @@ TEST_CASE("PFH matches the brute-force formulation") {
 
 TEST_CASE("SHOT matches the brute-force formulation (frame and per-axis interpolation)") {
   Patch patch(12, 600, 0.02, 0.007, true);
-  auto& [rng, s, tree, set] = patch;
+  TS_UNPACK_PATCH(patch);
   auto kps = pick_keypoints(rng, s, 30, 20, 0.024);
   kps.emplace_back(0.0, 0.0, 0.5);
   const auto got = compute_descriptors(Descriptor::shot, kps, {}, s, tree, set);
@@ -330,7 +337,7 @@ TEST_CASE("SHOT matches the brute-force formulation (frame and per-axis interpol
 
 TEST_CASE("SHOT's frame radius is its own setting") {
   Patch patch(15, 600, 0.02, 0.007, false);
-  auto& [rng, s, tree, set] = patch;
+  TS_UNPACK_PATCH(patch);
   const auto kps = pick_keypoints(rng, s, 20, 0, 0.015);
   const auto same = compute_descriptors(Descriptor::shot, kps, {}, s, tree, set);
   set.shot_lrf_radius = 0.007;
@@ -370,7 +377,7 @@ TEST_CASE("SHOT needs 5 neighbours in its support, and 5 besides the keypoint fo
 
 TEST_CASE("Spin images match the brute-force formulation") {
   Patch patch(13, 500, 0.02, 0.006, false);
-  auto& [rng, s, tree, set] = patch;
+  TS_UNPACK_PATCH(patch);
   auto kps = pick_keypoints(rng, s, 25, 15, 0.024);
   kps.emplace_back(-1, 0, 0);
   auto normals = nearest_normals(s, kps);
@@ -424,7 +431,7 @@ TEST_CASE("on a plane: PFH puts every pair in one bin, the spin image on the bet
 
 TEST_CASE("FPFH through the common interface is compute_fpfh") {
   Patch patch(16, 500, 0.02, 0.006, false);
-  auto& [rng, s, tree, set] = patch;
+  TS_UNPACK_PATCH(patch);
   const auto kps = pick_keypoints(rng, s, 20, 10, 0.024);
   const auto got = compute_descriptors(Descriptor::fpfh, kps, {}, s, tree, set);
   FpfhSettings fs;
@@ -439,7 +446,7 @@ TEST_CASE("FPFH through the common interface is compute_fpfh") {
 
 TEST_CASE("every descriptor is invariant to rigid motions and independent of the thread count") {
   Patch patch(21, 1500, 0.025, 0.008, false);
-  auto& [rng, s, tree, set] = patch;
+  TS_UNPACK_PATCH(patch);
   const auto kps = pick_keypoints(rng, s, 60, 20, 0.02);
   const auto normals = nearest_normals(s, kps);
   for (Descriptor d : kAllDescriptors) {
