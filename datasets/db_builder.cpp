@@ -211,6 +211,8 @@ std::string build_fingerprint(const std::vector<MeshInput>& inputs, const std::v
   std::string text = "touchstone db build, schema " + std::to_string(io::kDbSchemaVersion) + "\n";
   const bool keep = settings.database.scale == ObjectScale::keep;
   if (keep) text += "scale keep\n";   // (fit builds: the text of the builds before keep existed)
+  if (settings.database.descriptor != Descriptor::fpfh)   // (FPFH: the text before descriptors)
+    text += "descriptor " + descriptor_name(settings.database.descriptor) + "\n";
   text += "seed " + std::to_string(settings.seed) + "\ndeflate " + std::to_string(settings.write.deflate) + "\n";
   char value[64];
   for (const auto& v : io::settings_values(settings.database)) {

@@ -41,7 +41,8 @@ BuiltObject build_object(const Mesh& object_frame_mesh, ObjectInfo info,
   ScanResult scan = scan_mesh(index, settings.scan, seed);
   out.timings.scan_s = seconds_since(t0);
 
-  // 2. Features: PCA normals on the fine cloud, FPFH at every coarse point from the fine cloud.
+  // 2. Features: PCA normals on the fine cloud, the database's descriptor (FPFH by default) at
+  //    every coarse point from the fine cloud.
   //    The coarse points are fine points (voxel representatives), so the same selection on the
   //    fine cloud carrying PCA normals gives the keypoints with their PCA normals.
   t0 = std::chrono::steady_clock::now();
@@ -50,13 +51,17 @@ BuiltObject build_object(const Mesh& object_frame_mesh, ObjectInfo info,
   surface.normals = oriented_pca_normals(scan.fine, settings.fpfh.normal_radius);
   const PointCloud keypoints = voxel_representatives(surface, settings.scan.coarse_voxel);
   const KdTree3 tree(surface.points);
-  const FpfhResult fpfh = compute_fpfh(keypoints.points, keypoints.normals, surface, tree, settings.fpfh);
+  DescriptorSettings ds;
+  ds.feature_radius = settings.fpfh.feature_radius;
+  const Descriptors desc =
+      compute_descriptors(settings.descriptor, keypoints.points, keypoints.normals, surface, tree, ds);
   // Keypoints without a usable neighbourhood (zero histogram) are left out of the database.
+  out.features.features = FeatureRows(desc.dim);
   for (std::size_t i = 0; i < keypoints.size(); ++i) {
-    if (!fpfh.valid[i]) continue;
+    if (!desc.valid[i]) continue;
     out.features.coarse.points.push_back(keypoints.points[i]);
     out.features.coarse.normals.push_back(keypoints.normals[i]);
-    out.features.features.push_back(fpfh.features[i]);
+    out.features.features.push_back(desc.row(i).data());
   }
   out.timings.features_s = seconds_since(t0);
 

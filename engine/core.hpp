@@ -21,6 +21,39 @@ using Pose = Eigen::Isometry3d;  ///< rigid transform; named T_target_source whe
 constexpr int kFeatureDim = 33;
 using Feature = std::array<float, kFeatureDim>;
 
+/// Feature vectors of one length (a descriptor's: FPFH 33, PFH 125, SHOT 352, Spin Images 153),
+/// row-major float. Every row has dim() values; rows added by resize() are zero.
+class FeatureRows {
+ public:
+  FeatureRows() = default;
+  explicit FeatureRows(int dim, std::size_t rows = 0)
+      : dim_(dim), values_(static_cast<std::size_t>(dim > 0 ? dim : 0) * rows, 0.0f) {
+    if (dim <= 0) throw std::invalid_argument("FeatureRows: the dimension must be positive");
+  }
+  /// FPFH rows (kFeatureDim values each).
+  explicit FeatureRows(const std::vector<Feature>& fpfh) : dim_(kFeatureDim) {
+    values_.reserve(fpfh.size() * kFeatureDim);
+    for (const Feature& f : fpfh) values_.insert(values_.end(), f.begin(), f.end());
+  }
+  int dim() const { return dim_; }
+  std::size_t size() const { return values_.size() / static_cast<std::size_t>(dim_); }
+  bool empty() const { return values_.empty(); }
+  const float* row(std::size_t i) const { return values_.data() + i * static_cast<std::size_t>(dim_); }
+  float* row(std::size_t i) { return values_.data() + i * static_cast<std::size_t>(dim_); }
+  void resize(std::size_t rows) { values_.resize(rows * static_cast<std::size_t>(dim_), 0.0f); }
+  void reserve(std::size_t rows) { values_.reserve(rows * static_cast<std::size_t>(dim_)); }
+  /// Append one row of dim() values.
+  void push_back(const float* r) { values_.insert(values_.end(), r, r + dim_); }
+  /// All values, row after row.
+  const std::vector<float>& values() const { return values_; }
+  std::vector<float>& values() { return values_; }
+  bool operator==(const FeatureRows& o) const { return dim_ == o.dim_ && values_ == o.values_; }
+
+ private:
+  int dim_ = kFeatureDim;
+  std::vector<float> values_;
+};
+
 /// Triangle mesh in its own frame. Faces index `vertices` (counter-clockwise seen from outside).
 struct Mesh {
   std::vector<Vec3> vertices;

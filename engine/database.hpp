@@ -6,6 +6,7 @@
 
 #include "engine/core.hpp"
 #include "engine/distance_field.hpp"
+#include "engine/descriptors.hpp"
 #include "engine/fpfh.hpp"
 #include "engine/scanner.hpp"
 #include "engine/search.hpp"
@@ -27,7 +28,8 @@ struct DatabaseSettings {
   ObjectScale scale = ObjectScale::fit;
   double max_extent = 0.20;        ///< m, largest bounding-box extent after scaling (fit)
   ScanSettings scan;
-  FpfhSettings fpfh;
+  FpfhSettings fpfh;               ///< normal radius, and the feature radius of every descriptor
+  Descriptor descriptor = Descriptor::fpfh;  ///< the local descriptor of keypoints and queries
   DistanceFieldSettings field;
 };
 
@@ -46,7 +48,7 @@ struct ObjectInfo {
 
 struct ObjectFeatures {
   PointCloud coarse;               ///< object frame, with normals
-  std::vector<Feature> features;   ///< one per coarse point
+  FeatureRows features;            ///< one row per coarse point, of the database's descriptor
 };
 
 /// What Batch RANSAC and the shortlist read of an object, kept for every object once loaded:
@@ -66,7 +68,7 @@ struct ObjectGeometry {
 /// Wall-clock seconds per stage of build_object (diagnostics printed by `db build`).
 struct BuildTimings {
   double scan_s = 0.0;       ///< simulated laser scanner: fine and coarse clouds
-  double features_s = 0.0;   ///< normals and FPFH of the coarse points
+  double features_s = 0.0;   ///< normals and descriptors of the coarse points
   double field_s = 0.0;      ///< distance field
 };
 
@@ -205,7 +207,8 @@ std::size_t memory_bytes(const ObjectGeometry& g);
 
 /// Build one object from a mesh already in its object frame (see io/mesh_import for the
 /// frame): scan_mesh (settings.scan) gives the fine cloud; PCA normals (fpfh.normal_radius)
-/// on it, oriented by the scanner's outward normals, feed FPFH at one fine point per
+/// on it, oriented by the scanner's outward normals, feed the descriptor (settings.descriptor,
+/// over fpfh.feature_radius; FPFH by default) at one fine point per
 /// scan.coarse_voxel (keypoints with an empty neighbourhood are dropped); the distance field
 /// is signed when the mesh is closed. Fills info's extent, closed, counts and coverage (the
 /// caller's name, source, checksum, scale and centre are kept). Deterministic for a seed and

@@ -16,7 +16,6 @@ namespace ts {
 
 namespace {
 
-constexpr int kDim = kFeatureDim;
 constexpr std::size_t kBlock = 128;          ///< rows per block (dims-major inside a block)
 constexpr std::uint32_t kPadding = 0xffffffffu;  ///< object of a padding row
 
@@ -26,11 +25,12 @@ struct Item {
 };
 inline bool before(const Item& a, const Item& b) { return a.d < b.d || (a.d == b.d && a.row < b.row); }
 
-/// Squared distances of one block's rows to query q (rows dims-major: blk[d * kBlock + r]).
+/// Squared distances of one block's rows to query q of `dim` values (rows dims-major:
+/// blk[d * kBlock + r]).
 TS_TARGET_CLONES
-void block_distances(const float* __restrict blk, const float* __restrict q, float* __restrict out) {
+void block_distances(const float* __restrict blk, const float* __restrict q, int dim, float* __restrict out) {
   for (std::size_t r = 0; r < kBlock; ++r) out[r] = 0.0f;
-  for (int d = 0; d < kDim; ++d) {
+  for (int d = 0; d < dim; ++d) {
     const float qd = q[d];
     const float* __restrict col = blk + static_cast<std::size_t>(d) * kBlock;
     for (std::size_t r = 0; r < kBlock; ++r) {
@@ -43,16 +43,18 @@ void block_distances(const float* __restrict blk, const float* __restrict q, flo
 }  // namespace
 
 struct FeatureTable::Impl {
+  int dim = kFeatureDim;            ///< values per feature (the database's descriptor)
   std::vector<FeatureRef> refs;     ///< per table row (rows are in k-d leaf order)
-  std::vector<float> blocks;        ///< nblocks x kDim x kBlock, padding rows far away
-  std::vector<float> lo, hi;        ///< nblocks x kDim: bounding box of each block's rows
-  std::vector<float> centre;        ///< nblocks x kDim: mean of each block's rows
+  std::vector<float> blocks;        ///< nblocks x dim x kBlock, padding rows far away
+  std::vector<float> lo, hi;        ///< nblocks x dim: bounding box of each block's rows
+  std::vector<float> centre;        ///< nblocks x dim: mean of each block's rows
   std::vector<std::uint8_t> filled; ///< per block: rows that hold a feature (the first ones)
   std::size_t rows = 0;
   std::size_t features = 0;         ///< rows that hold a feature (rows minus padding)
   std::vector<std::uint32_t> object_blocks;  ///< first block of each object present (+ end)
   std::size_t nblocks() const { return (rows + kBlock - 1) / kBlock; }
-  const float* block(std::size_t b) const { return blocks.data() + b * kDim * kBlock; }
+  std::size_t stride() const { return static_cast<std::size_t>(dim); }
+  const float* block(std::size_t b) const { return blocks.data() + b * stride() * kBlock; }
 };
 
 FeatureTable::FeatureTable() : impl_(std::make_unique<Impl>()) {}
@@ -65,16 +67,15 @@ namespace {
 /// Order rows like the leaves of a k-d tree (split at the median of the widest dimension until
 /// a piece fits a block), so that each block holds similar features and a ball around its mean
 /// bounds it tightly. Deterministic (ties by row).
-void kd_order(const std::vector<const Feature*>& f, std::vector<std::uint32_t>& idx, std::size_t lo,
-              std::size_t hi) {
+void kd_order(const FeatureRows& f, std::vector<std::uint32_t>& idx, std::size_t lo, std::size_t hi) {
   if (hi - lo <= kBlock) return;
   int dim = 0;
   float widest = -1.0f;
-  for (int d = 0; d < kDim; ++d) {
-    float mn = (*f[idx[lo]])[d], mx = mn;
+  for (int d = 0; d < f.dim(); ++d) {
+    float mn = f.row(idx[lo])[d], mx = mn;
     for (std::size_t i = lo; i < hi; ++i) {
-      mn = std::min(mn, (*f[idx[i]])[d]);
-      mx = std::max(mx, (*f[idx[i]])[d]);
+      mn = std::min(mn, f.row(idx[i])[d]);
+      mx = std::max(mx, f.row(idx[i])[d]);
     }
     if (mx - mn > widest) widest = mx - mn, dim = d;
   }
@@ -83,7 +84,7 @@ void kd_order(const std::vector<const Feature*>& f, std::vector<std::uint32_t>& 
   const std::size_t mid = std::min(half, hi);
   std::nth_element(idx.begin() + static_cast<std::ptrdiff_t>(lo), idx.begin() + static_cast<std::ptrdiff_t>(mid),
                    idx.begin() + static_cast<std::ptrdiff_t>(hi), [&](std::uint32_t a, std::uint32_t b) {
-                     const float va = (*f[a])[dim], vb = (*f[b])[dim];
+                     const float va = f.row(a)[dim], vb = f.row(b)[dim];
                      return va < vb || (va == vb && a < b);
                    });
   kd_order(f, idx, lo, mid);
@@ -95,6 +96,8 @@ void kd_order(const std::vector<const Feature*>& f, std::vector<std::uint32_t>& 
 FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& objects)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
+  m.dim = descriptor_dim(db.settings().descriptor);
+  const std::size_t dim = m.stride();
   // Each object's rows in k-d leaf order, starting on a block boundary (padding rows between
   // objects), so that a block belongs to one object: knn_per_object searches an object's blocks
   // best-first like knn searches all of them. The table keeps the only copy of the features
@@ -104,28 +107,26 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
     if (objects.empty() || (o < objects.size() && objects[o]))
       expected += (std::min<std::size_t>(db.info(o).coarse_points, 1u << 24) + kBlock - 1) / kBlock;
   expected = std::min<std::size_t>(expected, std::size_t{1} << 26);
-  m.blocks.reserve(expected * kDim * kBlock);
+  m.blocks.reserve(expected * dim * kBlock);
   m.refs.reserve(expected * kBlock);
   struct Loaded {
     std::size_t o = 0;
-    std::vector<Feature> fs;
-    std::vector<const Feature*> of;
+    FeatureRows fs;
     std::vector<std::uint32_t> idx;
   };
   auto append = [&](const Loaded& L) {
     const std::size_t o = L.o;
-    const std::vector<Feature>& fs = L.fs;
-    const std::vector<const Feature*>& of = L.of;
+    const FeatureRows& fs = L.fs;
     const std::vector<std::uint32_t>& idx = L.idx;
     if (fs.empty()) return;
     const std::size_t b0 = m.refs.size() / kBlock, nb = (fs.size() + kBlock - 1) / kBlock;
     if ((b0 + nb) * kBlock >= std::numeric_limits<std::uint32_t>::max())
       throw Error("FeatureTable: too many features");
     m.object_blocks.push_back(static_cast<std::uint32_t>(b0));
-    m.blocks.resize((b0 + nb) * kDim * kBlock, 1e18f);  // padding never wins
-    m.lo.resize((b0 + nb) * kDim, std::numeric_limits<float>::infinity());
-    m.hi.resize((b0 + nb) * kDim, -std::numeric_limits<float>::infinity());
-    m.centre.resize((b0 + nb) * kDim, 0.0f);
+    m.blocks.resize((b0 + nb) * dim * kBlock, 1e18f);  // padding never wins
+    m.lo.resize((b0 + nb) * dim, std::numeric_limits<float>::infinity());
+    m.hi.resize((b0 + nb) * dim, -std::numeric_limits<float>::infinity());
+    m.centre.resize((b0 + nb) * dim, 0.0f);
     m.filled.resize(b0 + nb, 0);
     for (std::size_t k = 0; k < nb * kBlock; ++k) {
       if (k >= idx.size()) {
@@ -133,22 +134,22 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
         continue;
       }
       m.refs.push_back({static_cast<std::uint32_t>(o), idx[k]});
-      const Feature& f = *of[idx[k]];
+      const float* f = fs.row(idx[k]);
       const std::size_t b = b0 + k / kBlock;
-      float* blk = m.blocks.data() + b * kDim * kBlock;
-      for (int d = 0; d < kDim; ++d) {
-        blk[static_cast<std::size_t>(d) * kBlock + k % kBlock] = f[d];
-        m.lo[b * kDim + d] = std::min(m.lo[b * kDim + d], f[d]);
-        m.hi[b * kDim + d] = std::max(m.hi[b * kDim + d], f[d]);
+      float* blk = m.blocks.data() + b * dim * kBlock;
+      for (std::size_t d = 0; d < dim; ++d) {
+        blk[d * kBlock + k % kBlock] = f[d];
+        m.lo[b * dim + d] = std::min(m.lo[b * dim + d], f[d]);
+        m.hi[b * dim + d] = std::max(m.hi[b * dim + d], f[d]);
       }
     }
     for (std::size_t j = 0; j < nb; ++j) {  // block means, summed in double in row order
       const std::size_t b = b0 + j, rows = std::min(kBlock, fs.size() - j * kBlock);
       m.filled[b] = static_cast<std::uint8_t>(rows);
-      for (int d = 0; d < kDim; ++d) {
+      for (std::size_t d = 0; d < dim; ++d) {
         double sum = 0.0;
-        for (std::size_t r = 0; r < rows; ++r) sum += m.blocks[b * kDim * kBlock + static_cast<std::size_t>(d) * kBlock + r];
-        m.centre[b * kDim + d] = static_cast<float>(sum / double(rows));
+        for (std::size_t r = 0; r < rows; ++r) sum += m.blocks[b * dim * kBlock + d * kBlock + r];
+        m.centre[b * dim + d] = static_cast<float>(sum / double(rows));
       }
     }
     m.features += fs.size();
@@ -173,13 +174,15 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
           }) &
           tbb::make_filter<std::shared_ptr<Loaded>, std::shared_ptr<Loaded>>(
               tbb::filter_mode::parallel,
-              [&db](std::shared_ptr<Loaded> L) {
+              [&db, dim](std::shared_ptr<Loaded> L) {
                 L->fs = db.load_features(L->o).features;  // the reads take turns, inflating does not
-                L->of.resize(L->fs.size());
+                if (L->fs.dim() != static_cast<int>(dim) && !L->fs.empty())
+                  throw Error("FeatureTable: object " + db.info(L->o).name + " has features of " +
+                              std::to_string(L->fs.dim()) + " values, the database's descriptor " +
+                              std::to_string(dim));
                 L->idx.resize(L->fs.size());
-                for (std::size_t i = 0; i < L->fs.size(); ++i)
-                  L->of[i] = &L->fs[i], L->idx[i] = static_cast<std::uint32_t>(i);
-                kd_order(L->of, L->idx, 0, L->idx.size());
+                for (std::size_t i = 0; i < L->fs.size(); ++i) L->idx[i] = static_cast<std::uint32_t>(i);
+                kd_order(L->fs, L->idx, 0, L->idx.size());
                 return L;
               }) &
           tbb::make_filter<std::shared_ptr<Loaded>, void>(tbb::filter_mode::serial_in_order,
@@ -192,32 +195,34 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
 
 std::size_t FeatureTable::size() const { return impl_->rows; }
 std::size_t FeatureTable::features() const { return impl_->features; }
+int FeatureTable::dim() const { return impl_->dim; }
 const FeatureRef& FeatureTable::ref(std::size_t i) const { return impl_->refs.at(i); }
 
 namespace {
 
 /// Squared distance from query qv to block b's bounding box, shrunk by 1e-5 so that it never
 /// exceeds a row's distance as block_distances computes it in float (either sum of 33 squares
-/// is within about 4e-6 of the exact one, relatively).
+/// is within about 4e-6 of the exact one, relatively; the margin grows with the dimension, as
+/// the rounding of a longer sum does).
 TS_TARGET_CLONES
-float block_bound(const float* __restrict lo, const float* __restrict hi, const float* __restrict qv) {
+float block_bound(const float* __restrict lo, const float* __restrict hi, const float* __restrict qv, int dim) {
   float s2 = 0.0f;
-  for (int k = 0; k < kDim; ++k) {
+  for (int k = 0; k < dim; ++k) {
     const float e = std::max(std::max(lo[k] - qv[k], qv[k] - hi[k]), 0.0f);
     s2 += e * e;
   }
-  return s2 * (1.0f - 1e-5f);
+  return s2 * (1.0f - 1e-5f * std::max(1.0f, static_cast<float>(dim) / 33.0f));
 }
 
 inline float block_bound(const FeatureTable::Impl& m, const float* qv, std::size_t b) {
-  return block_bound(&m.lo[b * kDim], &m.hi[b * kDim], qv);
+  return block_bound(&m.lo[b * m.stride()], &m.hi[b * m.stride()], qv, m.dim);
 }
 
 /// Squared distance from query qv to the mean of block b's rows.
 inline float centre_distance(const FeatureTable::Impl& m, const float* qv, std::size_t b) {
   float s2 = 0.0f;
-  const float* c = &m.centre[b * kDim];
-  for (int k = 0; k < kDim; ++k) s2 += (qv[k] - c[k]) * (qv[k] - c[k]);
+  const float* c = &m.centre[b * m.stride()];
+  for (int k = 0; k < m.dim; ++k) s2 += (qv[k] - c[k]) * (qv[k] - c[k]);
   return s2;
 }
 
@@ -248,7 +253,7 @@ void search_blocks(const FeatureTable::Impl& m, const float* qv, const Blocks& b
   float d[kBlock];
   for (const auto& [lb, b] : order) {
     if (max_blocks == 0 && lb > tau) break;
-    block_distances(m.block(b), qv, d);
+    block_distances(m.block(b), qv, m.dim, d);
     const std::size_t base = std::size_t{b} * kBlock, filled = m.filled[b];
     const bool unbounded = tau == std::numeric_limits<float>::infinity();
     for (std::size_t i = 0; i < filled; ++i)
@@ -294,7 +299,7 @@ std::vector<BlockRange> object_ranges(const FeatureTable::Impl& m, const std::ve
 
 /// Per query, the w nearest rows over all the ranges' blocks together. Parallel over queries.
 std::vector<std::vector<Neighbour>> search_ranges(const FeatureTable::Impl& m,
-                                                  const std::vector<Feature>& queries, std::size_t w,
+                                                  const FeatureRows& queries, std::size_t w,
                                                   const std::vector<BlockRange>& ranges) {
   std::vector<std::vector<Neighbour>> out(queries.size());
   if (queries.empty() || w == 0 || m.features == 0 || ranges.empty()) return out;
@@ -306,7 +311,7 @@ std::vector<std::vector<Neighbour>> search_ranges(const FeatureTable::Impl& m,
     std::vector<Item> cand;
     for (std::size_t q = range.begin(); q != range.end(); ++q) {
       out[q].reserve(w);
-      search_blocks(m, queries[q].data(), all, w, 0, order, cand, out[q]);
+      search_blocks(m, queries.row(q), all, w, 0, order, cand, out[q]);
     }
   });
   return out;
@@ -314,18 +319,26 @@ std::vector<std::vector<Neighbour>> search_ranges(const FeatureTable::Impl& m,
 
 }  // namespace
 
-std::vector<std::vector<Neighbour>> FeatureTable::knn(const std::vector<Feature>& queries,
-                                                      std::size_t w) const {
+namespace {
+void check_queries(const FeatureTable::Impl& m, const FeatureRows& queries) {
+  if (queries.dim() != m.dim && !queries.empty())
+    throw Error("FeatureTable: queries of " + std::to_string(queries.dim()) + " values, the table's features " +
+                std::to_string(m.dim));
+}
+}  // namespace
+
+std::vector<std::vector<Neighbour>> FeatureTable::knn(const FeatureRows& queries, std::size_t w) const {
   const Impl& m = *impl_;
+  check_queries(m, queries);
   return search_ranges(m, queries, std::min(w, m.features), object_ranges(m, {}));
 }
 
-std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vector<Feature>& queries,
+std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const FeatureRows& queries,
                                                                  std::size_t w) const {
   return knn_per_object(queries, w, std::vector<std::uint8_t>{});
 }
 
-std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vector<Feature>& queries,
+std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const FeatureRows& queries,
                                                                  std::size_t w,
                                                                  const std::vector<std::uint8_t>& mask,
                                                                  std::size_t max_blocks) const {
@@ -333,9 +346,10 @@ std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(const std::vect
 }
 
 std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(
-    const std::vector<Feature>& queries, std::size_t w,
+    const FeatureRows& queries, std::size_t w,
     const std::vector<std::vector<std::uint8_t>>& masks, std::size_t max_blocks) const {
   const Impl& m = *impl_;
+  check_queries(m, queries);
   if (masks.size() != queries.size()) throw Error("FeatureTable: one mask per query expected");
   std::vector<std::vector<Neighbour>> out(queries.size());
   if (w == 0 || m.features == 0) return out;
@@ -364,7 +378,7 @@ std::vector<std::vector<Neighbour>> FeatureTable::knn_per_object(
   std::vector<std::vector<Neighbour>> slot(pairs.size());
   auto search = [&](std::size_t p, std::vector<std::pair<float, std::uint32_t>>& order, std::vector<Item>& cand) {
     slot[p].reserve(w);
-    search_blocks(m, queries[pairs[p].first].data(), all[pairs[p].second], w, max_blocks, order, cand, slot[p]);
+    search_blocks(m, queries.row(pairs[p].first), all[pairs[p].second], w, max_blocks, order, cand, slot[p]);
   };
   const auto threads = static_cast<std::size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
   if (busy.size() >= 4 * threads) {

@@ -206,13 +206,13 @@ std::vector<std::uint8_t> objects_spanning(const Scene& scene, const Database& d
 
 FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings& settings,
                                  const std::vector<std::uint8_t>& objects) {
-  std::vector<Feature> features;
+  FeatureRows features(descriptor_dim(db.settings().descriptor));
   std::vector<FeatureRef> refs;
   for (std::size_t o = 0; o < db.size(); ++o) {
     if (!objects.empty() && (o >= objects.size() || !objects[o])) continue;
     const ObjectFeatures f = db.load_features(o);
     for (std::size_t i = 0; i < f.features.size(); ++i) {
-      features.push_back(f.features[i]);
+      features.push_back(f.features.row(i));
       refs.push_back({static_cast<std::uint32_t>(o), static_cast<std::uint32_t>(i)});
     }
   }
@@ -223,7 +223,7 @@ std::size_t FeatureSearch::size() const {
   return table ? table->features() : index ? index->size() : 0;
 }
 
-std::vector<std::vector<Neighbour>> FeatureSearch::knn_per_object(const std::vector<Feature>& queries,
+std::vector<std::vector<Neighbour>> FeatureSearch::knn_per_object(const FeatureRows& queries,
                                                                   std::size_t w,
                                                                   const std::vector<std::vector<std::uint8_t>>& masks,
                                                                   std::size_t max_blocks) const {
@@ -235,14 +235,14 @@ const FeatureRef& FeatureSearch::ref(std::size_t i) const {
   return table ? table->ref(i) : index->ref(i);
 }
 
-std::vector<std::vector<Neighbour>> FeatureSearch::knn(const std::vector<Feature>& queries,
+std::vector<std::vector<Neighbour>> FeatureSearch::knn(const FeatureRows& queries,
                                                        std::size_t w) const {
   if (table) return table->knn(queries, w);
   std::vector<std::vector<Neighbour>> out(queries.size());
   if (!index) return out;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 1),
                     [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t q = r.begin(); q != r.end(); ++q) out[q] = index->knn(queries[q], w);
+                      for (std::size_t q = r.begin(); q != r.end(); ++q) out[q] = index->knn(queries.row(q), w);
                     });
   return out;
 }
@@ -307,7 +307,7 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   });
   // Feature-based database pruning: the W nearest database features of every triplet point,
   // all queries of the step in one batch.
-  std::vector<Feature> queries;
+  FeatureRows queries(scene.features.dim());
   std::vector<std::vector<std::uint8_t>> masks;  // per-object pruning: the objects searched
   std::vector<std::uint32_t> allowed_list;
   for (std::uint32_t o = 0; o < allowed.size(); ++o)
@@ -358,7 +358,7 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
     st.searched.resize(mask.size(), 0);
     for (std::size_t o = 0; o < mask.size(); ++o) st.searched[o] |= mask[o];
     for (int j = 0; j < 3; ++j) {
-      queries.push_back(scene.features[t.point[j]]);
+      queries.push_back(scene.features.row(t.point[j]));
       masks.push_back(mask);
     }
   }

@@ -87,10 +87,10 @@ struct FeatureSearch {
   std::size_t size() const;
   const FeatureRef& ref(std::size_t i) const;
   /// Per query, the w nearest (sorted by distance, then row). Parallel.
-  std::vector<std::vector<Neighbour>> knn(const std::vector<Feature>& queries, std::size_t w) const;
+  std::vector<std::vector<Neighbour>> knn(const FeatureRows& queries, std::size_t w) const;
   /// Per query, the w nearest of every object of the mask (all: empty mask)
   /// (FeatureTable::knn_per_object; table only).
-  std::vector<std::vector<Neighbour>> knn_per_object(const std::vector<Feature>& queries,
+  std::vector<std::vector<Neighbour>> knn_per_object(const FeatureRows& queries,
                                                      std::size_t w,
                                                      const std::vector<std::vector<std::uint8_t>>& masks,
                                                      std::size_t max_blocks = 0) const;

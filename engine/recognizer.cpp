@@ -279,6 +279,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   // The query in a local frame (Section 4.1.2 clouds; Section 4.3.1 normals and features).
   auto t0 = Clock::now();
   SceneSettings scs = s_.scene;
+  scs.descriptor = db_.settings().descriptor;   // the queries' descriptor is the database's
   if (scs.free_clearance < 0.0)  // automatic: d_thresh of Eq. 8
     scs.free_clearance = s_.evaluate.d_thresh > 0.0 ? s_.evaluate.d_thresh : 0.5 * s_.evaluate.res_free;
   Scene scene = prepare_scene(contacts_world, free_world, db_.settings().fpfh, scs, s_.seed, step_u);

@@ -131,7 +131,7 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
   const std::size_t n = in.size();
   sc.contacts.points = in.points;
   sc.contacts.normals.assign(n, Vec3::Zero());
-  sc.features.assign(n, Feature{});
+  sc.features = FeatureRows(descriptor_dim(s.descriptor), n);
   sc.feature_valid.assign(n, 0);
   sc.interior.assign(n, 0);
   sc.order.resize(n);
@@ -176,7 +176,8 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
   sc.unobservable_dof = unobservable_dof(sc.contacts.points, sc.contacts.normals,
                                          s.observability_eps);
 
-  // 3. FPFH on the points with normals (neighbourhoods from those points only).
+  // 3. The descriptor (FPFH by default) on the points with normals (neighbourhoods from those
+  //    points only).
   std::vector<std::uint32_t> with;
   for (std::size_t i = 0; i < n; ++i)
     if (sc.contacts.normals[i].squaredNorm() > 0.5) with.push_back(static_cast<std::uint32_t>(i));
@@ -189,12 +190,14 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
       surf.normals.push_back(sc.contacts.normals[i]);
     }
     const KdTree3 surf_tree(surf.points);
-    const FpfhResult fr = compute_fpfh(surf.points, surf.normals, surf, surf_tree, fpfh);
+    DescriptorSettings ds;
+    ds.feature_radius = fpfh.feature_radius;
+    const Descriptors fr = compute_descriptors(s.descriptor, surf.points, surf.normals, surf, surf_tree, ds);
     for (std::size_t k = 0; k < with.size(); ++k) {
       bool ok = fr.valid[k];
-      for (float v : fr.features[k]) ok = ok && std::isfinite(v);
+      for (float v : fr.row(k)) ok = ok && std::isfinite(v);
       if (!ok) continue;
-      sc.features[with[k]] = fr.features[k];
+      std::copy(fr.row(k).begin(), fr.row(k).end(), sc.features.row(with[k]));
       sc.feature_valid[with[k]] = 1;
     }
   }

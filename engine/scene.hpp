@@ -6,6 +6,7 @@
 #pragma once
 
 #include "engine/core.hpp"
+#include "engine/descriptors.hpp"
 #include "engine/fpfh.hpp"
 #include "engine/search.hpp"
 
@@ -22,14 +23,15 @@ struct SceneSettings {
                                      ///< nearer than res_free / 2; the recognizer sets d_thresh)
   double observability_eps = 0.01;   ///< eigenvalue ratio of the point-to-plane information
                                      ///< matrix below which a pose DOF counts as unobservable
+  Descriptor descriptor = Descriptor::fpfh;  ///< the contacts' descriptor: the database's
 };
 
 /// One step's query in a local frame: scene = world - origin (a pure translation).
 struct Scene {
   Vec3 origin = Vec3::Zero();          ///< world position of the local frame's origin
   PointCloud contacts;                 ///< local frame; unit normals, zero where undefined
-  std::vector<Feature> features;       ///< FPFH per contact (zero where invalid)
-  std::vector<std::uint8_t> feature_valid;  ///< FPFH defined (normal and neighbours present)
+  FeatureRows features;                ///< descriptor per contact (zero where invalid)
+  std::vector<std::uint8_t> feature_valid;  ///< descriptor defined (normal and neighbours present)
   std::vector<std::uint8_t> interior;  ///< not on a patch boundary (triplet sampling)
   KdTree3 tree;                        ///< over contacts.points
   std::vector<Vec3> free_space;        ///< local frame, in a fixed pseudo-random order
@@ -41,7 +43,7 @@ struct Scene {
   int unobservable_dof = 6;            ///< pose DOF the contact geometry leaves unconstrained
   std::size_t dropped_non_finite = 0;  ///< input points ignored because not finite
   std::size_t dropped_free = 0;        ///< free points dropped as too close to a contact
-  double feature_radius = 0.0;         ///< m, FPFH radius the features were computed with
+  double feature_radius = 0.0;         ///< m, radius the features were computed with
   GraspGroups grasps;                  ///< local frame; the contacts grouped by grasp, or empty
 
   bool has_free_space() const { return !free_space.empty(); }

@@ -236,11 +236,11 @@ void KdTree3::radius(const Vec3& q, double radius, std::vector<Neighbour>& out, 
 
 namespace {
 
-/// Squared L2 between two features, accumulated in double in bin order 0..32 (documented in
-/// the header so that oracles can reproduce it exactly).
-inline double feature_sq_distance(const float* a, const float* b) {
+/// Squared L2 between two features of `dim` values, accumulated in double in bin order
+/// (documented in the header so that oracles can reproduce it exactly).
+inline double feature_sq_distance(const float* a, const float* b, int dim) {
   double s = 0.0;
-  for (int i = 0; i < kFeatureDim; ++i) {
+  for (int i = 0; i < dim; ++i) {
     const double d = static_cast<double>(a[i]) - static_cast<double>(b[i]);
     s += d * d;
   }
@@ -248,12 +248,13 @@ inline double feature_sq_distance(const float* a, const float* b) {
 }
 
 /// As feature_sq_distance, but returns early (a partial sum > bound) once the sum exceeds a
-/// positive bound. Accepted candidates therefore always carry the full sum.
-inline double feature_sq_distance_bounded(const float* a, const float* b, double bound) {
-  if (!(bound > 0.0)) return feature_sq_distance(a, b);
+/// positive bound, checked every 11 values (FPFH's blocks). Accepted candidates therefore always
+/// carry the full sum.
+inline double feature_sq_distance_bounded(const float* a, const float* b, int dim, double bound) {
+  if (!(bound > 0.0)) return feature_sq_distance(a, b, dim);
   double s = 0.0;
-  for (int block = 0; block < 3; ++block) {
-    for (int i = block * 11; i < block * 11 + 11; ++i) {
+  for (int block = 0; block < dim; block += 11) {
+    for (int i = block; i < std::min(block + 11, dim); ++i) {
       const double d = static_cast<double>(a[i]) - static_cast<double>(b[i]);
       s += d * d;
     }
@@ -272,7 +273,7 @@ struct FeatureL2 {
   /// (the partial sums only grow, so the decision is the same as with the full sum).
   template <typename It1, typename It2>
   ResultType operator()(It1 a, It2 b, std::size_t size, ResultType worst = -1) const {
-    return feature_sq_distance_bounded(&a[0], &b[0], worst);
+    return feature_sq_distance_bounded(&a[0], &b[0], static_cast<int>(size), worst);
   }
   template <typename U, typename V>
   ResultType accum_dist(const U& a, const V& b, int) const {
@@ -300,7 +301,7 @@ class FlannKnnSet final : public flann::ResultSet<double> {
 /// ts::Rng(seed, tree), which makes the index (and every query) reproducible.
 class KdForest {
  public:
-  KdForest(const std::vector<Feature>& data, int trees, std::uint64_t seed) : data_(data) {
+  KdForest(const FeatureRows& data, int trees, std::uint64_t seed) : data_(data) {
     trees_.resize(static_cast<std::size_t>(std::max(trees, 1)));
     tbb::parallel_for(std::size_t(0), trees_.size(), [&](std::size_t t) {
       Rng rng(seed, 0x6b64666f72657374ULL /* "kdforest" */, t);
@@ -308,7 +309,7 @@ class KdForest {
     });
   }
 
-  std::vector<Neighbour> knn(const Feature& q, std::size_t k, int max_checks) const {
+  std::vector<Neighbour> knn(const float* q, std::size_t k, int max_checks) const {
     const std::size_t n = data_.size();
     TopK top(std::min(k, n));
     if (n == 0 || k == 0) return {};
@@ -386,18 +387,19 @@ class KdForest {
   void choose_split(const std::uint32_t* idx, std::size_t count, Rng& rng, int& feat,
                     float& val) const {
     const std::size_t m = std::min<std::size_t>(count, kSampleMean);
-    std::array<double, kFeatureDim> mean{}, var{};
+    const int dim = data_.dim();
+    std::vector<double> mean(static_cast<std::size_t>(dim), 0.0), var(static_cast<std::size_t>(dim), 0.0);
     for (std::size_t i = 0; i < m; ++i)
-      for (int d = 0; d < kFeatureDim; ++d) mean[d] += data_[idx[i]][d];
+      for (int d = 0; d < dim; ++d) mean[d] += data_.row(idx[i])[d];
     for (auto& v : mean) v /= static_cast<double>(m);
     for (std::size_t i = 0; i < m; ++i)
-      for (int d = 0; d < kFeatureDim; ++d) {
-        const double e = data_[idx[i]][d] - mean[d];
+      for (int d = 0; d < dim; ++d) {
+        const double e = data_.row(idx[i])[d] - mean[d];
         var[d] += e * e;
       }
     // Top kRandDim dimensions by variance (ties by smaller dimension), one chosen at random.
-    std::array<int, kFeatureDim> order;
-    for (int d = 0; d < kFeatureDim; ++d) order[d] = d;
+    std::vector<int> order(static_cast<std::size_t>(dim));
+    for (int d = 0; d < dim; ++d) order[d] = d;
     std::partial_sort(order.begin(), order.begin() + kRandDim, order.end(), [&](int a, int b) {
       return var[a] > var[b] || (var[a] == var[b] && a < b);
     });
@@ -411,7 +413,7 @@ class KdForest {
     auto part = [&](std::size_t from, auto goes_left) {
       std::size_t i = from;
       for (std::size_t j = from; j < count; ++j)
-        if (goes_left(data_[idx[j]][feat])) std::swap(idx[i++], idx[j]);
+        if (goes_left(data_.row(idx[j])[feat])) std::swap(idx[i++], idx[j]);
       return i;
     };
     const std::size_t lim1 = part(0, [&](float x) { return x < val; });
@@ -425,7 +427,7 @@ class KdForest {
   }
 
   template <class Heap>
-  void descend(const Feature& q, std::uint32_t t, std::int32_t node, double mindist, TopK& top,
+  void descend(const float* q, std::uint32_t t, std::int32_t node, double mindist, TopK& top,
                std::vector<std::uint64_t>& checked, int& checks, int max_checks,
                Heap& branches) const {
     const Tree& tree = trees_[t];
@@ -438,7 +440,7 @@ class KdForest {
         if ((word & bit) || (checks >= max_checks && top.full())) return;
         word |= bit;
         ++checks;
-        top.add(feature_sq_distance_bounded(q.data(), data_[i].data(), top.full() ? top.bound() : -1.0), i);
+        top.add(feature_sq_distance_bounded(q, data_.row(i), data_.dim(), top.full() ? top.bound() : -1.0), i);
         return;
       }
       const double diff = static_cast<double>(q[nd.feat]) - static_cast<double>(nd.val);
@@ -453,7 +455,7 @@ class KdForest {
     }
   }
 
-  const std::vector<Feature>& data_;
+  const FeatureRows& data_;
   std::vector<Tree> trees_;
 };
 
@@ -462,7 +464,7 @@ using FlannExact = flann::KDTreeSingleIndex<FeatureL2>;
 }  // namespace
 
 struct FeatureIndex::Impl {
-  std::vector<Feature> features;
+  FeatureRows features;
   std::vector<FeatureRef> refs;
   FeatureIndexSettings settings;
   std::unique_ptr<FlannExact> exact;
@@ -471,7 +473,7 @@ struct FeatureIndex::Impl {
 
 FeatureIndex::FeatureIndex() : impl_(std::make_unique<Impl>()) {}
 
-FeatureIndex::FeatureIndex(std::vector<Feature> features, std::vector<FeatureRef> refs,
+FeatureIndex::FeatureIndex(FeatureRows features, std::vector<FeatureRef> refs,
                            const FeatureIndexSettings& settings)
     : impl_(std::make_unique<Impl>()) {
   if (features.size() != refs.size())
@@ -481,15 +483,15 @@ FeatureIndex::FeatureIndex(std::vector<Feature> features, std::vector<FeatureRef
     throw Error("FeatureIndex: too many features");
   if (!settings.exact && (settings.trees < 1 || settings.checks < 1))
     throw Error("FeatureIndex: trees and checks must be >= 1", {}, "trees/checks");
-  for (const auto& f : features)
-    for (float v : f)
-      if (!std::isfinite(v)) throw Error("FeatureIndex: non-finite feature value");
+  for (float v : features.values())
+    if (!std::isfinite(v)) throw Error("FeatureIndex: non-finite feature value");
   impl_->features = std::move(features);
   impl_->refs = std::move(refs);
   impl_->settings = settings;
   if (impl_->features.empty()) return;
   if (settings.exact) {
-    flann::Matrix<float> m(impl_->features.front().data(), impl_->features.size(), kFeatureDim);
+    flann::Matrix<float> m(impl_->features.values().data(), impl_->features.size(),
+                           static_cast<std::size_t>(impl_->features.dim()));
     impl_->exact = std::make_unique<FlannExact>(m, flann::KDTreeSingleIndexParams(32, true));
     impl_->exact->buildIndex();
   } else {
@@ -502,15 +504,16 @@ FeatureIndex::FeatureIndex(FeatureIndex&&) noexcept = default;
 FeatureIndex& FeatureIndex::operator=(FeatureIndex&&) noexcept = default;
 
 std::size_t FeatureIndex::size() const { return impl_ ? impl_->features.size() : 0; }
+int FeatureIndex::dim() const { return impl_ ? impl_->features.dim() : kFeatureDim; }
 const FeatureRef& FeatureIndex::ref(std::size_t i) const { return impl_->refs.at(i); }
 
-std::vector<Neighbour> FeatureIndex::knn(const Feature& query, std::size_t w) const {
+std::vector<Neighbour> FeatureIndex::knn(const float* query, std::size_t w) const {
   if (!impl_ || impl_->features.empty() || w == 0) return {};
   const std::size_t k = std::min(w, impl_->features.size());
   if (impl_->exact) {
     FlannKnnSet set(k);
     flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED);
-    impl_->exact->findNeighbors(set, query.data(), params);
+    impl_->exact->findNeighbors(set, query, params);
     return set.take();
   }
   return impl_->forest->knn(query, k, impl_->settings.checks);

@@ -70,11 +70,11 @@ struct FeatureIndexSettings {
 /// Exact mode: FLANN's single k-d tree with unlimited checks. Approximate mode: a randomized
 /// k-d forest searched best-bin-first (FLANN's KDTreeIndex algorithm) whose split choices come
 /// from ts::Rng(seed): the same features and settings give the same results on every run.
-/// sq_distance = sum over bins i = 0..32, in that order, of (double(a_i) - double(b_i))^2.
+/// sq_distance = sum over bins i = 0..dim-1, in that order, of (double(a_i) - double(b_i))^2.
 class FeatureIndex {
  public:
   FeatureIndex();
-  FeatureIndex(std::vector<Feature> features, std::vector<FeatureRef> refs,
+  FeatureIndex(FeatureRows features, std::vector<FeatureRef> refs,
                const FeatureIndexSettings& settings);
   ~FeatureIndex();
   FeatureIndex(FeatureIndex&&) noexcept;
@@ -82,8 +82,9 @@ class FeatureIndex {
 
   std::size_t size() const;
   const FeatureRef& ref(std::size_t i) const;
-  /// The W nearest features to `query` (L2), sorted by distance then index.
-  std::vector<Neighbour> knn(const Feature& query, std::size_t w) const;
+  /// The W nearest features to `query` (dim values, L2), sorted by distance then index.
+  std::vector<Neighbour> knn(const float* query, std::size_t w) const;
+  int dim() const;
 
  private:
   struct Impl;

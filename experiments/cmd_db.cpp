@@ -50,9 +50,17 @@ void add_build_parameters(CLI::App* sub, DatabaseSettings& s, int& deflate) {
       ->check(positive)->capture_default_str();
   sub->add_option("--target-coverage", s.scan.target_coverage, "Scanner: stop at this covered area fraction")
       ->check(CLI::Range(0.0, 1.0))->capture_default_str();
-  sub->add_option("--normal-radius", s.fpfh.normal_radius, "FPFH: normal estimation radius, m (paper: 0.007)")
+  sub->add_option("--descriptor", s.descriptor,
+                  "Local descriptor of the keypoints (and of every query on this database): fpfh (the "
+                  "paper's choice), pfh, shot or spin (README, study 13)")
+      ->transform(CLI::CheckedTransformer(std::map<std::string, Descriptor>{{"fpfh", Descriptor::fpfh},
+                                                                            {"pfh", Descriptor::pfh},
+                                                                            {"shot", Descriptor::shot},
+                                                                            {"spin", Descriptor::spin}}))
+      ->default_str("fpfh");
+  sub->add_option("--normal-radius", s.fpfh.normal_radius, "Normal estimation radius, m (paper: 0.007)")
       ->check(positive)->capture_default_str();
-  sub->add_option("--feature-radius", s.fpfh.feature_radius, "FPFH: feature radius, m (paper: 0.010)")
+  sub->add_option("--feature-radius", s.fpfh.feature_radius, "Descriptor (feature) radius, m (paper: 0.010)")
       ->check(positive)->capture_default_str();
   sub->add_option("--field-voxel", s.field.fine_voxel, "Distance field: narrow-band voxel, m")
       ->check(positive)->capture_default_str();
@@ -74,6 +82,7 @@ json params_json(const DatabaseSettings& s, std::uint64_t seed) {
     else p[v.group][v.name] = value;
   }
   p["scale"] = to_string(s.scale);
+  p["descriptor"] = descriptor_name(s.descriptor);
   p["seed"] = seed;
   return p;
 }
@@ -419,9 +428,9 @@ int run_info(const InfoOptions& o) {
   std::cout << o.db << ": object database, schema " << db.schema_version() << ", " << db.size() << " objects ("
             << open << " open meshes), " << fine << " fine and " << coarse << " coarse points\n"
             << "params: " << (s.scale == ObjectScale::keep ? "real sizes (scale keep)" : "max extent " + fixed(s.max_extent, 3) + " m") << "; scan: fine spacing " << s.scan.fine_spacing
-            << " m, coarse voxel " << s.scan.coarse_voxel << " m; fpfh: normal radius " << s.fpfh.normal_radius
-            << " m, feature radius " << s.fpfh.feature_radius << " m (" << db.feature_dim()
-            << " bins); field: voxel " << s.field.fine_voxel << " m, coarse voxel " << s.field.coarse_voxel
+            << " m, coarse voxel " << s.scan.coarse_voxel << " m; descriptor " << descriptor_name(s.descriptor)
+            << ": normal radius " << s.fpfh.normal_radius << " m, feature radius " << s.fpfh.feature_radius << " m ("
+            << db.feature_dim() << " bins); field: voxel " << s.field.fine_voxel << " m, coarse voxel " << s.field.coarse_voxel
             << " m; seed " << db.build_seed() << "\n"
             << congruence_text(db.congruence(), object_names(db)) << "\n"
             << table.str();

@@ -501,6 +501,7 @@ StressCaseResult run_stress_case(const StressStudy& study, std::size_t index,
       out.position_error_m = e.position_m;
       out.orientation_error_deg = e.orientation_deg;
       SceneSettings ss = rs.scene;
+      ss.descriptor = db.settings().descriptor;
       ss.free_clearance = 0.0;
       const Scene scene = prepare_scene(touch.contacts, touch.free, db.settings().fpfh, ss, rs.seed,
                                         static_cast<std::uint64_t>(c.grasps));

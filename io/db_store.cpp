@@ -16,7 +16,6 @@ namespace {
 static_assert(sizeof(Vec3) == 3 * sizeof(double), "Vec3 arrays are written as [n,3] doubles");
 static_assert(sizeof(Eigen::Vector3i) == 3 * sizeof(std::int32_t), "faces are written as [n,3] int32");
 static_assert(sizeof(std::array<std::int32_t, 3>) == 3 * sizeof(std::int32_t));
-static_assert(sizeof(Feature) == kFeatureDim * sizeof(float));
 
 // --- build parameters ------------------------------------------------------------------------
 // One table per settings struct, so writing, reading and `db info` list the same fields.
@@ -91,6 +90,7 @@ void write_params(h5::Group root, const DatabaseSettings& s, std::uint64_t seed)
   auto p = root.create_group("params");
   p.set_attribute("max_extent", s.max_extent);
   p.set_attribute("scale", std::string(to_string(s.scale)));
+  p.set_attribute("descriptor", descriptor_name(s.descriptor));
   p.set_attribute("seed", static_cast<std::int64_t>(seed));
   write_fields(p.create_group("scan"), s.scan, scan_fields());
   write_fields(p.create_group("fpfh"), s.fpfh, fpfh_fields());
@@ -186,7 +186,8 @@ CompactGrid read_compact(const h5::Group& g, const std::string& prefix) {
   return grid;
 }
 
-void write_object(h5::Group objects, const StoredObject& stored, const DbWriteSettings& w, const std::string& file) {
+void write_object(h5::Group objects, const StoredObject& stored, const DbWriteSettings& w, const std::string& file,
+                  int feature_dim) {
   if (!stored.object) throw Error("no object to write", file);
   const BuiltObject& o = *stored.object;
   const ObjectInfo& info = o.info;
@@ -200,6 +201,10 @@ void write_object(h5::Group objects, const StoredObject& stored, const DbWriteSe
     throw Error("object has " + std::to_string(o.features.features.size()) + " features for " +
                     std::to_string(o.features.coarse.size()) + " coarse points",
                 file, where);
+  if (o.features.features.dim() != feature_dim)
+    throw Error("object has features of " + std::to_string(o.features.features.dim()) +
+                    " values, the database's descriptor " + std::to_string(feature_dim),
+                file, where + "/features");
   const h5::Storage st{.deflate = w.deflate};
 
   auto g = objects.create_group(info.name);
@@ -223,8 +228,8 @@ void write_object(h5::Group objects, const StoredObject& stored, const DbWriteSe
   write_vec3(g, "fine/normals", o.fine.normals, st);
   write_vec3(g, "coarse/points", o.features.coarse.points, st);
   write_vec3(g, "coarse/normals", o.features.coarse.normals, st);
-  g.write("features", o.features.features.empty() ? nullptr : o.features.features.data()->data(),
-          {o.features.features.size(), static_cast<std::uint64_t>(kFeatureDim)}, st);
+  g.write("features", o.features.features.empty() ? nullptr : o.features.features.values().data(),
+          {o.features.features.size(), static_cast<std::uint64_t>(feature_dim)}, st);
 
   auto field = g.create_group("field");
   field.set_attribute("signed", static_cast<std::int64_t>(o.field.is_signed() ? 1 : 0));
@@ -330,10 +335,24 @@ void check_unique(const std::vector<StoredObject>& objects, std::set<std::string
   }
 }
 
-/// Root checks shared by the reader and append: format, schema, feature size.
-/// `writing`: new objects are to be appended (they are written in this program's schema, so the
-/// file must already have it); reading takes every schema since 1.
-void check_root(const h5::Group& root, bool writing) {
+/// The descriptor a database was built with: /params@descriptor, or FPFH for databases written
+/// before the attribute existed (FPFH was the only one).
+Descriptor stored_descriptor(const h5::Group& root) {
+  if (!root.has_group("params")) return Descriptor::fpfh;
+  const auto params = root.open_group("params");
+  if (!params.has_attribute("descriptor")) return Descriptor::fpfh;
+  try {
+    return parse_descriptor(params.string_attribute("descriptor"));
+  } catch (const Error& e) {
+    throw Error(e.what(), root.file(), "/params@descriptor");
+  }
+}
+
+/// Root checks shared by the reader and append: format, schema, feature size (that of the
+/// stored descriptor). `writing`: new objects are to be appended (they are written in this
+/// program's schema, so the file must already have it); reading takes every schema since 1.
+/// Returns the values per feature.
+int check_root(const h5::Group& root, bool writing) {
   if (!root.has_attribute("schema_version"))
     throw Error("not a Touchstone object database (no schema_version attribute)", root.file(), "/");
   if (!root.has_attribute("format") || root.string_attribute("format") != kDbFormatName)
@@ -348,10 +367,13 @@ void check_root(const h5::Group& root, bool writing) {
     throw Error("a database of schema version " + std::to_string(v) + " cannot take new objects (this program writes version " +
                     std::to_string(kDbSchemaVersion) + "); rebuild the database",
                 root.file(), "/@schema_version");
-  if (root.int_attribute("feature_dim") != kFeatureDim)
+  const Descriptor d = stored_descriptor(root);
+  const int dim = descriptor_dim(d);
+  if (root.int_attribute("feature_dim") != dim)
     throw Error("features have " + std::to_string(root.int_attribute("feature_dim")) + " bins, expected " +
-                    std::to_string(kFeatureDim),
+                    std::to_string(dim) + " (" + descriptor_name(d) + ")",
                 root.file(), "/@feature_dim");
+  return dim;
 }
 
 }  // namespace
@@ -429,7 +451,7 @@ namespace {
 void write_root(h5::Group& root, const DatabaseSettings& settings, std::uint64_t build_seed) {
   root.set_attribute("format", kDbFormatName);
   root.set_attribute("schema_version", kDbSchemaVersion);
-  root.set_attribute("feature_dim", static_cast<std::int64_t>(kFeatureDim));
+  root.set_attribute("feature_dim", static_cast<std::int64_t>(descriptor_dim(settings.descriptor)));
   write_params(root, settings, build_seed);
 }
 }  // namespace
@@ -448,7 +470,7 @@ void write_database(const std::filesystem::path& path, const std::vector<StoredO
     std::vector<std::string> order;
     auto objs = root.create_group("objects");
     for (const auto& s : objects) {
-      write_object(objs, s, write, file);
+      write_object(objs, s, write, file, descriptor_dim(settings.descriptor));
       order.push_back(s.object->info.name);
     }
     root.write_strings("order", order);
@@ -473,7 +495,11 @@ void merge_databases(const std::vector<std::filesystem::path>& parts, const std:
     for (const auto& part : parts) {
       auto pf = h5::File::open(part, h5::File::Access::read, part.string());
       const auto proot = pf.root();
-      check_root(proot, true);
+      if (check_root(proot, true) != descriptor_dim(settings.descriptor) ||
+          stored_descriptor(proot) != settings.descriptor)
+        throw Error("the part was built with descriptor " + descriptor_name(stored_descriptor(proot)) + ", not " +
+                        descriptor_name(settings.descriptor),
+                    part.string(), "/params@descriptor");
       const auto names_in = proot.read_strings("order");
       if (names_in.size() != 1)
         throw Error("a part must hold one object, not " + std::to_string(names_in.size()), part.string(), "/order");
@@ -519,12 +545,12 @@ void append_to_database(const std::filesystem::path& path, const std::vector<Sto
                         const DbWriteSettings& write, const CongruenceRecord* congruence) {
   const std::string file = path.string();
   edit_copy(path, "append to it", [&](h5::Group& root) {
-    check_root(root, true);
+    const int dim = check_root(root, true);
     auto order = root.read_strings("order");
     check_unique(objects, std::set<std::string>(order.begin(), order.end()), file);
     auto objs = root.open_group("objects");
     for (const auto& s : objects) {
-      write_object(objs, s, write, file);
+      write_object(objs, s, write, file, dim);
       order.push_back(s.object->info.name);
     }
     root.remove("order");
@@ -569,7 +595,8 @@ DbReader::DbReader(const std::filesystem::path& path) : impl_(std::make_unique<I
   d.path = path.string();
   d.file = h5::File::open(path, h5::File::Access::read);
   const auto root = d.file.root();
-  check_root(root, false);
+  d.feature_dim = check_root(root, false);
+  d.settings.descriptor = stored_descriptor(root);
   d.schema = root.int_attribute("schema_version");
 
   const auto params = root.open_group("params");
@@ -661,14 +688,14 @@ ObjectFeatures DbReader::load_features(std::size_t i) const {
   const std::size_t n = impl_->infos[i].coarse_points;
   ObjectFeatures out;
   out.coarse = load_coarse(i);
-  const auto raw = g.read<float>("features", {static_cast<std::int64_t>(n), kFeatureDim});
-  out.features.resize(n);
-  for (std::size_t k = 0; k < n; ++k) {
-    std::copy_n(raw.begin() + static_cast<std::ptrdiff_t>(k * kFeatureDim), kFeatureDim, out.features[k].begin());
-    for (float v : out.features[k])
-      if (!std::isfinite(v))
-        throw Error("non-finite value in row " + std::to_string(k), impl_->path, g.child_path("features"));
-  }
+  const int dim = impl_->feature_dim;
+  auto raw = g.read<float>("features", {static_cast<std::int64_t>(n), dim});
+  for (std::size_t k = 0; k < raw.size(); ++k)
+    if (!std::isfinite(raw[k]))
+      throw Error("non-finite value in row " + std::to_string(k / static_cast<std::size_t>(dim)), impl_->path,
+                  g.child_path("features"));
+  out.features = FeatureRows(dim);
+  out.features.values() = std::move(raw);
   return out;
 }
 

@@ -96,6 +96,8 @@ int main(int argc, char** argv) {
     std::vector<double> screen_time, prune_time, register_time;
     std::vector<std::size_t> reached;
     std::vector<std::size_t> allowed_counts;
+    SceneSettings scene_settings;
+    scene_settings.descriptor = db.settings().descriptor;
     for (std::size_t o : explored) {
       for (std::size_t seed = 1; seed <= seeds; ++seed) {
         datasets::SimulatorSettings ss;
@@ -109,7 +111,7 @@ int main(int argc, char** argv) {
         Exploration ex(log, es);
         for (std::size_t step : steps) {
           ex.advance_to(step);
-          const Scene scene = prepare_scene(ex.contact_cloud(), {}, db.settings().fpfh, SceneSettings{}, seed, step);
+          const Scene scene = prepare_scene(ex.contact_cloud(), {}, db.settings().fpfh, scene_settings, seed, step);
           const std::vector<std::uint8_t> allowed = objects_spanning(scene, db, RansacSettings{}.size_slack);
           allowed_counts.push_back(static_cast<std::size_t>(std::count(allowed.begin(), allowed.end(), 1)));
           std::vector<Feature> q;  // spread over the scene, interior first

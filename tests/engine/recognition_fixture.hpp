@@ -164,7 +164,7 @@ class TestSource final : public ObjectSource {
     const FpfhResult fr = compute_fpfh(coarse.points, coarse.normals, fine, tree, db_settings.fpfh);
     ObjectFeatures of;
     of.coarse = coarse;
-    of.features = fr.features;
+    of.features = FeatureRows(fr.features);
     const DistanceField field = DistanceField::build(mesh, true, db_settings.field);
     field_fine.push_back(field.fine_sparse());
     field_coarse.push_back(field.coarse_sparse());
