@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <stdexcept>
@@ -49,7 +50,24 @@ class FeatureRows {
   std::vector<float>& values() { return values_; }
   bool operator==(const FeatureRows& o) const { return dim_ == o.dim_ && values_ == o.values_; }
 
+  /// FPFH conveniences (dim() must be kFeatureDim; std::invalid_argument otherwise).
+  void push_back(const Feature& f) { check_fpfh(), push_back(f.data()); }
+  void assign(std::size_t rows, const Feature& f) {
+    check_fpfh();
+    values_.clear();
+    for (std::size_t i = 0; i < rows; ++i) push_back(f.data());
+  }
+  Feature fpfh(std::size_t i) const {
+    check_fpfh();
+    Feature f;
+    std::copy(row(i), row(i) + kFeatureDim, f.begin());
+    return f;
+  }
+
  private:
+  void check_fpfh() const {
+    if (dim_ != kFeatureDim) throw std::invalid_argument("FeatureRows: not FPFH rows");
+  }
   int dim_ = kFeatureDim;
   std::vector<float> values_;
 };

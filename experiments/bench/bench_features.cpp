@@ -161,13 +161,13 @@ int main(int argc, char** argv) {
     auto t0 = Clock::now();
     ts::FeatureIndexSettings exact_settings;
     exact_settings.exact = true;
-    const ts::FeatureIndex exact(feats, refs, exact_settings);
+    const ts::FeatureIndex exact(ts::FeatureRows(feats), refs, exact_settings);
     std::printf("  exact build %.3f s\n", since(t0));
 
     for (const std::size_t w : {std::size_t(3000), std::size_t(100)}) {
       std::vector<std::vector<ts::Neighbour>> truth(queries.size());
       t0 = Clock::now();
-      for (std::size_t q = 0; q < queries.size(); ++q) truth[q] = exact.knn(queries[q], w);
+      for (std::size_t q = 0; q < queries.size(); ++q) truth[q] = exact.knn(queries[q].data(), w);
       const double t_exact = since(t0) / static_cast<double>(queries.size());
       std::printf("  W = %zu: exact %.3f ms/query (1 thread)\n", w, t_exact * 1e3);
       std::printf("    %-28s %7s %9s %11s\n", "approximate", "checks", "recall", "ms/query");
@@ -178,11 +178,11 @@ int main(int argc, char** argv) {
           s.exact = false;
           s.trees = trees;
           s.checks = checks;
-          const ts::FeatureIndex approx(feats, refs, s);
+          const ts::FeatureIndex approx(ts::FeatureRows(feats), refs, s);
           double rec = 0;
           t0 = Clock::now();
           std::vector<std::vector<ts::Neighbour>> got(queries.size());
-          for (std::size_t q = 0; q < queries.size(); ++q) got[q] = approx.knn(queries[q], w);
+          for (std::size_t q = 0; q < queries.size(); ++q) got[q] = approx.knn(queries[q].data(), w);
           const double t = since(t0) / static_cast<double>(queries.size());
           for (std::size_t q = 0; q < queries.size(); ++q) rec += recall(got[q], truth[q]);
           std::printf("    ts forest, %d trees %12s %7d %9.4f %11.3f\n", trees, "", checks, rec / queries.size(), t * 1e3);

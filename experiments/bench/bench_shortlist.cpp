@@ -114,11 +114,11 @@ int main(int argc, char** argv) {
           const Scene scene = prepare_scene(ex.contact_cloud(), {}, db.settings().fpfh, scene_settings, seed, step);
           const std::vector<std::uint8_t> allowed = objects_spanning(scene, db, RansacSettings{}.size_slack);
           allowed_counts.push_back(static_cast<std::size_t>(std::count(allowed.begin(), allowed.end(), 1)));
-          std::vector<Feature> q;  // spread over the scene, interior first
+          FeatureRows q(scene.features.dim());  // spread over the scene, interior first
           for (int pass = 0; pass < 2; ++pass)
             for (std::uint32_t i : scene.order)
               if (q.size() < queries_n && scene.feature_valid[i] && (scene.interior[i] != 0) == (pass == 0))
-                q.push_back(scene.features[i]);
+                q.push_back(scene.features.row(i));
           {  // the shortlist: Batch RANSAC over every allowed object, candidates screened
             RansacStats st;
             const auto cands = ransac_candidates(scene, db, search, allowed, rs.ransac, seed, step, &st);

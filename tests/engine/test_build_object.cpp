@@ -77,7 +77,7 @@ TEST_CASE("build_object: a complete, consistent object from a closed mesh") {
     for (int block = 0; block < 3; ++block) {
       double sum = 0.0;
       for (int b = 0; b < 11; ++b) {
-        const float v = f.features[i][block * 11 + b];
+        const float v = f.features.row(i)[block * 11 + b];
         CHECK(std::isfinite(v));
         CHECK(v >= 0.0f);
         sum += v;

@@ -135,7 +135,7 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     for (int i = 0; i < 3000 + 500 * o; ++i) {
       Feature x;
       for (auto& v : x) v = static_cast<float>(rng.uniform(0, 10));
-      if (i % 7 == 0 && i > 0) x = f.features[static_cast<std::size_t>(i - 1)];  // exact ties
+      if (i % 7 == 0 && i > 0) x = f.features.fpfh(static_cast<std::size_t>(i - 1));  // exact ties
       f.features.push_back(x);
       f.coarse.points.push_back(Vec3::Zero());
     }
@@ -144,11 +144,11 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
     src->fines.emplace_back();
   }
   Database db(src);
-  std::vector<Feature> queries;
+  FeatureRows queries;
   std::size_t total = 0;
   for (std::uint32_t o = 0; o < 3; ++o) total += db.load_features(o).features.size();
   for (int q = 0; q < 20; ++q) {
-    Feature x = db.load_features(static_cast<std::size_t>(q % 3)).features[static_cast<std::size_t>(q * 37)];
+    Feature x = db.load_features(static_cast<std::size_t>(q % 3)).features.fpfh(static_cast<std::size_t>(q * 37));
     for (auto& v : x) v += static_cast<float>(rng.uniform(-0.5, 0.5));
     queries.push_back(x);
   }
@@ -171,15 +171,15 @@ TEST_CASE("FeatureTable: the W nearest equal a brute-force oracle, for any threa
   }
   // The oracle: per query, every real row by (squared distance, row), computed once (each
   // object's features loaded once: the sanitizer builds run this test too).
-  std::vector<std::vector<Feature>> features_of;
+  std::vector<FeatureRows> features_of;
   for (std::uint32_t o = 0; o < 3; ++o) features_of.push_back(db.load_features(o).features);
   std::vector<std::vector<std::pair<float, std::uint32_t>>> sorted_rows(queries.size());
   for (std::size_t q = 0; q < queries.size(); ++q) {
     for (std::uint32_t r : real) {
-      const Feature& f = features_of[rows[r].first][rows[r].second];
+      const float* f = features_of[rows[r].first].row(rows[r].second);
       float d = 0.0f;
       for (int k = 0; k < kFeatureDim; ++k) {
-        const float e = f[k] - queries[q][k];
+        const float e = f[k] - queries.row(q)[k];
         d += e * e;
       }
       sorted_rows[q].emplace_back(d, r);

@@ -223,7 +223,7 @@ TEST_CASE("FeatureIndex exact mode matches brute force, ties included") {
   for (std::size_t i = 0; i < refs.size(); ++i) refs[i] = {static_cast<std::uint32_t>(i % 7), static_cast<std::uint32_t>(i)};
   FeatureIndexSettings s;
   s.exact = true;
-  const FeatureIndex index(feats, refs, s);
+  const FeatureIndex index(FeatureRows(feats), refs, s);
   REQUIRE(index.size() == feats.size());
   CHECK(index.ref(10).object == 3);
   for (int q = 0; q < 40; ++q) {
@@ -231,7 +231,7 @@ TEST_CASE("FeatureIndex exact mode matches brute force, ties included") {
     Feature query = feats[rng.index(feats.size())];
     if (q % 2)
       for (auto& v : query) v += static_cast<float>(rng.normal());
-    for (std::size_t w : {1u, 10u, 100u, 3000u, 5000u}) check_same(index.knn(query, w), brute_features(feats, query, w));
+    for (std::size_t w : {1u, 10u, 100u, 3000u, 5000u}) check_same(index.knn(query.data(), w), brute_features(feats, query, w));
   }
   // FLANN's search is const with per-call state only: parallel queries equal serial ones.
   std::vector<Feature> queries(64);
@@ -242,7 +242,7 @@ TEST_CASE("FeatureIndex exact mode matches brute force, ties included") {
   std::vector<std::vector<Neighbour>> par(queries.size());
   tbb::task_arena arena(2);
   arena.execute([&] {
-    tbb::parallel_for(std::size_t(0), queries.size(), [&](std::size_t i) { par[i] = index.knn(queries[i], 200); });
+    tbb::parallel_for(std::size_t(0), queries.size(), [&](std::size_t i) { par[i] = index.knn(queries[i].data(), 200); });
   });
   for (std::size_t i = 0; i < queries.size(); ++i) check_same(par[i], brute_features(feats, queries[i], 200));
 }
@@ -264,15 +264,15 @@ TEST_CASE("FeatureIndex ties: among identical features the smaller indices win")
   FeatureIndexSettings approx;
   approx.exact = false;
   approx.checks = 1000;
-  const FeatureIndex a(feats, refs, exact), b(feats, refs, approx);
+  const FeatureIndex a(FeatureRows(feats), refs, exact), b(FeatureRows(feats), refs, approx);
   for (int q = 0; q < 12; ++q) {
     Feature query = distinct[q];
     query[q] += 0.25f;
     for (std::size_t w : {1u, 100u, 250u, 400u, 777u}) {
       const auto want = brute_features(feats, query, w);
-      check_same(a.knn(query, w), want);
+      check_same(a.knn(query.data(), w), want);
       // Approximate: whatever it returns is sorted by (distance, index) with true distances.
-      const auto got = b.knn(query, w);
+      const auto got = b.knn(query.data(), w);
       REQUIRE(got.size() == w);
       for (std::size_t i = 0; i < got.size(); ++i) {
         CHECK(got[i].sq_distance == sqf(query, feats[got[i].index]));
@@ -292,13 +292,13 @@ TEST_CASE("FeatureIndex approximate mode is reproducible, seeded, and near-exact
   s.exact = false;
   s.trees = 4;
   s.checks = 128;
-  const FeatureIndex a(feats, refs, s), b(feats, refs, s);
+  const FeatureIndex a(FeatureRows(feats), refs, s), b(FeatureRows(feats), refs, s);
   FeatureIndexSettings all = s;
   all.checks = static_cast<int>(feats.size());
-  const FeatureIndex full(feats, refs, all);
+  const FeatureIndex full(FeatureRows(feats), refs, all);
   FeatureIndexSettings other_seed = s;
   other_seed.seed = 2;
-  const FeatureIndex c(feats, refs, other_seed);
+  const FeatureIndex c(FeatureRows(feats), refs, other_seed);
 
   double recall_sum = 0.0;
   bool seed_matters = false;
@@ -309,12 +309,12 @@ TEST_CASE("FeatureIndex approximate mode is reproducible, seeded, and near-exact
     for (auto& v : q) v += static_cast<float>(2.0 * rng.normal());
   }
   for (const auto& q : queries) {
-    const auto ra = a.knn(q, 50);
-    check_same(ra, b.knn(q, 50));               // same settings, same answers
+    const auto ra = a.knn(q.data(), 50);
+    check_same(ra, b.knn(q.data(), 50));               // same settings, same answers
     const auto truth = brute_features(feats, q, 50);
     // A budget of every feature: (nearly) exhaustive. The forest's branch bound is FLANN's
     // heuristic, not a true lower bound, so exactness is not promised; recall must be ~1.
-    const auto rf = full.knn(q, 50);
+    const auto rf = full.knn(q.data(), 50);
     std::size_t full_hit = 0;
     for (const auto& n : rf)
       full_hit += std::count_if(truth.begin(), truth.end(), [&](const Neighbour& t) { return t.index == n.index; });
@@ -327,7 +327,7 @@ TEST_CASE("FeatureIndex approximate mode is reproducible, seeded, and near-exact
     for (const auto& n : ra)
       hit += std::count_if(truth.begin(), truth.end(), [&](const Neighbour& t) { return t.index == n.index; });
     recall_sum += double(hit) / 50.0;
-    const auto rc = c.knn(q, 50);
+    const auto rc = c.knn(q.data(), 50);
     for (std::size_t i = 0; i < rc.size(); ++i) seed_matters |= rc[i].index != ra[i].index;
   }
   CHECK(recall_sum / nq > 0.5);   // approximate but useful (the benchmark measures it properly)
@@ -337,23 +337,23 @@ TEST_CASE("FeatureIndex approximate mode is reproducible, seeded, and near-exact
   std::vector<std::vector<Neighbour>> par(queries.size());
   tbb::task_arena arena(2);
   arena.execute([&] {
-    tbb::parallel_for(std::size_t(0), queries.size(), [&](std::size_t i) { par[i] = a.knn(queries[i], 50); });
+    tbb::parallel_for(std::size_t(0), queries.size(), [&](std::size_t i) { par[i] = a.knn(queries[i].data(), 50); });
   });
-  for (std::size_t i = 0; i < queries.size(); ++i) check_same(par[i], a.knn(queries[i], 50));
+  for (std::size_t i = 0; i < queries.size(); ++i) check_same(par[i], a.knn(queries[i].data(), 50));
 }
 
 TEST_CASE("FeatureIndex rejects bad input and handles the empty index") {
   std::vector<Feature> f(3);
-  CHECK_THROWS_AS(FeatureIndex(f, std::vector<FeatureRef>(2), {}), Error);
+  CHECK_THROWS_AS(FeatureIndex(FeatureRows(f), std::vector<FeatureRef>(2), {}), Error);
   f[1][4] = std::nanf("");
-  CHECK_THROWS_AS(FeatureIndex(f, std::vector<FeatureRef>(3), {}), Error);
+  CHECK_THROWS_AS(FeatureIndex(FeatureRows(f), std::vector<FeatureRef>(3), {}), Error);
   FeatureIndexSettings bad;
   bad.exact = false;
   bad.checks = 0;
-  CHECK_THROWS_AS(FeatureIndex(std::vector<Feature>(2), std::vector<FeatureRef>(2), bad), Error);
+  CHECK_THROWS_AS(FeatureIndex(FeatureRows(std::vector<Feature>(2)), std::vector<FeatureRef>(2), bad), Error);
   const FeatureIndex empty;
   CHECK(empty.size() == 0);
-  CHECK(empty.knn(Feature{}, 5).empty());
-  const FeatureIndex none(std::vector<Feature>{}, {}, {});
-  CHECK(none.knn(Feature{}, 5).empty());
+  CHECK(empty.knn(Feature{}.data(), 5).empty());
+  const FeatureIndex none(FeatureRows(std::vector<Feature>{}), {}, {});
+  CHECK(none.knn(Feature{}.data(), 5).empty());
 }

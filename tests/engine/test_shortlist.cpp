@@ -67,12 +67,13 @@ double sqf(const Feature& a, const Feature& b) {
 
 /// Per-object pruning, smaller numbers (unit tests must be fast).
 /// n queries near random database features (with `anywhere`, every fourth one anywhere).
-std::vector<Feature> random_queries(const FeatureSource& src, int n, std::uint64_t seed, bool anywhere) {
+FeatureRows random_queries(const FeatureSource& src, int n, std::uint64_t seed, bool anywhere) {
   Rng rng(seed, 0, 0, 0);
-  std::vector<Feature> queries;
+  FeatureRows queries;
   for (int i = 0; i < n; ++i) {
     const auto& fs = src.feats[rng.index(src.size())].features;
-    queries.push_back(anywhere && i % 4 == 0 ? random_feature(rng) : random_feature(rng, &fs[rng.index(fs.size())], 6.0f));
+    const Feature near = fs.fpfh(rng.index(fs.size()));
+    queries.push_back(anywhere && i % 4 == 0 ? random_feature(rng) : random_feature(rng, &near, 6.0f));
   }
   return queries;
 }
@@ -100,7 +101,7 @@ TEST_CASE("FeatureTable: per-object search restricted to a mask equals brute for
   auto src = feature_source();
   Database db(src);
   const FeatureTable table(db);
-  const std::vector<Feature> queries = random_queries(*src, 40, 9, true);
+  const FeatureRows queries = random_queries(*src, 40, 9, true);
   for (const std::vector<std::uint8_t>& mask :
        {std::vector<std::uint8_t>{}, std::vector<std::uint8_t>{1, 0, 1, 1, 0, 1, 1, 0}}) {
     const auto per = table.knn_per_object(queries, 7, mask);
@@ -112,7 +113,8 @@ TEST_CASE("FeatureTable: per-object search restricted to a mask equals brute for
         CHECK(by_object.count(o) == (in ? 1u : 0u));
         if (!in) continue;
         std::vector<double> d;
-        for (const Feature& f : src->feats[o].features) d.push_back(sqf(queries[q], f));
+        const FeatureRows& fo = src->feats[o].features;
+        for (std::size_t i = 0; i < fo.size(); ++i) d.push_back(sqf(queries.fpfh(q), fo.fpfh(i)));
         std::sort(d.begin(), d.end());
         const auto& mine = by_object[o];
         REQUIRE(mine.size() == std::min<std::size_t>(7, d.size()));
@@ -367,7 +369,7 @@ TEST_CASE("Approximate pruning by block: the exact search's neighbours when ever
   auto src = feature_source();
   Database db(src);
   const FeatureTable table(db);
-  const std::vector<Feature> queries = random_queries(*src, 20, 4, false);
+  const FeatureRows queries = random_queries(*src, 20, 4, false);
   const auto exact = table.knn_per_object(queries, 9, std::vector<std::uint8_t>{});
   const auto wide = table.knn_per_object(queries, 9, std::vector<std::uint8_t>{}, 1000);  // every block
   const auto one = table.knn_per_object(queries, 9, std::vector<std::uint8_t>{}, 1);      // the nearest block
