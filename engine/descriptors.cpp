@@ -69,11 +69,15 @@ bool pfh_row(const PointCloud& s, const std::vector<Neighbour>& nb, float* out) 
   bool any = false;
   for (std::size_t i = 0; i < n; ++i) {
     const Vec3 &pi = s.points[nb[i].index], &ni = s.normals[nb[i].index];
-    if (!finite(pi)) continue;
+    if (!finite(pi) || !finite(ni)) continue;   // (PCL would bin NaN: undefined behaviour)
     for (std::size_t j = 0; j < i; ++j) {
       const Vec3 &pj = s.points[nb[j].index], &nj = s.normals[nb[j].index];
-      double f[3];
-      if (!finite(pj) || !pair_features(pi, ni, pj, nj, f)) continue;
+      if (!finite(pj) || !finite(nj)) continue;
+      // PCL's PFHEstimation::computePairFeatures ignores pcl::computePairFeatures' false: a
+      // degenerate pair (the same point twice, or the line along the normal) is binned with
+      // f = (0, 0, 0), bin 2 + 5 * 2 + 25 * 2 = 62.
+      double f[3] = {0.0, 0.0, 0.0};
+      if (!pair_features(pi, ni, pj, nj, f)) f[0] = f[1] = f[2] = 0.0;
       const int b = split_bin((f[0] + kPi) / (2.0 * kPi)) + kPfhSplit * split_bin((f[1] + 1.0) * 0.5) +
                     kPfhSplit * kPfhSplit * split_bin((f[2] + 1.0) * 0.5);
       h[b] += incr;

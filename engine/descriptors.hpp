@@ -56,9 +56,10 @@ struct Descriptors {
 ///  - pfh: PFHEstimation, 5 bins per pair feature (f1 atan2 angle, f2, f3) from
 ///    pcl::computePairFeatures over every unordered pair of the neighbourhood (the keypoint's
 ///    own point included when it lies in the surface), bin f1 + 5 f2 + 25 f3, each pair adding
-///    100 / (n (n - 1) / 2): the histogram sums to 100 unless some pairs are degenerate (the
-///    same point twice, or the line along the normal), which PCL skips. Valid with at least one
-///    non-degenerate pair.
+///    100 / (n (n - 1) / 2), so the histogram sums to 100. A degenerate pair (the same point
+///    twice, or the line along the normal) is binned as PCL's PFHEstimation bins it, with
+///    f = (0, 0, 0) (bin 62); a pair with a non-finite point or normal is left out (PCL's
+///    binning of NaN is undefined). Valid with at least one pair counted.
 ///  - shot: SHOTEstimation with SHOTLocalReferenceFrameEstimation (weighted covariance,
 ///    eigenvectors' signs by the majority of neighbours): 32 volumes (8 azimuth x 2 elevation
 ///    x 2 radial) x 11 cosine bins (PCL's 10 shape bins + 1), PCL's interpolation on cosine,

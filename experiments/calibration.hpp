@@ -162,7 +162,7 @@ struct KnownAnswer {
 /// runs more about half the time. This draws `resamples` samples of the objects with replacement
 /// (each drawn object with all its answers; ts::Rng(seed)), takes choose_open_set_threshold on
 /// each, and returns the (1 - confidence) quantile of those thresholds (the
-/// (floor((1 - confidence) * resamples) + 1)-th smallest): in `confidence` of the resamples the
+/// (floor((1 - confidence) * resamples) + 1)-th smallest): in at least `confidence` of the resamples the
 /// threshold costs at most `max_drop`. confidence 0 gives choose_open_set_threshold on all
 /// answers. Deterministic; the order of `answers` does not matter. Throws ts::Error for
 /// max_drop outside [0, 1) (key "--open-set-drop"), confidence outside [0, 1)

@@ -527,13 +527,16 @@ int run_calibrate(const CalibrateOptions& o) {
       known_at.push_back({r.group, right, right ? score[i] : 0.0});
       right_at += right ? 1 : 0;
     }
-    cal.open_set_threshold =
-        experiments::choose_open_set_threshold_clustered(known_at, o.open_set_drop, o.open_set_confidence);
+    constexpr int kResamples = 2000;
+    constexpr std::uint64_t kResampleSeed = 1;
+    cal.open_set_threshold = experiments::choose_open_set_threshold_clustered(
+        known_at, o.open_set_drop, o.open_set_confidence, kResamples, kResampleSeed);
     cal.provenance["open_set"] = {{"score", "in_database, out of fold (5 folds by object)"},
                                   {"in_database", "known objects, and hidden ones whose congruent copy was named"},
                                   {"max_drop", o.open_set_drop}, {"confidence", o.open_set_confidence},
-                                  {"rule", "the (1 - confidence) quantile of the max_drop thresholds of 2000 "
-                                           "resamples of the explored objects"},
+                                  {"rule", "the (1 - confidence) quantile of the max_drop thresholds of "
+                                           "resamples of the explored objects (ts::Rng(seed))"},
+                                  {"resamples", kResamples}, {"seed", kResampleSeed},
                                   {"step", at}, {"known_runs", known_at.size()}, {"right", right_at}};
   } else {
     cal.provenance["open_set"] = nullptr;   // no hidden runs: no open-set score

@@ -65,8 +65,9 @@ std::pair<Row, bool> brute_pfh(const PointCloud& s, const Vec3& kp, double r) {
   bool any = false;
   for (std::size_t i = 0; i < nb.size(); ++i)
     for (std::size_t j = 0; j < i; ++j) {
-      double f[3];
-      if (!brute_pair(s.points[nb[i]], s.normals[nb[i]], s.points[nb[j]], s.normals[nb[j]], f)) continue;
+      double f[3] = {0, 0, 0};
+      // PCL's PFHEstimation bins a degenerate pair (pcl::computePairFeatures false) at f = 0.
+      if (!brute_pair(s.points[nb[i]], s.normals[nb[i]], s.points[nb[j]], s.normals[nb[j]], f)) f[0] = f[1] = f[2] = 0;
       const double unit[3] = {(f[0] + M_PI) / (2 * M_PI), (f[1] + 1) / 2, (f[2] + 1) / 2};
       int index = 0, place = 1;
       for (double u : unit) {
@@ -316,6 +317,46 @@ TEST_CASE("PFH matches the brute-force formulation") {
       const auto row = got.row(k);
       CHECK(std::accumulate(row.begin(), row.end(), 0.0) == doctest::Approx(100.0).epsilon(1e-5));
     }
+}
+
+TEST_CASE("PFH bins a degenerate pair as PCL does: f = (0, 0, 0), bin 62") {
+  // Points of a plane z = 0 with normals +z, and the first point twice: its pair with its copy
+  // has distance 0 (pcl::computePairFeatures returns false, PFHEstimation bins it anyway). Every
+  // other pair of a plane has f1 = 0 (u = n, n2 = n), f2 = 0 and f3 = 0 as well: the whole
+  // histogram is bin 62. A copy with a tilted normal instead has a well-defined pair elsewhere.
+  PointCloud s;
+  for (int i = 0; i < 6; ++i) {
+    s.points.emplace_back(0.002 * i, 0.001 * (i % 3), 0.0);
+    s.normals.emplace_back(0.0, 0.0, 1.0);
+  }
+  s.points.push_back(s.points[0]);
+  s.normals.emplace_back(0.0, 0.0, 1.0);
+  const KdTree3 tree(s.points);
+  DescriptorSettings set;
+  set.feature_radius = 0.05;
+  const auto got = compute_descriptors(Descriptor::pfh, {s.points[0]}, {}, s, tree, set);
+  REQUIRE(got.valid[0]);
+  const auto row = got.row(0);
+  CHECK(row[62] == doctest::Approx(100.0).epsilon(1e-6));
+  CHECK(std::accumulate(row.begin(), row.end(), 0.0) == doctest::Approx(100.0).epsilon(1e-6));
+  const auto [want, ok] = brute_pfh(s, s.points[0], set.feature_radius);
+  REQUIRE(ok);
+  for (int b = 0; b < 125; ++b) CHECK(row[b] == doctest::Approx(want[b]).epsilon(1e-6));
+  // With the copy's normal tilted, its 5 pairs with the other points leave bin 62 (f3 = the
+  // tilted normal's slope along the pair, about +-0.55), its pair with point 0 stays there
+  // (degenerate), and so do the 15 planar pairs: 16 of the 21 pairs; the sum stays 100.
+  s.normals.back() = Vec3(0.6, 0.0, 0.8);
+  const KdTree3 tree2(s.points);
+  const auto tilted = compute_descriptors(Descriptor::pfh, {s.points[0]}, {}, s, tree2, set);
+  const auto r2 = tilted.row(0);
+  CHECK(std::accumulate(r2.begin(), r2.end(), 0.0) == doctest::Approx(100.0).epsilon(1e-6));
+  CHECK(r2[62] == doctest::Approx(100.0 * 15.0 / 21.0 + 100.0 / 21.0).epsilon(1e-6));   // + the degenerate pair
+  // A non-finite normal leaves its pairs out, without undefined behaviour.
+  s.normals.back() = Vec3(std::nan(""), 0.0, 1.0);
+  const KdTree3 tree3(s.points);
+  const auto with_nan = compute_descriptors(Descriptor::pfh, {s.points[0]}, {}, s, tree3, set);
+  const auto nan_row = with_nan.row(0);
+  CHECK(std::accumulate(nan_row.begin(), nan_row.end(), 0.0) == doctest::Approx(100.0 * 15.0 / 21.0).epsilon(1e-6));
 }
 
 TEST_CASE("SHOT matches the brute-force formulation (frame and per-axis interpolation)") {

@@ -308,6 +308,19 @@ TEST_CASE("Open-set threshold over resamples of the explored objects: an object 
   const double robust = choose_open_set_threshold_clustered(a, 0.03, 0.9);
   CHECK(robust <= 0.11 + 1e-12);
   CHECK(robust >= 0.10 - 1e-12);
+  // Objects, not runs, are resampled: object 7's five runs all score 0.10 and 9 % of the runs may
+  // be lost (the 10th smallest score). Ten low runs need object 7 drawn twice or more, in 26 % of
+  // the resamples of objects: their 10 % quantile is low. Drawn run by run, 10 of the 5 low runs
+  // in 100 draws come in about 3 % of resamples: that quantile would be a high score.
+  std::vector<KnownAnswer> same;
+  for (int g = 0; g < 20; ++g)
+    for (int r = 0; r < 5; ++r) same.push_back({g, true, g == 7 ? 0.10 : 0.80 + 0.01 * ((g * 5 + r) % 20)});
+  CHECK(choose_open_set_threshold_clustered(same, 0.09, 0.0) >= 0.80);   // as they are: a high one
+  CHECK(choose_open_set_threshold_clustered(same, 0.09, 0.9) == doctest::Approx(0.10).scale(0));
+  // No right answer at all: nothing to refuse, whatever the confidence.
+  std::vector<KnownAnswer> none;
+  for (int g = 0; g < 20; ++g) none.push_back({g, false, 0.0});
+  CHECK(choose_open_set_threshold_clustered(none, 0.03, 0.9) == 1.0);
   // Monotone in the confidence; the order of the answers does not matter; deterministic.
   double last = 2.0;
   for (double c : {0.0, 0.5, 0.8, 0.9, 0.95}) {
