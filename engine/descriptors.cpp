@@ -28,13 +28,15 @@ constexpr double kPi = 3.14159265358979323846;
 constexpr int kPfhSplit = 5;
 
 /// pcl::computePairFeatures: f1 = atan2(w . n2', u . n2'), f2 = v . n2', f3 = u . d / |d| in the
-/// Darboux frame of the point whose normal is closer to the connecting line. False when the
-/// pair is degenerate (the same point, or the line along that normal).
-bool pair_features(const Vec3& p1, const Vec3& n1, const Vec3& p2, const Vec3& n2, double f[3]) {
+/// Darboux frame of the point whose normal is closer to the connecting line; here f1 is left as
+/// its two arguments, f = {w . n2', u . n2', f2, f3}. False when the pair is degenerate (the same
+/// point, or the line along that normal).
+bool pair_features(const Vec3& p1, const Vec3& n1, const Vec3& p2, const Vec3& n2, double f[4]) {
   Vec3 d = p2 - p1;
-  const double len = d.norm();
-  if (len == 0.0) return false;
-  const double a1 = n1.dot(d) / len, a2 = n2.dot(d) / len;
+  const double len2 = d.squaredNorm();
+  if (len2 == 0.0) return false;
+  const double inv_len = 1.0 / std::sqrt(len2);
+  const double a1 = n1.dot(d) * inv_len, a2 = n2.dot(d) * inv_len;
   const Vec3* u = &n1;
   const Vec3* other = &n2;
   // PCL: acos(|a1|) > acos(|a2|), i.e. |a1| < |a2|: the second point becomes the origin.
@@ -42,17 +44,17 @@ bool pair_features(const Vec3& p1, const Vec3& n1, const Vec3& p2, const Vec3& n
     u = &n2;
     other = &n1;
     d = -d;
-    f[2] = -a2;
+    f[3] = -a2;
   } else {
-    f[2] = a1;
+    f[3] = a1;
   }
-  Vec3 v = d.cross(*u);
-  const double vn = v.norm();
-  if (vn == 0.0) return false;
-  v /= vn;
-  const Vec3 w = u->cross(v);
-  f[1] = v.dot(*other);
-  f[0] = std::atan2(w.dot(*other), u->dot(*other));
+  const Vec3 v = d.cross(*u);   // v and w = u x v are scaled by 1 / |v| only where used
+  const double vn2 = v.squaredNorm();
+  if (vn2 == 0.0) return false;
+  const double inv_vn = 1.0 / std::sqrt(vn2);
+  f[2] = v.dot(*other) * inv_vn;
+  f[0] = u->cross(v).dot(*other) * inv_vn;
+  f[1] = u->dot(*other);
   return true;
 }
 
@@ -61,25 +63,51 @@ inline int split_bin(double unit) {   // unit in [0, 1] -> 0 .. kPfhSplit - 1 (f
   return std::clamp(b, 0, kPfhSplit - 1);
 }
 
+/// split_bin((atan2(y, x) + pi) / (2 pi)) without the atan2, which took a third of a PFH
+/// database build: the five bins are the sectors [-pi, -0.6 pi), [-0.6 pi, -0.2 pi), [-0.2 pi,
+/// 0.2 pi), [0.2 pi, 0.6 pi), [0.6 pi, pi], told apart by the sign of a cross product with each
+/// boundary direction. A point on an axis or exactly on a boundary (signed zeros, and where the
+/// two roundings could disagree) takes atan2 itself.
+inline int angle_bin(double y, double x) {
+  constexpr double c1 = 0.80901699437494742, s1 = 0.58778525229247314;    // cos, sin of 0.2 pi
+  constexpr double c2 = -0.30901699437494742, s2 = 0.95105651629515357;   // cos, sin of 0.6 pi
+  if (y != 0.0 && x != 0.0) {
+    const double ya = std::abs(y);
+    const double t1 = c1 * ya - s1 * x, t2 = c2 * ya - s2 * x;   // < 0: |angle| below the boundary
+    if (t1 != 0.0 && t2 != 0.0) {
+      if (y > 0.0) return t1 < 0.0 ? 2 : (t2 < 0.0 ? 3 : 4);
+      return t1 < 0.0 ? 2 : (t2 < 0.0 ? 1 : 0);
+    }
+  }
+  return split_bin((std::atan2(y, x) + kPi) / (2.0 * kPi));
+}
+
 bool pfh_row(const PointCloud& s, const std::vector<Neighbour>& nb, float* out) {
   const std::size_t n = nb.size();
   if (n < 2) return false;
   const double incr = 100.0 / (static_cast<double>(n) * static_cast<double>(n - 1) / 2.0);
+  // The neighbours side by side (the surface is indexed at random); a non-finite point or normal
+  // leaves its pairs out (PCL would bin NaN: undefined behaviour).
+  std::vector<Vec3> pts, nrm;
+  pts.reserve(n);
+  nrm.reserve(n);
+  for (const Neighbour& k : nb) {
+    const Vec3 &p = s.points[k.index], &q = s.normals[k.index];
+    if (finite(p) && finite(q)) pts.push_back(p), nrm.push_back(q);
+  }
+  const std::size_t m = pts.size();
   std::array<double, kPfhSplit * kPfhSplit * kPfhSplit> h{};
   bool any = false;
-  for (std::size_t i = 0; i < n; ++i) {
-    const Vec3 &pi = s.points[nb[i].index], &ni = s.normals[nb[i].index];
-    if (!finite(pi) || !finite(ni)) continue;   // (PCL would bin NaN: undefined behaviour)
+  for (std::size_t i = 0; i < m; ++i) {
     for (std::size_t j = 0; j < i; ++j) {
-      const Vec3 &pj = s.points[nb[j].index], &nj = s.normals[nb[j].index];
-      if (!finite(pj) || !finite(nj)) continue;
       // PCL's PFHEstimation::computePairFeatures ignores pcl::computePairFeatures' false: a
       // degenerate pair (the same point twice, or the line along the normal) is binned with
       // f = (0, 0, 0), bin 2 + 5 * 2 + 25 * 2 = 62.
-      double f[3] = {0.0, 0.0, 0.0};
-      if (!pair_features(pi, ni, pj, nj, f)) f[0] = f[1] = f[2] = 0.0;
-      const int b = split_bin((f[0] + kPi) / (2.0 * kPi)) + kPfhSplit * split_bin((f[1] + 1.0) * 0.5) +
-                    kPfhSplit * kPfhSplit * split_bin((f[2] + 1.0) * 0.5);
+      int b = 62;
+      double f[4];
+      if (pair_features(pts[i], nrm[i], pts[j], nrm[j], f))
+        b = angle_bin(f[0], f[1]) + kPfhSplit * split_bin((f[2] + 1.0) * 0.5) +
+            kPfhSplit * kPfhSplit * split_bin((f[3] + 1.0) * 0.5);
       h[b] += incr;
       any = true;
     }
