@@ -203,7 +203,7 @@ void write_object(h5::Group objects, const StoredObject& stored, const DbWriteSe
                 file, where);
   if (o.features.features.dim() != feature_dim)
     throw Error("object has features of " + std::to_string(o.features.features.dim()) +
-                    " values, the database's descriptor " + std::to_string(feature_dim),
+                    " values per row; the database's descriptor has " + std::to_string(feature_dim),
                 file, where + "/features");
   const h5::Storage st{.deflate = w.deflate};
 

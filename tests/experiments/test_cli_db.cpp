@@ -194,6 +194,68 @@ TEST_CASE("cli db: export writes PLY and PCD clouds with normals") {
   CHECK_FALSE(fs::exists(dir / "n.ply"));
 }
 
+TEST_CASE("cli db: --descriptor pfh|shot|spin builds, info shows it, db add and recognize use it") {
+  TempDir dir("cli");
+  write_meshes(dir);
+  REQUIRE(touchstone(dir, "db build --meshes meshes --out fpfh.h5" + kFast).code == 0);
+  const ts::io::DbReader fpfh(dir / "fpfh.h5");
+  const std::vector<std::pair<std::string, int>> kinds = {{"pfh", 125}, {"shot", 352}, {"spin", 153}};
+  for (const auto& [name, dim] : kinds) {
+    CAPTURE(name);
+    const std::string db = name + ".h5";
+    const auto b = touchstone(dir, "db build --meshes meshes --out " + db + " --descriptor " + name + kFast);
+    REQUIRE_MESSAGE(b.code == 0, b.err);
+    const auto j = nlohmann::json::parse(touchstone(dir, "db info " + db + " --json").out);
+    CHECK(j["params"]["descriptor"] == name);
+    for (const auto& o : j["objects"]) CHECK(o["feature_dim"] == dim);
+    CHECK(touchstone(dir, "db info " + db).out.find("descriptor " + name) != std::string::npos);
+
+    // Only the features differ from the FPFH database: the same scan; keypoints are scan points
+    // (voxel representatives; one without a usable neighbourhood is left out).
+    const ts::io::DbReader other(dir / db);
+    REQUIRE(other.size() == fpfh.size());
+    for (std::size_t i = 0; i < other.size(); ++i) {
+      CHECK(other.load_fine(i).points == fpfh.load_fine(i).points);
+      const auto a = other.load_features(i), f = fpfh.load_features(i);
+      CHECK(a.features.dim() == dim);
+      CHECK(a.features.size() == a.coarse.size());
+      CHECK(a.coarse.size() > 0);
+      const auto fine = other.load_fine(i).points;
+      std::size_t on_scan = 0;
+      for (const auto& p : a.coarse.points) on_scan += std::find(fine.begin(), fine.end(), p) != fine.end();
+      CHECK(on_scan == a.coarse.size());
+      CHECK(f.features.dim() == 33);
+      bool nonzero = false;
+      for (float v : a.features.values()) nonzero = nonzero || v != 0.0f;
+      CHECK(nonzero);
+    }
+
+    // db add builds the new object with the database's descriptor.
+    ts::test::write_text(dir / ("one_" + name + ".tsv"), "test\tmeshes/box.off\tbox\n");
+    REQUIRE(touchstone(dir, "db build --manifest one_" + name + ".tsv --out one_" + db + " --descriptor " + name +
+                                kFast).code == 0);
+    const auto add = touchstone(dir, "db add one_" + db + " meshes/ball.off");
+    REQUIRE_MESSAGE(add.code == 0, add.err);
+    const ts::io::DbReader grown(dir / ("one_" + db));
+    CHECK(grown.settings().descriptor == other.settings().descriptor);
+    CHECK(grown.load_features(grown.find("ball")).features == other.load_features(other.find("ball")).features);
+
+    // A query on this database computes the same descriptor at its contacts.
+    REQUIRE(touchstone(dir, "simulate --db " + db + " --object box --grasps 4 --noise ideal --seed 3 --out log_" +
+                                db).code == 0);
+    const auto r = touchstone(dir, "recognize --db " + db + " --log log_" + db +
+                                       " --json -N 6 -R 40 -W 800 --n-p 20 --icp-points 64");
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    const auto steps = nlohmann::json::parse(r.out)["steps"];
+    REQUIRE(steps.size() == 4);
+    CHECK(steps[3]["object"].is_string());
+  }
+  const auto bad = touchstone(dir, "db build --meshes meshes --out bad.h5 --descriptor sift" + kFast);
+  CHECK(bad.code != 0);
+  CHECK(bad.err.find("sift") != std::string::npos);
+  CHECK(!fs::exists(dir / "bad.h5"));
+}
+
 TEST_CASE("cli db: bad input gives one error line, exit 1, and no output file") {
   TempDir dir("cli");
   write_meshes(dir);

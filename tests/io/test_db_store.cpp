@@ -467,3 +467,63 @@ TEST_CASE("db store: the congruence record round-trips; databases without one op
   edit([](h5::Group& g) { g.set_attribute("tolerance", 0.0); });
   CHECK_THROWS_WITH_AS(ts::io::DbReader(dir / "bad.h5"), doctest::Contains("/congruence@tolerance"), ts::Error);
 }
+
+TEST_CASE("db store: the descriptor is a build parameter; its rows have its dimension") {
+  TempDir dir("db");
+  for (const ts::Descriptor d : {ts::Descriptor::pfh, ts::Descriptor::shot, ts::Descriptor::spin}) {
+    CAPTURE(ts::descriptor_name(d));
+    const int dim = ts::descriptor_dim(d);
+    std::vector<ts::BuiltObject> objects;
+    objects.push_back(synthetic_object("a", 1));
+    objects.push_back(synthetic_object("b", 2));
+    ts::Rng rng(3);
+    for (auto& o : objects) {
+      o.features.features = ts::FeatureRows(dim, o.features.coarse.size());
+      for (float& v : o.features.features.values()) v = static_cast<float>(rng.uniform(0, 1));
+    }
+    ts::DatabaseSettings s;
+    s.descriptor = d;
+    const auto path = dir / (ts::descriptor_name(d) + ".h5");
+    ts::io::write_database(path, stored(objects), s, 5);
+    {
+      ts::io::DbReader db(path);
+      CHECK(db.settings().descriptor == d);
+      CHECK(db.feature_dim() == dim);
+      for (std::size_t i = 0; i < objects.size(); ++i) {
+        const auto feat = db.load_features(i);
+        CHECK(feat.features.dim() == dim);
+        CHECK(feat.features == objects[i].features.features);
+      }
+    }
+    // Rows of another descriptor's dimension are refused, and the file stays as it was.
+    const auto before = ts::test::read_bytes(path);
+    auto fpfh_rows = synthetic_object("c", 4);   // 33 values per row
+    const std::string why = "features of 33 values per row; the database's descriptor has " + std::to_string(dim);
+    CHECK_THROWS_WITH_AS(ts::io::append_to_database(path, {{&fpfh_rows, 1}}), doctest::Contains(why.c_str()),
+                         ts::Error);
+    CHECK(ts::test::read_bytes(path) == before);
+    // A descriptor name nobody knows is one error naming the attribute.
+    {
+      auto f = h5::File::open(path, h5::File::Access::read_write);
+      f.group("params").set_attribute("descriptor", std::string("sift"));
+      f.close();
+    }
+    CHECK_THROWS_WITH_AS(ts::io::DbReader{path}, doctest::Contains("/params@descriptor"), ts::Error);
+    CHECK_THROWS_WITH_AS(ts::io::DbReader{path}, doctest::Contains("sift"), ts::Error);
+    // The stored descriptor and the rows' dimension must agree.
+    {
+      auto f = h5::File::open(path, h5::File::Access::read_write);
+      f.group("params").set_attribute("descriptor", std::string(d == ts::Descriptor::pfh ? "shot" : "pfh"));
+      f.close();
+    }
+    CHECK_THROWS_WITH_AS(ts::io::DbReader{path}, doctest::Contains("feature_dim"), ts::Error);
+  }
+}
+
+TEST_CASE("db store: databases written before the descriptor was stored are FPFH databases") {
+  const auto path = std::filesystem::path(TS_SOURCE_DIR) / "tests/fuzz/base/box_db.h5";
+  ts::io::DbReader db(path);   // written without /params@descriptor
+  CHECK(db.settings().descriptor == ts::Descriptor::fpfh);
+  CHECK(db.feature_dim() == 33);
+  CHECK(db.load_features(0).features.dim() == 33);
+}
