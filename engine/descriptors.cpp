@@ -66,8 +66,9 @@ inline int split_bin(double unit) {   // unit in [0, 1] -> 0 .. kPfhSplit - 1 (f
 /// split_bin((atan2(y, x) + pi) / (2 pi)) without the atan2, which took a third of a PFH
 /// database build: the five bins are the sectors [-pi, -0.6 pi), [-0.6 pi, -0.2 pi), [-0.2 pi,
 /// 0.2 pi), [0.2 pi, 0.6 pi), [0.6 pi, pi], told apart by the sign of a cross product with each
-/// boundary direction. A point on an axis or exactly on a boundary (signed zeros, and where the
-/// two roundings could disagree) takes atan2 itself.
+/// boundary direction. A point on an axis or exactly on a boundary (signed zeros) takes atan2
+/// itself. Within about 1e-14 rad of a boundary the two roundings may put a pair in the
+/// neighbouring bin (PCL itself bins in float).
 inline int angle_bin(double y, double x) {
   constexpr double c1 = 0.80901699437494742, s1 = 0.58778525229247314;    // cos, sin of 0.2 pi
   constexpr double c2 = -0.30901699437494742, s2 = 0.95105651629515357;   // cos, sin of 0.6 pi

@@ -211,6 +211,11 @@ FeatureIndex build_feature_index(const Database& db, const FeatureIndexSettings&
   for (std::size_t o = 0; o < db.size(); ++o) {
     if (!objects.empty() && (o >= objects.size() || !objects[o])) continue;
     const ObjectFeatures f = db.load_features(o);
+    if (!f.features.empty() && f.features.dim() != features.dim())
+      throw Error("object '" + db.info(o).name + "' has features of " + std::to_string(f.features.dim()) +
+                      " values, its database's descriptor (" + descriptor_name(db.settings().descriptor) + ") " +
+                      std::to_string(features.dim()),
+                  {}, "features");
     for (std::size_t i = 0; i < f.features.size(); ++i) {
       features.push_back(f.features.row(i));
       refs.push_back({static_cast<std::uint32_t>(o), static_cast<std::uint32_t>(i)});
@@ -240,6 +245,10 @@ std::vector<std::vector<Neighbour>> FeatureSearch::knn(const FeatureRows& querie
   if (table) return table->knn(queries, w);
   std::vector<std::vector<Neighbour>> out(queries.size());
   if (!index) return out;
+  if (!queries.empty() && index->size() > 0 && queries.dim() != index->dim())
+    throw Error("the query features have " + std::to_string(queries.dim()) + " values, the feature index " +
+                    std::to_string(index->dim()) + " (another descriptor)",
+                {}, "descriptor");
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queries.size(), 1),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t q = r.begin(); q != r.end(); ++q) out[q] = index->knn(queries.row(q), w);

@@ -244,6 +244,11 @@ Recognizer::Recognizer(const Database& db, std::shared_ptr<const FeatureIndex> i
   } else {
     search_.index = index ? std::move(index)
                           : std::make_shared<FeatureIndex>(build_feature_index(db_, s_.index, s_.objects));
+    const int dim = descriptor_dim(db_.settings().descriptor);
+    if (search_.index->size() > 0 && search_.index->dim() != dim)
+      throw Error("the shared feature index has " + std::to_string(search_.index->dim()) + " values a row, the " +
+                      descriptor_name(db_.settings().descriptor) + " database " + std::to_string(dim),
+                  {}, "descriptor");
   }
   if (!(s_.psi >= 0.0 && s_.psi <= 1.0)) throw Error("psi must be in [0, 1]", {}, "psi");
   if (!db_.surface() && needs_surface(s_, db_.settings()))

@@ -17,6 +17,9 @@ std::string source_fingerprint(const ObjectSource& source) {
   settings.precision(17);
   const DatabaseSettings& d = source.settings();
   settings << d.max_extent << ' ' << d.fpfh.normal_radius << ' ' << d.fpfh.feature_radius;
+  // The descriptor only when it is not FPFH: FPFH databases keep the fingerprints they had
+  // before descriptors were a choice (and the calibrations and run stores that name them).
+  if (d.descriptor != Descriptor::fpfh) settings << " descriptor " << descriptor_name(d.descriptor);
   add(settings.str());
   for (std::size_t i = 0; i < source.size(); ++i) {
     const ObjectInfo& o = source.info(i);
@@ -52,6 +55,7 @@ EngineDatabase open_database(const std::filesystem::path& path) {
   db.description["schema_version"] = reader->schema_version();
   db.description["build_seed"] = reader->build_seed();
   db.description["max_extent_m"] = reader->settings().max_extent;
+  db.description["descriptor"] = descriptor_name(reader->settings().descriptor);
   // Classes of congruent objects (names), which reports count class-aware rates with; absent
   // when the database recorded none.
   if (const io::CongruenceRecord* c = reader->congruence()) {

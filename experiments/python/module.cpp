@@ -602,6 +602,7 @@ PYBIND11_MODULE(_touchstone, m) {
         py::dict o;
         for (const auto& v : ts::io::settings_values(d.db->settings()))
           o[py::str(v.group.empty() ? v.name : v.group + "." + v.name)] = v.value;
+        o["descriptor"] = ts::descriptor_name(d.db->settings().descriptor);
         return o;
       });
 

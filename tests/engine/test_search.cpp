@@ -1,6 +1,7 @@
 // KdTree3 and FeatureIndex against brute force: random clouds, duplicates and exact ties
 // (integer grids, where every distance is exact), parallel queries, and the approximate
 // forest's reproducibility.
+#include "engine/ransac.hpp"
 #include "engine/search.hpp"
 
 #include <doctest/doctest.h>
@@ -9,6 +10,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
+#include <random>
 
 using namespace ts;
 
@@ -356,4 +359,44 @@ TEST_CASE("FeatureIndex rejects bad input and handles the empty index") {
   CHECK(empty.knn(Feature{}.data(), 5).empty());
   const FeatureIndex none(FeatureRows(std::vector<Feature>{}), {}, {});
   CHECK(none.knn(Feature{}.data(), 5).empty());
+}
+
+TEST_CASE("FeatureIndex at every descriptor's dimension: exact search is the brute force; queries of another dimension are refused") {
+  for (const int dim : {125, 352, 153}) {
+    CAPTURE(dim);
+    std::mt19937 gen(static_cast<unsigned>(dim));
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    const std::size_t n = 400;
+    FeatureRows rows(dim, n);
+    for (float& v : rows.values()) v = u(gen);
+    std::vector<FeatureRef> refs(n);
+    for (std::size_t i = 0; i < n; ++i) refs[i] = {static_cast<std::uint32_t>(i % 7), static_cast<std::uint32_t>(i)};
+    const auto index = std::make_shared<const FeatureIndex>(rows, refs, FeatureIndexSettings{});
+    CHECK(index->dim() == dim);
+    FeatureRows queries(dim, 5);
+    for (float& v : queries.values()) v = u(gen);
+    for (std::size_t q = 0; q < queries.size(); ++q) {
+      std::vector<std::pair<double, std::uint32_t>> all;
+      for (std::size_t i = 0; i < n; ++i) {
+        double d = 0.0;
+        for (int k = 0; k < dim; ++k) {
+          const double e = double(rows.row(i)[k]) - double(queries.row(q)[k]);
+          d += e * e;
+        }
+        all.emplace_back(d, static_cast<std::uint32_t>(i));
+      }
+      std::sort(all.begin(), all.end());
+      const auto got = index->knn(queries.row(q), 10);
+      REQUIRE(got.size() == 10);
+      for (std::size_t k = 0; k < 10; ++k) {
+        CHECK(got[k].index == all[k].second);
+        CHECK(std::abs(got[k].sq_distance - all[k].first) <= 1e-4 * all[k].first);
+      }
+    }
+    FeatureSearch search;
+    search.index = index;
+    CHECK(search.knn(queries, 3).size() == 5);
+    FeatureRows fpfh(kFeatureDim, 2);
+    CHECK_THROWS_WITH_AS(search.knn(fpfh, 3), doctest::Contains("another descriptor"), Error);
+  }
 }

@@ -63,6 +63,7 @@ def test_database_lists_the_manifest(built, db):
         assert info["extent_m"].shape == (3,) and np.all(info["extent_m"] > 0.005)
         assert info["fine_points"] > info["coarse_points"] > 0
         assert db.object_info(i)["name"] == name
+    assert db.settings["descriptor"] == "fpfh" and db.settings["fpfh.feature_radius"] > 0
     with pytest.raises(ts.Error) as e:
         db.index("no_such_object")
     assert "no_such_object" in str(e.value) and e.value.field == "object"
