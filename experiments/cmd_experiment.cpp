@@ -447,8 +447,12 @@ int run_calibrate(const CalibrateOptions& o) {
   const auto& names = experiments::confidence_feature_names();
   const std::vector<int> first = parse_step_ranges(o.step_ranges);
   std::vector<experiments::CalibrationRow> rows;
-  std::map<std::string, int> groups;   // explored objects by name, across the stores
+  // Explored objects by name across the stores, numbered in the order of first appearance here
+  // and renumbered below in database order, so that the folds and resamples (which follow the
+  // number) do not depend on the order the stores are given in.
+  std::map<std::string, int> groups;
   auto object_group = [&](const std::string& name) { return groups.emplace(name, static_cast<int>(groups.size())).first->second; };
+  std::vector<std::string> database_order;
   std::string fingerprint;
   nlohmann::ordered_json sources = nlohmann::ordered_json::array();
   const RunRange range = parse_runs(o.runs);
@@ -457,7 +461,7 @@ int run_calibrate(const CalibrateOptions& o) {
     std::erase_if(c.runs, [&](const io::RunRecord& r) { return !range.has(r.run); });
     const std::string fp = store_fingerprint(c.header);
     if (fp.empty()) throw Error("the run store records no database fingerprint", path, "/header/database");
-    if (fingerprint.empty()) fingerprint = fp;
+    if (fingerprint.empty()) fingerprint = fp, database_order = c.header.database_objects;
     if (fp != fingerprint)
       throw Error("the run store explored another database than " + o.stores.front() +
                   " (fingerprints differ): a calibration is for one database", path, "/header/database");
@@ -502,6 +506,22 @@ int run_calibrate(const CalibrateOptions& o) {
     sources.push_back(src);
   }
   if (rows.empty()) throw Error("the run stores hold no runs to fit on", o.stores.front(), "/runs");
+  {  // database order (objects outside it after, by name)
+    std::vector<std::pair<std::size_t, std::string>> keyed;
+    for (const auto& [name, id] : groups) {
+      const auto it = std::find(database_order.begin(), database_order.end(), name);
+      keyed.emplace_back(static_cast<std::size_t>(it - database_order.begin()), name);
+    }
+    std::sort(keyed.begin(), keyed.end());
+    std::vector<int> renumber(groups.size());
+    for (std::size_t k = 0; k < keyed.size(); ++k) renumber[static_cast<std::size_t>(groups.at(keyed[k].second))] = static_cast<int>(k);
+    for (auto& r : rows) r.group = renumber[static_cast<std::size_t>(r.group)];
+    // Rows in an order of their contents alone (sums, folds and resamples follow it).
+    auto key = [](const experiments::CalibrationRow& r) {
+      return std::tie(r.group, r.hidden, r.step, r.right, r.pose_right, r.copy_in_database, r.features);
+    };
+    std::stable_sort(rows.begin(), rows.end(), [&](const auto& a, const auto& b) { return key(a) < key(b); });
+  }
   const bool open_set = std::any_of(rows.begin(), rows.end(), [](const auto& r) { return r.hidden; });
   experiments::Calibration cal;
   cal.database_fingerprint = fingerprint;

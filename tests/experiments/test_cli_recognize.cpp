@@ -1002,3 +1002,30 @@ TEST_CASE("cli recognize --scene: each chosen step drawn in the world frame, a P
   CHECK(bad.err.find("log.h5") != std::string::npos);
   CHECK_FALSE(fs::exists(dir / "pics2"));
 }
+
+TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the order they are given in") {
+  test::TempDir dir("cli_calibrate");
+  make_db(dir);
+  const std::string fast = " --runs 2 --steps 3 --pool 6 --set ransac.triplets=6 --set ransac.registrations=40"
+                           " --set ransac.prune=800 --set bricpsf.hypotheses=20 --set icp.points=64";
+  // Two stores exploring the objects in different orders (the second with each object hidden
+  // from its own runs).
+  const Run a = touchstone(dir, "experiment --db db.h5 --objects box,nut,ball,wedge --seed 2 --out known.h5" + fast);
+  REQUIRE_MESSAGE(a.code == 0, a.err);
+  const Run b = touchstone(dir, "experiment --db db.h5 --objects wedge,ball,nut,box --seed 4 --set hidden=each"
+                                " --out hidden.h5" + fast);
+  REQUIRE_MESSAGE(b.code == 0, b.err);
+  const Run ab = touchstone(dir, "calibrate known.h5 hidden.h5 --step-ranges 1,3 --out ab.json");
+  REQUIRE_MESSAGE(ab.code == 0, ab.err);
+  const Run ba = touchstone(dir, "calibrate hidden.h5 known.h5 --step-ranges 1,3 --out ba.json");
+  REQUIRE_MESSAGE(ba.code == 0, ba.err);
+  const auto jab = nlohmann::json::parse(test::read_bytes(dir / "ab.json"));
+  const auto jba = nlohmann::json::parse(test::read_bytes(dir / "ba.json"));
+  CHECK(jab["format"] == "touchstone-calibration");
+  CHECK(jab["database_fingerprint"] == experiments::file_fingerprint(io::DbReader(dir / "db.h5")));
+  REQUIRE(jab["steps"].size() > 0);
+  CHECK(jab["steps"] == jba["steps"]);
+  CHECK(jab["open_set_threshold"] == jba["open_set_threshold"]);
+  CHECK(jab["open_set_threshold"].is_number());
+  CHECK(jab["provenance"]["step_answers"] == 2 * 4 * 3 * 2);
+}
