@@ -106,7 +106,9 @@ FeatureTable::FeatureTable(const Database& db, const std::vector<std::uint8_t>& 
   for (std::size_t o = 0; o < db.size(); ++o)
     if (objects.empty() || (o < objects.size() && objects[o]))
       expected += (std::min<std::size_t>(db.info(o).coarse_points, 1u << 24) + kBlock - 1) / kBlock;
-  expected = std::min<std::size_t>(expected, std::size_t{1} << 26);
+  // At most 4 GiB of values reserved (address space, not touched): the summaries come from the
+  // file and are checked only when an object's rows are loaded.
+  expected = std::min<std::size_t>(expected, (std::size_t{1} << 30) / (dim * kBlock));
   m.blocks.reserve(expected * dim * kBlock);
   m.refs.reserve(expected * kBlock);
   struct Loaded {
