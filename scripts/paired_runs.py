@@ -1,0 +1,85 @@
+#!/usr/bin/env python3
+"""Compare two run stores of the same runs, paired: the same explored objects, runs, object poses
+and grasps (for example one database built with two descriptors, the same study file and seed).
+
+    /usr/bin/python3 scripts/paired_runs.py rec_fpfh.h5 rec_spin.h5 [--steps 5,10,20]
+
+Per step: runs right in both, in A only, in B only; McNemar's exact test on the discordant runs
+(assumes every run independent: too optimistic when runs of one object share its geometry) and a
+sign test over the explored objects (how many objects gain, how many lose; assumes only the
+objects independent). Refuses stores whose runs differ in pose or grasps.
+"""
+import argparse
+import sys
+from math import comb
+
+import h5py
+import numpy as np
+
+
+def two_sided_binomial(k, n):
+    """P(X <= min(k, n - k)) * 2 for X ~ Binomial(n, 1/2), at most 1."""
+    if n == 0:
+        return 1.0
+    m = min(k, n - k)
+    return min(1.0, 2.0 * sum(comb(n, i) for i in range(m + 1)) / 2.0 ** n)
+
+
+def load(path):
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        sys.exit(f"paired_runs: error: {path}: not a run store ({e})")
+    with f:
+        for name in ("runs/object", "runs/run", "runs/first_step_row", "runs/truth", "runs/grasps", "steps/correct"):
+            if name not in f:
+                sys.exit(f"paired_runs: error: {path}: no dataset /{name} (not a run store?)")
+        r, s = f["runs"], f["steps"]
+        objects = [o.decode() for o in f["header/objects"][()]]
+        correct = s["correct"][()].astype(bool)
+        out = {}
+        for i in range(len(r["run"])):
+            key = (objects[int(r["object"][i])], int(r["run"][i]))
+            first = int(r["first_step_row"][i])
+            steps = r["grasps"].shape[1]
+            if first < 0 or first + steps > len(correct):
+                sys.exit(f"paired_runs: error: {path}: /runs/first_step_row of run {i} out of range")
+            out[key] = (correct[first:first + steps], r["truth"][i].tobytes() + r["grasps"][i].tobytes())
+        return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("a")
+    ap.add_argument("b")
+    ap.add_argument("--steps", default="5,10,20", help="steps to compare (1-based, comma-separated)")
+    o = ap.parse_args()
+    A, B = load(o.a), load(o.b)
+    keys = sorted(set(A) & set(B))
+    if not keys:
+        sys.exit("paired_runs: error: the stores share no (object, run)")
+    for k in keys:
+        if A[k][1] != B[k][1]:
+            sys.exit(f"paired_runs: error: run {k[1]} of {k[0]} differs in object pose or grasps: not paired")
+    steps = [int(x) for x in o.steps.split(",")]
+    n_steps = min(len(A[keys[0]][0]), len(B[keys[0]][0]))
+    objects = sorted({k[0] for k in keys})
+    print(f"{len(keys)} paired runs of {len(objects)} objects; A = {o.a}, B = {o.b}")
+    print("  step  both  A only  B only  McNemar p (runs indep.)  objects B better / worse  sign p (objects indep.)")
+    for st in steps:
+        if not 1 <= st <= n_steps:
+            sys.exit(f"paired_runs: error: --steps: step {st} outside 1..{n_steps}")
+        a = np.array([A[k][0][st - 1] for k in keys])
+        b = np.array([B[k][0][st - 1] for k in keys])
+        both, a_only, b_only = int(np.sum(a & b)), int(np.sum(a & ~b)), int(np.sum(~a & b))
+        better = worse = 0
+        for obj in objects:
+            d = sum(int(B[k][0][st - 1]) - int(A[k][0][st - 1]) for k in keys if k[0] == obj)
+            better += d > 0
+            worse += d < 0
+        print(f"  {st:4d}  {both:4d}  {a_only:6d}  {b_only:6d}  {two_sided_binomial(b_only, a_only + b_only):23.2g}"
+              f"  {better:12d} / {worse:<5d}      {two_sided_binomial(better, better + worse):.2g}")
+
+
+if __name__ == "__main__":
+    main()
