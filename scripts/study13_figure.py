@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """Study 13's figure, the paper's Figure 9 redrawn: one heat map per descriptor (FPFH, PFH,
 SHOT, Spin Images) of the normalized mean Euclidean distances between the 19 basic shapes, for
-the simulated scanner's clouds (top row) and the noisy taxel-like clouds (bottom row), coloured
+the simulated scanner's clouds (top row), the scanner's points with 1 mm noise (middle row) and
+the exploration simulator's tactile contacts under underwater noise (bottom row), coloured
 as the paper's from yellow (no difference) to red (large), each panel titled with its
 separability (mean between-shape / mean within-shape distance) and 1-NN same-shape rate.
 
@@ -21,7 +22,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 DESCRIPTORS = [("fpfh", "FPFH (33)"), ("pfh", "PFH (125)"), ("shot", "SHOT (352)"), ("spin", "Spin Images (153)")]
-CLOUDS = [("scanner", "laser scanner"), ("taxel", "noisy contacts")]
+CLOUDS = [("scanner", "laser scanner"), ("taxel", "scanner + 1 mm noise"), ("contacts", "simulated contacts")]
 
 
 def read_matrix(path):
@@ -43,7 +44,7 @@ def main():
         for r in csv.DictReader(f, delimiter="\t"):
             sep[(r["cloud"], r["descriptor"])] = (float(r["ratio"]), float(r["nn_same_shape"]))
 
-    fig, axes = plt.subplots(2, 4, figsize=(24, 11))
+    fig, axes = plt.subplots(len(CLOUDS), 4, figsize=(24, 5.5 * len(CLOUDS)))
     for row, (cloud, cloud_title) in enumerate(CLOUDS):
         for col, (desc, desc_title) in enumerate(DESCRIPTORS):
             names, m = read_matrix(os.path.join(args.folder, f"D_{cloud}_{desc}.tsv"))

@@ -4,6 +4,7 @@
 // matrix per descriptor, and how well each descriptor separates the shapes.
 //
 //   build/bench/study13_descriptors [--out DIR=study13] [--threads 2] [--noise 0.001] [--seed 1]
+//                                   [--grasps 300] [--profile underwater] [--reach 0.005]
 //
 // Objects (object frame, centred): cubes of side 5 and 10 cm; cylinders of radius 3, 5 and
 // 10 cm, height 5 cm (axis z); spheres of radius 3, 5, 10 and 15 cm. Each is scanned by the
@@ -13,16 +14,25 @@
 // edge midpoints, face centres; a cylinder's rims, side at mid-height, caps; points spread over
 // a sphere), all further than the 1.5 cm feature radius from any other shape of the object.
 //
-// Two clouds per object: "scanner" (the scan as it is) and "taxel" (each scan point moved by
-// Gaussian noise of --noise m per axis, imitating underwater contact points; normals estimated
-// from the noisy points). Keypoints are the same target locations in both.
+// Three clouds per object: "scanner" (the scan as it is); "taxel" (each scan point moved by
+// Gaussian noise of --noise m per axis, a stand-in for contact points; normals estimated from the
+// noisy points); "contacts" (the exploration simulator's tactile contacts: --grasps random grasps
+// of the middle finger's distal pad under the --profile noise profile, fused as the recognizer
+// fuses them, Eq. 1-2 and the 2 mm voxel filter, then taken into the object frame by the true
+// object pose; normals by PCA over 1 cm turned away from the object's centre, as the scene turns
+// them away from the contacts' centroid; descriptors from the contacts alone, as a query's). A
+// keypoint of the contacts is the contact nearest to its target location, when one lies within
+// --reach (the pad does not reach every target: a cube's vertex or a rim is touched only by a
+// pad that straddles it); unreached targets are counted and left out.
 //
 // Output (DIR): D_<cloud>_<descriptor>.tsv, the 19 x 19 matrix of mean distances between the
 // keypoints of two shapes (distinct keypoints on the diagonal) divided by the matrix's largest
 // entry; separability.tsv; and on stdout the tables. scripts/study13_figure.py draws the maps.
 #include "datasets/catalogue/csg.hpp"
+#include "datasets/simulator.hpp"
 #include "engine/cloud.hpp"
 #include "engine/descriptors.hpp"
+#include "engine/fusion.hpp"
 #include "engine/mesh.hpp"
 #include "engine/scanner.hpp"
 #include "engine/search.hpp"
@@ -148,6 +158,7 @@ struct Keypoints {
   std::vector<int> shape;                 // shape index of each row
   std::vector<double> shot_agree;         // SHOT only: mass in cosine bins 6..10 (normals along +z of the frame)
   int invalid = 0;
+  int unreached = 0;                      // targets with no contact within --reach
 };
 
 double sq_distance(const std::vector<float>& a, const std::vector<float>& b) {
@@ -203,13 +214,21 @@ int main(int argc, char** argv) {
   int threads = 2;
   double noise = 0.001;
   std::uint64_t seed = 1;
+  std::size_t grasps = 300;
+  double reach = 0.005;
+  std::string profile = "underwater";
   CLI::App app{"study13_descriptors: the paper's Figure 9, four local descriptors on 19 basic shapes"};
   app.add_option("--out", out_dir, "Output folder (default study13)");
   app.add_option("--threads", threads, "Threads (default 2)")->check(CLI::Range(1, 1024));
   app.add_option("--noise", noise, "Taxel cloud: Gaussian noise per axis, m (default 0.001)")->check(CLI::Range(0.0, 0.01));
-  app.add_option("--seed", seed, "Seed of the scanner and of the noise (default 1)");
+  app.add_option("--seed", seed, "Seed of the scanner, the noise and the simulator (default 1)");
+  app.add_option("--grasps", grasps, "Contacts cloud: simulated grasps per object (default 300)")->check(CLI::Range(1, 100000));
+  app.add_option("--profile", profile, "Contacts cloud: the simulator's noise profile, ideal|underwater|deepsea (default underwater)");
+  app.add_option("--reach", reach, "Contacts cloud: a target's keypoint is the nearest contact within this, m (default 0.005)")
+      ->check(CLI::Range(1e-4, 0.05));
   CLI11_PARSE(app, argc, argv);
   try {
+    const ts::datasets::NoiseSettings noise_profile = ts::datasets::noise_profile(profile);
     tbb::task_arena arena(threads);
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<Object> objects = {cube(0.05), cube(0.10)};
@@ -220,13 +239,63 @@ int main(int argc, char** argv) {
       for (const auto& s : o.shapes) shape_names.push_back(s.name);
     const int shapes = static_cast<int>(shape_names.size());
     std::printf("study13_descriptors: %zu objects, %d shapes, feature radius %.3f m, normal radius %.3f m, "
-                "taxel noise %.4f m, seed %llu, %d thread(s), %s\n",
-                objects.size(), shapes, kFeatureRadius, kNormalRadius, noise,
+                "taxel noise %.4f m, contacts: %zu grasps, %s noise, reach %.4f m, seed %llu, %d thread(s), %s\n",
+                objects.size(), shapes, kFeatureRadius, kNormalRadius, noise, grasps, profile.c_str(), reach,
                 static_cast<unsigned long long>(seed), threads, ts::cli::machine_description().c_str());
 
-    const char* clouds[2] = {"scanner", "taxel"};
-    std::vector<Keypoints> keys(2 * std::size(ts::kAllDescriptors));   // [cloud * 4 + descriptor]
-    std::size_t fine_points = 0;
+    constexpr int kClouds = 3;
+    const char* clouds[kClouds] = {"scanner", "taxel", "contacts"};
+    std::vector<Keypoints> keys(kClouds * std::size(ts::kAllDescriptors));   // [cloud * 4 + descriptor]
+    std::size_t fine_points = 0, contact_points = 0, contact_grasps = 0;
+    // Keypoints of one cloud (object frame, unit outward normals; a zero normal: no normal) at
+    // the object's targets: the nearest point with a normal, within `reach` (0: any distance).
+    const auto describe = [&](int c, const ts::PointCloud& cloud, const Object& o, int shape_base, double reach) {
+      ts::PointCloud surf;
+      for (std::size_t i = 0; i < cloud.size(); ++i)
+        if (cloud.normals[i].squaredNorm() > 0.5) {
+          surf.points.push_back(cloud.points[i]);
+          surf.normals.push_back(cloud.normals[i]);
+        }
+      if (surf.size() < 3) throw ts::Error("study 13: " + o.name + ": fewer than 3 points with normals in the " + clouds[c] + " cloud");
+      const ts::KdTree3 tree(surf.points);
+      std::vector<Vec3> kp, kn;
+      std::vector<int> label;
+      int unreached = 0;
+      for (std::size_t si = 0; si < o.shapes.size(); ++si)
+        for (const Vec3& t : o.shapes[si].targets) {
+          const auto nearest = tree.nearest(t);
+          if (reach > 0 && nearest.sq_distance > reach * reach) {
+            ++unreached;
+            continue;
+          }
+          kp.push_back(surf.points[nearest.index]);
+          kn.push_back(surf.normals[nearest.index]);
+          label.push_back(shape_base + static_cast<int>(si));
+        }
+      ts::DescriptorSettings ds;
+      ds.feature_radius = kFeatureRadius;
+      for (std::size_t di = 0; di < std::size(ts::kAllDescriptors); ++di) {
+        const ts::Descriptor d = ts::kAllDescriptors[di];
+        const ts::Descriptors res = ts::compute_descriptors(d, kp, kn, surf, tree, ds);
+        Keypoints& k = keys[c * 4 + di];
+        k.unreached += unreached;
+        for (std::size_t i = 0; i < kp.size(); ++i) {
+          if (!res.valid[i]) {
+            ++k.invalid;
+            continue;
+          }
+          const auto row = res.row(i);
+          k.rows.emplace_back(row.begin(), row.end());
+          k.shape.push_back(label[i]);
+          if (d == ts::Descriptor::shot) {
+            double agree = 0;
+            for (int v = 0; v < 32; ++v)
+              for (int b = 6; b <= 10; ++b) agree += double(row[v * 11 + b]) * row[v * 11 + b];
+            k.shot_agree.push_back(agree);   // of the squared mass (the norm is 1)
+          }
+        }
+      }
+    };
     arena.execute([&] {
       int shape_base = 0;
       for (std::size_t oi = 0; oi < objects.size(); ++oi) {
@@ -240,53 +309,48 @@ int main(int argc, char** argv) {
             ts::Rng rng(seed, 10, oi);
             for (Vec3& p : pts) p += noise * Vec3(rng.normal(), rng.normal(), rng.normal());
           }
-          const ts::PointCloud cloud = with_pca_normals(std::move(pts), scan.fine.normals);
-          const ts::KdTree3 tree(cloud.points);
-          std::vector<Vec3> kp, kn;
-          std::vector<int> label;
-          for (std::size_t si = 0; si < o.shapes.size(); ++si)
-            for (const Vec3& t : o.shapes[si].targets) {
-              const auto nearest = tree.nearest(t);
-              kp.push_back(cloud.points[nearest.index]);
-              kn.push_back(cloud.normals[nearest.index]);
-              label.push_back(shape_base + static_cast<int>(si));
-            }
-          ts::DescriptorSettings ds;
-          ds.feature_radius = kFeatureRadius;
-          for (std::size_t di = 0; di < std::size(ts::kAllDescriptors); ++di) {
-            const ts::Descriptor d = ts::kAllDescriptors[di];
-            const ts::Descriptors res = ts::compute_descriptors(d, kp, kn, cloud, tree, ds);
-            Keypoints& k = keys[c * 4 + di];
-            for (std::size_t i = 0; i < kp.size(); ++i) {
-              if (!res.valid[i]) {
-                ++k.invalid;
-                continue;
-              }
-              const auto row = res.row(i);
-              k.rows.emplace_back(row.begin(), row.end());
-              k.shape.push_back(label[i]);
-              if (d == ts::Descriptor::shot) {
-                double agree = 0;
-                for (int v = 0; v < 32; ++v)
-                  for (int b = 6; b <= 10; ++b) agree += double(row[v * 11 + b]) * row[v * 11 + b];
-                k.shot_agree.push_back(agree);   // of the squared mass (the norm is 1)
-              }
-            }
-          }
+          describe(c, with_pca_normals(std::move(pts), scan.fine.normals), o, shape_base, 0.0);
         }
+        // The exploration simulator's contacts, fused as a query's, in the object frame.
+        ts::datasets::SimulatorSettings ss;
+        ss.grasps = grasps;
+        ss.noise = noise_profile;
+        ss.seed = seed + oi;
+        const ts::datasets::Simulator sim(o.mesh, o.name, ts::Gripper(), ss);
+        const ts::datasets::SimulationResult run = sim.run();
+        contact_grasps += run.grasps_with_contact;
+        const ts::ExplorationClouds ec = ts::exploration_clouds(run.log, run.log.grasps.size());
+        const ts::Pose T_object_world = sim.object_pose().inverse();
+        std::vector<Vec3> pts;
+        pts.reserve(ec.contacts.size());
+        for (const Vec3& p : ec.contacts.points) pts.push_back(T_object_world * p);
+        contact_points += pts.size();
+        ts::NormalSettings ns;
+        ns.radius = kNormalRadius;
+        std::vector<Vec3> n = ts::estimate_normals(pts, ns);
+        for (std::size_t i = 0; i < n.size(); ++i) {
+          if (!ts::finite(n[i]) || n[i].squaredNorm() < 0.5) {
+            n[i] = Vec3::Zero();
+            continue;
+          }
+          n[i].normalize();
+          if (n[i].dot(pts[i]) < 0) n[i] = -n[i];   // away from the centre (the object frame's origin)
+        }
+        describe(2, ts::PointCloud{std::move(pts), std::move(n)}, o, shape_base, reach);
         shape_base += static_cast<int>(o.shapes.size());
       }
     });
-    std::printf("scans: %zu fine points in all, %.1f s\n", fine_points,
+    std::printf("scans: %zu fine points in all; contacts: %zu after the voxel filter, %zu of %zu grasps touched; %.1f s\n",
+                fine_points, contact_points, contact_grasps, grasps * objects.size(),
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 
     std::filesystem::create_directories(out_dir);
     std::ofstream sep(std::filesystem::path(out_dir) / "separability.tsv");
-    sep << "cloud\tdescriptor\tkeypoints\tinvalid\tbetween\twithin\tratio\tnn_same_shape\n";
-    std::printf("\n%-8s %-5s %9s %7s %10s %10s %7s %8s\n", "cloud", "desc", "keypoints", "invalid", "between",
-                "within", "ratio", "1-NN");
+    sep << "cloud\tdescriptor\tkeypoints\tinvalid\tunreached\tbetween\twithin\tratio\tnn_same_shape\n";
+    std::printf("\n%-8s %-5s %9s %7s %9s %10s %10s %7s %8s\n", "cloud", "desc", "keypoints", "invalid", "unreached",
+                "between", "within", "ratio", "1-NN");
     std::vector<std::vector<double>> matrices(keys.size());
-    for (int c = 0; c < 2; ++c)
+    for (int c = 0; c < kClouds; ++c)
       for (std::size_t di = 0; di < std::size(ts::kAllDescriptors); ++di) {
         const Keypoints& k = keys[c * 4 + di];
         const std::string name = ts::descriptor_name(ts::kAllDescriptors[di]);
@@ -309,9 +373,9 @@ int main(int argc, char** argv) {
         between /= std::max(nb, 1);
         within /= std::max(nw, 1);
         const double nn = nearest_same_shape(k);
-        std::printf("%-8s %-5s %9zu %7d %10.4g %10.4g %7.2f %8.3f\n", clouds[c], name.c_str(), k.rows.size(),
-                    k.invalid, between, within, between / within, nn);
-        sep << clouds[c] << '\t' << name << '\t' << k.rows.size() << '\t' << k.invalid << '\t' << between << '\t'
+        std::printf("%-8s %-5s %9zu %7d %9d %10.4g %10.4g %7.2f %8.3f\n", clouds[c], name.c_str(), k.rows.size(),
+                    k.invalid, k.unreached, between, within, between / within, nn);
+        sep << clouds[c] << '\t' << name << '\t' << k.rows.size() << '\t' << k.invalid << '\t' << k.unreached << '\t' << between << '\t'
             << within << '\t' << between / within << '\t' << nn << '\n';
         std::ofstream f(std::filesystem::path(out_dir) / ("D_" + std::string(clouds[c]) + "_" + name + ".tsv"));
         f << "shape";
@@ -356,7 +420,7 @@ int main(int argc, char** argv) {
     };
     std::ofstream obs(std::filesystem::path(out_dir) / "observations.tsv");
     obs << "cloud\tcomparison\tdescriptor\tbetween\twithin\n";
-    for (int c = 0; c < 2; ++c) {
+    for (int c = 0; c < kClouds; ++c) {
       std::printf("\n%s cloud: between / within, normalized distances (between the shapes compared; within those shapes)\n",
                   clouds[c]);
       std::printf("%-36s", "comparison");
@@ -386,7 +450,7 @@ int main(int argc, char** argv) {
     // which on a plane is a tie broken by rounding. Share of the squared descriptor mass in
     // cosine bins 6..10 (normals along the frame's +z): near 1 or near 0 per keypoint.
     std::printf("\nSHOT: keypoints whose frame's z axis agrees with the outward normals (mass in cosine bins 6..10 > 0.5)\n");
-    for (int c = 0; c < 2; ++c) {
+    for (int c = 0; c < kClouds; ++c) {
       const Keypoints& k = keys[c * 4 + 2];
       std::printf("%-8s", clouds[c]);
       for (int s = 0; s < shapes; ++s) {
