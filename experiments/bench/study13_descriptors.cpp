@@ -27,7 +27,8 @@
 //
 // Output (DIR): D_<cloud>_<descriptor>.tsv, the 19 x 19 matrix of mean distances between the
 // keypoints of two shapes (distinct keypoints on the diagonal) divided by the matrix's largest
-// entry; separability.tsv; and on stdout the tables. scripts/study13_figure.py draws the maps.
+// entry; separability.tsv; cross.tsv (each noisy or contact keypoint's nearest scanner keypoint:
+// of the same shape?); and on stdout the tables. scripts/study13_figure.py draws the maps.
 #include "datasets/catalogue/csg.hpp"
 #include "datasets/simulator.hpp"
 #include "engine/cloud.hpp"
@@ -205,6 +206,31 @@ double nearest_same_shape(const Keypoints& k) {
     if (tied > 0) same += static_cast<double>(tied_same) / tied;
   }
   return k.rows.empty() ? 0.0 : same / static_cast<double>(k.rows.size());
+}
+
+/// Fraction of the query rows whose nearest row of `reference` (Euclidean) belongs to the same
+/// shape, ties shared as above: how a query computed on one kind of cloud finds its place among
+/// descriptors computed on another (a database is built from scans, queried with contacts).
+double cross_nearest_same_shape(const Keypoints& query, const Keypoints& reference) {
+  double same = 0;
+  for (std::size_t i = 0; i < query.rows.size(); ++i) {
+    double best = INFINITY;
+    int tied = 0, tied_same = 0;
+    for (std::size_t j = 0; j < reference.rows.size(); ++j) {
+      const double s = sq_distance(query.rows[i], reference.rows[j]);
+      if (s < best) {
+        best = s;
+        tied = 0;
+        tied_same = 0;
+      }
+      if (s == best) {
+        ++tied;
+        tied_same += reference.shape[j] == query.shape[i];
+      }
+    }
+    if (tied > 0) same += static_cast<double>(tied_same) / tied;
+  }
+  return query.rows.empty() ? 0.0 : same / static_cast<double>(query.rows.size());
 }
 
 }  // namespace
@@ -390,6 +416,24 @@ int main(int argc, char** argv) {
         matrices[c * 4 + di] = std::move(m);
       }
 
+    // Across clouds: each contact keypoint's nearest scanner keypoint (a query against a
+    // database built from scans), and each noisy keypoint's.
+    std::printf("\nacross clouds: share of keypoints whose nearest keypoint of the scanner cloud is of the same shape\n");
+    std::printf("%-8s", "query");
+    for (ts::Descriptor d : ts::kAllDescriptors) std::printf(" %6s", ts::descriptor_name(d).c_str());
+    std::printf("\n");
+    std::ofstream cross(std::filesystem::path(out_dir) / "cross.tsv");
+    cross << "query_cloud\treference_cloud\tdescriptor\tnn_same_shape\n";
+    for (int c = 1; c < kClouds; ++c) {
+      std::printf("%-8s", clouds[c]);
+      for (std::size_t di = 0; di < std::size(ts::kAllDescriptors); ++di) {
+        const double nn = cross_nearest_same_shape(keys[c * 4 + di], keys[di]);
+        std::printf(" %6.3f", nn);
+        cross << clouds[c] << "\tscanner\t" << ts::descriptor_name(ts::kAllDescriptors[di]) << '\t' << nn << '\n';
+      }
+      std::printf("\n");
+    }
+
     // The paper's observations: per comparison the mean normalized distance between the shapes
     // named (matrix / its largest entry) against the mean normalized within-shape distance of
     // those same shapes (their diagonal entries): a comparison is told apart when the first is
@@ -464,7 +508,7 @@ int main(int argc, char** argv) {
       }
       std::printf("\n");
     }
-    std::printf("\nwrote %s/ (D_*.tsv, separability.tsv, observations.tsv), %.1f s\n", out_dir.c_str(),
+    std::printf("\nwrote %s/ (D_*.tsv, separability.tsv, cross.tsv, observations.tsv), %.1f s\n", out_dir.c_str(),
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   } catch (const std::exception& e) {
     std::fprintf(stderr, "study13_descriptors: %s\n", e.what());
