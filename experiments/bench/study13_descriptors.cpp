@@ -182,41 +182,20 @@ std::vector<double> distance_matrix(const Keypoints& k, int shapes) {
   return sum;
 }
 
-/// Fraction of rows whose nearest other row (Euclidean) belongs to the same shape. Rows at
-/// exactly the same smallest distance share the credit (identical descriptors of different
-/// shapes, e.g. two flat faces, count as a coin toss, not as the lower index).
-double nearest_same_shape(const Keypoints& k) {
-  double same = 0;
-  for (std::size_t i = 0; i < k.rows.size(); ++i) {
-    double best = INFINITY;
-    int tied = 0, tied_same = 0;
-    for (std::size_t j = 0; j < k.rows.size(); ++j) {
-      if (i == j) continue;
-      const double s = sq_distance(k.rows[i], k.rows[j]);
-      if (s < best) {
-        best = s;
-        tied = 0;
-        tied_same = 0;
-      }
-      if (s == best) {
-        ++tied;
-        tied_same += k.shape[j] == k.shape[i];
-      }
-    }
-    if (tied > 0) same += static_cast<double>(tied_same) / tied;
-  }
-  return k.rows.empty() ? 0.0 : same / static_cast<double>(k.rows.size());
-}
-
 /// Fraction of the query rows whose nearest row of `reference` (Euclidean) belongs to the same
-/// shape, ties shared as above: how a query computed on one kind of cloud finds its place among
-/// descriptors computed on another (a database is built from scans, queried with contacts).
-double cross_nearest_same_shape(const Keypoints& query, const Keypoints& reference) {
+/// shape. Rows at exactly the same smallest distance share the credit (identical descriptors of
+/// different shapes, e.g. two flat faces, count as a coin toss, not as the lower index). With
+/// the same set as query and reference, a row's nearest other row; across clouds, how a query
+/// computed on one kind of cloud finds its place among descriptors computed on another (a
+/// database is built from scans, queried with contacts).
+double nearest_same_shape(const Keypoints& query, const Keypoints& reference) {
+  const bool self = &query == &reference;
   double same = 0;
   for (std::size_t i = 0; i < query.rows.size(); ++i) {
     double best = INFINITY;
     int tied = 0, tied_same = 0;
     for (std::size_t j = 0; j < reference.rows.size(); ++j) {
+      if (self && i == j) continue;
       const double s = sq_distance(query.rows[i], reference.rows[j]);
       if (s < best) {
         best = s;
@@ -398,7 +377,7 @@ int main(int argc, char** argv) {
           }
         between /= std::max(nb, 1);
         within /= std::max(nw, 1);
-        const double nn = nearest_same_shape(k);
+        const double nn = nearest_same_shape(k, k);
         std::printf("%-8s %-5s %9zu %7d %9d %10.4g %10.4g %7.2f %8.3f\n", clouds[c], name.c_str(), k.rows.size(),
                     k.invalid, k.unreached, between, within, between / within, nn);
         sep << clouds[c] << '\t' << name << '\t' << k.rows.size() << '\t' << k.invalid << '\t' << k.unreached << '\t' << between << '\t'
@@ -427,7 +406,7 @@ int main(int argc, char** argv) {
     for (int c = 1; c < kClouds; ++c) {
       std::printf("%-8s", clouds[c]);
       for (std::size_t di = 0; di < std::size(ts::kAllDescriptors); ++di) {
-        const double nn = cross_nearest_same_shape(keys[c * 4 + di], keys[di]);
+        const double nn = nearest_same_shape(keys[c * 4 + di], keys[di]);
         std::printf(" %6.3f", nn);
         cross << clouds[c] << "\tscanner\t" << ts::descriptor_name(ts::kAllDescriptors[di]) << '\t' << nn << '\n';
       }
