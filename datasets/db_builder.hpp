@@ -14,7 +14,7 @@
 // error naming the manifest and the folder.
 #pragma once
 
-#include "engine/database.hpp"
+#include "engine/database/database.hpp"
 #include "io/db_store.hpp"
 #include "io/mesh_import.hpp"
 

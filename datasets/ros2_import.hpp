@@ -29,7 +29,7 @@
 // are 1 (the calibration is not in the recording).
 #pragma once
 
-#include "engine/fusion.hpp"
+#include "engine/touch/fusion.hpp"
 
 #include <filesystem>
 #include <string>

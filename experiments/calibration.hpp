@@ -14,7 +14,7 @@
 // when right) and of the paper preset (0.85-0.98) are not probabilities; this is.
 #pragma once
 
-#include "engine/recognizer.hpp"
+#include "engine/recognition/recognizer.hpp"
 
 #include <nlohmann/json.hpp>
 

@@ -2,7 +2,7 @@
 
 #include "experiments/allocator.hpp"
 
-#include "engine/database.hpp"
+#include "engine/database/database.hpp"
 
 #include "engine/core.hpp"
 

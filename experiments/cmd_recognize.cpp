@@ -11,13 +11,13 @@
 #include "experiments/report.hpp"
 #include "experiments/scene.hpp"
 
-#include "engine/feature_table.hpp"
-#include "engine/active_touch.hpp"
-#include "engine/fusion.hpp"
-#include "engine/kabsch.hpp"
-#include "engine/pose_error.hpp"
-#include "engine/recognizer.hpp"
-#include "engine/symmetry.hpp"
+#include "engine/features/feature_table.hpp"
+#include "engine/touch/active_touch.hpp"
+#include "engine/touch/fusion.hpp"
+#include "engine/geometry/kabsch.hpp"
+#include "engine/geometry/pose_error.hpp"
+#include "engine/recognition/recognizer.hpp"
+#include "engine/geometry/symmetry.hpp"
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
 #include "io/log_store.hpp"
@@ -287,7 +287,7 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
   if (progress) std::fprintf(stderr, "\n");
 
   if (o.suggest > 0) {
-    // The N best next grasps on the state after the last step (engine/active_touch.hpp).
+    // The N best next grasps on the state after the last step (engine/touch/active_touch.hpp).
     if (!log) throw Error("--suggest plans the next grasp of a tactile log (not a contact cloud)", in.path, "--suggest");
     if (log->sensing == Sensing::probe)
       throw Error("--suggest plans grasps of a gripper with pads; this is a probe log", in.path, "/sensing");

@@ -3,7 +3,7 @@
 // tactile log it makes.
 #include "datasets/ros2_import.hpp"
 #include "datasets/simulator.hpp"
-#include "engine/fusion.hpp"
+#include "engine/touch/fusion.hpp"
 #include "experiments/cli_common.hpp"
 #include "experiments/config.hpp"
 #include "experiments/grasp_pools.hpp"

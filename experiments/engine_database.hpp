@@ -3,10 +3,10 @@
 // distinct subset, shared by the variants that use it).
 #pragma once
 
-#include "engine/database.hpp"
-#include "engine/feature_table.hpp"
-#include "engine/shape_prior.hpp"
-#include "engine/search.hpp"
+#include "engine/database/database.hpp"
+#include "engine/features/feature_table.hpp"
+#include "engine/features/shape_prior.hpp"
+#include "engine/geometry/search.hpp"
 
 #include <nlohmann/json.hpp>
 

@@ -1,6 +1,6 @@
 #include "experiments/grasp_pools.hpp"
 
-#include "engine/gripper.hpp"
+#include "engine/touch/gripper.hpp"
 #include "experiments/driver.hpp"
 #include "io/log_store.hpp"
 

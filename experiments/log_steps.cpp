@@ -1,6 +1,6 @@
 #include "experiments/log_steps.hpp"
 
-#include "engine/sparse_hypotheses.hpp"
+#include "engine/recognition/sparse_hypotheses.hpp"
 
 namespace ts::experiments {
 

@@ -4,9 +4,9 @@
 // it, so that both give the same answers for the same log and seed.
 #pragma once
 
-#include "engine/database.hpp"
-#include "engine/fusion.hpp"
-#include "engine/recognizer.hpp"
+#include "engine/database/database.hpp"
+#include "engine/touch/fusion.hpp"
+#include "engine/recognition/recognizer.hpp"
 
 #include <cstddef>
 #include <vector>

@@ -115,7 +115,7 @@ MeanInterval mean_t_interval(std::span<const double> values, double level = 0.95
 // --- Pose errors ---------------------------------------------------------------------------------
 
 // The position and orientation errors (Section 5.2, Eq. 10; symmetry-aware too) are the
-// engine's: pose_error() in engine/pose_error.hpp.
+// engine's: pose_error() in engine/geometry/pose_error.hpp.
 /// BOP Maximum Symmetry-aware Surface Distance (Hodan et al. 2020):
 /// min_S max_x || T_est x - T_truth S x || over model points x (object frame). The identity is
 /// always considered. No points gives 0.

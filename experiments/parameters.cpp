@@ -243,7 +243,7 @@ std::vector<Parameter> declaration() {
   // Contact fusion.
   d.push_back(real("exploration.contact_voxel_m", "m", 1e-6, 1, "", "Voxel filter of the cumulative contact cloud",
                    {"--contact-voxel", "contact_voxel"}, TS_FIELD(contact_voxel)));
-  // Active touch (engine/active_touch.hpp): experiments choose each grasp after the first with
+  // Active touch (engine/touch/active_touch.hpp): experiments choose each grasp after the first with
   // the planner; `recognize --suggest` reads the planner's parameters.
   {
     Parameter p = declare("exploration.strategy", Type::choice, "", 0, 1, "random (Section 5.1: the operator's grasps)",

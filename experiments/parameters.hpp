@@ -23,8 +23,8 @@
 // `touchstone params --markdown`; a test checks it is current).
 #pragma once
 
-#include "engine/active_touch.hpp"
-#include "engine/recognizer.hpp"
+#include "engine/touch/active_touch.hpp"
+#include "engine/recognition/recognizer.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -47,7 +47,7 @@ struct MethodSettings {
   RecognizerSettings recognizer;
   double contact_voxel = 0.002;   ///< m, voxel filter of the cumulative contact cloud
   int exploration = 0;            ///< 0: random grasps (the operator's), 1: active (the planner's)
-  ActiveSettings active;          ///< the next-grasp planner (engine/active_touch.hpp)
+  ActiveSettings active;          ///< the next-grasp planner (engine/touch/active_touch.hpp)
 
   /// A preset's settings: "paper" (the paper's method exactly) or "improved" (Touchstone's
   /// extensions). Throws ts::Error on another name.

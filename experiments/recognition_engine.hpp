@@ -1,9 +1,9 @@
 // The real RunEngine: simulated grasp pools (datasets/simulator) explored by the recognizer
-// (engine/recognizer), scored against the simulator's ground truth.
+// (engine/recognition/recognizer), scored against the simulator's ground truth.
 //
 // A pool is an object at a random pose and `pool` random grasps on it (Section 5.1: the object
 // stays fixed, the hand grasps it at random places). A run draws `steps` distinct grasps from a
-// pool in random order (Section 5.2), fuses them step by step (engine/fusion: cumulative
+// pool in random order (Section 5.2), fuses them step by step (engine/touch/fusion: cumulative
 // contacts and free space) and runs the recognizer on each step. Protocol (config `protocol`):
 //   independent (default): every run has its own pool, simulated lazily inside the run (only
 //     the drawn grasps; nothing is kept), so runs are independent samples of pose and grasps;
@@ -26,7 +26,7 @@
 #include "experiments/driver.hpp"
 #include "experiments/engine_database.hpp"
 #include "experiments/grasp_pools.hpp"
-#include "engine/database.hpp"
+#include "engine/database/database.hpp"
 
 #include <nlohmann/json.hpp>
 

@@ -5,8 +5,8 @@
 // (two views) and a self-contained interactive HTML page (no network at viewing time).
 #pragma once
 
-#include "engine/database.hpp"
-#include "engine/recognizer.hpp"
+#include "engine/database/database.hpp"
+#include "engine/recognition/recognizer.hpp"
 
 #include <nlohmann/json.hpp>
 

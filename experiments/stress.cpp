@@ -1,11 +1,11 @@
 #include "experiments/stress.hpp"
 
-#include "engine/database.hpp"
-#include "engine/icp.hpp"
-#include "engine/mesh.hpp"
-#include "engine/pose_error.hpp"
-#include "engine/recognizer.hpp"
-#include "engine/scene.hpp"
+#include "engine/database/database.hpp"
+#include "engine/recognition/icp.hpp"
+#include "engine/geometry/mesh.hpp"
+#include "engine/geometry/pose_error.hpp"
+#include "engine/recognition/recognizer.hpp"
+#include "engine/recognition/scene.hpp"
 #include "io/result_store.hpp"
 
 #include <CLI/CLI.hpp>

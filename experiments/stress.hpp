@@ -4,7 +4,7 @@
 // the recognizer (the improved or the paper preset) over synthetic tactile patches of known
 // objects at known poses, and reports the errors, how often the answer is flagged ambiguous
 // (StepResult::pose_ambiguous), the condition of the ICP normal equations at the answer
-// (engine/icp.hpp icp_system) and whether any output (JSON, result stores) held a NaN or an
+// (engine/recognition/icp.hpp icp_system) and whether any output (JSON, result stores) held a NaN or an
 // infinity.
 //
 // The objects: five asymmetric prisms (irregular polygon sections, slanted tops) whose largest

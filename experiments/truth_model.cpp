@@ -1,7 +1,7 @@
 #include "experiments/truth_model.hpp"
 
-#include "engine/pose_error.hpp"
-#include "engine/search.hpp"
+#include "engine/geometry/pose_error.hpp"
+#include "engine/geometry/search.hpp"
 #include "experiments/metrics.hpp"
 
 #include <Eigen/Geometry>

@@ -3,7 +3,7 @@
 #pragma once
 
 #include "engine/core.hpp"
-#include "engine/symmetry.hpp"
+#include "engine/geometry/symmetry.hpp"
 
 #include <vector>
 

@@ -19,14 +19,14 @@
 //       ...]
 //   }
 //
-// Frames and conventions: see engine/gripper.hpp. rpy_deg = [roll, pitch, yaw] with
+// Frames and conventions: see engine/touch/gripper.hpp. rpy_deg = [roll, pitch, yaw] with
 // R = Rz(yaw) Ry(pitch) Rx(roll); "q_wxyz": [w, x, y, z] is accepted instead of rpy_deg.
 // "palm", "sensor", "single_pad" and each joint's "origin_m" (default: the parent link's tip,
 // (0, 0, parent length)) are optional; everything else is required.
 // datasets/grippers/touchstone-3f.json is the compiled-in default (ts::default_gripper_spec()).
 #pragma once
 
-#include "engine/gripper.hpp"
+#include "engine/touch/gripper.hpp"
 
 #include <filesystem>
 #include <string>

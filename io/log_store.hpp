@@ -13,7 +13,7 @@
 // All functions take the HDF5 wrapper's global mutex; call them from any thread.
 #pragma once
 
-#include "engine/fusion.hpp"
+#include "engine/touch/fusion.hpp"
 
 #include <filesystem>
 #include <memory>

@@ -19,8 +19,8 @@
 #pragma once
 
 #include "engine/core.hpp"
-#include "engine/database.hpp"
-#include "engine/mesh.hpp"
+#include "engine/database/database.hpp"
+#include "engine/geometry/mesh.hpp"
 
 #include <filesystem>
 #include <optional>

@@ -4,8 +4,8 @@
 // depend only on the inputs, settings and seed (no timings, no thread count, no timestamps).
 #pragma once
 
-#include "engine/pose_error.hpp"
-#include "engine/recognizer.hpp"
+#include "engine/geometry/pose_error.hpp"
+#include "engine/recognition/recognizer.hpp"
 
 #include <filesystem>
 #include <optional>

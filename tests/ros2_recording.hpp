@@ -2,7 +2,7 @@
 // `log import` (datasets/ros2_import.hpp).
 #pragma once
 
-#include "engine/fusion.hpp"
+#include "engine/touch/fusion.hpp"
 #include "io/mcap.hpp"
 #include "io/ros2_messages.hpp"
 

@@ -1,6 +1,6 @@
 #include "datasets/catalogue/catalogue.hpp"
 
-#include "engine/mesh.hpp"
+#include "engine/geometry/mesh.hpp"
 #include "io/mesh_export.hpp"
 
 #include <Eigen/Eigenvalues>

@@ -14,11 +14,11 @@
 // Run from the repository root (the manifest's relative paths resolve against its folder).
 #include "datasets/archive.hpp"
 #include "datasets/manifest.hpp"
-#include "engine/cloud.hpp"
-#include "engine/distance_field.hpp"
-#include "engine/fpfh.hpp"
-#include "engine/scanner.hpp"
-#include "engine/search.hpp"
+#include "engine/geometry/cloud.hpp"
+#include "engine/geometry/distance_field.hpp"
+#include "engine/features/fpfh.hpp"
+#include "engine/geometry/scanner.hpp"
+#include "engine/geometry/search.hpp"
 #include "experiments/cli_common.hpp"
 #include "io/mesh_import.hpp"
 

@@ -21,10 +21,10 @@
 //
 // Prints the machine, thread counts, parameters and every figure.
 #include "datasets/simulator.hpp"
-#include "engine/fusion.hpp"
-#include "engine/pose_error.hpp"
-#include "engine/recognizer.hpp"
-#include "engine/symmetry.hpp"
+#include "engine/touch/fusion.hpp"
+#include "engine/geometry/pose_error.hpp"
+#include "engine/recognition/recognizer.hpp"
+#include "engine/geometry/symmetry.hpp"
 #include "experiments/allocator.hpp"
 #include "experiments/cli_common.hpp"
 #include "experiments/config.hpp"

@@ -10,8 +10,8 @@
 // Run from the repository root (the manifest's relative paths resolve against its folder).
 #include "datasets/archive.hpp"
 #include "datasets/manifest.hpp"
-#include "engine/database.hpp"
-#include "engine/scanner.hpp"
+#include "engine/database/database.hpp"
+#include "engine/geometry/scanner.hpp"
 #include "experiments/cli_common.hpp"
 #include "io/mesh_import.hpp"
 

@@ -1,4 +1,4 @@
-// Benchmark of the object shortlist (engine/shortlist.hpp) on a database file with simulated
+// Benchmark of the object shortlist (engine/recognition/shortlist.hpp) on a database file with simulated
 // tactile logs: how often the explored object is among the K objects the shortlist keeps
 // (recall@K), per step, and what the screening costs. For comparison, the same recall for
 // object evidence from features alone (naive Bayes nearest neighbour: every object's nearest
@@ -12,10 +12,10 @@
 // Also the geometry an explored object holds in memory (what --memory-budget counts). Prints
 // the machine, thread count and every figure.
 #include "datasets/simulator.hpp"
-#include "engine/fusion.hpp"
-#include "engine/ransac.hpp"
-#include "engine/recognizer.hpp"
-#include "engine/shortlist.hpp"
+#include "engine/touch/fusion.hpp"
+#include "engine/recognition/ransac.hpp"
+#include "engine/recognition/recognizer.hpp"
+#include "engine/recognition/shortlist.hpp"
 #include "experiments/cli_common.hpp"
 #include "experiments/parameters.hpp"
 #include "io/db_store.hpp"

@@ -1,5 +1,5 @@
 // Study 13 (issue 18 calls it study 10; Hardening's stress study has that number): the paper's Figure 9 (Section 4.3.1). Four local descriptors (FPFH, PFH, SHOT,
-// Spin Images; engine/descriptors.hpp) on the paper's nine primitive objects and their 19 basic
+// Spin Images; engine/features/descriptors.hpp) on the paper's nine primitive objects and their 19 basic
 // shapes, the Euclidean distance between the descriptors of every pair of shapes as a 19 x 19
 // matrix per descriptor, and how well each descriptor separates the shapes.
 //
@@ -8,7 +8,7 @@
 //
 // Objects (object frame, centred): cubes of side 5 and 10 cm; cylinders of radius 3, 5 and
 // 10 cm, height 5 cm (axis z); spheres of radius 3, 5, 10 and 15 cm. Each is scanned by the
-// simulated laser scanner (engine/scanner.hpp, default ScanSettings: 1.5 mm fine cloud), normals
+// simulated laser scanner (engine/geometry/scanner.hpp, default ScanSettings: 1.5 mm fine cloud), normals
 // re-estimated by PCA over 1 cm (the paper's normal radius) and turned outward. Keypoints are
 // scan points nearest to 12 target locations per shape, chosen by geometry (a cube's corners,
 // edge midpoints, face centres; a cylinder's rims, side at mid-height, caps; points spread over
@@ -31,12 +31,12 @@
 // of the same shape?); and on stdout the tables. scripts/study13_figure.py draws the maps.
 #include "datasets/catalogue/csg.hpp"
 #include "datasets/simulator.hpp"
-#include "engine/cloud.hpp"
-#include "engine/descriptors.hpp"
-#include "engine/fusion.hpp"
-#include "engine/mesh.hpp"
-#include "engine/scanner.hpp"
-#include "engine/search.hpp"
+#include "engine/geometry/cloud.hpp"
+#include "engine/features/descriptors.hpp"
+#include "engine/touch/fusion.hpp"
+#include "engine/geometry/mesh.hpp"
+#include "engine/geometry/scanner.hpp"
+#include "engine/geometry/search.hpp"
 #include "experiments/cli_common.hpp"
 
 #include <CLI/CLI.hpp>

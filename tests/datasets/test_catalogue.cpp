@@ -2,7 +2,7 @@
 // determinism, congruence rejection, configuration errors and readable output.
 #include "datasets/catalogue/catalogue.hpp"
 #include "datasets/manifest.hpp"
-#include "engine/mesh.hpp"
+#include "engine/geometry/mesh.hpp"
 #include "io/mesh_import.hpp"
 #include "mesh_fixtures.hpp"
 #include "temp_dir.hpp"

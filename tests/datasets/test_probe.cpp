@@ -3,7 +3,7 @@
 // the log written and read back (format_version 2), identical logs for 1 and 2 threads.
 #include "datasets/simulator.hpp"
 #include "engine/recognition_fixture.hpp"
-#include "engine/fusion.hpp"
+#include "engine/touch/fusion.hpp"
 #include "io/h5.hpp"
 #include "io/log_store.hpp"
 #include "temp_dir.hpp"

@@ -1,7 +1,7 @@
 // The exploration simulator: contacts on the true surface and free space outside the object
 // with ideal noise, byte-identical logs for any thread count, noise profiles, bad settings.
 #include "datasets/simulator.hpp"
-#include "engine/fusion.hpp"
+#include "engine/touch/fusion.hpp"
 #include "io/log_store.hpp"
 #include "temp_dir.hpp"
 

@@ -1,9 +1,9 @@
-// Test oracle of OccupancyGrid::full_free_cloud (engine/free_space.hpp): the recognizer's
+// Test oracle of OccupancyGrid::full_free_cloud (engine/touch/free_space.hpp): the recognizer's
 // free-space cloud PC^free (Section 4.1.2) by brute force over every free voxel: one point per
 // cube of size res that is ENTIRELY free, at the cube's centre, inside the box B of Eq. 3.
 #pragma once
 
-#include "engine/free_space.hpp"
+#include "engine/touch/free_space.hpp"
 
 #include <algorithm>
 #include <array>

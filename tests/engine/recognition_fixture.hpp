@@ -4,10 +4,10 @@
 // taken from an object placed at a known pose.
 #pragma once
 
-#include "engine/database.hpp"
-#include "engine/recognizer.hpp"
-#include "engine/fpfh.hpp"
-#include "engine/search.hpp"
+#include "engine/database/database.hpp"
+#include "engine/recognition/recognizer.hpp"
+#include "engine/features/fpfh.hpp"
+#include "engine/geometry/search.hpp"
 
 #include <cmath>
 #include <functional>

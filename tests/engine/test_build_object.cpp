@@ -1,4 +1,4 @@
-#include "engine/database.hpp"
+#include "engine/database/database.hpp"
 #include "mesh_shapes.hpp"
 
 #include <doctest/doctest.h>

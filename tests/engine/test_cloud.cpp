@@ -1,4 +1,4 @@
-#include "engine/cloud.hpp"
+#include "engine/geometry/cloud.hpp"
 
 #include <doctest/doctest.h>
 #include <tbb/task_arena.h>

@@ -1,7 +1,7 @@
-// Congruent objects (engine/congruence.hpp): oracles are shapes whose relation is known by
+// Congruent objects (engine/geometry/congruence.hpp): oracles are shapes whose relation is known by
 // construction: the same solid moved, its mirror image, a stretched copy, a regular octahedron
 // turned by 45 degrees (the default database's `octahedron` and `bipyramid`).
-#include "engine/congruence.hpp"
+#include "engine/geometry/congruence.hpp"
 
 #include "mesh_fixtures.hpp"
 

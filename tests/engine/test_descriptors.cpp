@@ -1,11 +1,11 @@
-// PFH, SHOT and Spin Images (engine/descriptors.hpp) against brute-force formulations written
+// PFH, SHOT and Spin Images (engine/features/descriptors.hpp) against brute-force formulations written
 // here from the descriptions of PCL's PFHEstimation, SHOTEstimation (with
 // SHOTLocalReferenceFrameEstimation) and SpinImageEstimation: plain loops over every point, no
 // tree, SHOT's volumes assigned directly from the azimuth angle and its interpolation written
 // per axis. Also: analytic answers on a plane, rigid-motion invariance, thread-count
 // independence, the name parser, and the errors.
-#include "engine/descriptors.hpp"
-#include "engine/fpfh.hpp"
+#include "engine/features/descriptors.hpp"
+#include "engine/features/fpfh.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <doctest/doctest.h>

@@ -1,7 +1,7 @@
 // DistanceField against brute force: exact point-to-triangle distances and a winding-number
 // inside test written here, on closed meshes (icosphere, box, torus) and an open one (a bent
 // sheet); serialization round trip; independence from the thread count; bad input.
-#include "engine/distance_field.hpp"
+#include "engine/geometry/distance_field.hpp"
 
 #include <doctest/doctest.h>
 #include <tbb/task_arena.h>

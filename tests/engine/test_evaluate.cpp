@@ -1,7 +1,7 @@
-#include "engine/evaluate.hpp"
-#include "engine/twins.hpp"
+#include "engine/recognition/evaluate.hpp"
+#include "engine/recognition/twins.hpp"
 
-#include "engine/distance_field.hpp"
+#include "engine/geometry/distance_field.hpp"
 #include "tests/engine/mesh_shapes.hpp"
 
 #include <doctest/doctest.h>

@@ -1,8 +1,8 @@
 // Objects far below the usual size with every length scaled: what the stress study (README
 // "Study 10") found. A 1 mm object's distance field needs voxels of about 13 micrometres,
 // which OpenVDB refused to make (ArithmeticError: its transform's scale must exceed 1.44e-5 m).
-#include "engine/distance_field.hpp"
-#include "engine/mesh.hpp"
+#include "engine/geometry/distance_field.hpp"
+#include "engine/geometry/mesh.hpp"
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>

@@ -1,7 +1,7 @@
 // FPFH against an independent brute-force implementation written here from PCL's description
-// (no code shared with engine/fpfh.cpp), and on shapes whose answer is known: a plane, spheres
+// (no code shared with engine/features/fpfh.cpp), and on shapes whose answer is known: a plane, spheres
 // of different radii, rigid-motion invariance, thread-count independence, the valid flag.
-#include "engine/fpfh.hpp"
+#include "engine/features/fpfh.hpp"
 
 #include <doctest/doctest.h>
 #include <tbb/task_arena.h>

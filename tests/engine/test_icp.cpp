@@ -1,6 +1,6 @@
-#include "engine/icp.hpp"
-#include "engine/kabsch.hpp"
-#include "engine/pose_error.hpp"
+#include "engine/recognition/icp.hpp"
+#include "engine/geometry/kabsch.hpp"
+#include "engine/geometry/pose_error.hpp"
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>

@@ -1,6 +1,6 @@
 // The ICP normal equations as a diagnostic (icp_system): singular on a flat patch, well
 // conditioned with patches all round, and unitless (the same for a scaled copy of the scene).
-#include "engine/icp.hpp"
+#include "engine/recognition/icp.hpp"
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>

@@ -1,5 +1,5 @@
-#include "engine/kabsch.hpp"
-#include "engine/pose_error.hpp"
+#include "engine/geometry/kabsch.hpp"
+#include "engine/geometry/pose_error.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>

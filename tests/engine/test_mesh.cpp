@@ -1,4 +1,4 @@
-#include "engine/mesh.hpp"
+#include "engine/geometry/mesh.hpp"
 #include "mesh_shapes.hpp"
 
 #include <doctest/doctest.h>

@@ -1,7 +1,7 @@
-#include "engine/kabsch.hpp"
-#include "engine/pose_error.hpp"
-#include "engine/ransac.hpp"
-#include "engine/symmetry.hpp"
+#include "engine/geometry/kabsch.hpp"
+#include "engine/geometry/pose_error.hpp"
+#include "engine/recognition/ransac.hpp"
+#include "engine/geometry/symmetry.hpp"
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>

@@ -1,6 +1,6 @@
-#include "engine/pose_error.hpp"
-#include "engine/recognizer.hpp"
-#include "engine/symmetry.hpp"
+#include "engine/geometry/pose_error.hpp"
+#include "engine/recognition/recognizer.hpp"
+#include "engine/geometry/symmetry.hpp"
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>

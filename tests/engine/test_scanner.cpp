@@ -1,5 +1,5 @@
-#include "engine/scanner.hpp"
-#include "engine/search.hpp"
+#include "engine/geometry/scanner.hpp"
+#include "engine/geometry/search.hpp"
 #include "mesh_shapes.hpp"
 
 #include <doctest/doctest.h>

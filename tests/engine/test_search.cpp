@@ -1,8 +1,8 @@
 // KdTree3 and FeatureIndex against brute force: random clouds, duplicates and exact ties
 // (integer grids, where every distance is exact), parallel queries, and the approximate
 // forest's reproducibility.
-#include "engine/ransac.hpp"
-#include "engine/search.hpp"
+#include "engine/recognition/ransac.hpp"
+#include "engine/geometry/search.hpp"
 
 #include <doctest/doctest.h>
 #include <tbb/parallel_for.h>
@@ -17,7 +17,7 @@ using namespace ts;
 
 namespace {
 
-// Brute-force oracles. Distances use the formulas documented in engine/search.hpp.
+// Brute-force oracles. Distances use the formulas documented in engine/geometry/search.hpp.
 double sq3(const Vec3& q, const Vec3& p) {
   const double dx = q[0] - p[0], dy = q[1] - p[1], dz = q[2] - p[2];
   double s = 0.0;

@@ -1,11 +1,11 @@
-// Feature-free hypotheses for sparse contacts (engine/sparse_hypotheses): the pair tables against
+// Feature-free hypotheses for sparse contacts (engine/recognition/sparse_hypotheses): the pair tables against
 // brute force, when the source runs, the true pose among the candidates (asymmetric, symmetric,
 // coplanar, 1 mm quantized contacts), degenerate sets, determinism, and the recognizer with
 // isolated contacts alone.
-#include "engine/pose_error.hpp"
-#include "engine/recognizer.hpp"
-#include "engine/sparse_hypotheses.hpp"
-#include "engine/symmetry.hpp"
+#include "engine/geometry/pose_error.hpp"
+#include "engine/recognition/recognizer.hpp"
+#include "engine/recognition/sparse_hypotheses.hpp"
+#include "engine/geometry/symmetry.hpp"
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>

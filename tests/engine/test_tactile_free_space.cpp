@@ -1,7 +1,7 @@
 // Occupancy grid and free-space cloud (Section 4.1.2, Eq. 3) against brute force, far from the
 // origin too, and the swept volume of the gripper.
 #include "engine/free_cloud_oracle.hpp"
-#include "engine/free_space.hpp"
+#include "engine/touch/free_space.hpp"
 
 #include <doctest/doctest.h>
 

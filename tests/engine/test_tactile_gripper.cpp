@@ -1,5 +1,5 @@
 // Forward kinematics (Eq. 2) of the default gripper against poses computed by hand.
-#include "engine/gripper.hpp"
+#include "engine/touch/gripper.hpp"
 
 #include <doctest/doctest.h>
 

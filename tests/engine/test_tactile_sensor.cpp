@@ -1,6 +1,6 @@
 // Sensor model (Section 3.2, Figure 7) and its inverse (Eq. 1): the fold on both sides of the
 // peak, the 10 % threshold, per-sensel gains, and no NaN on any input.
-#include "engine/tactile.hpp"
+#include "engine/touch/tactile.hpp"
 
 #include <doctest/doctest.h>
 

@@ -1,8 +1,8 @@
 // `touchstone recognize` run as a user runs it: the JSON keys of the interface contract, the
 // result file, identical outputs for any --threads, the --cloud mode with a ground-truth file,
 // and clear errors for bad input.
-#include "engine/fusion.hpp"
-#include "engine/recognizer.hpp"
+#include "engine/touch/fusion.hpp"
+#include "engine/recognition/recognizer.hpp"
 #include "experiments/calibration.hpp"
 #include "experiments/recognition_engine.hpp"
 #include "io/cloud_io.hpp"

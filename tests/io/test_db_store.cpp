@@ -1,4 +1,4 @@
-#include "engine/database.hpp"
+#include "engine/database/database.hpp"
 #include "io/db_store.hpp"
 #include "io/h5.hpp"
 #include "mesh_fixtures.hpp"

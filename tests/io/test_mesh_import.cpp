@@ -1,4 +1,4 @@
-#include "engine/mesh.hpp"
+#include "engine/geometry/mesh.hpp"
 #include "io/mesh_import.hpp"
 #include "io/sha256.hpp"
 #include "mesh_fixtures.hpp"

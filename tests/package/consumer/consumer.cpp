@@ -2,9 +2,9 @@
 // the box's exact signed distance, a cloud written and read back as PLY (io), and the command's
 // --version. Prints "consumer: ok" and exits 0 when everything holds.
 #include "engine/core.hpp"
-#include "engine/distance_field.hpp"
-#include "engine/kabsch.hpp"   // C++20 headers (std::span): the package asks for C++20
-#include "engine/search.hpp"
+#include "engine/geometry/distance_field.hpp"
+#include "engine/geometry/kabsch.hpp"   // C++20 headers (std::span): the package asks for C++20
+#include "engine/geometry/search.hpp"
 #include "io/cloud_io.hpp"
 
 #include <algorithm>

@@ -1,0 +1,118 @@
+#include "engine/geometry/kabsch.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
+
+#include <cmath>
+#include <numbers>
+
+namespace ts {
+
+namespace {
+
+// Weighted centroid computed relative to the first point, so that large absolute coordinates
+// (100 km from the origin) lose no precision in the sums.
+Vec3 centroid_of(std::span<const Vec3> p, std::span<const double> w, double wsum) {
+  const Vec3 ref = p[0];
+  Vec3 acc = Vec3::Zero();
+  for (std::size_t i = 0; i < p.size(); ++i) acc += (w.empty() ? 1.0 : w[i]) * (p[i] - ref);
+  return ref + acc / wsum;
+}
+
+// Sorted (descending) square roots of the eigenvalues of the weighted covariance.
+Vec3 spreads_of(std::span<const Vec3> p, std::span<const double> w, const Vec3& c, double wsum) {
+  Mat3 cov = Mat3::Zero();
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const Vec3 d = p[i] - c;
+    cov.noalias() += (w.empty() ? 1.0 : w[i]) * d * d.transpose();
+  }
+  cov /= wsum;
+  Eigen::SelfAdjointEigenSolver<Mat3> es(cov, Eigen::EigenvaluesOnly);
+  const Vec3 ev = es.eigenvalues();  // ascending
+  return {std::sqrt(std::max(0.0, ev[2])), std::sqrt(std::max(0.0, ev[1])),
+          std::sqrt(std::max(0.0, ev[0]))};
+}
+
+}  // namespace
+
+Vec3 principal_spreads(std::span<const Vec3> points) {
+  if (points.empty()) return Vec3::Zero();
+  for (const Vec3& p : points)
+    if (!finite(p)) return Vec3::Zero();
+  const double n = static_cast<double>(points.size());
+  const Vec3 c = centroid_of(points, {}, n);
+  return spreads_of(points, {}, c, n);
+}
+
+bool triangle_well_conditioned(const Vec3& a, const Vec3& b, const Vec3& c, double min_sv_ratio) {
+  const std::array<Vec3, 3> pts{a, b, c};
+  const Vec3 s = principal_spreads(pts);
+  if (!(s[0] > 0.0)) return false;
+  return s[1] >= min_sv_ratio * s[0];
+}
+
+Mat3 rotation_from_covariance(const Mat3& H, bool* reflected) {
+  Eigen::JacobiSVD<Mat3> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Mat3& U = svd.matrixU();
+  const Mat3& V = svd.matrixV();
+  // Reflection fix (Umeyama 1991): R = V diag(1, 1, det(V U^T)) U^T.
+  Mat3 D = Mat3::Identity();
+  const bool reflection = (V * U.transpose()).determinant() < 0.0;
+  if (reflection) D(2, 2) = -1.0;
+  if (reflected) *reflected = reflection;
+  return V * D * U.transpose();
+}
+
+RigidFit kabsch(std::span<const Vec3> source, std::span<const Vec3> target,
+                std::span<const double> weights, const KabschSettings& settings) {
+  RigidFit fit;
+  const std::size_t n = source.size();
+  if (n < 3 || target.size() != n || (!weights.empty() && weights.size() != n)) return fit;
+  double wsum = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!finite(source[i]) || !finite(target[i])) return fit;
+    const double w = weights.empty() ? 1.0 : weights[i];
+    if (!(w >= 0.0) || !std::isfinite(w)) return fit;
+    wsum += w;
+  }
+  if (!(wsum > 0.0)) return fit;
+
+  const Vec3 cs = centroid_of(source, weights, wsum);
+  const Vec3 ct = centroid_of(target, weights, wsum);
+  const Vec3 ss = spreads_of(source, weights, cs, wsum);
+  const Vec3 st = spreads_of(target, weights, ct, wsum);
+  if (ss[0] < settings.min_spread || st[0] < settings.min_spread) return fit;
+  fit.sv_ratio = std::min(ss[1] / ss[0], st[1] / st[0]);
+  if (!(fit.sv_ratio >= settings.min_sv_ratio)) return fit;
+
+  // Cross-covariance of the centred sets (Arun et al., Eq. 11): H = sum w (s - cs)(t - ct)^T.
+  Mat3 H = Mat3::Zero();
+  for (std::size_t i = 0; i < n; ++i) {
+    const double w = weights.empty() ? 1.0 : weights[i];
+    H.noalias() += w * (source[i] - cs) * (target[i] - ct).transpose();
+  }
+  const Mat3 R = rotation_from_covariance(H, &fit.reflection_fixed);
+  if (!R.allFinite()) return fit;
+
+  double sq = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double w = weights.empty() ? 1.0 : weights[i];
+    sq += w * (R * (source[i] - cs) - (target[i] - ct)).squaredNorm();
+  }
+  fit.rms = std::sqrt(sq / wsum);
+  fit.T_target_source.linear() = R;
+  fit.T_target_source.translation() = ct - R * cs;
+  fit.valid = fit.T_target_source.matrix().allFinite() && std::isfinite(fit.rms);
+  if (!fit.valid) fit.T_target_source = Pose::Identity();
+  return fit;
+}
+
+double rotation_angle(const Mat3& R) {
+  if (!R.allFinite()) return std::numbers::pi;
+  Eigen::Quaterniond q(R);
+  q.normalize();
+  const double v = q.vec().norm();
+  return 2.0 * std::atan2(v, std::abs(q.w()));
+}
+
+}  // namespace ts

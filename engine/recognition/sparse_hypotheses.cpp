@@ -1,0 +1,307 @@
+#include "engine/recognition/sparse_hypotheses.hpp"
+
+#include "engine/geometry/cloud.hpp"
+#include "engine/geometry/kabsch.hpp"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numbers>
+
+namespace ts {
+
+namespace {
+
+constexpr std::uint64_t kSparseStream = 0x5350415253450000ull;  // "SPARSE"
+
+double angle_between(const Vec3& a, const Vec3& b) {
+  return std::atan2(a.cross(b).norm(), a.dot(b));
+}
+
+/// The invariant angles of an oriented point pair (Drost et al. 2010): angle(n_a, d),
+/// angle(n_b, d), angle(n_a, n_b), d = b - a.
+struct PairAngles {
+  double a = 0.0, b = 0.0, ab = 0.0;
+};
+PairAngles pair_angles(const Vec3& pa, const Vec3& na, const Vec3& pb, const Vec3& nb) {
+  const Vec3 d = pb - pa;
+  return {angle_between(na, d), angle_between(nb, d), angle_between(na, nb)};
+}
+
+/// Angles in the table's units (pi / 255).
+int angle_units(double rad) {
+  return static_cast<int>(std::lround(std::clamp(rad, 0.0, std::numbers::pi) * 255.0 / std::numbers::pi));
+}
+
+struct Triplet {
+  std::uint32_t k[3] = {0, 0, 0};
+};
+
+/// A well-conditioned triplet of contacts with sides >= min_side, or none.
+bool draw_triplet(const std::vector<Vec3>& pts, double min_side, const SparseSettings& s, Rng& rng,
+                  Triplet& out) {
+  const std::size_t n = pts.size();
+  if (n < 3) return false;
+  for (int attempt = 0; attempt < s.triplet_attempts; ++attempt) {
+    const std::size_t a = rng.index(n), b = rng.index(n), c = rng.index(n);
+    if (a == b || b == c || a == c) continue;
+    if ((pts[a] - pts[b]).norm() < min_side || (pts[b] - pts[c]).norm() < min_side ||
+        (pts[a] - pts[c]).norm() < min_side)
+      continue;
+    if (!triangle_well_conditioned(pts[a], pts[b], pts[c], s.min_sv_ratio)) continue;
+    // The longest side first: its distance is the most selective in the pair table.
+    std::uint32_t k[3] = {static_cast<std::uint32_t>(a), static_cast<std::uint32_t>(b),
+                          static_cast<std::uint32_t>(c)};
+    const double dab = (pts[a] - pts[b]).squaredNorm(), dbc = (pts[b] - pts[c]).squaredNorm(),
+                 dca = (pts[c] - pts[a]).squaredNorm();
+    if (dbc >= dab && dbc >= dca) k[0] = b, k[1] = c, k[2] = a;
+    else if (dca >= dab && dca >= dbc) k[0] = c, k[1] = a, k[2] = b;
+    std::copy(k, k + 3, out.k);
+    return true;
+  }
+  return false;
+}
+
+template <class F>
+void parallel_each(std::size_t n, F&& f) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1),
+                    [&](const tbb::blocked_range<std::size_t>& r) {
+                      for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
+                    });
+}
+
+
+/// Candidates of one (triplet, object): oriented model pairs matching the longest side
+/// (distance, and the point-pair angles where the contacts have normals), then the model points
+/// closing the triangle (from the first point's sorted row), registered by Kabsch and checked on
+/// the normals.
+void match_object(const ObjectPairs& T, const Vec3 (&p)[3], const Vec3 (&n)[3], bool normals,
+                  const SparseSettings& s, Rng& rng, std::vector<Pose>& out) {
+  const std::size_t m = T.points.size();
+  if (m < 3 || !(T.unit > 0.0)) return;
+  const double tol = s.distance_tolerance;
+  const double ntol = s.normal_tolerance_deg * std::numbers::pi / 180.0;
+  const int utol = angle_units(ntol);
+  const double d01 = (p[1] - p[0]).norm(), d02 = (p[2] - p[0]).norm(), d12 = (p[2] - p[1]).norm();
+  auto units = [&](double d) { return std::clamp(d / T.unit, 0.0, 65535.0); };
+  const double lo01 = units(d01 - tol), hi01 = units(d01 + tol), lo02 = units(d02 - tol), hi02 = units(d02 + tol);
+  int sa = 0, sb = 0, sab = 0, ta = 0, tb = 0, tab = 0;
+  if (normals) {
+    const PairAngles a = pair_angles(p[0], n[0], p[1], n[1]);
+    sa = angle_units(a.a), sb = angle_units(a.b), sab = angle_units(a.ab);
+    const PairAngles c = pair_angles(p[0], n[0], p[2], n[2]);   // the third side, from contact 0
+    ta = angle_units(c.a), tb = angle_units(c.b), tab = angle_units(c.ab);
+  }
+  const double cos_ntol = std::cos(ntol);
+  auto first_at_least = [](auto row, auto end, double v) {
+    return std::lower_bound(row, end, v, [](const ObjectPairs::Near& x, double w) { return x.distance < w; });
+  };
+  // Oriented model pairs (i on contact 0, j on contact 1) that agree with the contacts.
+  std::vector<std::pair<std::uint16_t, std::uint16_t>> matched;
+  for (std::size_t i = 0; i < m; ++i) {
+    const auto row = T.near.begin() + static_cast<std::ptrdiff_t>(i * (m - 1));
+    const auto end = row + static_cast<std::ptrdiff_t>(m - 1);
+    for (auto it = first_at_least(row, end, lo01); it != end && it->distance <= hi01; ++it) {
+      if (normals && (std::abs(sab - it->a_ij) > utol || std::abs(sa - it->a_i) > utol || std::abs(sb - it->a_j) > utol))
+        continue;
+      matched.emplace_back(static_cast<std::uint16_t>(i), it->index);
+    }
+  }
+  // A deterministic random subset of them (partial Fisher-Yates).
+  const std::size_t take = std::min(matched.size(), s.pairs_per_triplet);
+  for (std::size_t k = 0; k < take; ++k) std::swap(matched[k], matched[k + rng.index(matched.size() - k)]);
+  KabschSettings ks;
+  ks.min_sv_ratio = s.min_sv_ratio;
+  for (std::size_t k = 0; k < take && out.size() < s.per_object; ++k) {
+    const auto [i, j] = matched[k];
+    const auto row = T.near.begin() + static_cast<std::ptrdiff_t>(std::size_t{i} * (m - 1));
+    const auto end = row + static_cast<std::ptrdiff_t>(m - 1);
+    for (auto it = first_at_least(row, end, lo02); it != end && it->distance <= hi02 && out.size() < s.per_object; ++it) {
+      const std::size_t r = it->index;
+      if (r == j) continue;
+      if (normals && (std::abs(tab - it->a_ij) > utol || std::abs(ta - it->a_i) > utol || std::abs(tb - it->a_j) > utol))
+        continue;
+      if (std::abs((T.points[r] - T.points[j]).norm() - d12) > tol) continue;
+      const Vec3 src[3] = {T.points[i], T.points[j], T.points[r]};
+      const RigidFit fit = kabsch(std::span<const Vec3>(src, 3), std::span<const Vec3>(p, 3), {}, ks);
+      if (!fit.valid) continue;
+      if (normals) {
+        const Mat3 R = fit.T_target_source.linear();
+        const std::size_t idx[3] = {i, j, r};
+        bool ok = true;
+        for (int q = 0; q < 3 && ok; ++q) ok = (R * T.normals[idx[q]]).dot(n[q]) >= cos_ntol;
+        if (!ok) continue;
+      }
+      out.push_back(fit.T_target_source);
+    }
+  }
+}
+
+}  // namespace
+
+ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSettings& s) {
+  ObjectPairs out;
+  const std::size_t cap = std::min<std::size_t>(s.max_model_points, 65535);
+  PointCloud thin;
+  for (double voxel = s.model_spacing; ; voxel *= 1.5) {
+    thin = voxel_filter(keypoints.coarse, voxel);
+    if (thin.size() <= cap) break;
+  }
+  out.points = thin.points;
+  out.normals = thin.has_normals() ? thin.normals : std::vector<Vec3>(thin.size(), Vec3::Zero());
+  const std::size_t n = out.points.size();
+  if (n < 2) return out;
+  double largest = 0.0;
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t j = i + 1; j < n; ++j) largest = std::max(largest, (out.points[i] - out.points[j]).norm());
+  out.unit = std::max(largest, 1e-9) / 65535.0;
+  out.near.reserve(n * (n - 1));
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto first = out.near.size();
+    for (std::size_t j = 0; j < n; ++j) {
+      if (j == i) continue;
+      const PairAngles a = pair_angles(out.points[i], out.normals[i], out.points[j], out.normals[j]);
+      out.near.push_back({static_cast<std::uint16_t>(std::lround(std::min((out.points[i] - out.points[j]).norm() / out.unit, 65535.0))),
+                          static_cast<std::uint16_t>(j), static_cast<std::uint8_t>(angle_units(a.a)),
+                          static_cast<std::uint8_t>(angle_units(a.b)), static_cast<std::uint8_t>(angle_units(a.ab)), 0});
+    }
+    std::sort(out.near.begin() + static_cast<std::ptrdiff_t>(first), out.near.end(),
+              [](const ObjectPairs::Near& a, const ObjectPairs::Near& b) {
+                return a.distance != b.distance ? a.distance < b.distance : a.index < b.index;
+              });
+  }
+  return out;
+}
+
+std::size_t ObjectPairs::memory_bytes() const {
+  return points.size() * 2 * sizeof(Vec3) + near.size() * sizeof(Near);
+}
+
+SparseTables::SparseTables(const Database& db, SparseSettings settings)
+    : db_(db), s_(settings), tables_(db.size()) {}
+
+void SparseTables::prepare(const std::vector<std::uint8_t>& wanted) {
+  std::lock_guard lock(mutex_);
+  std::vector<std::size_t> missing;
+  for (std::size_t o = 0; o < tables_.size(); ++o)
+    if ((wanted.empty() || (o < wanted.size() && wanted[o])) && !tables_[o]) missing.push_back(o);
+  parallel_each(missing.size(), [&](std::size_t k) {
+    tables_[missing[k]] = std::make_unique<ObjectPairs>(build_object_pairs(db_.keypoints(missing[k]), s_));
+  });
+}
+
+std::size_t isolated_contacts(const Scene& scene) {
+  std::size_t n = 0;
+  std::vector<Neighbour> near;
+  for (std::size_t i = 0; i < scene.contacts.size(); ++i) {
+    if (i < scene.feature_valid.size() && scene.feature_valid[i]) continue;
+    scene.tree.radius(scene.contacts.points[i], scene.feature_radius, near, false);
+    n += near.size() <= 1;   // itself alone
+  }
+  return n;
+}
+
+bool sparse_active(const Scene& scene, const SparseSettings& s) {
+  if (!s.enabled || scene.contacts.size() < 3) return false;
+  const std::size_t iso = isolated_contacts(scene);
+  return iso >= s.min_isolated && static_cast<double>(iso) >= s.min_isolated_share * static_cast<double>(scene.contacts.size());
+}
+
+std::vector<Vec3> scene_contact_normals(const Scene& scene, const PointCloud& contacts_world) {
+  if (!contacts_world.has_normals()) return {};
+  std::vector<Vec3> local;
+  std::vector<std::size_t> index;
+  for (std::size_t i = 0; i < contacts_world.size(); ++i)
+    if (contacts_world.points[i].allFinite()) {
+      local.push_back(contacts_world.points[i] - scene.origin);
+      index.push_back(i);
+    }
+  if (local.empty()) return {};
+  const KdTree3 tree(local);
+  std::vector<Vec3> out(scene.contacts.size(), Vec3::Zero());
+  for (std::size_t k = 0; k < scene.contacts.size(); ++k) {
+    const Neighbour nb = tree.nearest(scene.contacts.points[k]);
+    if (nb.sq_distance > 1e-12) continue;   // the scene moved or merged it: unknown
+    const Vec3& nw = contacts_world.normals[index[nb.index]];
+    const double len = nw.norm();
+    if (std::isfinite(len) && len > 0.5) out[k] = nw / len;
+  }
+  return out;
+}
+
+std::vector<Candidate> sparse_candidates(const Scene& scene, SparseTables& tables,
+                                         const std::vector<Vec3>& contact_normals,
+                                         const std::vector<std::uint8_t>& allowed,
+                                         const SparseSettings& s, std::uint64_t seed,
+                                         std::uint64_t step, SparseStats* stats) {
+  const auto t0 = std::chrono::steady_clock::now();
+  SparseStats st;
+  st.isolated = isolated_contacts(scene);
+  std::vector<Candidate> out;
+  auto finish = [&] {
+    st.candidates = out.size();
+    st.time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (stats) *stats = st;
+    return out;
+  };
+  if (!sparse_active(scene, s)) return finish();
+  st.active = true;
+  const std::vector<Vec3>& pts = scene.contacts.points;
+  const bool with_normals = contact_normals.size() == pts.size();
+
+  // Triplets (serial: few draws, one stream).
+  Rng rng(seed, step, kSparseStream);
+  const double min_side = std::max(2.0 * s.distance_tolerance, s.min_side_share * scene.diameter);
+  std::vector<Triplet> triplets;
+  for (int t = 0; t < s.triplets; ++t) {
+    Triplet tr;
+    if (draw_triplet(pts, min_side, s, rng, tr)) triplets.push_back(tr);
+  }
+  st.triplets = triplets.size();
+  std::vector<std::uint32_t> objects;
+  for (std::uint32_t o = 0; o < allowed.size(); ++o)
+    if (allowed[o]) objects.push_back(o);
+  if (triplets.empty() || objects.empty()) return finish();
+  tables.prepare(allowed);
+
+  // (triplet, object) tasks, each into its own slot.
+  const std::size_t tasks = triplets.size() * objects.size();
+  std::vector<std::vector<Pose>> slots(tasks);
+  parallel_each(tasks, [&](std::size_t task) {
+    const Triplet& tr = triplets[task / objects.size()];
+    const std::uint32_t o = objects[task % objects.size()];
+    Vec3 p[3], n[3];
+    bool normals = with_normals;
+    for (int q = 0; q < 3; ++q) {
+      p[q] = pts[tr.k[q]];
+      n[q] = with_normals ? contact_normals[tr.k[q]] : Vec3::Zero();
+      normals = normals && n[q].squaredNorm() > 0.0;
+    }
+    Rng r(seed, step, kSparseStream + 1, task);
+    match_object(tables.object(o), p, n, normals, s, r, slots[task]);
+  });
+  std::uint32_t slot = kSparseSlot;
+  for (std::size_t task = 0; task < tasks; ++task)
+    for (const Pose& T : slots[task]) {
+      Candidate c;
+      c.object = objects[task % objects.size()];
+      c.T_scene_object = T;
+      c.slot = slot++;
+      out.push_back(c);
+    }
+  return finish();
+}
+
+double mean_contact_distance(const ObjectGeometry& geometry, const Pose& T_world_object,
+                             const std::vector<Vec3>& contacts_world) {
+  if (contacts_world.empty()) return std::numeric_limits<double>::quiet_NaN();
+  const Pose T_object_world = T_world_object.inverse();
+  double sum = 0.0;
+  for (const Vec3& c : contacts_world) sum += std::abs(geometry.field.distance(T_object_world * c));
+  return sum / static_cast<double>(contacts_world.size());
+}
+
+}  // namespace ts

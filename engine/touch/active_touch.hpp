@@ -1,0 +1,134 @@
+// Active touch (issue 13): choose the next grasp that tells the most about object and pose.
+//
+// Candidates. Each candidate imitates the simulator's operator on one of the leading hypotheses'
+// models instead of the true object: a surface point p of the hypothesis' model (its keypoints,
+// outward by the centroid rule) within `aim_radius` of a contact so far (the true surface surely
+// continues there; a grasp that misses the object tells the recognizer little), the aimed pad (the gripper's single_pad) facing it, a seeded roll
+// and seeded nominal joint angles of the aimed finger; the open hand comes in along -n. A command
+// is that hand pose at the aim (T_world_eef, open fingers), the approach direction and the finger
+// joint targets (the aimed finger's nominal angles, the others open). As the simulator's operator
+// redraws an aim the open hand cannot reach, an aim blocked on the aimed hypothesis' own model is
+// redrawn (`attempts`).
+//
+// Prediction. Under each of the top-K hypotheses (object, pose) the distance field of its object
+// answers, without the true mesh:
+//   - what the pad would feel: the signed distance of 3 x 3 points of the pad's foam (at the
+//     aim, nominal angles) to that hypothesis' surface, clamped to +-`cap` (0: contact where the
+//     aim expects it; larger: the surface is farther or absent; negative: nearer);
+//   - whether the swept open hand would run into that hypothesis' object before reaching the aim
+//     (each hand sample sphere-traced along the approach through the object's bounding sphere;
+//     a distance below `clearance` blocks).
+// Score. The expected information about which hypothesis is true is the mutual information
+// between the hypothesis and the outcome y (the predicted pad distances and the blocked flag,
+// observed with isotropic Gaussian noise `sigma`), estimated by the pairwise Bhattacharyya lower
+// bound of Kolchinsky and Tracey (2017):
+//     I >= - sum_i w_i ln sum_j w_j exp(-|y_i - y_j|^2 / (8 sigma^2))     (nats, <= H(w))
+// Weights are the hypotheses' weights tempered by `temperature` and renormalized over the K.
+// The collision penalty is `collision_weight` x (sum of the weights of the hypotheses under which
+// the hand is blocked): a grasp that would run into the likely object ranks lower.
+//     score = information - collision_weight * blocked_weight
+// The K hypotheses: the best of each object first (up to K/2 objects), then the rest by weight,
+// so hypotheses of competing objects are always compared.
+//
+// Determinism: candidate c draws from Rng(seed, c); candidates are scored in parallel (TBB, the
+// caller's arena) into their own slots and ranked by (score, index): the same result for any
+// thread count.
+#pragma once
+
+#include "engine/core.hpp"
+#include "engine/geometry/distance_field.hpp"
+#include "engine/touch/gripper.hpp"
+#include "engine/recognition/recognizer.hpp"
+
+#include <functional>
+#include <vector>
+
+namespace ts {
+
+struct ActiveSettings {
+  std::size_t candidates = 48;      ///< candidate grasps scored per step
+  std::size_t hypotheses = 16;      ///< K, hypotheses the outcomes are predicted under
+  std::size_t leaders = 8;          ///< hypotheses whose models the candidates aim at
+  double sigma = 0.004;             ///< m, noise of a predicted pad distance (arm pose, foam)
+  double cap = 0.02;                ///< m, predicted distances clamped to +-cap
+  double collision_weight = 1.0;    ///< nats per unit of blocked hypothesis weight
+  double temperature = 1.0;         ///< ln wt divided by this before normalizing (> 0)
+  double clearance = 0.002;         ///< m, a hand sample nearer than this to a surface blocks
+  double aim_min_deg = 0.0;         ///< nominal angles of the aimed finger's joints, range
+  double aim_max_deg = 60.0;        ///< (as the simulator's operator)
+  double hand_spacing = 0.02;       ///< m, spacing of the hand samples swept along the approach
+  double aim_radius = 0.05;         ///< m, aims only at model points within this of a contact
+                                    ///< so far (where the true surface surely continues; 0 or no
+                                    ///< contacts: anywhere on the model)
+  std::size_t attempts = 8;         ///< aims per candidate: one the open hand cannot reach on
+                                    ///< the aimed hypothesis' model is redrawn (as the simulator)
+};
+
+/// A grasp to execute: the open hand at the aim, reached along `approach`.
+struct GraspCommand {
+  Pose T_world_eef = Pose::Identity();  ///< hand pose at the aim (world; fingers open)
+  Vec3 approach = Vec3::UnitZ();        ///< unit, world: direction the hand moves in
+  std::vector<double> joints;           ///< rad, finger joint targets (the aimed finger's
+                                        ///< nominal angles, the others open)
+  Vec3 target = Vec3::Zero();           ///< world, the aimed surface point
+};
+
+struct PlannedGrasp {
+  GraspCommand command;
+  std::size_t candidate = 0;        ///< index among the step's candidates
+  std::uint32_t aimed_object = 0;   ///< object of the hypothesis whose model was aimed at
+  double information = 0.0;         ///< nats, expected information (lower bound)
+  double blocked_weight = 0.0;      ///< share of the hypothesis weight that blocks the hand
+  double score = 0.0;               ///< information - collision_weight * blocked_weight
+};
+
+/// What the planner reads of one object (object frame): its distance field, points of its
+/// surface with normals (aims), and the radius of a sphere about its origin that holds it.
+struct PlanObject {
+  const DistanceField* field = nullptr;
+  const PointCloud* surface = nullptr;
+  double radius = 0.0;
+};
+using PlanObjects = std::function<PlanObject(std::uint32_t object)>;
+
+class GraspPlanner {
+ public:
+  /// Throws ts::Error naming the field on bad settings ("active.candidates" = 0, ...).
+  GraspPlanner(Gripper gripper, ActiveSettings settings);
+
+  /// The `n_best` best of `settings.candidates` candidates aimed at the leading hypotheses
+  /// (`hypotheses`: a recognizer state, best first, world poses). Throws ts::Error when there
+  /// is no hypothesis (nothing to plan from) or an object has no field or surface.
+  /// `contacts`: the contacts so far (world), for `aim_radius`; empty: aims anywhere.
+  std::vector<PlannedGrasp> plan(const std::vector<Hypothesis>& hypotheses, const PlanObjects& objects,
+                                 std::uint64_t seed, std::size_t n_best,
+                                 const std::vector<Vec3>& contacts = {}) const;
+  /// Scores given commands (in their order) under the hypotheses.
+  std::vector<PlannedGrasp> evaluate(const std::vector<GraspCommand>& commands,
+                                     const std::vector<Hypothesis>& hypotheses,
+                                     const PlanObjects& objects) const;
+
+  const ActiveSettings& settings() const { return s_; }
+  const Gripper& gripper() const { return gripper_; }
+  /// Hand samples of the open hand (EEF frame) swept in the collision test.
+  const std::vector<Vec3>& hand_samples() const { return hand_; }
+
+ private:
+  struct Selected;
+  Selected select(const std::vector<Hypothesis>& hypotheses, const PlanObjects& objects) const;
+  PlannedGrasp score(const GraspCommand& c, const Selected& sel) const;
+  bool hand_blocked(const std::vector<Vec3>& hand_world, const Vec3& d, std::size_t k, const Selected& sel) const;
+
+  Gripper gripper_;
+  ActiveSettings s_;
+  int pad_ = 0;
+  std::vector<Vec3> hand_;          ///< EEF frame, open hand
+  std::vector<Vec3> pad_points_;    ///< pad frame: 3 x 3 points on the foam surface
+};
+
+/// The database's objects for the planner: each object's distance field, keypoints (coarse
+/// cloud with normals) and half the diagonal of its bounding box. Loads what the hypotheses
+/// need; the returned function keeps them alive.
+PlanObjects database_plan_objects(const Database& db);
+
+}  // namespace ts
