@@ -1,5 +1,5 @@
 // Touchstone's four local descriptors against the Point Cloud Library's own (issue 18): the
-// same keypoints, surface, normals and radius given to engine/descriptors.hpp and to PCL's
+// same keypoints, surface, normals and radius given to engine/features/descriptors.hpp and to PCL's
 // FPFHEstimation, PFHEstimation, SHOTEstimation and SpinImageEstimation (image width 8,
 // support angle cos 0, no minimum neighbour count), and their outputs compared row by row;
 // with the time of each. Built only where PCL 1.13 is found (Debian's libpcl-dev, or the private
@@ -36,11 +36,11 @@
 #include <pcl/search/kdtree.h>
 
 #include "datasets/catalogue/csg.hpp"
-#include "engine/cloud.hpp"
-#include "engine/descriptors.hpp"
-#include "engine/mesh.hpp"
-#include "engine/scanner.hpp"
-#include "engine/search.hpp"
+#include "engine/geometry/cloud.hpp"
+#include "engine/features/descriptors.hpp"
+#include "engine/geometry/mesh.hpp"
+#include "engine/geometry/scanner.hpp"
+#include "engine/geometry/search.hpp"
 #include "experiments/cli_common.hpp"
 
 #include <CLI/CLI.hpp>
