@@ -141,14 +141,15 @@ Object sphere(double r) {
   return o;
 }
 
-/// A cloud with outward unit normals from PCA over kNormalRadius; where PCA has too few
-/// neighbours the reference normal is kept.
-ts::PointCloud with_pca_normals(std::vector<Vec3> points, const std::vector<Vec3>& outward) {
+/// A cloud with unit normals from PCA over kNormalRadius, turned to agree with `outward`. Where
+/// PCA has too few neighbours the normal is `outward` itself when `keep_outward`, else zero (no
+/// normal: the point is left out of the descriptors' surface, as a query leaves it out).
+ts::PointCloud with_pca_normals(std::vector<Vec3> points, const std::vector<Vec3>& outward, bool keep_outward) {
   ts::NormalSettings ns;
   ns.radius = kNormalRadius;
   std::vector<Vec3> n = ts::estimate_normals(points, ns);
   for (std::size_t i = 0; i < n.size(); ++i) {
-    if (n[i].squaredNorm() == 0.0) n[i] = outward[i];
+    if (n[i].squaredNorm() == 0.0) n[i] = keep_outward ? outward[i] : Vec3::Zero();
     if (n[i].dot(outward[i]) < 0) n[i] = -n[i];
   }
   return {std::move(points), std::move(n)};
@@ -314,7 +315,7 @@ int main(int argc, char** argv) {
             ts::Rng rng(seed, 10, oi);
             for (Vec3& p : pts) p += noise * Vec3(rng.normal(), rng.normal(), rng.normal());
           }
-          describe(c, with_pca_normals(std::move(pts), scan.fine.normals), o, shape_base, 0.0);
+          describe(c, with_pca_normals(std::move(pts), scan.fine.normals, true), o, shape_base, 0.0);
         }
         // The exploration simulator's contacts, fused as a query's, in the object frame.
         ts::datasets::SimulatorSettings ss;
@@ -330,18 +331,8 @@ int main(int argc, char** argv) {
         pts.reserve(ec.contacts.size());
         for (const Vec3& p : ec.contacts.points) pts.push_back(T_object_world * p);
         contact_points += pts.size();
-        ts::NormalSettings ns;
-        ns.radius = kNormalRadius;
-        std::vector<Vec3> n = ts::estimate_normals(pts, ns);
-        for (std::size_t i = 0; i < n.size(); ++i) {
-          if (!ts::finite(n[i]) || n[i].squaredNorm() < 0.5) {
-            n[i] = Vec3::Zero();
-            continue;
-          }
-          n[i].normalize();
-          if (n[i].dot(pts[i]) < 0) n[i] = -n[i];   // away from the centre (the object frame's origin)
-        }
-        describe(2, ts::PointCloud{std::move(pts), std::move(n)}, o, shape_base, reach);
+        const std::vector<Vec3> away = pts;   // away from the centre (the object frame's origin)
+        describe(2, with_pca_normals(std::move(pts), away, false), o, shape_base, reach);
         shape_base += static_cast<int>(o.shapes.size());
       }
     });
