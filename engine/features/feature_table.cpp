@@ -7,6 +7,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <bit>
 #include <limits>
 #include <map>
 #include <memory>
@@ -19,11 +20,16 @@ namespace {
 constexpr std::size_t kBlock = 128;          ///< rows per block (dims-major inside a block)
 constexpr std::uint32_t kPadding = 0xffffffffu;  ///< object of a padding row
 
-struct Item {
-  float d;
-  std::uint32_t row;
-};
-inline bool before(const Item& a, const Item& b) { return a.d < b.d || (a.d == b.d && a.row < b.row); }
+/// A candidate row as one integer key: the bits of its squared distance (a non-negative float,
+/// whose bit patterns order like its values) above the row, so that the integer order is the
+/// order by (distance, row) and the selections below compare plain integers (a comparison
+/// function called through a pointer cost the step's pruning about a third of its time).
+using Item = std::uint64_t;
+inline Item item(float d, std::uint32_t row) {
+  return (static_cast<std::uint64_t>(std::bit_cast<std::uint32_t>(d)) << 32) | row;
+}
+inline float item_distance(Item x) { return std::bit_cast<float>(static_cast<std::uint32_t>(x >> 32)); }
+inline std::uint32_t item_row(Item x) { return static_cast<std::uint32_t>(x); }
 
 /// Squared distances of one block's rows to query q of `dim` values (rows dims-major:
 /// blk[d * kBlock + r]).
@@ -250,7 +256,11 @@ void search_blocks(const FeatureTable::Impl& m, const float* qv, const Blocks& b
       order.resize(max_blocks);
     }
   }
-  cand.clear();
+  if (w == 0) return;
+  // cand[0, nc): the rows in hand. Before a block is read nc < 2w, so 2w + kBlock slots hold it.
+  if (cand.size() < 2 * w + kBlock) cand.resize(2 * w + kBlock);
+  Item* const c = cand.data();
+  std::size_t nc = 0;
   float tau = std::numeric_limits<float>::infinity();
   float d[kBlock];
   for (const auto& [lb, b] : order) {
@@ -258,21 +268,24 @@ void search_blocks(const FeatureTable::Impl& m, const float* qv, const Blocks& b
     block_distances(m.block(b), qv, m.dim, d);
     const std::size_t base = std::size_t{b} * kBlock, filled = m.filled[b];
     const bool unbounded = tau == std::numeric_limits<float>::infinity();
-    for (std::size_t i = 0; i < filled; ++i)
-      if (d[i] <= tau) cand.push_back({d[i], static_cast<std::uint32_t>(base + i)});
+    // Branch-free: every row is written, and only those within tau are kept.
+    for (std::size_t i = 0; i < filled; ++i) {
+      c[nc] = item(d[i], static_cast<std::uint32_t>(base + i));
+      nc += static_cast<std::size_t>(d[i] <= tau);
+    }
     // The first time w rows are in hand, tau (the w-th distance) starts to skip rows and blocks.
-    if (cand.size() >= 2 * w || (unbounded && cand.size() >= w)) {
-      std::nth_element(cand.begin(), cand.begin() + static_cast<std::ptrdiff_t>(w - 1), cand.end(), before);
-      cand.resize(w);
-      tau = cand[w - 1].d;
+    if (nc >= 2 * w || (unbounded && nc >= w)) {
+      std::nth_element(c, c + (w - 1), c + nc);
+      nc = w;
+      tau = item_distance(c[w - 1]);
     }
   }
-  if (cand.size() > w) {
-    std::nth_element(cand.begin(), cand.begin() + static_cast<std::ptrdiff_t>(w - 1), cand.end(), before);
-    cand.resize(w);
+  if (nc > w) {
+    std::nth_element(c, c + (w - 1), c + nc);
+    nc = w;
   }
-  std::sort(cand.begin(), cand.end(), before);
-  for (const Item& x : cand) out.push_back({x.row, static_cast<double>(x.d)});
+  std::sort(c, c + nc);
+  for (std::size_t k = 0; k < nc; ++k) out.push_back({item_row(c[k]), static_cast<double>(item_distance(c[k]))});
 }
 
 /// A contiguous run of blocks, iterable as block indices.

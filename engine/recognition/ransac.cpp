@@ -46,7 +46,7 @@ struct PrunedSet {
   }
 };
 
-/// in[j - b] = 1 when the squared distance of item j to c lies in [lo, hi] (vectorized scan).
+/// in[j] = 1 when the squared distance of item j to c lies in [lo, hi] (vectorized scan).
 TS_TARGET_CLONES
 void shell_mask(const float* __restrict x, const float* __restrict y, const float* __restrict z,
                 std::uint32_t n, float cx, float cy, float cz, float lo, float hi,
@@ -56,6 +56,32 @@ void shell_mask(const float* __restrict x, const float* __restrict y, const floa
     const float d2 = dx * dx + dy * dy + dz * dz;
     in[j] = static_cast<std::uint8_t>((d2 >= lo) & (d2 <= hi));
   }
+}
+
+/// As shell_mask with two shells: in[j] = 1 for the items inside both, around c and around e.
+TS_TARGET_CLONES
+void shell_mask2(const float* __restrict x, const float* __restrict y, const float* __restrict z,
+                 std::uint32_t n, float cx, float cy, float cz, float lo, float hi,
+                 float ex, float ey, float ez, float lo2, float hi2, std::uint8_t* __restrict in) {
+  for (std::uint32_t j = 0; j < n; ++j) {
+    const float dx = x[j] - cx, dy = y[j] - cy, dz = z[j] - cz;
+    const float d2 = dx * dx + dy * dy + dz * dz;
+    const float fx = x[j] - ex, fy = y[j] - ey, fz = z[j] - ez;
+    const float f2 = fx * fx + fy * fy + fz * fz;
+    in[j] = static_cast<std::uint8_t>((d2 >= lo) & (d2 <= hi) & (f2 >= lo2) & (f2 <= hi2));
+  }
+}
+
+/// The indices j < n with in[j] = 1, ascending, into out (room for n); returns how many.
+/// Branch-free: every index is written and the count advances past the selected ones (a branch
+/// per item mispredicts about as often as an item is inside the shell).
+inline std::uint32_t selected(const std::uint8_t* __restrict in, std::uint32_t n, std::uint32_t* __restrict out) {
+  std::uint32_t m = 0;
+  for (std::uint32_t j = 0; j < n; ++j) {
+    out[m] = j;
+    m += in[j];
+  }
+  return m;
 }
 
 /// Sign-free angles of a point pair with normals: |n_a . n_b|, |n_a . u|, |n_b . u| (u the unit
@@ -123,7 +149,7 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
                                        std::vector<std::uint32_t>& buf2,
                                        std::vector<std::uint32_t>& buf3,
                                        std::vector<std::uint8_t>& mask,
-                                       std::vector<std::uint8_t>& mask2) {
+                                       std::vector<std::uint32_t>& inside) {
   const PrunedSet& F1 = t.pruned[0];
   const PrunedSet& F2 = t.pruned[1];
   const PrunedSet& F3 = t.pruned[2];
@@ -140,7 +166,7 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
     const Vec3& q1 = pts[a.point];
     // Second point: same object, distance to the first matching the input's (and, as an
     // extension, the same angles between normals and chord). Squared distances against a
-    // squared window, vectorized over the object's pruned items.
+    // squared window, branch-free over the object's pruned items.
     auto window = [&](double d) {
       const double lo = std::max(0.0, d - tol), hi = d + tol;
       return std::pair(static_cast<float>(lo * lo), static_cast<float>(hi * hi));
@@ -148,12 +174,13 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
     const auto [lo12, hi12] = window(t.d12);
     const auto [b2, e2] = F2.range_of(a.object);
     mask.resize(std::max(e2 - b2, 1u));
-    shell_mask(&F2.x[b2], &F2.y[b2], &F2.z[b2], e2 - b2, float(q1.x()), float(q1.y()), float(q1.z()),
-               lo12, hi12, mask.data());
+    inside.resize(mask.size());
+    shell_mask(&F2.x[b2], &F2.y[b2], &F2.z[b2], e2 - b2, float(q1.x()), float(q1.y()), float(q1.z()), lo12, hi12,
+               mask.data());
+    const std::uint32_t n2 = selected(mask.data(), e2 - b2, inside.data());
     buf2.clear();
-    for (std::uint32_t j = b2; j < e2; ++j) {
-      if (!mask[j - b2]) continue;
-      const std::uint32_t k = F2.items[j].point;
+    for (std::uint32_t m = 0; m < n2; ++m) {
+      const std::uint32_t k = F2.items[b2 + inside[m]].point;
       if (normals && !similar(signature(q1, coarse.normals[a.point], pts[k], coarse.normals[k]), t.s12, ntol))
         continue;
       buf2.push_back(k);
@@ -165,15 +192,13 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
     const auto [lo23, hi23] = window(t.d23);
     const auto [b3, e3] = F3.range_of(a.object);
     mask.resize(std::max(e3 - b3, 1u));
-    mask2.resize(std::max(e3 - b3, 1u));
-    shell_mask(&F3.x[b3], &F3.y[b3], &F3.z[b3], e3 - b3, float(q1.x()), float(q1.y()), float(q1.z()),
-               lo13, hi13, mask.data());
-    shell_mask(&F3.x[b3], &F3.y[b3], &F3.z[b3], e3 - b3, float(q2.x()), float(q2.y()), float(q2.z()),
-               lo23, hi23, mask2.data());
+    inside.resize(mask.size());
+    shell_mask2(&F3.x[b3], &F3.y[b3], &F3.z[b3], e3 - b3, float(q1.x()), float(q1.y()), float(q1.z()), lo13, hi13,
+                float(q2.x()), float(q2.y()), float(q2.z()), lo23, hi23, mask.data());
+    const std::uint32_t n3 = selected(mask.data(), e3 - b3, inside.data());
     buf3.clear();
-    for (std::uint32_t j = b3; j < e3; ++j) {
-      if (!(mask[j - b3] & mask2[j - b3])) continue;
-      const std::uint32_t k = F3.items[j].point;
+    for (std::uint32_t m = 0; m < n3; ++m) {
+      const std::uint32_t k = F3.items[b3 + inside[m]].point;
       const Vec3& q = pts[k];
       if (normals &&
           (!similar(signature(q1, coarse.normals[a.point], q, coarse.normals[k]), t.s13, ntol) ||
@@ -410,12 +435,13 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, slots, 16),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       std::vector<std::uint32_t> buf2, buf3;
-                      std::vector<std::uint8_t> mask, mask2;
+                      std::vector<std::uint8_t> mask;
+                      std::vector<std::uint32_t> inside;
                       for (std::size_t k = r.begin(); k != r.end(); ++k) {
                         const std::size_t i = k / static_cast<std::size_t>(R);
                         if (!trip[i].valid) continue;
                         Rng rng(seed, step, kTagRegistration, k);
-                        cand[k] = register_once(trip[i], db, s, rng, buf2, buf3, mask, mask2);
+                        cand[k] = register_once(trip[i], db, s, rng, buf2, buf3, mask, inside);
                         if (cand[k]) cand[k]->slot = static_cast<std::uint32_t>(k);
                       }
                     });
