@@ -3,7 +3,7 @@
 // one clear error naming the store at fault, with nothing written. The MPI mode (--mpi under
 // mpirun) gives one process's results too, and a rank killed mid-run loses only its runs in
 // flight.
-#include "experiments/mpi_runs.hpp"
+#include "experiments/runs/mpi_runs.hpp"
 #include "io/run_store.hpp"
 #include "cli_run.hpp"
 #include "db_fixture.hpp"
