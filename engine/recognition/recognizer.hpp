@@ -15,11 +15,11 @@
 #pragma once
 
 #include "engine/database/database.hpp"
+#include "engine/features/shape_prior.hpp"
 #include "engine/recognition/evaluate.hpp"
 #include "engine/recognition/icp.hpp"
 #include "engine/recognition/ransac.hpp"
 #include "engine/recognition/scene.hpp"
-#include "engine/features/shape_prior.hpp"
 #include "engine/recognition/shortlist.hpp"
 #include "engine/recognition/sparse_hypotheses.hpp"
 #include "engine/recognition/twins.hpp"

@@ -256,7 +256,7 @@ std::vector<StepModels> fit_step_models(const std::vector<CalibrationRow>& rows,
     }
     const std::string steps = "steps " + std::to_string(lo) + (hi == std::numeric_limits<int>::max()
                                                                     ? std::string(" on")
-                                                                    : "-" + std::to_string(hi - 1));
+                                                                    : '-' + std::to_string(hi - 1));
     if (known.empty()) throw Error("no answers of known objects at " + steps + " to fit on", {}, "--step-ranges");
     StepModels m;
     m.first_step = lo;

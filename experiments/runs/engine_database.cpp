@@ -38,7 +38,7 @@ std::string file_fingerprint(const io::DbReader& reader) {
   io::Sha256 h;
   h.update(source_fingerprint(reader));
   h.update(std::to_string(reader.schema_version()) + " " + std::to_string(reader.build_seed()));
-  for (std::size_t i = 0; i < reader.size(); ++i) h.update(" " + std::to_string(reader.object_seed(i)));
+  for (std::size_t i = 0; i < reader.size(); ++i) h.update(' ' + std::to_string(reader.object_seed(i)));
   return h.hex_digest();
 }
 
