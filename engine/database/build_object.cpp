@@ -1,8 +1,8 @@
 // Database object construction (Section 4.2): simulated laser scan of the CAD model, voxel
 // filtered dense and coarse clouds, FPFH features of the coarse points (Section 4.3.1), and the
 // object's distance field for hypothesis scoring.
-#include "engine/geometry/cloud.hpp"
 #include "engine/database/database.hpp"
+#include "engine/geometry/cloud.hpp"
 #include "engine/geometry/mesh.hpp"
 
 #include <chrono>

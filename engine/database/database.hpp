@@ -5,9 +5,9 @@
 #pragma once
 
 #include "engine/core.hpp"
-#include "engine/geometry/distance_field.hpp"
 #include "engine/features/descriptors.hpp"
 #include "engine/features/fpfh.hpp"
+#include "engine/geometry/distance_field.hpp"
 #include "engine/geometry/scanner.hpp"
 #include "engine/geometry/search.hpp"
 

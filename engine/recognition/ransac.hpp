@@ -10,10 +10,10 @@
 #pragma once
 
 #include "engine/database/database.hpp"
-#include "engine/recognition/evaluate.hpp"
 #include "engine/features/feature_table.hpp"
-#include "engine/recognition/scene.hpp"
 #include "engine/geometry/search.hpp"
+#include "engine/recognition/evaluate.hpp"
+#include "engine/recognition/scene.hpp"
 
 namespace ts {
 

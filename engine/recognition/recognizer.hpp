@@ -15,11 +15,11 @@
 #pragma once
 
 #include "engine/database/database.hpp"
+#include "engine/features/shape_prior.hpp"
 #include "engine/recognition/evaluate.hpp"
 #include "engine/recognition/icp.hpp"
 #include "engine/recognition/ransac.hpp"
 #include "engine/recognition/scene.hpp"
-#include "engine/features/shape_prior.hpp"
 #include "engine/recognition/shortlist.hpp"
 #include "engine/recognition/sparse_hypotheses.hpp"
 #include "engine/recognition/twins.hpp"
@@ -129,7 +129,7 @@ struct Funnel {
 /// How well the answer (the best hypothesis) explains all the evidence in absolute terms: its
 /// contacts' distances to the model after the per-grasp offsets against the assumed contact
 /// noise (evaluate.grasp_contact_sigma), and the free space it conflicts with. Features of the
-/// open-set ("in the database") score (experiments/calibration.hpp).
+/// open-set ("in the database") score (experiments/analysis/calibration.hpp).
 struct AnswerFit {
   bool valid = false;               ///< computed (a valid answer with a distance field)
   std::size_t contacts = 0;

@@ -37,8 +37,8 @@
 
 #include "engine/core.hpp"
 #include "engine/geometry/distance_field.hpp"
-#include "engine/touch/gripper.hpp"
 #include "engine/recognition/recognizer.hpp"
+#include "engine/touch/gripper.hpp"
 
 #include <functional>
 #include <vector>

@@ -6,7 +6,7 @@
 //
 // Run from the repository root. Prints the machine, thread count, per-stage times and totals.
 #include "datasets/db_builder.hpp"
-#include "experiments/cli_common.hpp"
+#include "experiments/cli/cli_common.hpp"
 #include "io/db_store.hpp"
 
 #include <CLI/CLI.hpp>

@@ -14,12 +14,12 @@
 // Run from the repository root (the manifest's relative paths resolve against its folder).
 #include "datasets/archive.hpp"
 #include "datasets/manifest.hpp"
+#include "engine/features/fpfh.hpp"
 #include "engine/geometry/cloud.hpp"
 #include "engine/geometry/distance_field.hpp"
-#include "engine/features/fpfh.hpp"
 #include "engine/geometry/scanner.hpp"
 #include "engine/geometry/search.hpp"
-#include "experiments/cli_common.hpp"
+#include "experiments/cli/cli_common.hpp"
 #include "io/mesh_import.hpp"
 
 #include <CLI/CLI.hpp>

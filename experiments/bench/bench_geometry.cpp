@@ -8,7 +8,7 @@
 // Loads run one at a time on the calling thread (the page cache warm after the first repeat;
 // the last repeat is reported). Prints the machine, thread count and every figure.
 #include "experiments/allocator.hpp"
-#include "experiments/cli_common.hpp"
+#include "experiments/cli/cli_common.hpp"
 #include "io/db_store.hpp"
 
 #include <CLI/CLI.hpp>

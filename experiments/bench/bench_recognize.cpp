@@ -12,7 +12,7 @@
 //   build/bench/bench_recognize --db DB.h5 [--grasps 20] [--speed-logs 6] [--seeds 3]
 //       [--noise underwater] [--method bricpsf] [--objects N] [--skip-speed] [--skip-accuracy]
 //       [--preset improved|paper] [--KEY VALUE ...] [--set KEY=VALUE ...]
-//   Method parameters (experiments/parameters.cpp, `touchstone params`) as `touchstone recognize`
+//   Method parameters (experiments/params/parameters.cpp, `touchstone params`) as `touchstone recognize`
 //   takes them: the preset's values (improved by default), then each --KEY (e.g. --ransac.triplets
 //   15, or an older flag, -N 15) or --set KEY=VALUE (a key or an older name: --set N=15).
 //   --method, --preset, --noise, its overrides (--arm-position-sigma, ...) and --sensors are the
@@ -21,15 +21,15 @@
 //
 // Prints the machine, thread counts, parameters and every figure.
 #include "datasets/simulator.hpp"
-#include "engine/touch/fusion.hpp"
 #include "engine/geometry/pose_error.hpp"
-#include "engine/recognition/recognizer.hpp"
 #include "engine/geometry/symmetry.hpp"
+#include "engine/recognition/recognizer.hpp"
+#include "engine/touch/fusion.hpp"
 #include "experiments/allocator.hpp"
-#include "experiments/cli_common.hpp"
-#include "experiments/config.hpp"
-#include "experiments/grasp_pools.hpp"
-#include "experiments/parameters.hpp"
+#include "experiments/cli/cli_common.hpp"
+#include "experiments/params/config.hpp"
+#include "experiments/params/parameters.hpp"
+#include "experiments/runs/grasp_pools.hpp"
 #include "io/db_store.hpp"
 
 #include <CLI/CLI.hpp>

@@ -12,7 +12,7 @@
 #include "datasets/manifest.hpp"
 #include "engine/database/database.hpp"
 #include "engine/geometry/scanner.hpp"
-#include "experiments/cli_common.hpp"
+#include "experiments/cli/cli_common.hpp"
 #include "io/mesh_import.hpp"
 
 #include <CLI/CLI.hpp>

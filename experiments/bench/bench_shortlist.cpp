@@ -12,12 +12,12 @@
 // Also the geometry an explored object holds in memory (what --memory-budget counts). Prints
 // the machine, thread count and every figure.
 #include "datasets/simulator.hpp"
-#include "engine/touch/fusion.hpp"
 #include "engine/recognition/ransac.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "engine/recognition/shortlist.hpp"
-#include "experiments/cli_common.hpp"
-#include "experiments/parameters.hpp"
+#include "engine/touch/fusion.hpp"
+#include "experiments/cli/cli_common.hpp"
+#include "experiments/params/parameters.hpp"
 #include "io/db_store.hpp"
 
 #include <CLI/CLI.hpp>

@@ -12,10 +12,10 @@
 #include "datasets/archive.hpp"
 #include "datasets/manifest.hpp"
 #include "datasets/simulator.hpp"
-#include "experiments/cli_common.hpp"
-#include "experiments/config.hpp"
-#include "experiments/grasp_pools.hpp"
-#include "experiments/parameters.hpp"
+#include "experiments/cli/cli_common.hpp"
+#include "experiments/params/config.hpp"
+#include "experiments/params/parameters.hpp"
+#include "experiments/runs/grasp_pools.hpp"
 #include "io/log_store.hpp"
 
 #include <CLI/CLI.hpp>

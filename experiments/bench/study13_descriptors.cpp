@@ -31,13 +31,13 @@
 // of the same shape?); and on stdout the tables. scripts/study13_figure.py draws the maps.
 #include "datasets/catalogue/csg.hpp"
 #include "datasets/simulator.hpp"
-#include "engine/geometry/cloud.hpp"
 #include "engine/features/descriptors.hpp"
-#include "engine/touch/fusion.hpp"
+#include "engine/geometry/cloud.hpp"
 #include "engine/geometry/mesh.hpp"
 #include "engine/geometry/scanner.hpp"
 #include "engine/geometry/search.hpp"
-#include "experiments/cli_common.hpp"
+#include "engine/touch/fusion.hpp"
+#include "experiments/cli/cli_common.hpp"
 
 #include <CLI/CLI.hpp>
 #include <tbb/task_arena.h>

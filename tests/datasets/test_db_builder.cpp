@@ -145,7 +145,7 @@ TEST_CASE("db builder: a stopped build keeps its finished objects and resumes to
   CHECK_THROWS_WITH_AS(ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "m2.tsv"), dir / "db.h5", settings),
                        doctest::Contains("was started with other inputs, parameters or seed"), ts::Error);
   CHECK_THROWS_WITH_AS(ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "m2.tsv"), dir / "db.h5", settings),
-                       doctest::Contains(("(" + (dir / "m2.tsv").string() + ", fingerprint)").c_str()), ts::Error);
+                       doctest::Contains(('(' + (dir / "m2.tsv").string() + ", fingerprint)").c_str()), ts::Error);
   ts::datasets::BuildSettings other_seed = settings;
   other_seed.seed = 2;
   CHECK_THROWS_WITH_AS(ts::datasets::build_database(inputs, dir / "db.h5", other_seed),
@@ -223,7 +223,7 @@ TEST_CASE("db builder: --scale keep builds objects at their real sizes, in their
   ts::test::write_text(dir / "bad.tsv", "pkg\tblock.off\tblock\tm\npkg\tball.off\tball\n");
   CHECK_THROWS_WITH_AS(
       ts::datasets::build_database(ts::datasets::inputs_from_manifest(dir / "bad.tsv"), dir / "bad.h5", settings),
-      doctest::Contains(("(" + (dir / "bad.tsv").string() + ", line 1, units)").c_str()), ts::Error);
+      doctest::Contains(('(' + (dir / "bad.tsv").string() + ", line 1, units)").c_str()), ts::Error);
   CHECK_FALSE(fs::exists(dir / "bad.h5"));
 }
 

@@ -47,7 +47,7 @@ std::shared_ptr<FeatureSource> feature_source() {
   const std::size_t counts[] = {300, 40, 129, 1, 700, 256, 90, 500};
   for (std::size_t o = 0; o < std::size(counts); ++o) {
     ObjectInfo info;
-    info.name = "o" + std::to_string(o);
+    info.name = 'o' + std::to_string(o);
     ObjectFeatures f;
     const Feature centre = random_feature(rng);
     for (std::size_t i = 0; i < counts[o]; ++i)  // odd objects: one tight cluster

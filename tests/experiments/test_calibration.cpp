@@ -1,7 +1,7 @@
 // Calibrated confidence (issue 14): the logistic fit against a known model, the calibration
 // measures against hand-computed values, the calibration file's checks.
-#include "experiments/calibration.hpp"
-#include "experiments/metrics.hpp"
+#include "experiments/analysis/calibration.hpp"
+#include "experiments/analysis/metrics.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>

@@ -1,10 +1,10 @@
 // `touchstone recognize` run as a user runs it: the JSON keys of the interface contract, the
 // result file, identical outputs for any --threads, the --cloud mode with a ground-truth file,
 // and clear errors for bad input.
-#include "engine/touch/fusion.hpp"
 #include "engine/recognition/recognizer.hpp"
-#include "experiments/calibration.hpp"
-#include "experiments/recognition_engine.hpp"
+#include "engine/touch/fusion.hpp"
+#include "experiments/analysis/calibration.hpp"
+#include "experiments/runs/recognition_engine.hpp"
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
 #include "io/log_store.hpp"

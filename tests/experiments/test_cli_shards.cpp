@@ -3,7 +3,7 @@
 // one clear error naming the store at fault, with nothing written. The MPI mode (--mpi under
 // mpirun) gives one process's results too, and a rank killed mid-run loses only its runs in
 // flight.
-#include "experiments/mpi_runs.hpp"
+#include "experiments/runs/mpi_runs.hpp"
 #include "io/run_store.hpp"
 #include "cli_run.hpp"
 #include "db_fixture.hpp"
@@ -70,7 +70,7 @@ void check_same_results(const io::RunStoreContents& a, const io::RunStoreContent
   }
 }
 
-std::string shard_name(int n, int i) { return "s" + std::to_string(n) + "_" + std::to_string(i) + ".h5"; }
+std::string shard_name(int n, int i) { return 's' + std::to_string(n) + "_" + std::to_string(i) + ".h5"; }
 
 /// Run shards 1..n of n; returns the merge arguments ("s3_1.h5 s3_2.h5 s3_3.h5").
 std::string run_shards(const test::TempDir& dir, int n) {
@@ -79,7 +79,7 @@ std::string run_shards(const test::TempDir& dir, int n) {
     const auto r = touchstone(dir, kExperiment + " --shard " + std::to_string(i) + "/" + std::to_string(n) +
                                        " --json --out " + shard_name(n, i));
     REQUIRE_MESSAGE(r.code == 0, r.err);
-    names += " " + shard_name(n, i);
+    names += ' ' + shard_name(n, i);
   }
   return names;
 }

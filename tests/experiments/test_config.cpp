@@ -1,7 +1,7 @@
 // Experiment configuration: files, flags, sweeps and clear errors that name the key.
-#include "experiments/config.hpp"
-#include "datasets/manifest.hpp"
 #include "datasets/catalogue/catalogue.hpp"
+#include "datasets/manifest.hpp"
+#include "experiments/params/config.hpp"
 
 #include <doctest/doctest.h>
 

@@ -1,5 +1,5 @@
 // The driver with a synthetic engine: parallel = serial, interrupted + resumed = uninterrupted.
-#include "experiments/driver.hpp"
+#include "experiments/runs/driver.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>

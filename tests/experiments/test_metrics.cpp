@@ -1,5 +1,5 @@
 // Metrics against hand-computed and published values.
-#include "experiments/metrics.hpp"
+#include "experiments/analysis/metrics.hpp"
 
 #include <doctest/doctest.h>
 

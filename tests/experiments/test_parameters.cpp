@@ -1,8 +1,8 @@
-// The vocabulary of method parameters (experiments/parameters.hpp): one declaration, its names,
+// The vocabulary of method parameters (experiments/params/parameters.hpp): one declaration, its names,
 // values that reach the settings, the presets, and the README's table generated from it.
-#include "experiments/config.hpp"
-#include "experiments/grasp_pools.hpp"
-#include "experiments/parameters.hpp"
+#include "experiments/params/config.hpp"
+#include "experiments/params/parameters.hpp"
+#include "experiments/runs/grasp_pools.hpp"
 
 #include <doctest/doctest.h>
 

@@ -2,9 +2,9 @@
 // records; the same results for 1 and 2 threads and after an interruption.
 #include "engine/recognition_fixture.hpp"
 #include "datasets/simulator.hpp"
-#include "experiments/calibration.hpp"
-#include "experiments/engine_database.hpp"
-#include "experiments/recognition_engine.hpp"
+#include "experiments/analysis/calibration.hpp"
+#include "experiments/runs/engine_database.hpp"
+#include "experiments/runs/recognition_engine.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>

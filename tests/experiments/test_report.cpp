@@ -1,6 +1,6 @@
 // Report JSON: the interface's keys, values against hand-counted outcomes, plots.
-#include "experiments/calibration.hpp"
-#include "experiments/report.hpp"
+#include "experiments/analysis/calibration.hpp"
+#include "experiments/analysis/report.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>

@@ -1,7 +1,7 @@
 // Study 10 (stiff and extreme cases, `touchstone stress`): the configuration's errors, and a
 // reduced study whose outcomes are known: a dive 1 000 km from the origin answers as at the
 // origin, a single flat patch is flagged, three contacts give no answer, nothing is NaN.
-#include "experiments/stress.hpp"
+#include "experiments/runs/stress.hpp"
 #include "cli_run.hpp"
 #include "temp_dir.hpp"
 

@@ -5,7 +5,7 @@
 #include "datasets/archive.hpp"
 #include "datasets/manifest.hpp"
 #include "engine/core.hpp"
-#include "experiments/config.hpp"
+#include "experiments/params/config.hpp"
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
 #include "io/gripper_io.hpp"

@@ -36,12 +36,12 @@
 #include <pcl/search/kdtree.h>
 
 #include "datasets/catalogue/csg.hpp"
-#include "engine/geometry/cloud.hpp"
 #include "engine/features/descriptors.hpp"
+#include "engine/geometry/cloud.hpp"
 #include "engine/geometry/mesh.hpp"
 #include "engine/geometry/scanner.hpp"
 #include "engine/geometry/search.hpp"
-#include "experiments/cli_common.hpp"
+#include "experiments/cli/cli_common.hpp"
 
 #include <CLI/CLI.hpp>
 #include <tbb/task_arena.h>

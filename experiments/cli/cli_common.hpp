@@ -1,0 +1,59 @@
+// What every `touchstone` subcommand shares: --threads, --seed, --json, the error format and
+// the caller-owned task arena. See ../../README.md "Command line" and the interface contract.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+
+namespace ts {
+class Database;
+}
+
+namespace ts::cli {
+
+struct CommonOptions {
+  int threads = 0;            ///< 0: all cores
+  std::uint64_t seed = 1;     ///< every random draw derives from it
+  bool json = false;          ///< exactly one JSON object on stdout
+};
+
+/// Add --threads and --seed (and --json when with_json) to a subcommand.
+void add_common(CLI::App* sub, CommonOptions& options, bool with_json = true);
+
+/// Run a command body inside a task arena of options.threads threads. A ts::Error or any other
+/// exception becomes one line "touchstone: error: ..." on stderr and exit code 1.
+/// The exit code is remembered for main (see exit_code()).
+void run_command(const CommonOptions& options, const std::function<int()>& body);
+int exit_code();
+
+/// Resolved thread count (options.threads or all cores).
+int thread_count(const CommonOptions& options);
+/// Host description for reports: "<cpu model>, <n> cores, <allocator>" (experiments/allocator.hpp).
+std::string machine_description();
+
+/// Default resident object geometry of `recognize`, `experiment` and the benchmarks (MB).
+constexpr double kDefaultMemoryBudgetMb = 256;
+/// A --memory-budget / memory_budget_mb value in MB (unset: the default; 0: no limit) in bytes.
+std::size_t memory_budget_bytes(const std::optional<double>& mb);
+
+/// Set a database's memory budget from --memory-budget / memory_budget_mb. A budget given
+/// explicitly that cannot hold the largest object's geometry (measured by loading it) is an
+/// error naming `file` and the option.
+void set_memory_budget(Database& db, const std::optional<double>& mb, const std::string& file,
+                       const std::string& option = "--memory-budget");
+bool stderr_is_terminal();
+
+// One register function per command group; each lives in its own cmd_*.cpp.
+void register_db(CLI::App& app);          // db build|add|info|export
+void register_tactile(CLI::App& app);     // simulate, log info|export
+void register_recognize(CLI::App& app);   // recognize
+void register_experiment(CLI::App& app);  // experiment, report, merge, calibrate
+void register_catalogue(CLI::App& app);   // catalogue
+void register_stress(CLI::App& app);      // stress
+void register_params(CLI::App& app);      // params
+
+}  // namespace ts::cli

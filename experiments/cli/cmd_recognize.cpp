@@ -1,0 +1,812 @@
+// `touchstone recognize`: recognize and localize the touched object, step by step, from a
+// tactile log (or from a plain contact cloud as a single step without free space). Several
+// logs or clouds (or a folder of clouds) are recognized in parallel in one process, sharing
+// the loaded database; each input gets its own recognizer with the seed it would have alone.
+#include "experiments/allocator.hpp"
+#include "experiments/analysis/calibration.hpp"
+#include "experiments/analysis/report.hpp"
+#include "experiments/analysis/scene.hpp"
+#include "experiments/cli/cli_common.hpp"
+#include "experiments/params/parameters.hpp"
+#include "experiments/runs/log_steps.hpp"
+#include "experiments/runs/recognition_engine.hpp"
+
+#include "engine/features/feature_table.hpp"
+#include "engine/touch/active_touch.hpp"
+#include "engine/touch/fusion.hpp"
+#include "engine/geometry/kabsch.hpp"
+#include "engine/geometry/pose_error.hpp"
+#include "engine/recognition/recognizer.hpp"
+#include "engine/geometry/symmetry.hpp"
+#include "io/cloud_io.hpp"
+#include "io/db_store.hpp"
+#include "io/log_store.hpp"
+#include "io/result_store.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/partitioner.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cctype>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <numbers>
+#include <mutex>
+#include <set>
+#include <sstream>
+
+namespace ts::cli {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RecognizeOptions {
+  CommonOptions common;
+  std::string db, out, ground_truth, object;
+  std::string calibration;           ///< --calibration: the confidence model (touchstone calibrate)
+  std::optional<double> open_set_threshold;  ///< --open-set-threshold (unset: the calibration's)
+  std::vector<std::string> logs, clouds;  ///< --log files; --cloud files or folders
+  std::string free;                  ///< --free: the free-space cloud of a single --cloud
+  std::vector<std::string> only;     ///< --only: the objects the answer may name (empty: all)
+  bool batch = false;                ///< several inputs (or a folder): per-input output
+  std::string method = "bricpsf";
+  std::string preset = "improved";   ///< improved | paper: the defaults the flags start from
+  int steps = 0;                     ///< 0: every grasp of the log
+  experiments::ParameterFlags flags;  ///< the method parameters' flags given (experiments/params/parameters.hpp)
+  RecognizerSettings rs;             ///< the preset's method parameters with the flags applied
+  double contact_voxel = 0.002;      ///< m, voxel filter of the cumulative contact cloud
+  std::optional<double> memory_budget_mb;  ///< resident object geometry; unset: the default
+  bool inside_margin = false;        ///< --free-inside-margin given (unset: 0; a probe: 1 cm)
+  int suggest = 0;                   ///< --suggest N: the N best next grasps after the last step
+  ActiveSettings active;             ///< the next-grasp planner's parameters (active.*)
+  std::string scene;                 ///< --scene DIR: pictures of chosen steps (experiments/analysis/scene.hpp)
+  std::vector<int> scene_steps;      ///< --scene-steps (empty: the last step)
+  int exploration = 0;               ///< exploration.strategy (recorded; experiments act on it)
+};
+
+/// A 4x4 row-major object -> world matrix from a text file (whitespace or comma separated).
+Pose read_ground_truth(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw Error("cannot open the ground-truth file", path);
+  std::vector<double> v;
+  std::string line;
+  int lineno = 0;
+  while (std::getline(in, line)) {
+    ++lineno;
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.erase(hash);
+    for (char& c : line)
+      if (c == ',' || c == ';' || c == '[' || c == ']') c = ' ';
+    std::istringstream ls(line);
+    std::string tok;
+    while (ls >> tok) {
+      char* end = nullptr;
+      const double x = std::strtod(tok.c_str(), &end);
+      if (end == tok.c_str() || *end != '\0' || !std::isfinite(x))
+        throw Error("not a finite number: '" + tok + "'", path, "line " + std::to_string(lineno));
+      v.push_back(x);
+    }
+  }
+  if (v.size() != 16)
+    throw Error("expected 16 numbers (a 4x4 row-major matrix), found " + std::to_string(v.size()),
+                path);
+  Eigen::Matrix4d M;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) M(r, c) = v[static_cast<std::size_t>(4 * r + c)];
+  if ((M.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).norm() > 1e-6)
+    throw Error("the last row must be 0 0 0 1", path, "line 4");
+  const Mat3 R = M.topLeftCorner<3, 3>();
+  if ((R.transpose() * R - Mat3::Identity()).norm() > 1e-3 || R.determinant() < 0.0)
+    throw Error("the upper-left 3x3 block is not a rotation", path);
+  Pose T = Pose::Identity();
+  T.linear() = rotation_from_covariance(R.transpose());  // the nearest rotation
+  T.translation() = M.topRightCorner<3, 1>();
+  return T;
+}
+
+nlohmann::ordered_json pose_json(const Pose& T) {
+  Eigen::Quaterniond q(T.linear());
+  q.normalize();
+  if (q.w() < 0) q.coeffs() = -q.coeffs();
+  const Vec3 t = T.translation();
+  return {{"t", {t.x(), t.y(), t.z()}}, {"q", {q.w(), q.x(), q.y(), q.z()}}};
+}
+
+nlohmann::ordered_json number_or_null(const std::optional<double>& x) {
+  if (!x || !std::isfinite(*x)) return nullptr;
+  return *x;
+}
+
+std::vector<std::pair<std::string, double>> params_of(const RecognizerSettings& s,
+                                                     const RecognizeOptions& o) {
+  experiments::MethodSettings m;
+  m.recognizer = s;
+  m.contact_voxel = o.contact_voxel;
+  m.exploration = o.exploration;
+  m.active = o.active;
+  return experiments::stored_parameters(m);
+}
+
+/// One input of the command: a tactile log or a contact cloud.
+struct Input {
+  std::string path;
+  bool is_log = true;
+};
+
+/// What every input shares: the options, the settings and the one loaded database.
+struct Context {
+  const RecognizeOptions& o;
+  RecognizerSettings rs;
+  const Database& db;
+  double largest = 0.0;          ///< m, diagonal of the largest database object
+  SymmetryCache& symmetries;     ///< thread-safe
+  const io::CongruenceRecord* congruence = nullptr;   ///< the database's classes (null: not known)
+  const experiments::Calibration* calibration = nullptr;  ///< --calibration (null: none)
+};
+
+/// The names of object i's congruent class (itself alone when in none, or when none are known).
+nlohmann::ordered_json class_json(const Context& c, std::size_t i) {
+  nlohmann::ordered_json names = nlohmann::ordered_json::array();
+  for (std::size_t k : c.congruence ? c.congruence->class_of(i) : std::vector<std::size_t>{i})
+    names.push_back(c.db.info(k).name);
+  return names;
+}
+
+/// One input's outcome.
+struct InputRun {
+  Input in;
+  std::string truth_name;
+  std::optional<Pose> truth_pose;
+  std::vector<StepResult> results;
+  std::vector<io::ResultStep> stored;
+  std::vector<double> fusion_time;
+  std::vector<double> contact_distance;  ///< m, mean contact-to-model distance at each answer
+  std::string written;           ///< the result file written ("" : none)
+  std::string error;             ///< several inputs: why this one failed ("" : it did not)
+  nlohmann::ordered_json suggestions;   ///< --suggest: the best next grasps (null: not asked)
+  double suggest_time_s = 0.0;
+  bool truth_outside = false;    ///< the log's object is not in the database (open set)
+  std::vector<nlohmann::ordered_json> scenes;   ///< --scene: the chosen steps' scenes
+};
+
+/// The whole recognition of one input with its own recognizer (the context's seed), the result
+/// file written to `out` when not empty. Throws ts::Error naming the input on bad input.
+InputRun recognize_one(const Context& c, const Input& in, const std::string& out, bool progress) {
+  const RecognizeOptions& o = c.o;
+  const Database& db = c.db;
+  InputRun run;
+  run.in = in;
+
+  // The input: a tactile log (K steps) or one contact cloud.
+  std::optional<TactileLog> log;
+  PointCloud single;
+  std::optional<std::size_t> truth_object;
+  int K = 1;
+  if (in.is_log) {
+    log = io::read_log(in.path);
+    if (log->grasps.empty()) throw Error("the log has no grasps", in.path, "/grasps");
+    const int n = static_cast<int>(log->grasps.size());
+    if (o.steps > n)
+      throw Error("--steps " + std::to_string(o.steps) + " exceeds the log's " + std::to_string(n) +
+                      " grasps", in.path, "--steps");
+    K = o.steps > 0 ? o.steps : n;
+    if (log->truth) run.truth_pose = log->truth->object_pose;
+    run.truth_name = log->object;
+    if (!run.truth_name.empty()) {
+      // An object outside the database (the open-set case) is recognized and scored: naming any
+      // database object is then wrong.
+      const std::size_t i = db.find(run.truth_name);
+      if (i < db.size())
+        truth_object = i;
+      else
+        run.truth_outside = true;
+    }
+  } else {
+    single = io::read_cloud(in.path);
+    if (o.steps > 1) throw Error("a contact cloud is one step", in.path, "--steps");
+  }
+  std::vector<Vec3> single_free;   // --free: a user's free-space cloud beside the contacts
+  if (!o.free.empty()) {
+    single_free = io::read_cloud(o.free).points;
+    for (std::size_t i = 0; i < single_free.size(); ++i)
+      if (!single_free[i].allFinite())
+        throw Error("free-space point " + std::to_string(i) + " is not finite", o.free, "--free");
+  }
+  if (!o.ground_truth.empty()) run.truth_pose = read_ground_truth(o.ground_truth);
+  if (!o.object.empty()) {
+    const std::size_t i = db.find(o.object);
+    if (i == db.size()) throw Error("no object '" + o.object + "' in the database", o.db, "--object");
+    truth_object = i;
+    run.truth_name = o.object;
+  }
+
+  // A probe's path: free by the ball radius only, unless the flags say otherwise (log_steps.hpp).
+  const RecognizerSettings rs = log ? experiments::log_settings(c.rs, *log, o.inside_margin) : c.rs;
+  Recognizer rec(db, rs);
+  if (truth_object) rec.watch(static_cast<std::uint32_t>(*truth_object));   // the JSON's truth_funnel
+  const SymmetryGroup* sym = nullptr;
+  if (truth_object && run.truth_pose) sym = &c.symmetries.get(db, *truth_object);
+
+  std::optional<Exploration> ex;
+  if (log) ex.emplace(*log, experiments::log_exploration(db, c.rs, o.contact_voxel));
+  const bool with_free = c.rs.method == Method::bricpsf || c.rs.method == Method::ransac_icp_fs;
+  std::vector<int> draw;   // --scene: the steps to draw
+  if (!o.scene.empty()) draw = experiments::scene_steps(o.scene_steps, K, in.path);
+  const std::string stem = fs::path(in.path).stem().string();
+
+  for (int k = 1; k <= K; ++k) {
+    PointCloud contacts;
+    std::vector<Vec3> free;
+    GraspGroups grasps;
+    const auto t0 = std::chrono::steady_clock::now();
+    if (ex) {
+      experiments::StepInput step = experiments::step_input(*ex, static_cast<std::size_t>(k), c.rs.method);
+      contacts = std::move(step.contacts);
+      free = std::move(step.free);
+      grasps = std::move(step.grasps);
+    } else {
+      contacts = single;
+      if (with_free) free = single_free;
+    }
+    run.fusion_time.push_back(
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    StepResult r = rec.step(contacts, free, grasps);
+    // Units sanity check: contacts far wider than any object mean the log and the database
+    // disagree (e.g. millimetres against metres).
+    if (r.contacts > 0) {
+      Eigen::AlignedBox3d box;
+      for (const Vec3& p : contacts.points) box.extend(p);
+      const double span = box.diagonal().norm();
+      if (span > 4.0 * c.largest + 0.5)
+        throw Error("the contacts span " + std::to_string(span) + " m but the largest database object " +
+                        std::to_string(c.largest) + " m: do the log and the database use the same units?",
+                    in.path, log ? "/grasps" : "points");
+    }
+    run.contact_distance.push_back(
+        r.valid && !contacts.empty()
+            ? mean_contact_distance(*db.geometry(r.best.object), r.best.pose, contacts.points)
+            : std::numeric_limits<double>::quiet_NaN());
+    if (std::find(draw.begin(), draw.end(), k) != draw.end())
+      run.scenes.push_back(experiments::scene_json(db, r, contacts, free, truth_object, run.truth_pose, stem,
+                                                   stem + ", step " + std::to_string(k)));
+    run.stored.push_back(io::to_result_step(r, truth_object, run.truth_pose, sym));
+    if (run.truth_outside) run.stored.back().correct = !r.valid;
+    run.results.push_back(std::move(r));
+    if (progress) std::fprintf(stderr, "\rstep %d/%d", k, K);
+  }
+  if (progress) std::fprintf(stderr, "\n");
+
+  if (o.suggest > 0) {
+    // The N best next grasps on the state after the last step (engine/touch/active_touch.hpp).
+    if (!log) throw Error("--suggest plans the next grasp of a tactile log (not a contact cloud)", in.path, "--suggest");
+    if (log->sensing == Sensing::probe)
+      throw Error("--suggest plans grasps of a gripper with pads; this is a probe log", in.path, "/sensing");
+    if (rec.hypotheses().empty())
+      throw Error("no hypothesis after " + std::to_string(K) +
+                      " step(s) to plan the next grasp from: no contact yet, or no database object fits "
+                      "the contacts (touch the object again, e.g. any grasp toward it)",
+                  in.path, "--suggest");
+    const auto t0 = std::chrono::steady_clock::now();
+    std::optional<GraspPlanner> planner;
+    try {
+      planner.emplace(log->gripper, o.active);
+    } catch (const Error& e) {
+      throw Error(e.message(), in.path, e.field().empty() ? "/gripper" : "/gripper " + e.field());
+    }
+    ex->advance_to(static_cast<std::size_t>(K));
+    const auto best = planner->plan(rec.hypotheses(), database_plan_objects(db), rs.seed,
+                                    static_cast<std::size_t>(o.suggest), ex->contact_cloud().points);
+    run.suggest_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    run.suggestions = nlohmann::ordered_json::array();
+    const Gripper& G = log->gripper;
+    for (std::size_t i = 0; i < best.size(); ++i) {
+      const PlannedGrasp& g = best[i];
+      nlohmann::ordered_json s;
+      s["rank"] = i + 1;
+      s["T_EEF"] = pose_json(g.command.T_world_eef);
+      nlohmann::ordered_json m = nlohmann::ordered_json::array();
+      for (int r = 0; r < 4; ++r)
+        for (int col = 0; col < 4; ++col) m.push_back(g.command.T_world_eef.matrix()(r, col));
+      s["T_EEF_matrix"] = m;
+      const Vec3 a = g.command.approach;
+      s["approach"] = {a.x(), a.y(), a.z()};
+      const Vec3 t = g.command.target;
+      s["target"] = {t.x(), t.y(), t.z()};
+      nlohmann::ordered_json joints;
+      for (int j = 0; j < G.joint_count(); ++j) {
+        const int f = G.finger_of_joint(j);
+        joints[G.spec().fingers[static_cast<std::size_t>(f)].name + "." + G.link(j).name] =
+            g.command.joints[static_cast<std::size_t>(j)] * 180.0 / std::numbers::pi;
+      }
+      s["joints_deg"] = joints;
+      s["expected_information_nats"] = g.information;
+      s["blocked_weight"] = g.blocked_weight;
+      s["score"] = g.score;
+      s["aimed_object"] = db.info(g.aimed_object).name;
+      run.suggestions.push_back(std::move(s));
+    }
+  }
+
+  if (!out.empty()) {
+    io::ResultHeader h;
+    h.method = std::string(method_name(c.rs.method));
+    h.seed = c.rs.seed;
+    h.database = o.db;
+    h.input = in.path;
+    h.input_kind = log ? "log" : "cloud";
+    for (std::size_t i = 0; i < db.size(); ++i) h.objects.push_back(db.info(i).name);
+    h.truth_object = run.truth_name;
+    h.truth_pose = run.truth_pose;
+    h.params = params_of(c.rs, o);
+    io::write_result(out, h, run.stored);
+    run.written = out;
+  }
+  return run;
+}
+
+nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
+  nlohmann::ordered_json steps = nlohmann::ordered_json::array();
+  for (std::size_t k = 0; k < run.results.size(); ++k) {
+    const StepResult& r = run.results[k];
+    const io::ResultStep& s = run.stored[k];
+    nlohmann::ordered_json st;
+    st["step"] = r.step;
+    st["object"] = r.valid ? nlohmann::ordered_json(c.db.info(r.best.object).name) : nullptr;
+    st["weight"] = r.valid ? nlohmann::ordered_json(r.best.weight) : nullptr;
+    st["posterior"] = r.valid ? nlohmann::ordered_json(r.posterior) : nullptr;
+    // Calibrated: P(the named object is right), P(and its position within 1 cm) (--calibration).
+    // Open set: below the threshold the answer is "not in the database" (the object the
+    // evidence fits best stays as best_guess).
+    bool refused = false;
+    if (c.calibration) {
+      const std::vector<double> f = experiments::confidence_features(r);
+      const auto in_database = c.calibration->in_database(r.step, f);  // the open-set score
+      st["confidence"] = {{"object", c.calibration->object_confidence(r.step, f)},
+                          {"pose", c.calibration->pose_confidence(r.step, f)},
+                          {"in_database", in_database ? nlohmann::ordered_json(*in_database) : nullptr}};
+      const auto threshold = c.o.open_set_threshold ? c.o.open_set_threshold : c.calibration->open_set_threshold;
+      refused = r.valid && threshold && in_database && *in_database < *threshold;
+    } else {
+      st["confidence"] = nullptr;
+    }
+    st["reason"] = refused ? nlohmann::ordered_json("not_in_database") : nullptr;
+    st["best_guess"] = refused ? st["object"] : nullptr;
+    if (refused) st["object"] = nullptr;
+    st["pose"] = r.valid ? pose_json(r.best.pose) : nullptr;
+    const auto e = s.error;
+    st["position_error_m"] = number_or_null(e ? std::optional(e->position_m) : std::nullopt);
+    st["orientation_error_deg"] = number_or_null(e ? std::optional(e->orientation_deg) : std::nullopt);
+    st["symmetric_orientation_error_deg"] =
+        number_or_null(e ? std::optional(e->symmetric_orientation_deg) : std::nullopt);
+    st["time_s"] = r.times.total_s;
+    // extensions
+    // A refused answer is right exactly when the touched object is not in the database.
+    st["correct"] = !s.correct ? nlohmann::ordered_json(nullptr)
+                    : refused  ? nlohmann::ordered_json(run.truth_outside)
+                               : nlohmann::ordered_json(*s.correct);
+    // The named object's class of congruent objects (no touch tells them apart), and whether the
+    // answer lies in the true object's class.
+    st["object_class"] = r.valid ? class_json(c, r.best.object) : nullptr;
+    if (s.correct) {
+      const std::size_t truth = c.db.find(run.truth_name);
+      st["correct_class"] = refused ? run.truth_outside : r.valid && truth < c.db.size() &&
+                            (c.congruence ? c.congruence->same_class(r.best.object, truth) : r.best.object == truth);
+    } else {
+      st["correct_class"] = nullptr;
+    }
+    st["symmetric_position_error_m"] =
+        number_or_null(e ? std::optional(e->symmetric_position_m) : std::nullopt);
+    st["log_weight"] = r.valid ? nlohmann::ordered_json(r.best.log_weight) : nullptr;
+    st["contacts"] = r.contacts;
+    st["free_points"] = r.free_points;
+    st["unobservable_dof"] = r.unobservable_dof;
+    st["pose_ambiguous"] = r.pose_ambiguous;
+    // Mean |distance| of the step's contacts to the answer's surface at its pose (Vezzani et al.)
+    st["contact_model_distance_m"] = number_or_null(
+        std::isfinite(run.contact_distance[k]) ? std::optional(run.contact_distance[k]) : std::nullopt);
+    st["candidates"] = r.candidates;
+    st["sparse_active"] = r.sparse_active;
+    st["sparse_candidates"] = r.sparse_candidates;
+    st["hypotheses"] = r.hypotheses.size();
+    st["objects_allowed"] = r.objects_allowed;
+    st["objects_reached"] = r.objects_reached;
+    st["objects_shortlisted"] = r.shortlist.empty() ? r.objects_reached : r.shortlist.size();
+    if (r.watched) {   // where the known object stood in the search (see Funnel)
+      const Funnel& f = *r.watched;
+      st["truth_funnel"] = {{"searched", f.searched},       {"candidates", f.candidates},
+                            {"shortlisted", f.shortlisted}, {"transferred", f.transferred},
+                            {"transfer_rank", f.transfer_rank}, {"prior_rank", f.prior_rank}, {"screen_score", f.screen_score},
+                            {"screen_cut", f.screen_cut}, {"screen_rank", f.screen_rank},
+                            {"hypotheses", f.hypotheses}};
+    }
+    st["geometry_loads"] = r.geometry_loads;
+    st["geometry_resident"] = r.geometry_resident;
+    st["stages_s"] = {{"fusion", run.fusion_time[k]}, {"prepare", r.times.prepare_s},
+                      {"prune", r.times.prune_s},     {"register", r.times.register_s},
+                      {"shortlist", r.times.shortlist_s},
+                      {"icp", r.times.icp_s},         {"evaluate", r.times.evaluate_s}};
+    steps.push_back(std::move(st));
+  }
+  return steps;
+}
+
+/// One input's JSON object: method, preset, steps (or error), [database,] input, truth_object.
+nlohmann::ordered_json input_json(const Context& c, const InputRun& run, bool with_database) {
+  nlohmann::ordered_json j;
+  j["method"] = std::string(method_name(c.rs.method));
+  j["preset"] = c.o.preset;
+  if (run.error.empty())
+    j["steps"] = steps_json(c, run);
+  else
+    j["error"] = run.error;
+  if (with_database) j["database"] = c.o.db;
+  j["input"] = run.in.path;
+  j["truth_object"] = run.truth_name.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(run.truth_name);
+  j["truth_in_database"] = run.truth_name.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(!run.truth_outside);
+  if (!run.suggestions.is_null()) {
+    j["suggestions"] = run.suggestions;
+    j["suggest_time_s"] = run.suggest_time_s;
+  }
+  return j;
+}
+
+/// The fields every input shares: seed, threads, machine, params.
+void add_shared_json(nlohmann::ordered_json& j, const Context& c) {
+  j["seed"] = c.rs.seed;
+  j["threads"] = thread_count(c.o.common);
+  j["machine"] = machine_description();
+  j["congruent_classes_known"] = c.congruence != nullptr;   // else "object_class" is the object alone
+  nlohmann::ordered_json p;
+  for (const auto& [name, value] : params_of(c.rs, c.o)) p[name] = value;
+  j["params"] = p;
+}
+
+std::string input_label(const InputRun& run) {
+  return "input " + run.in.path + (run.truth_name.empty() ? "" : " (object " + run.truth_name + ")");
+}
+
+/// One input's table (and notes) for people.
+void print_table(const Context& c, const InputRun& run) {
+  std::printf("%5s  %-24s %9s %9s %10s %9s %9s %8s\n", "step", "object", "weight", "posterior",
+              "pos_err_m", "ori_deg", "sym_deg", "time_s");
+  for (std::size_t k = 0; k < run.results.size(); ++k) {
+    const StepResult& r = run.results[k];
+    const auto& e = run.stored[k].error;
+    auto num = [](bool have, double x, const char* fmt) {
+      char buf[32];
+      if (!have || !std::isfinite(x)) return std::string("-");
+      std::snprintf(buf, sizeof buf, fmt, x);
+      return std::string(buf);
+    };
+    std::string name = r.valid ? c.db.info(r.best.object).name : "(none)";
+    if (r.valid && r.pose_ambiguous) name += " ?";
+    std::printf("%5d  %-24s %9s %9s %10s %9s %9s %8.3f\n", r.step, name.c_str(),
+                num(r.valid, r.best.weight, "%.4f").c_str(), num(r.valid, r.posterior, "%.3f").c_str(),
+                num(e.has_value(), e ? e->position_m : 0, "%.4f").c_str(),
+                num(e.has_value(), e ? e->orientation_deg : 0, "%.1f").c_str(),
+                num(e.has_value(), e ? e->symmetric_orientation_deg : 0, "%.1f").c_str(),
+                r.times.total_s);
+  }
+  if (!run.results.empty() && run.results.back().valid) {
+    const auto members = class_json(c, run.results.back().best.object);
+    if (members.size() > 1) {
+      std::cout << "note: congruent objects, no touch tells them apart:";
+      for (const auto& n : members) std::cout << ' ' << n.get<std::string>();
+      std::cout << '\n';
+    }
+  }
+  if (!run.results.empty() && run.results.back().pose_ambiguous)
+    std::cout << "? the contacts leave " << run.results.back().unobservable_dof
+              << " pose DOF unobservable (e.g. a single flat patch): the pose is not reliable\n";
+  if (!run.written.empty()) std::cout << "wrote " << run.written << '\n';
+}
+
+std::string lowercase(std::string s) {
+  for (char& ch : s) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  return s;
+}
+
+/// The inputs in command-line order; a --cloud folder gives its .ply/.pcd files sorted by name.
+std::vector<Input> expand_inputs(const RecognizeOptions& o) {
+  std::vector<Input> inputs;
+  for (const std::string& p : o.logs) inputs.push_back({p, true});
+  for (const std::string& p : o.clouds) {
+    if (!fs::is_directory(p)) {
+      inputs.push_back({p, false});
+      continue;
+    }
+    std::vector<std::string> names;
+    for (const auto& entry : fs::directory_iterator(p)) {
+      const std::string ext = lowercase(entry.path().extension().string());
+      if (entry.is_regular_file() && (ext == ".ply" || ext == ".pcd"))
+        names.push_back(entry.path().filename().string());
+    }
+    if (names.empty()) throw Error("the folder holds no .ply or .pcd file", p, "--cloud");
+    std::sort(names.begin(), names.end());
+    for (const std::string& n : names) inputs.push_back({(fs::path(p) / n).string(), false});
+  }
+  return inputs;
+}
+
+/// Several inputs with --out DIR: each result is DIR/<stem>.h5. Refuse (before any work) two
+/// inputs with one stem, a result file that would replace an input, and an --out that is a file.
+std::vector<std::string> result_paths(const RecognizeOptions& o, const std::vector<Input>& inputs) {
+  std::vector<std::string> paths(inputs.size());
+  if (o.out.empty()) return paths;
+  if (fs::exists(o.out) && !fs::is_directory(o.out))
+    throw Error("with several inputs --out takes a folder (one <stem>.h5 per input), not a file", o.out,
+                "--out");
+  std::map<std::string, std::string> by_stem;
+  std::set<fs::path> input_files;
+  for (const Input& in : inputs) input_files.insert(fs::weakly_canonical(in.path));
+  for (std::size_t i = 0; i < inputs.size(); ++i) {
+    const std::string stem = fs::path(inputs[i].path).stem().string();
+    const fs::path target = fs::path(o.out) / (stem + ".h5");
+    const auto [it, fresh] = by_stem.emplace(stem, inputs[i].path);
+    if (!fresh)
+      throw Error("the inputs " + it->second + " and " + inputs[i].path + " share the name '" + stem +
+                      "': both results would be " + target.string() + " (nothing was done)", o.out, "--out");
+    if (input_files.count(fs::weakly_canonical(target)))
+      throw Error("the result " + target.string() + " would replace the input of that name (nothing was done)",
+                  o.out, "--out");
+    paths[i] = target.string();
+  }
+  return paths;
+}
+
+/// The error line of a failed input: names the file (ts::Error's own message does when it is
+/// about the input; otherwise the input is added).
+std::string input_error(const Input& in, const std::exception& e) {
+  const auto* te = dynamic_cast<const Error*>(&e);
+  if (te && te->file() == in.path) return e.what();
+  return std::string(e.what()) + " (input " + in.path + ")";
+}
+
+/// --scene: every recognized input's chosen steps drawn into the folder (a PNG and an HTML page
+/// each, by the plot script); the scenes' data in DIR/scenes.json.
+void draw_scenes(const RecognizeOptions& o, const std::vector<const InputRun*>& runs) {
+  if (o.scene.empty()) return;
+  nlohmann::ordered_json j;
+  j["scenes"] = nlohmann::ordered_json::array();
+  for (const InputRun* run : runs)
+    for (const auto& s : run->scenes) j["scenes"].push_back(s);
+  if (j["scenes"].empty()) return;
+  const auto files = experiments::write_plots(j, o.scene, "scenes.json");
+  if (!o.common.json)
+    std::cerr << "scene: " << files.size() << " files written to " << o.scene << "\n";
+}
+
+/// Several inputs in parallel (each with its own recognizer and the shared database); a
+/// failing input is reported and the others go on. Exit code 1 when any failed.
+int recognize_many(const Context& c, const std::vector<Input>& inputs,
+                   const std::vector<std::string>& outs) {
+  const RecognizeOptions& o = c.o;
+  if (!o.out.empty()) fs::create_directories(o.out);
+  std::vector<InputRun> runs(inputs.size());
+  const bool progress = stderr_is_terminal() && !o.common.json;
+  std::mutex progress_mutex;
+  std::size_t done = 0;
+  // Every input's recognizer shares one FeatureTable, held here for the whole batch
+  // (FeatureTable::shared keeps a table only while someone holds it).
+  const auto table = c.rs.ransac.feature_table ? FeatureTable::shared(c.db, c.rs.objects) : nullptr;
+  const auto prior = Recognizer::shape_prior(c.db, c.rs);   // the same: built once, not per input
+  experiments::release_free_memory();   // what building them freed (experiments/allocator.hpp)
+  tbb::parallel_for(
+      tbb::blocked_range<std::size_t>(0, inputs.size(), 1),
+      [&](const tbb::blocked_range<std::size_t>& range) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+          // Isolated: a thread waiting inside one input's parallel work takes no other input.
+          tbb::this_task_arena::isolate([&] {
+            try {
+              runs[i] = recognize_one(c, inputs[i], outs[i], false);
+            } catch (const std::exception& e) {
+              runs[i] = InputRun{};
+              runs[i].in = inputs[i];
+              runs[i].error = input_error(inputs[i], e);
+            }
+          });
+          experiments::release_free_memory();   // what the input freed, before the next
+          if (progress) {
+            std::lock_guard<std::mutex> lock(progress_mutex);
+            std::fprintf(stderr, "\rinputs %zu/%zu", ++done, inputs.size());
+          }
+        }
+      },
+      tbb::simple_partitioner());
+  if (progress) std::fprintf(stderr, "\n");
+  std::vector<const InputRun*> drawn;
+  for (const InputRun& run : runs)
+    if (run.error.empty()) drawn.push_back(&run);
+  draw_scenes(o, drawn);
+
+  std::size_t failed = 0;
+  for (const InputRun& run : runs)
+    if (!run.error.empty()) {
+      std::cerr << "touchstone: error: " << run.error << '\n';
+      ++failed;
+    }
+  if (o.common.json) {
+    nlohmann::ordered_json j;
+    j["database"] = o.db;
+    add_shared_json(j, c);
+    j["inputs"] = nlohmann::ordered_json::array();
+    for (const InputRun& run : runs) j["inputs"].push_back(input_json(c, run, false));
+    std::cout << j.dump(2) << '\n';
+  } else {
+    std::cout << "method " << method_name(c.rs.method) << ", " << c.db.size() << " objects, "
+              << inputs.size() << " inputs\n";
+    for (const InputRun& run : runs) {
+      std::cout << '\n' << input_label(run) << '\n';
+      if (run.error.empty())
+        print_table(c, run);
+      else
+        std::cout << "error: " << run.error << '\n';
+    }
+    std::cout << '\n' << inputs.size() - failed << " of " << inputs.size() << " inputs recognized";
+    std::cout << (failed ? ", " + std::to_string(failed) + " failed (see the errors above)\n" : "\n");
+  }
+  return failed ? 1 : 0;
+}
+
+int run_recognize(const RecognizeOptions& o) {
+  const std::vector<Input> inputs = expand_inputs(o);
+  const bool many = o.batch;
+  const std::vector<std::string> outs = many ? result_paths(o, inputs) : std::vector<std::string>{o.out};
+
+  RecognizerSettings rs = o.rs;  // (the improved preset was applied before the flags)
+  rs.method = *parse_method(o.method);
+  rs.seed = o.common.seed;       // the same seed for every input, as if each ran alone
+
+  auto source = std::make_shared<io::DbReader>(o.db);
+  Database db(source);
+  if (db.size() == 0) throw Error("the database has no objects", o.db, "/objects");
+  db.set_surface(needs_surface(rs, db.settings()));
+  if (!o.only.empty()) {   // --only: the answer is one of these (one name: localize a known object)
+    rs.objects.assign(db.size(), 0);
+    for (const std::string& name : o.only) {
+      const std::size_t i = db.find(name);
+      if (i == db.size()) throw Error("no object '" + name + "' in the database", o.db, "--only");
+      rs.objects[i] = 1;
+    }
+  }
+  set_memory_budget(db, o.memory_budget_mb, o.db);
+  double largest = 0.0;
+  for (std::size_t i = 0; i < db.size(); ++i) largest = std::max(largest, db.info(i).extent.norm());
+  SymmetryCache symmetries;
+  std::optional<experiments::Calibration> calibration;   // fitted for this database, or an error
+  if (!o.calibration.empty())
+    calibration = experiments::read_calibration(o.calibration, experiments::file_fingerprint(*source));
+  else if (o.open_set_threshold)
+    throw Error("an open-set threshold needs a confidence calibration (--calibration)", {}, "--open-set-threshold");
+  if (calibration && o.open_set_threshold && !calibration->in_database(1, std::vector<double>(calibration->features.size(), 0.0)))
+    throw Error("the calibration has no open-set (in-database) model: fit it with leave-one-out runs too",
+                o.calibration, "steps[0].in_database");
+  const Context c{o, rs, db, largest, symmetries, source->congruence(), calibration ? &*calibration : nullptr};
+  if (many) return recognize_many(c, inputs, outs);
+
+  const InputRun run = recognize_one(c, inputs.front(), o.out, stderr_is_terminal() && !o.common.json);
+  draw_scenes(o, {&run});
+  if (o.common.json) {
+    nlohmann::ordered_json j = input_json(c, run, true);
+    add_shared_json(j, c);
+    std::cout << j.dump(2) << '\n';
+  } else {
+    std::cout << "method " << method_name(rs.method) << ", " << db.size() << " objects, "
+              << input_label(run) << '\n';
+    print_table(c, run);
+    if (!run.suggestions.is_null()) {
+      std::printf("\nnext grasps (planned in %.3f s; --json for T_EEF and the joint targets):\n", run.suggest_time_s);
+      std::printf("%5s  %-24s %12s %9s  %s\n", "rank", "aimed object", "information", "blocked", "target (world, m)");
+      for (const auto& g : run.suggestions)
+        std::printf("%5d  %-24s %12.3f %9.3f  %.4f %.4f %.4f\n", g["rank"].get<int>(),
+                    g["aimed_object"].get<std::string>().c_str(), g["expected_information_nats"].get<double>(),
+                    g["blocked_weight"].get<double>(), g["target"][0].get<double>(), g["target"][1].get<double>(),
+                    g["target"][2].get<double>());
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+
+void register_recognize(CLI::App& app) {
+  auto o = std::make_shared<RecognizeOptions>();
+  auto* sub = app.add_subcommand(
+      "recognize", "Recognize the touched object and its 6-DOF pose, step by step");
+  sub->add_option("--db", o->db, "Object database (HDF5)")->required()->check(CLI::ExistingFile);
+  auto* log = sub->add_option("--log", o->logs, "Tactile log(s) (HDF5); several are recognized in parallel")
+                  ->check(CLI::ExistingFile);
+  auto* cloud = sub->add_option("--cloud", o->clouds,
+                                "Plain contact cloud(s) (.ply/.pcd), each recognized as one step without "
+                                "free space; a folder gives its .ply/.pcd files in name order")
+                    ->check(CLI::ExistingPath);
+  log->excludes(cloud);
+  auto* free = sub->add_option("--free", o->free,
+                               "Free-space cloud (.ply/.pcd) of a single --cloud: points the sensor passed "
+                               "through (e.g. a probe's path), evidence against poses that put the object there");
+  free->needs(cloud)->check(CLI::ExistingFile);
+  sub->add_option("--only", o->only,
+                  "Objects the answer may name, NAME[,NAME...] (one name: localize a known object)")
+      ->delimiter(',');
+  sub->add_option("--method", o->method, "bricpsf | batch-ransac | ransac-icp | ransac-icp-fs")
+      ->check(CLI::IsMember({"bricpsf", "batch-ransac", "ransac-icp", "ransac-icp-fs"}));
+  sub->add_option("--steps", o->steps, "Steps (grasps) to process (default: all)")
+      ->check(CLI::Range(1, 1 << 30));
+  sub->add_option("--out", o->out,
+                  "Write every step's hypotheses to RESULT.h5 (several inputs: a folder, created if "
+                  "missing, with one <stem>.h5 per input)");
+  sub->add_option("--ground-truth", o->ground_truth,
+                  "Text file with the true 4x4 row-major object->world matrix")
+      ->check(CLI::ExistingFile);
+  sub->add_option("--object", o->object, "Name of the touched object (ground truth), if known");
+  sub->add_option("--calibration", o->calibration,
+                  "Confidence calibration of this database (touchstone calibrate): each step's JSON "
+                  "gets \"confidence\" {object, pose, in_database}; below its open-set threshold the "
+                  "in-database score makes the answer "
+                  "\"object\": null, \"reason\": \"not_in_database\"");
+  sub->add_option("--open-set-threshold", o->open_set_threshold,
+                  "In-database score below which the answer is \"not in the database\" (default: the "
+                  "calibration file's, chosen on its calibration runs; 0: always name an object)")
+      ->check(CLI::Range(0.0, 1.0));
+
+  sub->add_option("--preset", o->preset,
+                  "improved (default): Touchstone's extensions (per-object feature pruning, free "
+                  "space inside objects, duplicate removal, ICP on new hypotheses, diversity); "
+                  "paper: the paper's method exactly. The flags below apply on top")
+      ->check(CLI::IsMember({"paper", "improved"}));
+  // Every method parameter (experiments/params/parameters.cpp): --KEY with `_` written `-`, and its
+  // older flags; the preset's value where not given.
+  experiments::add_parameter_flags(*sub, o->flags,
+                                   "Method parameters (defaults: the preset's; `touchstone params` lists them)");
+  sub->add_option("--suggest", o->suggest,
+                  "After the last step, the N best next grasps (world T_EEF, approach, finger joint targets, "
+                  "expected information) in the JSON (\"suggestions\"): the next-grasp planner, active.* "
+                  "parameters. A single tactile log; an error when no grasp touched yet")
+      ->check(CLI::Range(1, 1000));
+  sub->add_option("--scene", o->scene,
+                  "Pictures of the scene into this folder: for each input and chosen step, the contacts, the "
+                  "free-space points, the leading hypotheses' objects at their poses and the true object when "
+                  "known, as scene_<input>_step<k>.png (two views) and .html (interactive, self-contained)");
+  sub->add_option("--scene-steps", o->scene_steps, "The steps --scene draws (default: the last)")
+      ->delimiter(',');
+  sub->add_option("--memory-budget", o->memory_budget_mb,
+                  "Resident object geometry in MB, loaded on demand and evicted least-recently-used "
+                  "(default 256; 0: no limit). Never changes results")
+      ->check(CLI::NonNegativeNumber);
+  add_common(sub, o->common);
+  sub->callback([o] {
+    // The preset's parameters, then the flags given (a bad value: a usage error naming the flag).
+    experiments::MethodSettings m = experiments::MethodSettings::preset(o->preset);
+    experiments::apply_flags(o->flags, m);
+    o->rs = m.recognizer;
+    o->contact_voxel = m.contact_voxel;
+    o->active = m.active;
+    o->exploration = m.exploration;
+    o->inside_margin = o->flags.given.count("evaluate.free_inside_margin_m") > 0;
+    if (o->logs.empty() && o->clouds.empty())
+      throw CLI::RequiredError("--log or --cloud");
+    o->batch = o->logs.size() + o->clouds.size() > 1 ||
+               std::any_of(o->clouds.begin(), o->clouds.end(), [](const std::string& p) { return fs::is_directory(p); });
+    if (o->suggest > 0 && (o->batch || o->logs.empty()))
+      throw CLI::ValidationError("--suggest", "takes a single --log (the next grasp of that exploration)");
+    if (o->batch && !o->free.empty())
+      throw CLI::ValidationError("--free", "takes a single --cloud (its free space)");
+    for (const auto& [flag, value] : {std::pair{"--ground-truth", &o->ground_truth}, {"--object", &o->object}})
+      if (o->batch && !value->empty())
+        throw CLI::ValidationError(flag, "takes a single input; with several inputs each log carries its own "
+                                         "ground truth");
+    run_command(o->common, [o] { return run_recognize(*o); });
+  });
+}
+
+}  // namespace ts::cli

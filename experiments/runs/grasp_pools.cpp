@@ -1,0 +1,92 @@
+#include "experiments/runs/grasp_pools.hpp"
+
+#include "engine/touch/gripper.hpp"
+#include "experiments/runs/driver.hpp"
+#include "io/log_store.hpp"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <sstream>
+
+namespace ts::experiments {
+
+namespace {
+constexpr std::uint64_t kPoolStream = 0x706f6f6cULL;  // "pool"
+constexpr std::uint64_t kRunPoolStream = 0x72706f6cULL;  // "rpol": a run's own pool (independent)
+}  // namespace
+
+datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
+  datasets::SimulatorSettings s;
+  s.sensors = c.sensors;
+  s.noise = datasets::noise_profile(c.noise);
+  const NoiseOverrides& n = c.noise_params;
+  if (n.arm_position_sigma_m) s.noise.arm_position_sigma = *n.arm_position_sigma_m;
+  if (n.arm_rotation_sigma_deg) s.noise.arm_rotation_sigma_deg = *n.arm_rotation_sigma_deg;
+  if (n.sensel_noise) s.noise.signal_noise = *n.sensel_noise;
+  if (n.force_noise) s.noise.force_noise = *n.force_noise;
+  if (n.contact_sigma_m) s.noise.lateral_sigma = *n.contact_sigma_m;
+  if (n.joint_sigma_deg) s.noise.joint_sigma_deg = *n.joint_sigma_deg;
+  s.sensing = parse_sensing(c.sensing, {}, "sensing");
+  if (s.sensing == Sensing::probe && n.contact_sigma_m) {   // the probe's own contact noise
+    s.probe.contact_sigma = *n.contact_sigma_m;
+    s.noise.lateral_sigma = 0.0;
+  }
+  const ProbeOverrides& p = c.probe_params;
+  if (p.ball_radius_m) s.probe.spec.ball_radius = *p.ball_radius_m;
+  s.probe.spec.shaft_radius = std::min(s.probe.spec.shaft_radius, s.probe.spec.ball_radius);
+  if (p.tilt_deg) s.probe.max_tilt_deg = *p.tilt_deg;
+  if (p.quantization_m) s.probe.quantization = *p.quantization_m;
+  s.grasps = static_cast<std::size_t>(c.pool);
+  return s;
+}
+
+std::string pool_key(const datasets::SimulatorSettings& s) {
+  std::ostringstream k;
+  k.precision(17);
+  k << s.noise.name << '|' << s.noise.arm_position_sigma << '|' << s.noise.arm_rotation_sigma_deg
+    << '|' << s.noise.joint_sigma_deg << '|' << s.noise.signal_noise << '|' << s.noise.force_noise
+    << '|' << s.noise.lateral_sigma << '|' << s.noise.fold_detect << '|' << s.sensors << '|'
+    << s.grasps << '|' << to_string(s.sensing) << '|' << s.probe.contact_sigma << '|' << s.probe.spec.ball_radius
+    << '|' << s.probe.spec.shaft_radius << '|' << s.probe.max_tilt_deg << '|' << s.probe.quantization;
+  return k.str();
+}
+
+std::uint64_t pool_seed(std::uint64_t seed, const std::string& object, std::optional<int> run) {
+  if (!run) return Rng(seed, kPoolStream, name_hash(object)).next();
+  return Rng(seed, kRunPoolStream, name_hash(object), static_cast<std::uint64_t>(*run)).next();
+}
+
+TactileLog log_from_pool(const TactileLog& pool, const std::vector<std::int32_t>& grasps) {
+  TactileLog log = io::log_of(io::header_of(pool));   // its header: a probe pool stays a probe log
+  LogGroundTruth truth;
+  truth.object_pose = pool.truth->object_pose;
+  for (std::int32_t g : grasps) {
+    const auto gi = static_cast<std::size_t>(g);
+    log.grasps.push_back(pool.grasps.at(gi));
+    if (gi < pool.truth->arm_poses.size()) truth.arm_poses.push_back(pool.truth->arm_poses[gi]);
+    if (gi < pool.truth->joints.size()) truth.joints.push_back(pool.truth->joints[gi]);
+  }
+  log.truth = std::move(truth);
+  return log;
+}
+
+TactileLog simulate_run_pool(const Mesh& mesh, const std::string& name, datasets::SimulatorSettings s,
+                             std::uint64_t seed, const std::vector<std::int32_t>& grasps) {
+  s.seed = seed;
+  s.grasps = 0;  // run() below gives the log's header (pose, gains) without grasps
+  datasets::Simulator sim(mesh, name, Gripper(), s);
+  TactileLog log = sim.run().log;
+  if (!log.truth) throw Error("the simulator gave no ground truth", {}, name);
+  std::vector<datasets::Simulator::Grasp> drawn(grasps.size());
+  tbb::parallel_for(std::size_t{0}, grasps.size(),
+                    [&](std::size_t i) { drawn[i] = sim.grasp(static_cast<std::size_t>(grasps[i])); });
+  for (auto& g : drawn) {
+    log.grasps.push_back(std::move(g.measured));
+    log.truth->arm_poses.push_back(g.true_arm_pose);
+    log.truth->joints.push_back(std::move(g.true_joints));
+  }
+  return log;
+}
+
+}  // namespace ts::experiments
