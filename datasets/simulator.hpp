@@ -27,9 +27,9 @@
 // gives the same true grasps.
 #pragma once
 
+#include "engine/geometry/mesh.hpp"
 #include "engine/touch/active_touch.hpp"
 #include "engine/touch/fusion.hpp"
-#include "engine/geometry/mesh.hpp"
 
 #include <memory>
 #include <string>

@@ -12,8 +12,8 @@
 //   mutex, so a DbReader may be used from many threads.
 #pragma once
 
-#include "engine/geometry/congruence.hpp"
 #include "engine/database/database.hpp"
+#include "engine/geometry/congruence.hpp"
 
 #include <cstdint>
 #include <filesystem>

@@ -65,12 +65,12 @@ struct McapMetadata {
 
 /// What the reader hands over, in file order (any may be empty).
 struct McapHandlers {
-  std::function<void(const McapHeader&)> header;
-  std::function<void(const McapSchema&)> schema;
-  std::function<void(const McapChannel&)> channel;
-  std::function<void(const McapMessage&)> message;
-  std::function<void(const McapAttachment&)> attachment;
-  std::function<void(const McapMetadata&)> metadata;
+  std::function<void(const McapHeader&)> header = {};
+  std::function<void(const McapSchema&)> schema = {};
+  std::function<void(const McapChannel&)> channel = {};
+  std::function<void(const McapMessage&)> message = {};
+  std::function<void(const McapAttachment&)> attachment = {};
+  std::function<void(const McapMetadata&)> metadata = {};
 };
 
 struct McapReadSummary {

@@ -23,8 +23,8 @@
 // `touchstone params --markdown`; a test checks it is current).
 #pragma once
 
-#include "engine/touch/active_touch.hpp"
 #include "engine/recognition/recognizer.hpp"
+#include "engine/touch/active_touch.hpp"
 
 #include <nlohmann/json.hpp>
 

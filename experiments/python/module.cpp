@@ -16,8 +16,8 @@
 #include "experiments/runs/recognition_engine.hpp"
 
 #include "datasets/simulator.hpp"
-#include "engine/recognition/recognizer.hpp"
 #include "engine/geometry/symmetry.hpp"
+#include "engine/recognition/recognizer.hpp"
 #include "io/db_store.hpp"
 #include "io/log_store.hpp"
 #include "io/result_store.hpp"

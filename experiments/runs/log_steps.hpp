@@ -5,8 +5,8 @@
 #pragma once
 
 #include "engine/database/database.hpp"
-#include "engine/touch/fusion.hpp"
 #include "engine/recognition/recognizer.hpp"
+#include "engine/touch/fusion.hpp"
 
 #include <cstddef>
 #include <vector>

@@ -1,9 +1,9 @@
 #include "experiments/runs/stress.hpp"
 
 #include "engine/database/database.hpp"
-#include "engine/recognition/icp.hpp"
 #include "engine/geometry/mesh.hpp"
 #include "engine/geometry/pose_error.hpp"
+#include "engine/recognition/icp.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "engine/recognition/scene.hpp"
 #include "io/result_store.hpp"

@@ -5,9 +5,9 @@
 #pragma once
 
 #include "engine/database/database.hpp"
-#include "engine/recognition/recognizer.hpp"
 #include "engine/features/fpfh.hpp"
 #include "engine/geometry/search.hpp"
+#include "engine/recognition/recognizer.hpp"
 
 #include <cmath>
 #include <functional>

@@ -2,8 +2,8 @@
 // objects coincide except on one side (a 4 cm cube and a 7 cm x 4 cm x 4 cm box sharing the
 // cube's -x face). Only a grasp on the +x side can tell them apart, and only there does the
 // longer box fill the space the hand would sweep when aiming at the cube's +x face.
-#include "engine/touch/active_touch.hpp"
 #include "engine/recognition_fixture.hpp"
+#include "engine/touch/active_touch.hpp"
 
 #include <doctest/doctest.h>
 #include <tbb/task_arena.h>

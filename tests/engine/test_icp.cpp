@@ -1,6 +1,6 @@
-#include "engine/recognition/icp.hpp"
 #include "engine/geometry/kabsch.hpp"
 #include "engine/geometry/pose_error.hpp"
+#include "engine/recognition/icp.hpp"
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>

@@ -1,7 +1,7 @@
 #include "engine/geometry/kabsch.hpp"
 #include "engine/geometry/pose_error.hpp"
-#include "engine/recognition/ransac.hpp"
 #include "engine/geometry/symmetry.hpp"
+#include "engine/recognition/ransac.hpp"
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>

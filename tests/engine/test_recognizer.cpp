@@ -1,6 +1,6 @@
 #include "engine/geometry/pose_error.hpp"
-#include "engine/recognition/recognizer.hpp"
 #include "engine/geometry/symmetry.hpp"
+#include "engine/recognition/recognizer.hpp"
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>

@@ -1,8 +1,8 @@
 // KdTree3 and FeatureIndex against brute force: random clouds, duplicates and exact ties
 // (integer grids, where every distance is exact), parallel queries, and the approximate
 // forest's reproducibility.
-#include "engine/recognition/ransac.hpp"
 #include "engine/geometry/search.hpp"
+#include "engine/recognition/ransac.hpp"
 
 #include <doctest/doctest.h>
 #include <tbb/parallel_for.h>

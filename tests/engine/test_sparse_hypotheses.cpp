@@ -3,9 +3,9 @@
 // coplanar, 1 mm quantized contacts), degenerate sets, determinism, and the recognizer with
 // isolated contacts alone.
 #include "engine/geometry/pose_error.hpp"
+#include "engine/geometry/symmetry.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "engine/recognition/sparse_hypotheses.hpp"
-#include "engine/geometry/symmetry.hpp"
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>

@@ -1,8 +1,8 @@
 // Stiff and extreme cases: each must give a flagged or correct answer, never NaN or a crash.
 #include "engine/geometry/kabsch.hpp"
 #include "engine/geometry/pose_error.hpp"
-#include "engine/recognition/recognizer.hpp"
 #include "engine/geometry/symmetry.hpp"
+#include "engine/recognition/recognizer.hpp"
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>

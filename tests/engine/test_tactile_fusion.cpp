@@ -1,7 +1,7 @@
 // Contact fusion (Eq. 1-2, Section 4.1.2) on hand-built logs: exact contact points, the
 // cumulative voxel-filtered cloud, incremental = batch, zero-contact grasps, far coordinates.
-#include "engine/touch/fusion.hpp"
 #include "engine/geometry/cloud.hpp"
+#include "engine/touch/fusion.hpp"
 
 #include <doctest/doctest.h>
 

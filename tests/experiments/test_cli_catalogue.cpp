@@ -1,7 +1,7 @@
 // `touchstone catalogue` end to end: the built program, its summary and its errors.
-#include "cli_run.hpp"
 #include "datasets/manifest.hpp"
 #include "io/mesh_import.hpp"
+#include "cli_run.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>

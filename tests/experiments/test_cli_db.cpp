@@ -3,8 +3,8 @@
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
 #include "io/h5.hpp"
-#include "mesh_fixtures.hpp"
 #include "cli_run.hpp"
+#include "mesh_fixtures.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>

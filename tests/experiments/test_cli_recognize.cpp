@@ -2,6 +2,7 @@
 // result file, identical outputs for any --threads, the --cloud mode with a ground-truth file,
 // and clear errors for bad input.
 #include "engine/recognition/recognizer.hpp"
+#include "engine/recognition_fixture.hpp"
 #include "engine/touch/fusion.hpp"
 #include "experiments/analysis/calibration.hpp"
 #include "experiments/runs/recognition_engine.hpp"
@@ -9,7 +10,6 @@
 #include "io/db_store.hpp"
 #include "io/log_store.hpp"
 #include "io/result_store.hpp"
-#include "engine/recognition_fixture.hpp"
 #include "cli_run.hpp"
 #include "db_fixture.hpp"
 #include "temp_dir.hpp"

@@ -1,7 +1,7 @@
 // The real engine (simulator + recognizer) on a small in-memory database: complete, consistent
 // records; the same results for 1 and 2 threads and after an interruption.
-#include "engine/recognition_fixture.hpp"
 #include "datasets/simulator.hpp"
+#include "engine/recognition_fixture.hpp"
 #include "experiments/analysis/calibration.hpp"
 #include "experiments/runs/engine_database.hpp"
 #include "experiments/runs/recognition_engine.hpp"

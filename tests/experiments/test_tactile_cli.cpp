@@ -4,8 +4,8 @@
 #include "io/db_store.hpp"
 #include "io/h5.hpp"
 #include "io/log_store.hpp"
-#include "mesh_fixtures.hpp"
 #include "cli_run.hpp"
+#include "mesh_fixtures.hpp"
 #include "ros2_recording.hpp"
 #include "temp_dir.hpp"
 
