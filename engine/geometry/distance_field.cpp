@@ -320,34 +320,12 @@ inline double interpolate(const Level& L, const int raw[8], double tx, double ty
   return y0 + tz * (y1 - y0);
 }
 
-/// The last two fine cells read by a batch of queries and their corners: the finite-difference
-/// probes of ICP (a point and three points 0.5 mm from it, one axis each) mostly fall in the
-/// point's cell, and a probe that crosses into a neighbour (a quarter of them with 2 mm voxels)
-/// is followed by a probe back in the point's cell.
+/// The last fine cell read by a batch of queries and its corners: the finite-difference probes
+/// of ICP (a point and three points 0.5 mm from it) mostly fall in one cell.
 struct CellCache {
-  struct Slot {
-    bool valid = false, ok = false;
-    int i = 0, j = 0, k = 0;
-    int raw[8];
-  };
-  Slot slot[2];
-  int last = 0;   ///< the slot used most recently; a miss replaces the other one
-
-  /// The slot holding cell (i, j, k), filled from L on a miss.
-  const Slot& get(const Level& L, int i, int j, int k) {
-    for (const int n : {last, 1 - last}) {
-      const Slot& s = slot[n];
-      if (s.valid && s.i == i && s.j == j && s.k == k) {
-        last = n;
-        return s;
-      }
-    }
-    last = 1 - last;
-    Slot& s = slot[last];
-    s.ok = corners(L, i, j, k, s.raw);
-    s.valid = true, s.i = i, s.j = j, s.k = k;
-    return s;
-  }
+  bool valid = false, ok = false;
+  int i = 0, j = 0, k = 0;
+  int raw[8];
 };
 
 /// Trilinear interpolation at index-space point x when all 8 corners are active.
@@ -361,9 +339,12 @@ inline bool trilinear(const Level& L, const Vec3& x, double& out, Vec3* grad = n
   int own[8];
   const int* raw = own;
   if (cache) {
-    const CellCache::Slot& c = cache->get(L, i, j, k);
-    if (!c.ok) return false;
-    raw = c.raw;
+    if (!(cache->valid && cache->i == i && cache->j == j && cache->k == k)) {
+      cache->ok = corners(L, i, j, k, cache->raw);
+      cache->valid = true, cache->i = i, cache->j = j, cache->k = k;
+    }
+    if (!cache->ok) return false;
+    raw = cache->raw;
   } else if (!corners(L, i, j, k, own)) {
     return false;
   }
@@ -386,22 +367,6 @@ struct DistanceField::Impl {
     if (coarse_box.contains(p) && trilinear(coarse, p * coarse.inv_voxel, d)) return d;
     if (!finite(p)) return std::numeric_limits<double>::infinity();
     return std::sqrt(coarse_box.squaredExteriorDistance(p)) + coarse_margin;
-  }
-
-  /// Asks the memory system for the fine brick that query(p) will read first (no effect on any
-  /// result). A batch of queries over an object's field misses the caches on most bricks: with
-  /// the next points' bricks requested while the current ones are interpolated, the misses
-  /// overlap instead of adding up.
-  void prefetch(const Vec3& p) const {
-    const Vec3 x = p * fine.inv_voxel;
-    const double fx = std::floor(x.x()), fy = std::floor(x.y()), fz = std::floor(x.z());
-    if (!(std::abs(fx) < 1e9 && std::abs(fy) < 1e9 && std::abs(fz) < 1e9)) return;
-    const int i = static_cast<int>(fx), j = static_cast<int>(fy), k = static_cast<int>(fz);
-    if (const std::int16_t* b = fine.brick(i, j, k)) {
-      const int o = in_brick(i, j, k);
-      __builtin_prefetch(b + o);
-      __builtin_prefetch(b + std::min(o + 21, 63));   // the far corner (+16 + 4 + 1): maybe the next line
-    }
   }
 
   /// As query(), with the gradient of the interpolant (zero where only a bound is known).
@@ -683,14 +648,8 @@ void DistanceField::distances(const Vec3* pts, std::size_t n, const Pose& T_obje
     std::fill(out, out + n, std::numeric_limits<double>::infinity());
     return;
   }
-  constexpr std::size_t kAhead = 8;   // points whose bricks are requested ahead of their query
-  const Impl& im = *impl_;
-  for (std::size_t i = 0; i < std::min(n, kAhead); ++i) im.prefetch(T_object_query * pts[i]);
   CellCache cache;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (i + kAhead < n) im.prefetch(T_object_query * pts[i + kAhead]);
-    out[i] = im.query(T_object_query * pts[i], &cache);
-  }
+  for (std::size_t i = 0; i < n; ++i) out[i] = impl_->query(T_object_query * pts[i], &cache);
 }
 
 void DistanceField::distances_gradients(const Vec3* pts, std::size_t n, const Pose& T_object_query,
@@ -700,13 +659,7 @@ void DistanceField::distances_gradients(const Vec3* pts, std::size_t n, const Po
     std::fill(grad, grad + n, Vec3::Zero());
     return;
   }
-  constexpr std::size_t kAhead = 8;
-  const Impl& im = *impl_;
-  for (std::size_t i = 0; i < std::min(n, kAhead); ++i) im.prefetch(T_object_query * pts[i]);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (i + kAhead < n) im.prefetch(T_object_query * pts[i + kAhead]);
-    out[i] = im.query_gradient(T_object_query * pts[i], grad[i]);
-  }
+  for (std::size_t i = 0; i < n; ++i) out[i] = impl_->query_gradient(T_object_query * pts[i], grad[i]);
 }
 
 }  // namespace ts
