@@ -166,7 +166,7 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
     const Vec3& q1 = pts[a.point];
     // Second point: same object, distance to the first matching the input's (and, as an
     // extension, the same angles between normals and chord). Squared distances against a
-    // squared window, branch-free over the object's pruned items.
+    // squared window, vectorized over the object's pruned items; the hits gathered branch-free.
     auto window = [&](double d) {
       const double lo = std::max(0.0, d - tol), hi = d + tol;
       return std::pair(static_cast<float>(lo * lo), static_cast<float>(hi * hi));
