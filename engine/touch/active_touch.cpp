@@ -30,6 +30,7 @@ void require(bool ok, const std::string& message, const std::string& field) {
 struct GraspPlanner::Selected {
   std::vector<const Hypothesis*> h;
   std::vector<double> w;            ///< normalized tempered weights
+  std::vector<double> object_w;     ///< per hypothesis, the summed w of its object's hypotheses
   std::vector<PlanObject> obj;
   std::vector<Pose> T_obj_world;
   std::vector<Vec3> centre_world;   ///< object-frame origin in the world
@@ -45,6 +46,12 @@ GraspPlanner::GraspPlanner(Gripper gripper, ActiveSettings s) : gripper_(std::mo
           "active.collision_weight");
   require(s_.temperature > 0 && std::isfinite(s_.temperature), "the temperature must be positive",
           "active.temperature");
+  require(s_.pose_weight >= 0 && std::isfinite(s_.pose_weight), "the pose weight must be >= 0",
+          "active.pose_weight");
+  require(s_.coverage_weight >= 0 && std::isfinite(s_.coverage_weight), "the coverage weight must be >= 0",
+          "active.coverage_weight");
+  require(s_.coverage_radius > 0 && std::isfinite(s_.coverage_radius), "the coverage radius must be positive",
+          "active.coverage_radius_m");
   require(s_.clearance >= 0 && s_.clearance < 0.1, "the clearance must lie in [0, 0.1) m", "active.clearance_m");
   require(s_.aim_min_deg <= s_.aim_max_deg, "aim angles: need min <= max", "active.aim_deg");
   require(s_.hand_spacing > 0.001, "hand sample spacing must exceed 1 mm", "active.hand_spacing_m");
@@ -109,6 +116,10 @@ GraspPlanner::Selected GraspPlanner::select(const std::vector<Hypothesis>& hyps,
     sum += sel.w.back();
   }
   for (double& w : sel.w) w /= sum;
+  sel.object_w.assign(sel.h.size(), 0.0);
+  for (std::size_t i = 0; i < sel.h.size(); ++i)
+    for (std::size_t j = 0; j < sel.h.size(); ++j)
+      if (sel.h[j]->object == sel.h[i]->object) sel.object_w[i] += sel.w[j];
   for (const Hypothesis* h : sel.h) {
     PlanObject o = objects(h->object);
     if (!o.field || o.field->empty())
@@ -151,7 +162,17 @@ bool GraspPlanner::hand_blocked(const std::vector<Vec3>& hand_world, const Vec3&
   return false;
 }
 
-PlannedGrasp GraspPlanner::score(const GraspCommand& c, const Selected& sel) const {
+namespace {
+/// At most 256 of the contacts, evenly picked.
+std::vector<Vec3> thinned(const std::vector<Vec3>& contacts) {
+  std::vector<Vec3> near;
+  const std::size_t stride = std::max<std::size_t>(1, contacts.size() / 256);
+  for (std::size_t i = 0; i < contacts.size(); i += stride) near.push_back(contacts[i]);
+  return near;
+}
+}  // namespace
+
+PlannedGrasp GraspPlanner::score(const GraspCommand& c, const Selected& sel, const std::vector<Vec3>& near) const {
   const std::size_t K = sel.h.size();
   const std::size_t P = pad_points_.size();
   const Pose T_world_pad = c.T_world_eef * gripper_.pad_pose(c.joints, pad_);
@@ -176,33 +197,43 @@ PlannedGrasp GraspPlanner::score(const GraspCommand& c, const Selected& sel) con
     y[k * D + P] = blocked ? 3.0 * s_.cap : 0.0;
     if (blocked) out.blocked_weight += sel.w[k];
   }
-  // Pairwise Bhattacharyya lower bound on I(H; Y).
+  // Pairwise Bhattacharyya lower bound on I(H; Y), and its part about the object.
   const double inv = 1.0 / (8.0 * s_.sigma * s_.sigma);
-  double info = 0.0;
+  double info = 0.0, object_info = 0.0;
   for (std::size_t i = 0; i < K; ++i) {
-    double inner = 0.0;
+    double inner = 0.0, same = 0.0;
     for (std::size_t j = 0; j < K; ++j) {
       double d2 = 0.0;
       for (std::size_t e = 0; e < D; ++e) {
         const double diff = y[i * D + e] - y[j * D + e];
         d2 += diff * diff;
       }
-      inner += sel.w[j] * std::exp(-d2 * inv);
+      const double term = sel.w[j] * std::exp(-d2 * inv);
+      inner += term;
+      if (sel.h[j]->object == sel.h[i]->object) same += term;
     }
     info -= sel.w[i] * std::log(inner);
+    object_info += sel.w[i] * std::log(same / (sel.object_w[i] * inner));
   }
   out.information = std::max(0.0, info);
-  out.score = out.information - s_.collision_weight * out.blocked_weight;
+  out.object_information = std::clamp(object_info, 0.0, out.information);
+  double d2 = s_.coverage_radius * s_.coverage_radius;
+  for (const Vec3& p : near) d2 = std::min(d2, (p - c.target).squaredNorm());
+  out.coverage = std::sqrt(d2) / s_.coverage_radius;
+  out.score = out.object_information + s_.pose_weight * (out.information - out.object_information) -
+              s_.collision_weight * out.blocked_weight + s_.coverage_weight * out.coverage;
   return out;
 }
 
 std::vector<PlannedGrasp> GraspPlanner::evaluate(const std::vector<GraspCommand>& commands,
                                                  const std::vector<Hypothesis>& hypotheses,
-                                                 const PlanObjects& objects) const {
+                                                 const PlanObjects& objects,
+                                                 const std::vector<Vec3>& contacts) const {
   const Selected sel = select(hypotheses, objects);
+  const std::vector<Vec3> near = thinned(contacts);
   std::vector<PlannedGrasp> out(commands.size());
   tbb::parallel_for(std::size_t{0}, commands.size(), [&](std::size_t i) {
-    out[i] = score(commands[i], sel);
+    out[i] = score(commands[i], sel, near);
     out[i].candidate = i;
   });
   return out;
@@ -214,9 +245,7 @@ std::vector<PlannedGrasp> GraspPlanner::plan(const std::vector<Hypothesis>& hypo
   const Selected sel = select(hypotheses, objects);
   const std::size_t leaders = std::min(s_.leaders, sel.h.size());
   // Per leader, the model points near the contacts (at most 256 contacts, evenly picked).
-  std::vector<Vec3> near;
-  const std::size_t stride = std::max<std::size_t>(1, contacts.size() / 256);
-  for (std::size_t i = 0; i < contacts.size(); i += stride) near.push_back(contacts[i]);
+  const std::vector<Vec3> near = thinned(contacts);
   std::vector<std::vector<std::size_t>> eligible(leaders);
   if (s_.aim_radius > 0 && !near.empty()) {
     const double r2 = s_.aim_radius * s_.aim_radius;
@@ -275,7 +304,7 @@ std::vector<PlannedGrasp> GraspPlanner::plan(const std::vector<Hypothesis>& hypo
       for (std::size_t i = 0; i < hand_.size(); ++i) hand_world[i] = cmd.T_world_eef * hand_[i];
       if (!hand_blocked(hand_world, z, k, sel)) break;
     }
-    out[c] = score(cmd, sel);
+    out[c] = score(cmd, sel, near);
     out[c].candidate = c;
     out[c].aimed_object = sel.h[k]->object;
   });

@@ -24,9 +24,16 @@
 // bound of Kolchinsky and Tracey (2017):
 //     I >= - sum_i w_i ln sum_j w_j exp(-|y_i - y_j|^2 / (8 sigma^2))     (nats, <= H(w))
 // Weights are the hypotheses' weights tempered by `temperature` and renormalized over the K.
+// The same estimator splits I(H; Y) = I(O; Y) + I(H; Y | O) into what the outcome tells about
+// the object O and what it tells about the pose among one object's hypotheses (the within-object
+// bound, weighted by each object's share W_o, is I(H; Y | O), >= 0):
+//     I(O; Y) ~ sum_i w_i ln( sum_{j: o_j = o_i} w_j k_ij / (W_{o_i} sum_j w_j k_ij) ),
+//     k_ij = exp(-|y_i - y_j|^2 / (8 sigma^2))                          (clamped at 0; <= H(O))
+// Recognition names the object first, so the pose part is weighted by `pose_weight`
+// (1: the information about the hypothesis, object and pose alike).
 // The collision penalty is `collision_weight` x (sum of the weights of the hypotheses under which
 // the hand is blocked): a grasp that would run into the likely object ranks lower.
-//     score = information - collision_weight * blocked_weight
+//     score = I(O; Y) + pose_weight * (I(H; Y) - I(O; Y)) - collision_weight * blocked_weight
 // The K hypotheses: the best of each object first (up to K/2 objects), then the rest by weight,
 // so hypotheses of competing objects are always compared.
 //
@@ -53,6 +60,12 @@ struct ActiveSettings {
   double cap = 0.02;                ///< m, predicted distances clamped to +-cap
   double collision_weight = 1.0;    ///< nats per unit of blocked hypothesis weight
   double temperature = 1.0;         ///< ln wt divided by this before normalizing (> 0)
+  double pose_weight = 1.0;         ///< weight of the information about the pose within an
+                                    ///< object against that about the object (>= 0)
+  double coverage_weight = 0.0;     ///< nats per unit of coverage: how far the aim lies from
+                                    ///< the contacts so far, min(d, coverage_radius) /
+                                    ///< coverage_radius (0: off)
+  double coverage_radius = 0.05;    ///< m, the distance at which an aim counts as new ground
   double clearance = 0.002;         ///< m, a hand sample nearer than this to a surface blocks
   double aim_min_deg = 0.0;         ///< nominal angles of the aimed finger's joints, range
   double aim_max_deg = 60.0;        ///< (as the simulator's operator)
@@ -77,9 +90,14 @@ struct PlannedGrasp {
   GraspCommand command;
   std::size_t candidate = 0;        ///< index among the step's candidates
   std::uint32_t aimed_object = 0;   ///< object of the hypothesis whose model was aimed at
-  double information = 0.0;         ///< nats, expected information (lower bound)
+  double information = 0.0;         ///< nats, expected information about the hypothesis
+                                    ///< (object and pose; lower bound)
+  double object_information = 0.0;  ///< nats, the part of it about the object (<= information)
   double blocked_weight = 0.0;      ///< share of the hypothesis weight that blocks the hand
-  double score = 0.0;               ///< information - collision_weight * blocked_weight
+  double coverage = 0.0;            ///< min(distance of the aim from the contacts so far,
+                                    ///< coverage_radius) / coverage_radius (1 without contacts)
+  double score = 0.0;               ///< object_information + pose_weight * (information -
+                                    ///< object_information) - collision_weight * blocked_weight
 };
 
 /// What the planner reads of one object (object frame): its distance field, points of its
@@ -103,10 +121,12 @@ class GraspPlanner {
   std::vector<PlannedGrasp> plan(const std::vector<Hypothesis>& hypotheses, const PlanObjects& objects,
                                  std::uint64_t seed, std::size_t n_best,
                                  const std::vector<Vec3>& contacts = {}) const;
-  /// Scores given commands (in their order) under the hypotheses.
+  /// Scores given commands (in their order) under the hypotheses; `contacts` (world): the
+  /// contacts so far, for the coverage term.
   std::vector<PlannedGrasp> evaluate(const std::vector<GraspCommand>& commands,
                                      const std::vector<Hypothesis>& hypotheses,
-                                     const PlanObjects& objects) const;
+                                     const PlanObjects& objects,
+                                     const std::vector<Vec3>& contacts = {}) const;
 
   const ActiveSettings& settings() const { return s_; }
   const Gripper& gripper() const { return gripper_; }
@@ -116,7 +136,7 @@ class GraspPlanner {
  private:
   struct Selected;
   Selected select(const std::vector<Hypothesis>& hypotheses, const PlanObjects& objects) const;
-  PlannedGrasp score(const GraspCommand& c, const Selected& sel) const;
+  PlannedGrasp score(const GraspCommand& c, const Selected& sel, const std::vector<Vec3>& near) const;
   bool hand_blocked(const std::vector<Vec3>& hand_world, const Vec3& d, std::size_t k, const Selected& sel) const;
 
   Gripper gripper_;

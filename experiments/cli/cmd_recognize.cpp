@@ -330,7 +330,9 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
       }
       s["joints_deg"] = joints;
       s["expected_information_nats"] = g.information;
+      s["expected_object_information_nats"] = g.object_information;
       s["blocked_weight"] = g.blocked_weight;
+      s["coverage"] = g.coverage;
       s["score"] = g.score;
       s["aimed_object"] = db.info(g.aimed_object).name;
       run.suggestions.push_back(std::move(s));

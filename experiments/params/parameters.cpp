@@ -274,6 +274,17 @@ std::vector<Parameter> declaration() {
   d.push_back(real("active.temperature", "", 1e-6, 1e12, "",
                    "Active touch: ln wt divided by this before the hypotheses' weights are normalized",
                    {"active_temperature"}, TS_FIELD(active.temperature)));
+  d.push_back(real("active.pose_weight", "", 0, 1e6, "",
+                   "Active touch: weight of the expected information about the pose within an object against that "
+                   "about the object (1: about the hypothesis, object and pose alike; 0: the object only)",
+                   {"active_pose_weight"}, TS_FIELD(active.pose_weight)));
+  d.push_back(real("active.coverage_weight", "", 0, 1e6, "",
+                   "Active touch: score bonus (nats) of an aim at least active.coverage_radius_m from every contact so "
+                   "far (linear below; 0: off)",
+                   {"active_coverage_weight"}, TS_FIELD(active.coverage_weight)));
+  d.push_back(real("active.coverage_radius_m", "m", 1e-4, 100, "",
+                   "Active touch: distance from the contacts so far at which an aim counts as new ground",
+                   {"active_coverage_radius"}, TS_FIELD(active.coverage_radius)));
   return d;
 }
 

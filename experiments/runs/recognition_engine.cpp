@@ -318,7 +318,8 @@ class RecognitionEngine final : public RunEngine {
           if (!recognizer.hypotheses().empty()) {
             std::vector<GraspCommand> commands;
             for (std::size_t i : unused) commands.push_back(*aims[i]);
-            const auto scored = planner->evaluate(commands, recognizer.hypotheses(), plan_objects);
+            const auto scored =
+                planner->evaluate(commands, recognizer.hypotheses(), plan_objects, exploration.contact_cloud().points);
             std::size_t best = 0;
             for (std::size_t i = 1; i < scored.size(); ++i)
               if (scored[i].score > scored[best].score) best = i;

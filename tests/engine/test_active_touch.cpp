@@ -166,6 +166,70 @@ TEST_CASE("active touch: weights, temperature and the collision weight act as do
   CHECK(found);
 }
 
+TEST_CASE("active touch: the information about the object is the part that tells objects apart") {
+  TwoBoxes scene;
+  ActiveSettings s;
+  s.candidates = 120;
+  // One hypothesis per object: everything the outcome tells is about the object.
+  const GraspPlanner planner(Gripper(), s);
+  for (const PlannedGrasp& g : planner.plan(scene.hyps, scene.objects(), 5, s.candidates))
+    CHECK(std::abs(g.object_information - g.information) <= 1e-12);
+  // The cube at two poses 3 cm apart, one object: nothing about the object, and with the pose
+  // weight 0 only the collision penalty is left in the score.
+  auto same = scene.hyps;
+  same[1] = same[0];
+  same[1].pose = scene.world * Pose(Eigen::Translation3d(0.03, 0.0, 0.0));
+  const auto poses = planner.plan(same, scene.objects(), 5, s.candidates);
+  CHECK(poses.front().information > 0.5);
+  for (const PlannedGrasp& g : poses) CHECK(g.object_information == 0.0);
+  ActiveSettings object_only = s;
+  object_only.pose_weight = 0.0;
+  for (const PlannedGrasp& g : GraspPlanner(Gripper(), object_only).plan(same, scene.objects(), 5, 8))
+    CHECK(std::abs(g.score + g.blocked_weight) <= 1e-12);
+  // Both: the cube at two poses and the long box. The score is the object's information plus the
+  // weighted rest; the best grasp under the object-only score tells the objects apart.
+  auto both = scene.hyps;
+  both.push_back(same[1]);
+  ActiveSettings mixed = s;
+  mixed.pose_weight = 0.3;
+  for (const PlannedGrasp& g : GraspPlanner(Gripper(), mixed).plan(both, scene.objects(), 5, s.candidates)) {
+    CHECK(g.object_information >= 0.0);
+    CHECK(g.object_information <= g.information + 1e-12);
+    CHECK(std::abs(g.score - (g.object_information + 0.3 * (g.information - g.object_information) -
+                              g.blocked_weight)) <= 1e-12);
+  }
+  const auto best = GraspPlanner(Gripper(), object_only).plan(both, scene.objects(), 5, 1);
+  // Two objects, the cube carrying 2/3 of the weight: at most H(O) = ln 3 - (2/3) ln 2 nats.
+  CHECK(best[0].object_information <= std::log(3.0) - 2.0 / 3.0 * std::log(2.0) + 1e-9);
+  CHECK(best[0].object_information > 0.3);
+}
+
+TEST_CASE("active touch: the coverage term rewards aims away from the contacts so far") {
+  TwoBoxes scene;
+  ActiveSettings s;
+  s.candidates = 60;
+  s.coverage_weight = 0.7;
+  s.coverage_radius = 0.04;
+  const GraspPlanner planner(Gripper(), s);
+  const auto planned = planner.plan(scene.hyps, scene.objects(), 9, 3);
+  REQUIRE(planned.size() == 3);
+  // Contacts 1 cm, 2 cm and 10 cm from the first command's target (and none nearer).
+  const GraspCommand c = planned[0].command;
+  const Vec3 u = c.approach.unitOrthogonal();
+  for (const auto& [d, expected] : std::vector<std::pair<double, double>>{{0.01, 0.25}, {0.02, 0.5}, {0.1, 1.0}}) {
+    const std::vector<Vec3> contacts = {c.target + d * u, c.target + (d + 0.05) * u};
+    const auto g = planner.evaluate({c}, scene.hyps, scene.objects(), contacts);
+    CHECK(std::abs(g[0].coverage - expected) <= 1e-12);
+    CHECK(std::abs(g[0].score - (g[0].information - g[0].blocked_weight + 0.7 * expected)) <= 1e-12);
+  }
+  // Without contacts every aim is new ground.
+  CHECK(planner.evaluate({c}, scene.hyps, scene.objects())[0].coverage == 1.0);
+  // Off by default: the score is the information term alone.
+  const auto plain = GraspPlanner(Gripper(), ActiveSettings{}).evaluate({c}, scene.hyps, scene.objects(),
+                                                                        {c.target + 0.01 * u});
+  CHECK(std::abs(plain[0].score - (plain[0].information - plain[0].blocked_weight)) <= 1e-12);
+}
+
 TEST_CASE("active touch: deterministic for any thread count") {
   TwoBoxes scene;
   ActiveSettings s;
@@ -193,6 +257,12 @@ TEST_CASE("active touch: bad input is one clear error") {
   s = ActiveSettings{};
   s.temperature = 0.0;
   CHECK_THROWS_WITH_AS(GraspPlanner(Gripper(), s), doctest::Contains("active.temperature"), Error);
+  s = ActiveSettings{};
+  s.pose_weight = -1.0;
+  CHECK_THROWS_WITH_AS(GraspPlanner(Gripper(), s), doctest::Contains("active.pose_weight"), Error);
+  s = ActiveSettings{};
+  s.coverage_radius = 0.0;
+  CHECK_THROWS_WITH_AS(GraspPlanner(Gripper(), s), doctest::Contains("active.coverage_radius_m"), Error);
   const GraspPlanner planner(Gripper(), ActiveSettings{});
   CHECK_THROWS_WITH_AS(planner.plan({}, scene.objects(), 1, 3), doctest::Contains("no contact yet"), Error);
   auto no_field = [&](std::uint32_t) { return PlanObject{}; };

@@ -883,6 +883,9 @@ TEST_CASE("cli recognize --suggest: the N best next grasps in the world frame, t
     const double info = g["expected_information_nats"].get<double>();
     CHECK(info >= 0.0);
     CHECK(info <= std::log(static_cast<double>(std::max<std::size_t>(K, 16))) + 1e-9);
+    const double object_info = g["expected_object_information_nats"].get<double>();
+    CHECK(object_info >= 0.0);
+    CHECK(object_info <= info);
     // The hand's pose and the aim agree: the approach is a unit vector, the target within the
     // hand's reach of the EEF origin, and near the explored contacts (the object is under 20 cm).
     const Vec3 t(g["T_EEF"]["t"][0].get<double>(), g["T_EEF"]["t"][1].get<double>(), g["T_EEF"]["t"][2].get<double>());
