@@ -1,69 +1,124 @@
 #!/usr/bin/env python3
-"""Paired comparison of two variants of run stores (touchstone experiment): per step, the share
-recognized by each, the runs only one got right (a sign test on them), and a 95 % bootstrap of
-the difference that resamples explored objects (the runs of one object share its pool and are
-not independent).
+"""Compare two run stores of the same runs, paired: the same explored objects, runs, object poses
+and grasps (for example one database built with two descriptors, the same study file and seed).
 
-  scripts/paired_runs.py A.h5 "LABEL_A" B.h5 "LABEL_B" [--steps 5 10 20] [--seed 1]
+    /usr/bin/python3 scripts/paired_runs.py rec_fpfh.h5 rec_spin.h5 [--steps 5,10,20]
+    /usr/bin/python3 scripts/paired_runs.py s12.h5 s12.h5 --variant-a exploration.strategy=random \
+        --variant-b exploration.strategy=active --grasps-may-differ
 
-A label is a variant label as `touchstone report` prints it ("" for a store without a sweep).
-Runs are paired by (object, run): both variants must come from the same seed and objects.
+A store with a sweep holds several variants: --variant-a / --variant-b pick one by its label as
+`touchstone report` prints it (a store of one variant needs none). Active exploration chooses
+other grasps than the random runs it is paired with: --grasps-may-differ then checks the object
+pose and the first grasp only.
+
+Per step: runs right in both, in A only, in B only; McNemar's exact test on the discordant runs
+(assumes every run independent: too optimistic when runs of one object share its geometry) and a
+sign test over the explored objects (how many objects gain, how many lose; assumes only the
+objects independent), and a 95 % bootstrap interval of the difference B - A in points that
+resamples the explored objects with their runs (the runs of one object fail together). Refuses
+stores whose runs differ in pose or grasps.
 """
 import argparse
+import sys
 from math import comb
 
 import h5py
 import numpy as np
 
 
-def load(path, label):
-    with h5py.File(path, "r") as f:
-        labels = [x.decode() if isinstance(x, bytes) else x for x in f["header/variant_labels"][:]]
-        if label not in labels:
-            raise SystemExit(f"{path}: no variant {label!r} (header/variant_labels: {labels})")
-        v = labels.index(label)
-        variant = f["runs/variant"][:]
-        first = f["runs/first_step_row"][:]
-        obj = f["runs/object"][:]
-        run = f["runs/run"][:]
-        step = f["steps/step"][:]
-        correct = f["steps/correct"][:]
+def two_sided_binomial(k, n):
+    """P(X <= min(k, n - k)) * 2 for X ~ Binomial(n, 1/2), at most 1."""
+    if n == 0:
+        return 1.0
+    m = min(k, n - k)
+    return min(1.0, 2.0 * sum(comb(n, i) for i in range(m + 1)) / 2.0 ** n)
+
+
+def load(path, variant, grasps_may_differ):
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        sys.exit(f"paired_runs: error: {path}: not a run store ({e})")
+    with f:
+        for name in ("runs/object", "runs/run", "runs/first_step_row", "runs/truth", "runs/grasps", "steps/correct"):
+            if name not in f:
+                sys.exit(f"paired_runs: error: {path}: no dataset /{name} (not a run store?)")
+        r, s = f["runs"], f["steps"]
+        objects = [o.decode() for o in f["header/objects"][()]]
+        correct = s["correct"][()].astype(bool)
+        labels = [x.decode() if isinstance(x, bytes) else str(x) for x in f["header/variant_labels"][()]] \
+            if "header/variant_labels" in f else [""]
+        if variant is None:
+            if len(labels) > 1:
+                sys.exit(f"paired_runs: error: {path}: {len(labels)} variants ({', '.join(labels)}): "
+                         "name one with --variant-a / --variant-b")
+            chosen = 0
+        elif variant in labels:
+            chosen = labels.index(variant)
+        else:
+            sys.exit(f"paired_runs: error: {path}: no variant {variant!r} (/header/variant_labels: {', '.join(labels)})")
+        runs_variant = r["variant"][()] if "variant" in r else np.zeros(len(r["run"]), dtype=int)
         out = {}
-        for r in np.where(variant == v)[0]:
-            rows = range(int(first[r]), len(step) if r + 1 >= len(first) else int(first[r + 1]))
-            out[(int(obj[r]), int(run[r]))] = {int(step[i]): bool(correct[i]) for i in rows if i < len(step)}
+        for i in range(len(r["run"])):
+            if int(runs_variant[i]) != chosen:
+                continue
+            key = (objects[int(r["object"][i])], int(r["run"][i]))
+            first = int(r["first_step_row"][i])
+            steps = r["grasps"].shape[1]
+            if first < 0 or first + steps > len(correct):
+                sys.exit(f"paired_runs: error: {path}: /runs/first_step_row of run {i} out of range")
+            grasps = r["grasps"][i][:1] if grasps_may_differ else r["grasps"][i]
+            out[key] = (correct[first:first + steps], r["truth"][i].tobytes() + grasps.tobytes())
         return out
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("a")
-    ap.add_argument("label_a")
     ap.add_argument("b")
-    ap.add_argument("label_b")
-    ap.add_argument("--steps", type=int, nargs="+", default=[5, 10, 20])
-    ap.add_argument("--resamples", type=int, default=2000)
-    ap.add_argument("--seed", type=int, default=1)
-    args = ap.parse_args()
-    a, b = load(args.a, args.label_a), load(args.b, args.label_b)
-    keys = sorted(set(a) & set(b))
+    ap.add_argument("--steps", default="5,10,20", help="steps to compare (1-based, comma-separated)")
+    ap.add_argument("--variant-a", help="variant label of A's runs (a store with a sweep)")
+    ap.add_argument("--variant-b", help="variant label of B's runs (a store with a sweep)")
+    ap.add_argument("--grasps-may-differ", action="store_true",
+                    help="pair on the object pose and the first grasp only (active exploration)")
+    ap.add_argument("--resamples", type=int, default=2000, help="bootstrap resamples of the objects")
+    ap.add_argument("--seed", type=int, default=1, help="seed of the bootstrap")
+    o = ap.parse_args()
+    if o.resamples < 1:
+        sys.exit("paired_runs: error: --resamples must be at least 1")
+    A, B = load(o.a, o.variant_a, o.grasps_may_differ), load(o.b, o.variant_b, o.grasps_may_differ)
+    keys = sorted(set(A) & set(B))
     if not keys:
-        raise SystemExit("no run is in both variants (same seed and objects?)")
+        sys.exit("paired_runs: error: the stores share no (object, run)")
+    for k in keys:
+        if A[k][1] != B[k][1]:
+            sys.exit(f"paired_runs: error: run {k[1]} of {k[0]} differs in object pose or grasps: not paired")
+    steps = [int(x) for x in o.steps.split(",")]
+    n_steps = min(len(A[keys[0]][0]), len(B[keys[0]][0]))
     objects = sorted({k[0] for k in keys})
-    rng = np.random.default_rng(args.seed)
-    print(f"{len(keys)} paired runs of {len(objects)} objects")
-    for s in args.steps:
-        ka = np.array([a[k].get(s, False) for k in keys], float)
-        kb = np.array([b[k].get(s, False) for k in keys], float)
-        diff = np.array([sum(ka[i] - kb[i] for i, k in enumerate(keys) if k[0] == o) for o in objects])
-        boots = [diff[rng.integers(0, len(objects), len(objects))].sum() / len(keys) for _ in range(args.resamples)]
-        lo, hi = np.percentile(boots, [2.5, 97.5])
-        up, down = int(((ka == 1) & (kb == 0)).sum()), int(((ka == 0) & (kb == 1)).sum())
-        m = up + down
-        p = min(1.0, 2 * sum(comb(m, i) for i in range(min(up, down) + 1)) / 2**m) if m else 1.0
-        print(f"step {s}: A {100 * ka.mean():.1f} % B {100 * kb.mean():.1f} % difference "
-              f"{100 * (ka.mean() - kb.mean()):+.1f} points (95 % bootstrap over objects {100 * lo:+.1f} to "
-              f"{100 * hi:+.1f}); right in A only {up}, in B only {down} (sign test p = {p:.3f})")
+    print(f"{len(keys)} paired runs of {len(objects)} objects; A = {o.a}, B = {o.b}")
+    print("  step  both  A only  B only  McNemar p (runs indep.)  objects B better / worse  sign p (objects indep.)"
+          "  B - A, points (95 % bootstrap over objects)")
+    rng = np.random.default_rng(o.seed)
+    for st in steps:
+        if not 1 <= st <= n_steps:
+            sys.exit(f"paired_runs: error: --steps: step {st} outside 1..{n_steps}")
+        a = np.array([A[k][0][st - 1] for k in keys])
+        b = np.array([B[k][0][st - 1] for k in keys])
+        both, a_only, b_only = int(np.sum(a & b)), int(np.sum(a & ~b)), int(np.sum(~a & b))
+        better = worse = 0
+        per_object = []
+        for obj in objects:
+            d = sum(int(B[k][0][st - 1]) - int(A[k][0][st - 1]) for k in keys if k[0] == obj)
+            per_object.append(d)
+            better += d > 0
+            worse += d < 0
+        per_object = np.array(per_object, dtype=float)
+        boot = [per_object[rng.integers(0, len(objects), len(objects))].sum() / len(keys) for _ in range(o.resamples)]
+        lo, hi = np.percentile(boot, [2.5, 97.5])
+        print(f"  {st:4d}  {both:4d}  {a_only:6d}  {b_only:6d}  {two_sided_binomial(b_only, a_only + b_only):23.2g}"
+              f"  {better:12d} / {worse:<5d}      {two_sided_binomial(better, better + worse):.2g}"
+              f"                 {100 * (b.mean() - a.mean()):+.1f} ({100 * lo:+.1f} to {100 * hi:+.1f})")
 
 
 if __name__ == "__main__":
