@@ -99,7 +99,6 @@ def main():
     print(f"{len(keys)} paired runs of {len(objects)} objects; A = {o.a}, B = {o.b}")
     print("  step  both  A only  B only  McNemar p (runs indep.)  objects B better / worse  sign p (objects indep.)"
           "  B - A, points (95 % bootstrap over objects)")
-    rng = np.random.default_rng(o.seed)
     for st in steps:
         if not 1 <= st <= n_steps:
             sys.exit(f"paired_runs: error: --steps: step {st} outside 1..{n_steps}")
@@ -107,14 +106,19 @@ def main():
         b = np.array([B[k][0][st - 1] for k in keys])
         both, a_only, b_only = int(np.sum(a & b)), int(np.sum(a & ~b)), int(np.sum(~a & b))
         better = worse = 0
-        per_object = []
+        per_object, runs_of = [], []
         for obj in objects:
             d = sum(int(B[k][0][st - 1]) - int(A[k][0][st - 1]) for k in keys if k[0] == obj)
             per_object.append(d)
+            runs_of.append(sum(1 for k in keys if k[0] == obj))
             better += d > 0
             worse += d < 0
-        per_object = np.array(per_object, dtype=float)
-        boot = [per_object[rng.integers(0, len(objects), len(objects))].sum() / len(keys) for _ in range(o.resamples)]
+        per_object, runs_of = np.array(per_object, dtype=float), np.array(runs_of, dtype=float)
+        rng = np.random.default_rng([o.seed, st])   # a step's interval does not depend on the others asked
+        boot = []
+        for _ in range(o.resamples):
+            pick = rng.integers(0, len(objects), len(objects))
+            boot.append(per_object[pick].sum() / runs_of[pick].sum())
         lo, hi = np.percentile(boot, [2.5, 97.5])
         print(f"  {st:4d}  {both:4d}  {a_only:6d}  {b_only:6d}  {two_sided_binomial(b_only, a_only + b_only):23.2g}"
               f"  {better:12d} / {worse:<5d}      {two_sided_binomial(better, better + worse):.2g}"

@@ -172,7 +172,7 @@ std::vector<Vec3> thinned(const std::vector<Vec3>& contacts) {
 }
 }  // namespace
 
-PlannedGrasp GraspPlanner::score(const GraspCommand& c, const Selected& sel, const std::vector<Vec3>& near) const {
+PlannedGrasp GraspPlanner::score(const GraspCommand& c, const Selected& sel, const std::vector<Vec3>& contacts) const {
   const std::size_t K = sel.h.size();
   const std::size_t P = pad_points_.size();
   const Pose T_world_pad = c.T_world_eef * gripper_.pad_pose(c.joints, pad_);
@@ -212,16 +212,20 @@ PlannedGrasp GraspPlanner::score(const GraspCommand& c, const Selected& sel, con
       inner += term;
       if (sel.h[j]->object == sel.h[i]->object) same += term;
     }
+    if (sel.w[i] == 0.0) continue;   // underflowed (a low temperature): no term, and no 0 / 0
     info -= sel.w[i] * std::log(inner);
-    object_info += sel.w[i] * std::log(same / (sel.object_w[i] * inner));
+    // same >= w_i > 0 (k_ii = 1) and object_w >= w_i: every logarithm is finite
+    object_info += sel.w[i] * (std::log(same) - std::log(sel.object_w[i]) - std::log(inner));
   }
   out.information = std::max(0.0, info);
   out.object_information = std::clamp(object_info, 0.0, out.information);
   double d2 = s_.coverage_radius * s_.coverage_radius;
-  for (const Vec3& p : near) d2 = std::min(d2, (p - c.target).squaredNorm());
+  for (const Vec3& p : contacts) d2 = std::min(d2, (p - c.target).squaredNorm());
   out.coverage = std::sqrt(d2) / s_.coverage_radius;
-  out.score = out.object_information + s_.pose_weight * (out.information - out.object_information) -
-              s_.collision_weight * out.blocked_weight + s_.coverage_weight * out.coverage;
+  // Written so that pose_weight 1 and coverage_weight 0 give the information term bit for bit.
+  out.score = out.information - (1.0 - s_.pose_weight) * (out.information - out.object_information) -
+              s_.collision_weight * out.blocked_weight;
+  if (s_.coverage_weight > 0.0) out.score += s_.coverage_weight * out.coverage;
   return out;
 }
 
@@ -230,10 +234,9 @@ std::vector<PlannedGrasp> GraspPlanner::evaluate(const std::vector<GraspCommand>
                                                  const PlanObjects& objects,
                                                  const std::vector<Vec3>& contacts) const {
   const Selected sel = select(hypotheses, objects);
-  const std::vector<Vec3> near = thinned(contacts);
   std::vector<PlannedGrasp> out(commands.size());
   tbb::parallel_for(std::size_t{0}, commands.size(), [&](std::size_t i) {
-    out[i] = score(commands[i], sel, near);
+    out[i] = score(commands[i], sel, contacts);
     out[i].candidate = i;
   });
   return out;
@@ -304,7 +307,7 @@ std::vector<PlannedGrasp> GraspPlanner::plan(const std::vector<Hypothesis>& hypo
       for (std::size_t i = 0; i < hand_.size(); ++i) hand_world[i] = cmd.T_world_eef * hand_[i];
       if (!hand_blocked(hand_world, z, k, sel)) break;
     }
-    out[c] = score(cmd, sel, near);
+    out[c] = score(cmd, sel, contacts);
     out[c].candidate = c;
     out[c].aimed_object = sel.h[k]->object;
   });

@@ -33,7 +33,11 @@
 // (1: the information about the hypothesis, object and pose alike).
 // The collision penalty is `collision_weight` x (sum of the weights of the hypotheses under which
 // the hand is blocked): a grasp that would run into the likely object ranks lower.
+// A new-ground bonus: coverage = min(d, coverage_radius) / coverage_radius, d the distance of
+// the aim from the nearest contact so far (all of them; 1 without contacts):
 //     score = I(O; Y) + pose_weight * (I(H; Y) - I(O; Y)) - collision_weight * blocked_weight
+//             + coverage_weight * coverage
+// I(O; Y) is a difference of two pairwise bounds, an estimate rather than a bound itself.
 // The K hypotheses: the best of each object first (up to K/2 objects), then the rest by weight,
 // so hypotheses of competing objects are always compared.
 //
@@ -98,6 +102,7 @@ struct PlannedGrasp {
                                     ///< coverage_radius) / coverage_radius (1 without contacts)
   double score = 0.0;               ///< object_information + pose_weight * (information -
                                     ///< object_information) - collision_weight * blocked_weight
+                                    ///< + coverage_weight * coverage
 };
 
 /// What the planner reads of one object (object frame): its distance field, points of its

@@ -292,6 +292,7 @@ class RecognitionEngine final : public RunEngine {
     es.free.s_obj_max = largest_object_extent(*group.database);
     Exploration exploration(log, es);
     const auto run_start = Clock::now();
+    std::vector<Vec3> contacts_so_far;   // active: the contact cloud of the previous step
     for (int k = 1; k <= v.config.steps; ++k) {
       if (stop && stop->load()) return std::nullopt;
       double plan_s = 0.0;
@@ -318,8 +319,7 @@ class RecognitionEngine final : public RunEngine {
           if (!recognizer.hypotheses().empty()) {
             std::vector<GraspCommand> commands;
             for (std::size_t i : unused) commands.push_back(*aims[i]);
-            const auto scored =
-                planner->evaluate(commands, recognizer.hypotheses(), plan_objects, exploration.contact_cloud().points);
+            const auto scored = planner->evaluate(commands, recognizer.hypotheses(), plan_objects, contacts_so_far);
             std::size_t best = 0;
             for (std::size_t i = 1; i < scored.size(); ++i)
               if (scored[i].score > scored[best].score) best = i;
@@ -339,6 +339,7 @@ class RecognitionEngine final : public RunEngine {
       const auto t0 = Clock::now();
       exploration.advance_to(static_cast<std::size_t>(k));
       const PointCloud contacts = exploration.contact_cloud();
+      if (v.active) contacts_so_far = contacts.points;
       const PointCloud free = exploration.free_cloud();
       const GraspGroups& grasps = exploration.grasp_groups();  // unused when the offsets are off
       const double fusion_s = seconds_since(t0);

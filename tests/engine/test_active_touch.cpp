@@ -204,6 +204,23 @@ TEST_CASE("active touch: the information about the object is the part that tells
   CHECK(best[0].object_information > 0.3);
 }
 
+TEST_CASE("active touch: weights that underflow at a low temperature leave finite scores") {
+  TwoBoxes scene;
+  auto skewed = scene.hyps;
+  skewed[1].log_weight = skewed[0].log_weight - 30.0;   // exp(-30 / 1e-6) == 0
+  ActiveSettings s;
+  s.candidates = 40;
+  s.temperature = 1e-6;
+  s.pose_weight = 0.0;
+  const auto all = GraspPlanner(Gripper(), s).plan(skewed, scene.objects(), 3, s.candidates);
+  REQUIRE(all.size() == s.candidates);
+  for (const PlannedGrasp& g : all) {
+    CHECK(std::isfinite(g.score));
+    CHECK(g.information == 0.0);          // one hypothesis holds all the weight
+    CHECK(g.object_information == 0.0);
+  }
+}
+
 TEST_CASE("active touch: the coverage term rewards aims away from the contacts so far") {
   TwoBoxes scene;
   ActiveSettings s;

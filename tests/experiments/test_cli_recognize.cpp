@@ -886,6 +886,9 @@ TEST_CASE("cli recognize --suggest: the N best next grasps in the world frame, t
     const double object_info = g["expected_object_information_nats"].get<double>();
     CHECK(object_info >= 0.0);
     CHECK(object_info <= info);
+    const double coverage = g["coverage"].get<double>();
+    CHECK(coverage >= 0.0);
+    CHECK(coverage <= 1.0);
     // The hand's pose and the aim agree: the approach is a unit vector, the target within the
     // hand's reach of the EEF origin, and near the explored contacts (the object is under 20 cm).
     const Vec3 t(g["T_EEF"]["t"][0].get<double>(), g["T_EEF"]["t"][1].get<double>(), g["T_EEF"]["t"][2].get<double>());
