@@ -162,16 +162,6 @@ bool GraspPlanner::hand_blocked(const std::vector<Vec3>& hand_world, const Vec3&
   return false;
 }
 
-namespace {
-/// At most 256 of the contacts, evenly picked.
-std::vector<Vec3> thinned(const std::vector<Vec3>& contacts) {
-  std::vector<Vec3> near;
-  const std::size_t stride = std::max<std::size_t>(1, contacts.size() / 256);
-  for (std::size_t i = 0; i < contacts.size(); i += stride) near.push_back(contacts[i]);
-  return near;
-}
-}  // namespace
-
 PlannedGrasp GraspPlanner::score(const GraspCommand& c, const Selected& sel, const std::vector<Vec3>& contacts) const {
   const std::size_t K = sel.h.size();
   const std::size_t P = pad_points_.size();
@@ -248,7 +238,9 @@ std::vector<PlannedGrasp> GraspPlanner::plan(const std::vector<Hypothesis>& hypo
   const Selected sel = select(hypotheses, objects);
   const std::size_t leaders = std::min(s_.leaders, sel.h.size());
   // Per leader, the model points near the contacts (at most 256 contacts, evenly picked).
-  const std::vector<Vec3> near = thinned(contacts);
+  std::vector<Vec3> near;
+  const std::size_t stride = std::max<std::size_t>(1, contacts.size() / 256);
+  for (std::size_t i = 0; i < contacts.size(); i += stride) near.push_back(contacts[i]);
   std::vector<std::vector<std::size_t>> eligible(leaders);
   if (s_.aim_radius > 0 && !near.empty()) {
     const double r2 = s_.aim_radius * s_.aim_radius;

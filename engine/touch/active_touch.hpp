@@ -141,7 +141,7 @@ class GraspPlanner {
  private:
   struct Selected;
   Selected select(const std::vector<Hypothesis>& hypotheses, const PlanObjects& objects) const;
-  PlannedGrasp score(const GraspCommand& c, const Selected& sel, const std::vector<Vec3>& near) const;
+  PlannedGrasp score(const GraspCommand& c, const Selected& sel, const std::vector<Vec3>& contacts) const;
   bool hand_blocked(const std::vector<Vec3>& hand_world, const Vec3& d, std::size_t k, const Selected& sel) const;
 
   Gripper gripper_;
