@@ -56,6 +56,8 @@ def main():
 
     def score(features):
         x = np.array([features["feature." + f] for f in cal["features"]])
+        if model.get("terms") == "quadratic":   # version 3: the features, then their squares
+            x = np.concatenate([x, x * x])
         z = model["coef"][0] + np.dot(model["coef"][1:], (x - np.array(model["mean"])) / np.array(model["scale"]))
         return 1.0 / (1.0 + np.exp(-z))
 

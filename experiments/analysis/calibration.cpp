@@ -100,10 +100,19 @@ const StepModels& Calibration::at(int step) const {
   return ranges[k];
 }
 
-double LogisticModel::predict(std::span<const double> f) const {
+std::vector<double> quadratic_terms(std::span<const double> f) {
+  std::vector<double> t(f.begin(), f.end());
+  for (double x : f) t.push_back(x * x);
+  return t;
+}
+
+double LogisticModel::predict(std::span<const double> features) const {
+  std::vector<double> terms;
+  if (quadratic) terms = quadratic_terms(features);
+  const std::span<const double> f = quadratic ? std::span<const double>(terms) : features;
   if (f.size() + 1 != coef.size() || mean.size() != f.size() || scale.size() != f.size())
-    throw Error("the confidence model expects " + std::to_string(mean.size()) + " features, got " +
-                std::to_string(f.size()), {}, "features");
+    throw Error("the confidence model expects " + std::to_string(quadratic ? mean.size() / 2 : mean.size()) +
+                " features, got " + std::to_string(features.size()), {}, "features");
   double z = coef[0];
   for (std::size_t i = 0; i < f.size(); ++i) z += coef[i + 1] * (f[i] - mean[i]) / scale[i];
   // Stable in both tails.
@@ -249,7 +258,7 @@ std::vector<StepModels> fit_step_models(const std::vector<CalibrationRow>& rows,
       in_db.push_back(in_database_label(r));
       all_group.push_back(r.group);
       if (r.hidden) continue;
-      known.push_back(r.features);
+      known.push_back(quadratic_terms(r.features));
       right.push_back(r.right ? 1 : 0);
       pose_right.push_back(r.pose_right ? 1 : 0);
       known_group.push_back(r.group);
@@ -262,8 +271,10 @@ std::vector<StepModels> fit_step_models(const std::vector<CalibrationRow>& rows,
     m.first_step = lo;
     m.l2[0] = choose_l2(known, right, known_group, l2_grid);
     m.object = fit_logistic(known, right, m.l2[0]);
+    m.object.quadratic = true;
     m.l2[1] = choose_l2(known, pose_right, known_group, l2_grid);
     m.pose = fit_logistic(known, pose_right, m.l2[1]);
+    m.pose.quadratic = true;
     if (open_set) {
       if (known.size() == all.size())
         throw Error("no runs of hidden objects at " + steps + " to fit the open-set score on", {}, "--step-ranges");
@@ -332,6 +343,7 @@ nlohmann::ordered_json model_json(const LogisticModel& m) {
   j["mean"] = m.mean;
   j["scale"] = m.scale;
   j["coef"] = m.coef;
+  j["terms"] = m.quadratic ? "quadratic" : "linear";
   return j;
 }
 
@@ -341,6 +353,11 @@ LogisticModel model_from(const nlohmann::ordered_json& j, const std::string& key
   if (!j.contains(key) || !j[key].is_object()) throw Error("missing the model object", file, at);
   const auto& m = j[key];
   LogisticModel out;
+  if (m.contains("terms")) {   // absent: linear (version 2)
+    if (m["terms"] == "quadratic") out.quadratic = true;
+    else if (m["terms"] != "linear") throw Error("terms must be \"linear\" or \"quadratic\"", file, at + ".terms");
+  }
+  const std::size_t terms = out.quadratic ? 2 * features : features;
   auto numbers = [&](const char* name, std::size_t size) {
     const std::string where = at + "." + name;
     if (!m.contains(name) || !m[name].is_array() || m[name].size() != size)
@@ -352,9 +369,9 @@ LogisticModel model_from(const nlohmann::ordered_json& j, const std::string& key
     }
     return v;
   };
-  out.mean = numbers("mean", features);
-  out.scale = numbers("scale", features);
-  out.coef = numbers("coef", features + 1);
+  out.mean = numbers("mean", terms);
+  out.scale = numbers("scale", terms);
+  out.coef = numbers("coef", terms + 1);
   for (double s : out.scale)
     if (!(s > 0.0)) throw Error("scales must be positive", file, at + ".scale");
   return out;
@@ -404,10 +421,11 @@ Calibration read_calibration(const std::filesystem::path& path, const std::strin
   if (j.is_discarded() || !j.is_object()) throw Error("the calibration file is not a JSON object", file);
   if (!j.contains("format") || j["format"] != kFormat)
     throw Error("not a Touchstone calibration file (format must be \"" + std::string(kFormat) + "\")", file, "format");
-  if (!j.contains("version") || !j["version"].is_number_integer() || j["version"].get<long long>() != Calibration::kVersion)
+  if (!j.contains("version") || !j["version"].is_number_integer() ||
+      j["version"].get<long long>() < Calibration::kOldestVersion || j["version"].get<long long>() > Calibration::kVersion)
     throw Error("calibration version " + (j.contains("version") ? j["version"].dump() : std::string("absent")) +
-                " is not supported (this build reads version " + std::to_string(Calibration::kVersion) +
-                "): refit it with `touchstone calibrate`",
+                " is not supported (this build reads versions " + std::to_string(Calibration::kOldestVersion) + " to " +
+                std::to_string(Calibration::kVersion) + "): refit it with `touchstone calibrate`",
                 file, "version");
   Calibration c;
   if (!j.contains("database_fingerprint") || !j["database_fingerprint"].is_string())

@@ -157,6 +157,109 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   CHECK(error_of(indb.dump(), "abc123") == "steps[0].in_database.mean");
   CHECK(error_of("[1, 2]", "abc123").empty());
   CHECK_THROWS_AS(read_calibration(dir / "missing.json", ""), Error);
+
+  // Quadratic models (version 3): twice the terms, the squares after the features. The late
+  // object model weighs the square of the first feature alone: z = 1 + 2 x0^2.
+  Calibration qc = c;
+  LogisticModel& q = qc.ranges[1].object;
+  q.quadratic = true;
+  q.mean.assign(2 * f, 0.0);
+  q.scale.assign(2 * f, 1.0);
+  q.coef.assign(2 * f + 1, 0.0);
+  q.coef[0] = 1.0;
+  q.coef[1 + f] = 2.0;
+  write_calibration(path, qc);
+  const Calibration qback = read_calibration(path, "abc123");
+  CHECK(qback.ranges[1].object.quadratic);
+  CHECK_FALSE(qback.ranges[0].object.quadratic);
+  CHECK(qback.object_confidence(9, x) == doctest::Approx(1.0 / (1.0 + std::exp(-(1.0 + 2.0 * 0.25)))));
+  CHECK(qback.object_confidence(1, x) == back.object_confidence(1, x));
+  CHECK_THROWS_AS(q.predict(std::vector<double>(2 * f, 0.0)), Error);   // terms given as features
+  auto qj = to_json(qc);
+  CHECK(qj["version"] == 3);
+  CHECK(qj["steps"][1]["object"]["terms"] == "quadratic");
+  auto short_q = qj;   // quadratic, but the coefficients of a linear model
+  short_q["steps"][1]["object"]["coef"] = j["steps"][1]["object"]["coef"];
+  CHECK(error_of(short_q.dump(), "abc123") == "steps[1].object.coef");
+  short_q["steps"][1]["object"]["mean"] = j["steps"][1]["object"]["mean"];
+  short_q["steps"][1]["object"]["scale"] = j["steps"][1]["object"]["scale"];
+  CHECK(error_of(short_q.dump(), "abc123") == "steps[1].object.mean");
+  auto terms = qj;
+  terms["steps"][0]["pose"]["terms"] = "cubic";
+  CHECK(error_of(terms.dump(), "abc123") == "steps[0].pose.terms");
+  auto old = j;   // version 2: no terms, every model linear
+  old["version"] = 2;
+  for (auto& r : old["steps"])
+    for (const char* k : {"object", "pose", "in_database"}) r[k].erase("terms");
+  std::ofstream(dir / "v2.json") << old.dump();
+  const Calibration v2 = read_calibration(dir / "v2.json", "abc123");
+  CHECK_FALSE(v2.ranges[1].object.quadratic);
+  CHECK(v2.object_confidence(9, x) == back.object_confidence(9, x));
+  auto newer = qj;
+  newer["version"] = 4;
+  CHECK(error_of(newer.dump(), "abc123") == "version");
+}
+
+TEST_CASE("Quadratic terms: a confidence that depends on a feature's size both ways is calibrated only with them") {
+  // y ~ Bernoulli(sigmoid(2 - 1.5 x0^2)), x ~ N(0, 1) with two features of noise: right when x0
+  // is near 0 either way. A linear model cannot follow it: it gives x0 no weight and every row
+  // the base rate (calibrated on average, but telling nothing: a Brier score far above the
+  // quadratic model's); the quadratic one recovers the weights and is calibrated on fresh rows.
+  auto draw = [](Rng& rng, std::size_t n, std::vector<std::vector<double>>& rows, std::vector<int>& y) {
+    for (std::size_t i = 0; i < n; ++i) {
+      std::vector<double> r{rng.normal(), rng.normal(), rng.normal()};
+      y.push_back(rng.uniform() < 1.0 / (1.0 + std::exp(-(2.0 - 1.5 * r[0] * r[0]))) ? 1 : 0);
+      rows.push_back(std::move(r));
+    }
+  };
+  Rng rng(8);
+  std::vector<std::vector<double>> rows, fresh, terms;
+  std::vector<int> y, fy;
+  draw(rng, 20000, rows, y);
+  draw(rng, 20000, fresh, fy);
+  for (const auto& r : rows) terms.push_back(quadratic_terms(r));
+  REQUIRE(terms[0].size() == 6);
+  CHECK(terms[0][3] == rows[0][0] * rows[0][0]);
+  const LogisticModel lin = fit_logistic(rows, y, 0.0);
+  LogisticModel quad = fit_logistic(terms, y, 0.0);
+  quad.quadratic = true;
+  // Raw weight of x0^2 and the bias at x = 0 (the standardization undone).
+  const double w_sq = quad.coef[4] / quad.scale[3];
+  double bias = quad.coef[0];
+  for (std::size_t k = 0; k < 6; ++k) bias -= quad.coef[k + 1] * quad.mean[k] / quad.scale[k];
+  CHECK(std::abs(w_sq + 1.5) < 0.15);
+  CHECK(std::abs(bias - 2.0) < 0.15);
+  std::vector<double> pl, pq;
+  for (const auto& r : fresh) {
+    pl.push_back(lin.predict(r));
+    pq.push_back(quad.predict(r));
+  }
+  const auto cl = confidence_calibration(pl, fy), cq = confidence_calibration(pq, fy);
+  CHECK(cq.ece < 0.02);
+  CHECK(cq.brier < cl.brier - 0.03);
+  CHECK(std::abs(lin.coef[1] / lin.scale[0]) < 0.1);
+  // fit_step_models makes object and pose quadratic and keeps the in-database score linear.
+  std::vector<CalibrationRow> cr;
+  for (std::size_t i = 0; i < 4000; ++i) {
+    CalibrationRow r;
+    r.features = confidence_features(StepResult{});
+    r.features[0] = rows[i][0];
+    r.step = 1 + static_cast<int>(i % 20);
+    r.features[5] = std::log(static_cast<double>(r.step));
+    r.group = static_cast<int>(i % 40);
+    r.right = r.pose_right = y[i] != 0;
+    r.hidden = i % 7 == 0;
+    cr.push_back(r);
+  }
+  const auto models = fit_step_models(cr, {1, 11});
+  REQUIRE(models.size() == 2);
+  for (const auto& m : models) {
+    CHECK(m.object.quadratic);
+    CHECK(m.pose.quadratic);
+    REQUIRE(m.in_database.has_value());
+    CHECK_FALSE(m.in_database->quadratic);
+    CHECK(m.object.coef.size() == 2 * confidence_feature_names().size() + 1);
+  }
 }
 
 TEST_CASE("Step-aware fit: each range of steps recovers its own model; one model over all steps does not") {
