@@ -3,7 +3,7 @@
 
     /usr/bin/python3 scripts/calibration_cv.py STORE.h5 [STORE.h5 ...] [--pose]
 
-STORE.h5: run stores of known objects (the calibration runs; never the held-out ones). Mirrors
+STORE.h5: run stores of known objects (the calibration runs; never the held-out ones). Approximately mirrors
 `touchstone calibrate`'s object model (--pose: the pose model): per range of steps (1, 2, 3, 5,
 7, 9, 12, 16), logistic regression on standardized terms, the L2 penalty from the same grid by
 the least log loss in 5 folds by explored object, Newton's method. Each variant is scored out of
@@ -56,7 +56,7 @@ def load(path):
 def fit_logistic(X, y, l2):
     mean = X.mean(0)
     scale = np.maximum(X.std(0), 1e-9)
-    Z = np.hstack([np.ones((len(X), 1)), (X - mean) / scale])
+    Z = np.hstack([np.ones((len(X), 1)), np.clip((X - mean) / scale, -CLAMP, CLAMP)])
     w = np.zeros(Z.shape[1])
     P = np.eye(Z.shape[1]) * l2 * len(X)
     P[0, 0] = 1e-9
@@ -75,7 +75,7 @@ def fit_logistic(X, y, l2):
 
 def predict_logit(m, X):
     mean, scale, w = m
-    return np.hstack([np.ones((len(X), 1)), (X - mean) / scale]) @ w
+    return np.hstack([np.ones((len(X), 1)), np.clip((X - mean) / scale, -CLAMP, CLAMP)]) @ w
 
 
 def logloss(p, y):
@@ -83,6 +83,7 @@ def logloss(p, y):
     return -np.mean(y * np.log(p) + (1 - y) * np.log(1 - p))
 
 
+CLAMP = 4.0   # standardized terms clamped, as touchstone calibrate does (kTermClamp)
 GRID = [1e-4, 1e-3, 1e-2, 3e-2, 0.1, 0.3]
 
 

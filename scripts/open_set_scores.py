@@ -58,7 +58,10 @@ def main():
         x = np.array([features["feature." + f] for f in cal["features"]])
         if model.get("terms") == "quadratic":   # version 3: the features, then their squares
             x = np.concatenate([x, x * x])
-        z = model["coef"][0] + np.dot(model["coef"][1:], (x - np.array(model["mean"])) / np.array(model["scale"]))
+        t = (x - np.array(model["mean"])) / np.array(model["scale"])
+        if model.get("clamp", 0) > 0:   # version 3: standardized terms clamped
+            t = np.clip(t, -model["clamp"], model["clamp"])
+        z = model["coef"][0] + np.dot(model["coef"][1:], t)
         return 1.0 / (1.0 + np.exp(-z))
 
     known, hidden = rows(a.known, a.step), rows(a.hidden, a.step)

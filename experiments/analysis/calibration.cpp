@@ -114,17 +114,21 @@ double LogisticModel::predict(std::span<const double> features) const {
     throw Error("the confidence model expects " + std::to_string(quadratic ? mean.size() / 2 : mean.size()) +
                 " features, got " + std::to_string(features.size()), {}, "features");
   double z = coef[0];
-  for (std::size_t i = 0; i < f.size(); ++i) z += coef[i + 1] * (f[i] - mean[i]) / scale[i];
+  for (std::size_t i = 0; i < f.size(); ++i) {
+    const double t = (f[i] - mean[i]) / scale[i];
+    z += coef[i + 1] * (clamp > 0.0 ? std::clamp(t, -clamp, clamp) : t);
+  }
   // Stable in both tails.
   return z >= 0 ? 1.0 / (1.0 + std::exp(-z)) : std::exp(z) / (1.0 + std::exp(z));
 }
 
 LogisticModel fit_logistic(const std::vector<std::vector<double>>& rows, const std::vector<int>& labels,
-                           double l2) {
+                           double l2, double clamp) {
   if (rows.empty() || rows.size() != labels.size())
     throw Error("a logistic fit needs as many labels as rows, and at least one", {}, "calibration");
   const std::size_t n = rows.size(), f = rows.front().size();
   LogisticModel m;
+  m.clamp = clamp;
   m.mean.assign(f, 0.0);
   m.scale.assign(f, 0.0);
   for (const auto& r : rows) {
@@ -144,7 +148,9 @@ LogisticModel fit_logistic(const std::vector<std::vector<double>>& rows, const s
     if (labels[i] != 0 && labels[i] != 1) throw Error("labels of a logistic fit must be 0 or 1", {}, "calibration");
     x(static_cast<Eigen::Index>(i), 0) = 1.0;
     for (std::size_t j = 0; j < f; ++j)
-      x(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j + 1)) = (rows[i][j] - m.mean[j]) / m.scale[j];
+      x(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j + 1)) =
+          clamp > 0.0 ? std::clamp((rows[i][j] - m.mean[j]) / m.scale[j], -clamp, clamp)
+                      : (rows[i][j] - m.mean[j]) / m.scale[j];
     y(static_cast<Eigen::Index>(i)) = labels[i];
   }
   const auto k = static_cast<Eigen::Index>(f + 1);
@@ -176,7 +182,7 @@ const std::vector<double>& default_l2_grid() {
 }
 
 double choose_l2(const std::vector<std::vector<double>>& rows, const std::vector<int>& labels,
-                 const std::vector<int>& groups, const std::vector<double>& grid, int folds) {
+                 const std::vector<int>& groups, const std::vector<double>& grid, int folds, double clamp) {
   if (grid.empty()) throw Error("an empty grid of L2 penalties", {}, "l2");
   if (grid.size() == 1 || folds < 2) return grid.front();
   std::vector<int> fold(rows.size());
@@ -198,7 +204,7 @@ double choose_l2(const std::vector<std::vector<double>>& rows, const std::vector
           train.push_back(rows[i]);
           y.push_back(labels[i]);
         }
-      const LogisticModel m = fit_logistic(train, y, l2);
+      const LogisticModel m = fit_logistic(train, y, l2, clamp);
       for (std::size_t i = 0; i < rows.size(); ++i)
         if (fold[i] == f) {
           const double p = std::clamp(m.predict(rows[i]), 1e-6, 1.0 - 1e-6);
@@ -214,7 +220,7 @@ double choose_l2(const std::vector<std::vector<double>>& rows, const std::vector
 }
 
 std::vector<double> out_of_fold_in_database(const std::vector<CalibrationRow>& rows, const std::vector<int>& first,
-                                            int step, double l2, int folds) {
+                                            int step, double l2, int folds, double clamp) {
   std::size_t k = 0;
   while (k + 1 < first.size() && first[k + 1] <= step) ++k;
   const int lo = first.at(k), hi = k + 1 < first.size() ? first[k + 1] : std::numeric_limits<int>::max();
@@ -234,7 +240,7 @@ std::vector<double> out_of_fold_in_database(const std::vector<CalibrationRow>& r
       y.push_back(in_database_label(r));
     }
     if (!held || train.empty()) continue;
-    const LogisticModel m = fit_logistic(train, y, l2);
+    const LogisticModel m = fit_logistic(train, y, l2, clamp);
     for (std::size_t i = 0; i < rows.size(); ++i)
       if (rows[i].step == step && fold_of(rows[i]) == f) out[i] = m.predict(rows[i].features);
   }
@@ -269,17 +275,17 @@ std::vector<StepModels> fit_step_models(const std::vector<CalibrationRow>& rows,
     if (known.empty()) throw Error("no answers of known objects at " + steps + " to fit on", {}, "--step-ranges");
     StepModels m;
     m.first_step = lo;
-    m.l2[0] = choose_l2(known, right, known_group, l2_grid);
-    m.object = fit_logistic(known, right, m.l2[0]);
+    m.l2[0] = choose_l2(known, right, known_group, l2_grid, 5, kTermClamp);
+    m.object = fit_logistic(known, right, m.l2[0], kTermClamp);
     m.object.quadratic = true;
-    m.l2[1] = choose_l2(known, pose_right, known_group, l2_grid);
-    m.pose = fit_logistic(known, pose_right, m.l2[1]);
+    m.l2[1] = choose_l2(known, pose_right, known_group, l2_grid, 5, kTermClamp);
+    m.pose = fit_logistic(known, pose_right, m.l2[1], kTermClamp);
     m.pose.quadratic = true;
     if (open_set) {
       if (known.size() == all.size())
         throw Error("no runs of hidden objects at " + steps + " to fit the open-set score on", {}, "--step-ranges");
-      m.l2[2] = choose_l2(all, in_db, all_group, l2_grid);
-      m.in_database = fit_logistic(all, in_db, m.l2[2]);
+      m.l2[2] = choose_l2(all, in_db, all_group, l2_grid, 5, kTermClamp);
+      m.in_database = fit_logistic(all, in_db, m.l2[2], kTermClamp);
     }
     out.push_back(std::move(m));
   }
@@ -344,6 +350,7 @@ nlohmann::ordered_json model_json(const LogisticModel& m) {
   j["scale"] = m.scale;
   j["coef"] = m.coef;
   j["terms"] = m.quadratic ? "quadratic" : "linear";
+  j["clamp"] = m.clamp;
   return j;
 }
 
@@ -356,6 +363,11 @@ LogisticModel model_from(const nlohmann::ordered_json& j, const std::string& key
   if (m.contains("terms")) {   // absent: linear (version 2)
     if (m["terms"] == "quadratic") out.quadratic = true;
     else if (m["terms"] != "linear") throw Error("terms must be \"linear\" or \"quadratic\"", file, at + ".terms");
+  }
+  if (m.contains("clamp")) {   // absent: 0, not clamped (version 2)
+    if (!m["clamp"].is_number() || !(m["clamp"].get<double>() >= 0.0) || !std::isfinite(m["clamp"].get<double>()))
+      throw Error("the clamp must be a number >= 0", file, at + ".clamp");
+    out.clamp = m["clamp"].get<double>();
   }
   const std::size_t terms = out.quadratic ? 2 * features : features;
   auto numbers = [&](const char* name, std::size_t size) {

@@ -47,17 +47,25 @@ struct LogisticModel {
   std::vector<double> mean, scale;   ///< standardization of each term
   std::vector<double> coef;          ///< b, then one weight per term
   bool quadratic = false;            ///< the terms are the features and their squares
+  /// Standardized terms are clamped to [-clamp, clamp] in the fit and in predict (0: not
+  /// clamped, as in version 2 files): a term that is nearly always the same (the free-space
+  /// conflict is 0 in 99.9 % of answers) has a tiny scale, and its rare large values would
+  /// otherwise sit hundreds of scales out and swing the logit without bound.
+  double clamp = 0.0;
   double predict(std::span<const double> features) const;
 };
+
+/// The clamp of standardized terms fit_step_models uses (and version 3 files record).
+inline constexpr double kTermClamp = 4.0;
 
 /// The terms of a quadratic model: the features, then their squares.
 std::vector<double> quadratic_terms(std::span<const double> features);
 
 /// Fit by Newton's method (IRLS) with an L2 penalty `l2` on the weights (not the bias) over the
-/// standardized features. rows[i] has one value per feature; labels are 0 or 1. Throws ts::Error
+/// standardized features, each clamped to [-clamp, clamp] when clamp > 0. rows[i] has one value per feature; labels are 0 or 1. Throws ts::Error
 /// for empty or ragged input or non-finite values.
 LogisticModel fit_logistic(const std::vector<std::vector<double>>& rows, const std::vector<int>& labels,
-                           double l2 = 1e-3);
+                           double l2 = 1e-3, double clamp = 0.0);
 
 /// The models of one range of steps.
 struct StepModels {
@@ -127,14 +135,15 @@ inline int in_database_label(const CalibrationRow& r) { return !r.hidden || r.co
 /// are not independent, so they are held out together. The first of the grid when fewer than
 /// two folds have rows.
 double choose_l2(const std::vector<std::vector<double>>& rows, const std::vector<int>& labels,
-                 const std::vector<int>& groups, const std::vector<double>& grid, int folds = 5);
+                 const std::vector<int>& groups, const std::vector<double>& grid, int folds = 5,
+                 double clamp = 0.0);
 
 /// Out-of-fold in-database scores of the rows at `step`: each row scored by the model of its
 /// step's range fitted (L2 penalty `l2`) without its group's fold (group g in fold g mod folds),
 /// so that a threshold chosen on them is not chosen on the model's own training answers.
 /// Returns one score per row at that step (NaN for rows at other steps).
 std::vector<double> out_of_fold_in_database(const std::vector<CalibrationRow>& rows, const std::vector<int>& first_steps,
-                                            int step, double l2, int folds = 5);
+                                            int step, double l2, int folds = 5, double clamp = kTermClamp);
 
 /// The default grid of choose_l2.
 const std::vector<double>& default_l2_grid();

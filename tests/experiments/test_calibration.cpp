@@ -198,6 +198,46 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   auto newer = qj;
   newer["version"] = 4;
   CHECK(error_of(newer.dump(), "abc123") == "version");
+  // The clamp of standardized terms: written, read back, applied (the pose model, mean 0 and
+  // scale 1: z = -0.5 - 0.5 * sum(clamp(t)), t = 10 clamped to 4 in every term).
+  Calibration cc = c;
+  cc.ranges[0].pose.clamp = 4.0;
+  write_calibration(path, cc);
+  const Calibration cback = read_calibration(path, "abc123");
+  CHECK(cback.ranges[0].pose.clamp == 4.0);
+  CHECK(cback.ranges[0].object.clamp == 0.0);
+  CHECK(cback.pose_confidence(1, std::vector<double>(f, 10.0)) ==
+        doctest::Approx(1.0 / (1.0 + std::exp(0.5 + 0.5 * 4.0 * double(f)))));
+  auto neg = to_json(cc);
+  neg["steps"][0]["pose"]["clamp"] = -1.0;
+  CHECK(error_of(neg.dump(), "abc123") == "steps[0].pose.clamp");
+}
+
+TEST_CASE("Clamped terms: a rare extreme value of a nearly constant feature cannot swing the confidence") {
+  // y ~ Bernoulli(sigmoid(2 x0)); x1 is 0 except in 3 of 6 000 rows, where it is 0.015 and the
+  // answer right. Unclamped, x1's scale is tiny and a new value of 0.05 sits hundreds of scales
+  // out; clamped at 4 scales, it moves the logit no more than the fitted rows did.
+  Rng rng(4);
+  std::vector<std::vector<double>> rows;
+  std::vector<int> y;
+  for (int i = 0; i < 6000; ++i) {
+    const double a = rng.normal();
+    const bool rare = i % 2000 == 7;
+    rows.push_back({a, rare ? 0.015 : 0.0});
+    y.push_back(rare ? 1 : (rng.uniform() < 1.0 / (1.0 + std::exp(-2.0 * a)) ? 1 : 0));
+  }
+  const LogisticModel free = fit_logistic(rows, y, 1e-3), held = fit_logistic(rows, y, 1e-3, kTermClamp);
+  const std::vector<double> at0{0.0, 0.0}, seen{0.0, 0.015}, far{0.0, 0.05};
+  auto logit = [](double p) { return std::log(p / (1.0 - p)); };
+  // Unclamped, the logit keeps growing past the values it was fitted on (3.3 times as far out,
+  // at least 3 times the shift, and the answer at ~1); clamped, a value beyond the fitted ones
+  // is read as the largest fitted one, and its shift stays what those 3 rows support.
+  CHECK(free.predict(far) > 0.999);
+  CHECK(logit(free.predict(far)) - logit(free.predict(at0)) > 3.0 * (logit(free.predict(seen)) - logit(free.predict(at0))));
+  CHECK(held.predict(far) == held.predict(seen));
+  CHECK(logit(held.predict(far)) - logit(held.predict(at0)) < 3.0);
+  CHECK(std::abs(held.predict(at0) - 0.5) < 0.05);   // the rest of the model is unchanged
+  CHECK(held.clamp == kTermClamp);
 }
 
 TEST_CASE("Quadratic terms: a confidence that depends on a feature's size both ways is calibrated only with them") {
