@@ -100,6 +100,14 @@ const StepModels& Calibration::at(int step) const {
   return ranges[k];
 }
 
+namespace {
+/// A term standardized by its mean and scale, clamped to [-clamp, clamp] when clamp > 0.
+inline double standardized(double v, double mean, double scale, double clamp) {
+  const double t = (v - mean) / scale;
+  return clamp > 0.0 ? std::clamp(t, -clamp, clamp) : t;
+}
+}  // namespace
+
 std::vector<double> quadratic_terms(std::span<const double> f) {
   std::vector<double> t(f.begin(), f.end());
   for (double x : f) t.push_back(x * x);
@@ -114,10 +122,7 @@ double LogisticModel::predict(std::span<const double> features) const {
     throw Error("the confidence model expects " + std::to_string(quadratic ? mean.size() / 2 : mean.size()) +
                 " features, got " + std::to_string(features.size()), {}, "features");
   double z = coef[0];
-  for (std::size_t i = 0; i < f.size(); ++i) {
-    const double t = (f[i] - mean[i]) / scale[i];
-    z += coef[i + 1] * (clamp > 0.0 ? std::clamp(t, -clamp, clamp) : t);
-  }
+  for (std::size_t i = 0; i < f.size(); ++i) z += coef[i + 1] * standardized(f[i], mean[i], scale[i], clamp);
   // Stable in both tails.
   return z >= 0 ? 1.0 / (1.0 + std::exp(-z)) : std::exp(z) / (1.0 + std::exp(z));
 }
@@ -148,9 +153,7 @@ LogisticModel fit_logistic(const std::vector<std::vector<double>>& rows, const s
     if (labels[i] != 0 && labels[i] != 1) throw Error("labels of a logistic fit must be 0 or 1", {}, "calibration");
     x(static_cast<Eigen::Index>(i), 0) = 1.0;
     for (std::size_t j = 0; j < f; ++j)
-      x(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j + 1)) =
-          clamp > 0.0 ? std::clamp((rows[i][j] - m.mean[j]) / m.scale[j], -clamp, clamp)
-                      : (rows[i][j] - m.mean[j]) / m.scale[j];
+      x(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j + 1)) = standardized(rows[i][j], m.mean[j], m.scale[j], clamp);
     y(static_cast<Eigen::Index>(i)) = labels[i];
   }
   const auto k = static_cast<Eigen::Index>(f + 1);

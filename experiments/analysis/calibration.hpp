@@ -62,8 +62,8 @@ inline constexpr double kTermClamp = 4.0;
 std::vector<double> quadratic_terms(std::span<const double> features);
 
 /// Fit by Newton's method (IRLS) with an L2 penalty `l2` on the weights (not the bias) over the
-/// standardized features, each clamped to [-clamp, clamp] when clamp > 0. rows[i] has one value per feature; labels are 0 or 1. Throws ts::Error
-/// for empty or ragged input or non-finite values.
+/// standardized features, each clamped to [-clamp, clamp] when clamp > 0. rows[i] has one value
+/// per feature; labels are 0 or 1. Throws ts::Error for empty or ragged input or non-finite values.
 LogisticModel fit_logistic(const std::vector<std::vector<double>>& rows, const std::vector<int>& labels,
                            double l2 = 1e-3, double clamp = 0.0);
 
@@ -140,7 +140,8 @@ double choose_l2(const std::vector<std::vector<double>>& rows, const std::vector
 
 /// Out-of-fold in-database scores of the rows at `step`: each row scored by the model of its
 /// step's range fitted (L2 penalty `l2`) without its group's fold (group g in fold g mod folds),
-/// so that a threshold chosen on them is not chosen on the model's own training answers.
+/// so that a threshold chosen on them is not chosen on the model's own training answers; the
+/// terms clamped as fit_step_models clamps them (kTermClamp by default).
 /// Returns one score per row at that step (NaN for rows at other steps).
 std::vector<double> out_of_fold_in_database(const std::vector<CalibrationRow>& rows, const std::vector<int>& first_steps,
                                             int step, double l2, int folds = 5, double clamp = kTermClamp);
