@@ -98,8 +98,8 @@ class Pairing {
     far_ = geo.field.empty() ? 0.0 : geo.field.coarse_margin();
     pairs_.resize(m_);
     if (use_field_) {
-      probe_.resize(4 * m_);
-      dist_.resize(4 * m_);
+      dist_.resize(m_);
+      grad_.resize(m_);
       ys_.resize(m_);
       ns_.resize(m_);
     }
@@ -118,27 +118,19 @@ class Pairing {
   double collect(const Pose& T) {
     const Pose T_os = T.inverse();
     const std::size_t m = m_;
-    const double h = s_.gradient_step;
     if (use_field_) {
+      // The distance and its gradient from one interpolation: the analytic derivative of the
+      // trilinear interpolant (zero where the field only knows a lower bound).
+      for (std::size_t i = 0; i < m; ++i) ys_[i] = T_os * scene_.ordered[i];
+      geo_.field.distances_gradients(ys_.data(), m, Pose::Identity(), dist_.data(), grad_.data());
       for (std::size_t i = 0; i < m; ++i) {
-        const Vec3 y = T_os * scene_.ordered[i];
-        ys_[i] = y;
-        Vec3* q = &probe_[4 * i];
-        q[0] = y;
-        for (int a = 0; a < 3; ++a) {
-          q[1 + a] = y;
-          q[1 + a][a] += h;
-        }
-      }
-      geo_.field.distances(probe_.data(), probe_.size(), Pose::Identity(), dist_.data());
-      for (std::size_t i = 0; i < m; ++i) {
-        const double* d = &dist_[4 * i];
-        const Vec3 g((d[1] - d[0]) / h, (d[2] - d[0]) / h, (d[3] - d[0]) / h);
+        const double d = dist_[i];
+        const Vec3& g = grad_[i];
         const double gn = g.norm();
-        const bool usable = std::abs(d[0]) < far_ && gn > 0.5 && g.allFinite();
+        const bool usable = std::abs(d) < far_ && gn > 0.5 && g.allFinite();
         ns_[i] = usable ? Vec3(g / gn) : Vec3::Zero();
         // pairs_[i].d2: squared distance; unusable contacts sort last and are never fitted
-        pairs_[i] = {usable ? d[0] * d[0] : std::numeric_limits<double>::infinity(),
+        pairs_[i] = {usable ? d * d : std::numeric_limits<double>::infinity(),
                      static_cast<std::uint32_t>(i), 0};
       }
     } else {
@@ -169,7 +161,7 @@ class Pairing {
       if (use_field_) {
         // closest-point estimate z = y - d n, so that n . (y - z) = d (signed distance)
         const std::uint32_t i = p.contact;
-        const double d = dist_[4 * i];
+        const double d = dist_[i];
         src.push_back(ys_[i]);
         nrm.push_back(ns_[i]);
         dst.push_back(ys_[i] - d * ns_[i]);
@@ -196,8 +188,9 @@ class Pairing {
   bool use_field_ = false, plane_ = false, usable_ = false;
   double gate2_ = 0.0, trim_ = 1.0, far_ = 0.0;
   std::vector<Pair> pairs_;
-  // Field metric: per contact the moved point y, its distance d and gradient direction n.
-  std::vector<Vec3> probe_, ys_, ns_;
+  // Field metric: per contact the moved point y, its distance d, the interpolant's gradient
+  // and its direction n.
+  std::vector<Vec3> ys_, grad_, ns_;
   std::vector<double> dist_;
 };
 

@@ -14,8 +14,9 @@ namespace ts {
 enum class IcpMetric {
   point_to_point,   ///< nearest fine-cloud point (k-d tree), Kabsch: the paper's ICP
   point_to_plane,   ///< nearest fine-cloud point and its normal (k-d tree), Gauss-Newton
-  field             ///< the object's distance field: residual d(y), normal = grad d (forward
-                    ///< differences), Gauss-Newton; O(1) per contact, no tree search
+  field             ///< the object's distance field: residual d(y), normal = grad d (the
+                    ///< trilinear interpolant's analytic gradient), Gauss-Newton; O(1) per
+                    ///< contact, no tree search
 };
 
 struct IcpSettings {
@@ -28,7 +29,6 @@ struct IcpSettings {
                                       ///< two successive iterations
   double max_correspondence = 0.0;    ///< m; pairs farther apart are ignored (0: keep all)
   double trim_fraction = 1.0;         ///< trimmed ICP: fit the closest share of pairs (1: all)
-  double gradient_step = 0.0005;      ///< m, finite-difference step of the field metric
   std::size_t max_points = 128;       ///< contacts used, a fixed prefix of the scene's
                                       ///< evaluation order (0: all)
 };

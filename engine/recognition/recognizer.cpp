@@ -218,7 +218,6 @@ RecognizerSettings RecognizerSettings::scaled(double f) const {
   s.ransac.size_slack *= f;
   s.icp.min_translation *= f;
   s.icp.max_correspondence *= f;
-  s.icp.gradient_step *= f;
   s.evaluate.d_outlier *= f;
   s.evaluate.res_free *= f;
   s.evaluate.grasp_offset_sigma *= f;

@@ -26,7 +26,6 @@ Conditioned wedge_system(double scale, int patches) {
   Pose T_scene = T;
   T_scene.translation() -= scene.origin;
   IcpSettings s;
-  s.gradient_step *= scale;
   const GeometryRef geo = db.geometry(4);
   return {icp_system(scene, *geo, T_scene, s), c.size()};
 }
