@@ -6,7 +6,7 @@
 //
 // Run from the repository root. Prints the machine, thread count, per-stage times and totals.
 #include "datasets/db_builder.hpp"
-#include "experiments/cli/cli_common.hpp"
+#include "experiments/resources.hpp"
 #include "io/db_store.hpp"
 
 #include <CLI/CLI.hpp>
@@ -91,7 +91,7 @@ int main(int argc, char** argv) {
     for (double c : report.coverage) coverage_min = std::min(coverage_min, c);
 
     std::printf("bench_db_build: %s\n", manifest.c_str());
-    std::printf("machine: %s; threads: %d; compression level %d\n", ts::cli::machine_description().c_str(), threads,
+    std::printf("machine: %s; threads: %d; compression level %d\n", ts::experiments::machine_description().c_str(), threads,
                 settings.write.deflate);
     std::printf("objects: %zu, fine points: %zu, file: %.1f MB, lowest coverage: %.2f %%\n", report.names.size(), fine,
                 static_cast<double>(std::filesystem::file_size(out)) / 1e6, 100.0 * coverage_min);

@@ -19,7 +19,7 @@
 #include "engine/geometry/distance_field.hpp"
 #include "engine/geometry/scanner.hpp"
 #include "engine/geometry/search.hpp"
-#include "experiments/cli/cli_common.hpp"
+#include "experiments/resources.hpp"
 #include "io/mesh_import.hpp"
 
 #include <CLI/CLI.hpp>
@@ -107,7 +107,7 @@ int main(int argc, char** argv) {
     auto entries = ts::datasets::read_manifest(manifest);
     if (entries.size() > max_objects) entries.resize(max_objects);
     std::printf("bench_features: %zu objects from %s, %d thread(s), %s\n", entries.size(), manifest.c_str(),
-                threads, ts::cli::machine_description().c_str());
+                threads, ts::experiments::machine_description().c_str());
     tbb::task_arena arena(threads);
 
     std::map<std::string, std::set<std::string>> wanted;

@@ -8,7 +8,7 @@
 // Loads run one at a time on the calling thread (the page cache warm after the first repeat;
 // the last repeat is reported). Prints the machine, thread count and every figure.
 #include "experiments/allocator.hpp"
-#include "experiments/cli/cli_common.hpp"
+#include "experiments/resources.hpp"
 #include "io/db_store.hpp"
 
 #include <CLI/CLI.hpp>
@@ -52,7 +52,7 @@ int main(int argc, char** argv) {
     for (std::size_t k = 0; k < n; ++k) pick.push_back(k * reader.size() / n);
     std::printf("bench_geometry: cost of loading an object's geometry\nmachine: %s, %d threads; first touch of fresh memory %.2f ms/MB\n"
                 "database: %s (%zu objects), %zu objects loaded %zu times each (last reported)\n",
-                cli::machine_description().c_str(), tbb::info::default_concurrency(),
+                experiments::machine_description().c_str(), tbb::info::default_concurrency(),
                 experiments::first_touch_ms_per_mb(), db_path.c_str(), reader.size(), pick.size(), repeat);
     std::vector<Row> rows;
     for (std::size_t r = 0; r < repeat; ++r) {

@@ -26,9 +26,9 @@
 #include "engine/recognition/recognizer.hpp"
 #include "engine/touch/fusion.hpp"
 #include "experiments/allocator.hpp"
-#include "experiments/cli/cli_common.hpp"
 #include "experiments/params/config.hpp"
 #include "experiments/params/parameters.hpp"
+#include "experiments/resources.hpp"
 #include "experiments/runs/grasp_pools.hpp"
 #include "io/db_store.hpp"
 
@@ -166,7 +166,7 @@ int main(int argc, char** argv) {
     db.set_surface(needs_surface(rs, db.settings()));   // as `touchstone recognize` does
     const std::size_t n_obj = objects > 0 ? std::min(objects, db.size()) : db.size();
     std::printf("bench_recognize: %s\nmachine: %s; first touch of fresh memory %.2f ms/MB\ndatabase: %s (%zu objects), method %s, %zu grasps, noise %s\n",
-                "recognizer speed and accuracy", cli::machine_description().c_str(),
+                "recognizer speed and accuracy", experiments::machine_description().c_str(),
                 experiments::first_touch_ms_per_mb(), db_path.c_str(),
                 db.size(), method.c_str(), grasps, noise.c_str());
     std::printf("parameters (preset %s):", preset.c_str());

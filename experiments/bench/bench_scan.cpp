@@ -12,7 +12,7 @@
 #include "datasets/manifest.hpp"
 #include "engine/database/database.hpp"
 #include "engine/geometry/scanner.hpp"
-#include "experiments/cli/cli_common.hpp"
+#include "experiments/resources.hpp"
 #include "io/mesh_import.hpp"
 
 #include <CLI/CLI.hpp>
@@ -75,7 +75,7 @@ int main(int argc, char** argv) {
     const ts::DatabaseSettings db_settings;
     const ts::ScanSettings& settings = db_settings.scan;
     std::printf("bench_scan: %zu objects from %s, %d thread(s), %s\n", entries.size(), manifest.c_str(),
-                threads, ts::cli::machine_description().c_str());
+                threads, ts::experiments::machine_description().c_str());
     std::printf("settings: fine_spacing %.4f m, ray pitch %.2f x fine, coverage radius %.4f m, "
                 "target %.3f, max incidence %.0f/%.0f deg, max extent 0.20 m\n",
                 settings.fine_spacing, settings.ray_pitch, settings.coverage_radius,

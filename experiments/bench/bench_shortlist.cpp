@@ -16,8 +16,8 @@
 #include "engine/recognition/recognizer.hpp"
 #include "engine/recognition/shortlist.hpp"
 #include "engine/touch/fusion.hpp"
-#include "experiments/cli/cli_common.hpp"
 #include "experiments/params/parameters.hpp"
+#include "experiments/resources.hpp"
 #include "io/db_store.hpp"
 
 #include <CLI/CLI.hpp>
@@ -80,7 +80,7 @@ int main(int argc, char** argv) {
     }
     std::printf("bench_shortlist: object shortlist recall and cost\nmachine: %s, %d threads\n"
                 "database: %s (%zu objects), %zu explored objects x %zu logs, %zu grasps, noise %s, %zu voting features\n",
-                cli::machine_description().c_str(), tbb::info::default_concurrency(), db_path.c_str(), db.size(),
+                experiments::machine_description().c_str(), tbb::info::default_concurrency(), db_path.c_str(), db.size(),
                 explored.size(), seeds, grasps, noise.c_str(), queries_n);
     auto t0 = Clock::now();
     const RecognizerSettings rs = RecognizerSettings::improved();

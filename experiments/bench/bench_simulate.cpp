@@ -12,9 +12,9 @@
 #include "datasets/archive.hpp"
 #include "datasets/manifest.hpp"
 #include "datasets/simulator.hpp"
-#include "experiments/cli/cli_common.hpp"
 #include "experiments/params/config.hpp"
 #include "experiments/params/parameters.hpp"
+#include "experiments/resources.hpp"
 #include "experiments/runs/grasp_pools.hpp"
 #include "io/log_store.hpp"
 
@@ -75,7 +75,7 @@ int main(int argc, char** argv) {
     const auto entries = datasets::read_manifest(manifest);
     std::printf("bench_simulate: %zu grasps per object, %d pad(s), noise %s, seed %llu, %d threads; %s\n", grasps,
                 sensors, noise.c_str(), static_cast<unsigned long long>(seed), threads,
-                cli::machine_description().c_str());
+                experiments::machine_description().c_str());
     std::printf("%-22s %8s %8s %9s %9s %7s\n", "object", "faces", "sim_s", "+write_s", "contact", "rate");
     tbb::task_arena arena(threads);
     const auto tmp = std::filesystem::temp_directory_path() / ("bench_simulate_" + std::to_string(::getpid()) + ".h5");

@@ -37,7 +37,7 @@
 #include "engine/geometry/scanner.hpp"
 #include "engine/geometry/search.hpp"
 #include "engine/touch/fusion.hpp"
-#include "experiments/cli/cli_common.hpp"
+#include "experiments/resources.hpp"
 
 #include <CLI/CLI.hpp>
 #include <tbb/task_arena.h>
@@ -247,7 +247,7 @@ int main(int argc, char** argv) {
     std::printf("study13_descriptors: %zu objects, %d shapes, feature radius %.3f m, normal radius %.3f m, "
                 "taxel noise %.4f m, contacts: %zu grasps, %s noise, reach %.4f m, seed %llu, %d thread(s), %s\n",
                 objects.size(), shapes, kFeatureRadius, kNormalRadius, noise, grasps, profile.c_str(), reach,
-                static_cast<unsigned long long>(seed), threads, ts::cli::machine_description().c_str());
+                static_cast<unsigned long long>(seed), threads, ts::experiments::machine_description().c_str());
 
     constexpr int kClouds = 3;
     const char* clouds[kClouds] = {"scanner", "taxel", "contacts"};

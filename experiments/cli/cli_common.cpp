@@ -1,18 +1,11 @@
 #include "experiments/cli/cli_common.hpp"
 
-#include "experiments/allocator.hpp"
-
-#include "engine/database/database.hpp"
-
 #include "engine/core.hpp"
 
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 #include <unistd.h>
 
-#include <cmath>
-#include <cstdio>
-#include <fstream>
 #include <iostream>
 
 namespace ts::cli {
@@ -46,43 +39,6 @@ void run_command(const CommonOptions& o, const std::function<int()>& body) {
 }
 
 int exit_code() { return g_exit_code; }
-
-std::size_t memory_budget_bytes(const std::optional<double>& mb) {
-  return static_cast<std::size_t>(std::llround(mb.value_or(kDefaultMemoryBudgetMb) * 1e6));
-}
-
-void set_memory_budget(Database& db, const std::optional<double>& mb, const std::string& file,
-                       const std::string& option) {
-  const std::size_t budget = memory_budget_bytes(mb);
-  if (mb && budget > 0 && db.size() > 0) {
-    std::size_t largest = 0;
-    for (std::size_t i = 1; i < db.size(); ++i)
-      if (db.info(i).fine_points > db.info(largest).fine_points) largest = i;
-    const std::size_t need = memory_bytes(*db.geometry(largest));
-    if (budget < need) {
-      char text[256];
-      std::snprintf(text, sizeof text,
-                    "a memory budget of %.1f MB cannot hold one object: '%s' needs %.1f MB",
-                    double(budget) / 1e6, db.info(largest).name.c_str(), double(need) / 1e6);
-      throw Error(text, file, option);
-    }
-  }
-  db.set_memory_budget(budget);
-}
-
-std::string machine_description() {
-  std::string model = "unknown CPU";
-  std::ifstream in("/proc/cpuinfo");
-  for (std::string line; std::getline(in, line);) {
-    if (line.rfind("model name", 0) == 0) {
-      auto pos = line.find(':');
-      if (pos != std::string::npos) model = line.substr(pos + 2);
-      break;
-    }
-  }
-  return model + ", " + std::to_string(tbb::info::default_concurrency()) + " cores, " +
-         experiments::allocator_name();
-}
 
 bool stderr_is_terminal() { return isatty(STDERR_FILENO) == 1; }
 

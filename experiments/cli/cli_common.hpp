@@ -6,12 +6,7 @@
 
 #include <cstdint>
 #include <functional>
-#include <optional>
 #include <string>
-
-namespace ts {
-class Database;
-}
 
 namespace ts::cli {
 
@@ -32,19 +27,6 @@ int exit_code();
 
 /// Resolved thread count (options.threads or all cores).
 int thread_count(const CommonOptions& options);
-/// Host description for reports: "<cpu model>, <n> cores, <allocator>" (experiments/allocator.hpp).
-std::string machine_description();
-
-/// Default resident object geometry of `recognize`, `experiment` and the benchmarks (MB).
-constexpr double kDefaultMemoryBudgetMb = 256;
-/// A --memory-budget / memory_budget_mb value in MB (unset: the default; 0: no limit) in bytes.
-std::size_t memory_budget_bytes(const std::optional<double>& mb);
-
-/// Set a database's memory budget from --memory-budget / memory_budget_mb. A budget given
-/// explicitly that cannot hold the largest object's geometry (measured by loading it) is an
-/// error naming `file` and the option.
-void set_memory_budget(Database& db, const std::optional<double>& mb, const std::string& file,
-                       const std::string& option = "--memory-budget");
 bool stderr_is_terminal();
 
 // One register function per command group; each lives in its own cmd_*.cpp.

@@ -2,6 +2,7 @@
 #include "experiments/cli/cli_common.hpp"
 
 #include "datasets/catalogue/catalogue.hpp"
+#include "experiments/resources.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -121,14 +122,14 @@ int run_catalogue(const CatalogueOptions& o) {
     j["tolerance"] = s.tolerance;
     j["seconds"] = r.seconds;
     j["threads"] = threads;
-    j["machine"] = machine_description();
+    j["machine"] = experiments::machine_description();
     std::cout << j.dump(2) << '\n';
     return 0;
   }
   char line[256];
   std::snprintf(line, sizeof line, "catalogue of %zu objects (seed %llu, %s) in %s: %.1f s on %d thread%s (%s)\n",
                 r.objects.size(), static_cast<unsigned long long>(s.seed), catalogue::kGeneratorVersion, o.out.c_str(),
-                r.seconds, threads, threads == 1 ? "" : "s", machine_description().c_str());
+                r.seconds, threads, threads == 1 ? "" : "s", experiments::machine_description().c_str());
   std::cout << line;
   std::cout << "objects per family:\n";
   for (const auto& f : s.families.families) {

@@ -4,6 +4,7 @@
 
 #include "datasets/db_builder.hpp"
 #include "engine/core.hpp"
+#include "experiments/resources.hpp"
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
 #include "io/mesh_import.hpp"
@@ -243,7 +244,7 @@ int run_build(const BuildOptions& o) {
   const auto& t = report.times;
   const int threads = thread_count(o.common);
   std::cerr << "built " << report.names.size() << " objects into " << o.out << " in " << fixed(t.wall_s, 2) << " s ("
-            << threads << (threads == 1 ? " thread; " : " threads; ") << machine_description() << ")\n"
+            << threads << (threads == 1 ? " thread; " : " threads; ") << experiments::machine_description() << ")\n"
             << "  per stage, seconds (import/scan/features/field summed over objects):\n"
             << "    read archives " << fixed(t.read_s, 2) << "\n"
             << "    import        " << fixed(t.import_s, 2) << "\n"
@@ -268,7 +269,7 @@ int run_build(const BuildOptions& o) {
     j["congruence"] = congruence_json(&report.congruence.record, report.names);
     j["congruence"]["search"] = congruence_stats_json(report.congruence);
     j["threads"] = threads;
-    j["machine"] = machine_description();
+    j["machine"] = experiments::machine_description();
     std::cout << j.dump(2) << '\n';
   }
   return 0;
@@ -363,7 +364,7 @@ int run_classes(const ClassesOptions& o) {
     j["congruence"]["search"] = congruence_stats_json(c);
     j["congruence"]["search"]["write_s"] = write_s;
     j["threads"] = thread_count(o.common);
-    j["machine"] = machine_description();
+    j["machine"] = experiments::machine_description();
     std::cout << j.dump(2) << '\n';
   } else {
     std::cout << names.size() << " objects, " << c.stats.candidates << " candidate pairs checked: signatures "

@@ -7,6 +7,7 @@
 #include "experiments/cli/cli_common.hpp"
 #include "experiments/params/config.hpp"
 #include "experiments/params/parameters.hpp"
+#include "experiments/resources.hpp"
 #include "experiments/runs/driver.hpp"
 #include "experiments/runs/mpi_runs.hpp"
 #include "experiments/runs/recognition_engine.hpp"
@@ -287,7 +288,7 @@ int run_mpi(const ExperimentOptions& o, const ExperimentConfig& config, experime
     io::RunStore::compact(out, true);
     experiments::ReportSettings rs;
     rs.threads = threads;
-    rs.machine = machine_description() + ", " + std::to_string(mpi.size()) + " MPI ranks";
+    rs.machine = experiments::machine_description() + ", " + std::to_string(mpi.size()) + " MPI ranks";
     emit_report(io::RunStore::read(out), rs, o.out, o.common.json, o.plots);
     return 0;
   } catch (const std::exception& e) {
@@ -395,7 +396,7 @@ int run_experiment_in(const ExperimentOptions& o, experiments::MpiSession* mpi) 
               << "; fold the shards into one store with: touchstone merge OUT.h5 SHARD.h5 ...\n";
   experiments::ReportSettings rs;
   rs.threads = threads;
-  rs.machine = machine_description();
+  rs.machine = experiments::machine_description();
   emit_report(io::RunStore::read(out), rs, o.out, o.common.json, o.plots);
   return 0;
 }

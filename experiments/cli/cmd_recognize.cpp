@@ -8,6 +8,7 @@
 #include "experiments/analysis/scene.hpp"
 #include "experiments/cli/cli_common.hpp"
 #include "experiments/params/parameters.hpp"
+#include "experiments/resources.hpp"
 #include "experiments/runs/log_steps.hpp"
 #include "experiments/runs/recognition_engine.hpp"
 
@@ -466,7 +467,7 @@ nlohmann::ordered_json input_json(const Context& c, const InputRun& run, bool wi
 void add_shared_json(nlohmann::ordered_json& j, const Context& c) {
   j["seed"] = c.rs.seed;
   j["threads"] = thread_count(c.o.common);
-  j["machine"] = machine_description();
+  j["machine"] = experiments::machine_description();
   j["congruent_classes_known"] = c.congruence != nullptr;   // else "object_class" is the object alone
   nlohmann::ordered_json p;
   for (const auto& [name, value] : params_of(c.rs, c.o)) p[name] = value;
@@ -681,7 +682,7 @@ int run_recognize(const RecognizeOptions& o) {
       rs.objects[i] = 1;
     }
   }
-  set_memory_budget(db, o.memory_budget_mb, o.db);
+  experiments::set_memory_budget(db, o.memory_budget_mb, o.db);
   double largest = 0.0;
   for (std::size_t i = 0; i < db.size(); ++i) largest = std::max(largest, db.info(i).extent.norm());
   SymmetryCache symmetries;

@@ -1,6 +1,7 @@
 // `touchstone stress`: the stiff and extreme cases study (experiments/runs/stress.hpp, README
 // "Study 10").
 #include "experiments/cli/cli_common.hpp"
+#include "experiments/resources.hpp"
 #include "experiments/runs/stress.hpp"
 
 #include <algorithm>
@@ -51,7 +52,7 @@ int run_stress(const StressOptions& o) {
   }
   nlohmann::ordered_json j = experiments::stress_json(study, results);
   j["threads"] = thread_count(o.common);
-  j["machine"] = machine_description();
+  j["machine"] = experiments::machine_description();
   const std::string bad_json = experiments::first_non_finite(j);
   std::string bad_run;
   for (const auto& r : results)
@@ -63,7 +64,7 @@ int run_stress(const StressOptions& o) {
     std::cout << experiments::stress_table(results);
     std::cout << "\n" << study.runs << " runs per case, preset " << study.preset << ", seed "
               << study.seed << ", " << thread_count(o.common) << " threads, "
-              << machine_description() << "\n";
+              << experiments::machine_description() << "\n";
     std::cout << "non-finite values in the outputs (steps, JSON"
               << (o.out.empty() ? "" : ", result stores") << "): "
               << (bad_json.empty() && bad_run.empty() ? "none" : "FOUND") << "\n";

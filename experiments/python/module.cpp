@@ -6,9 +6,9 @@
 // stubs are touchstone/__init__.pyi.
 #include "experiments/allocator.hpp"
 #include "experiments/analysis/report.hpp"
-#include "experiments/cli/cli_common.hpp"
 #include "experiments/params/config.hpp"
 #include "experiments/params/parameters.hpp"
+#include "experiments/resources.hpp"
 #include "experiments/runs/driver.hpp"
 #include "experiments/runs/engine_database.hpp"
 #include "experiments/runs/grasp_pools.hpp"
@@ -151,7 +151,7 @@ std::shared_ptr<PyDatabase> open_database(const std::string& path, std::optional
     d->reader = std::make_shared<io::DbReader>(path);
     d->db = std::make_shared<Database>(d->reader);
     if (d->db->size() == 0) throw Error("the database has no objects", path, "/objects");
-    cli::set_memory_budget(*d->db, memory_budget_mb, path, "memory_budget_mb");
+    experiments::set_memory_budget(*d->db, memory_budget_mb, path, "memory_budget_mb");
   }
   return d;
 }
@@ -434,14 +434,14 @@ std::string run_experiment(const std::string& db, const std::string& out, const 
   io::RunStore::compact(out, true);
   experiments::ReportSettings rs;
   rs.threads = used;
-  rs.machine = cli::machine_description();
+  rs.machine = experiments::machine_description();
   return experiments::report_json(io::RunStore::read(out), rs, out).dump();
 }
 
 std::string report(const std::string& store) {
   py::gil_scoped_release release;
   experiments::ReportSettings rs;
-  rs.machine = cli::machine_description();
+  rs.machine = experiments::machine_description();
   return experiments::report_json(io::RunStore::read(store), rs, store).dump();
 }
 

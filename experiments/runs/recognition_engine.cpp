@@ -9,8 +9,8 @@
 #include "engine/touch/fusion.hpp"
 #include "experiments/analysis/calibration.hpp"
 #include "experiments/analysis/metrics.hpp"
-#include "experiments/cli/cli_common.hpp"
 #include "experiments/params/parameters.hpp"
+#include "experiments/resources.hpp"
 #include "experiments/runs/grasp_pools.hpp"
 #include "experiments/runs/truth_model.hpp"
 
@@ -97,7 +97,7 @@ class RecognitionEngine final : public RunEngine {
       if (!inserted && surface && !groups_[it->second].database->surface()) {
         // A later variant needs the fine clouds the group's first one did not: load them too.
         groups_[it->second].database->set_surface(true);
-        cli::set_memory_budget(*groups_[it->second].database, config.memory_budget_mb, db_label, "memory_budget_mb");
+        experiments::set_memory_budget(*groups_[it->second].database, config.memory_budget_mb, db_label, "memory_budget_mb");
       }
       if (inserted) {
         DatabaseGroup g;
@@ -113,7 +113,7 @@ class RecognitionEngine final : public RunEngine {
           source = std::make_shared<SubsetSource>(reader_, objects);
         g.database = std::make_unique<Database>(source);
         g.database->set_surface(surface);
-        cli::set_memory_budget(*g.database, config.memory_budget_mb, db_label, "memory_budget_mb");
+        experiments::set_memory_budget(*g.database, config.memory_budget_mb, db_label, "memory_budget_mb");
         groups_.push_back(std::move(g));
       }
       VariantData d;
@@ -158,7 +158,7 @@ class RecognitionEngine final : public RunEngine {
     ver["threads"] = threads;
     ver["schedule"] = config.schedule;
     header_.versions_json = ver.dump();
-    header_.machine = cli::machine_description();
+    header_.machine = experiments::machine_description();
     header_.steps = config.steps;
     header_.variant_labels = labels_;
     header_.variant_configs = configs_;

@@ -41,7 +41,7 @@
 #include "engine/geometry/mesh.hpp"
 #include "engine/geometry/scanner.hpp"
 #include "engine/geometry/search.hpp"
-#include "experiments/cli/cli_common.hpp"
+#include "experiments/resources.hpp"
 
 #include <CLI/CLI.hpp>
 #include <tbb/task_arena.h>
@@ -190,7 +190,7 @@ int main(int argc, char** argv) {
   try {
     tbb::task_arena arena(threads);
     std::printf("bench_descriptors_pcl: PCL %s, %d thread(s) (PCL's PFH, Spin Images and single-thread FPFH/SHOT: 1), %s\n",
-                PCL_VERSION_PRETTY, threads, ts::cli::machine_description().c_str());
+                PCL_VERSION_PRETTY, threads, ts::experiments::machine_description().c_str());
     std::printf("%-8s %6s %-5s %7s %7s %9s %8s %7s %10s %10s %9s %9s %9s\n", "clouds", "radius", "desc", "rows", "valid",
                 "disagree", "equal", "planar", "rel p99", "rel max", "ours s", "PCL s", "PCL omp s");
     int status = 0;
