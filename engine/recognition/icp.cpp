@@ -86,7 +86,7 @@ bool plane_step(const std::vector<Vec3>& y, const std::vector<Vec3>& z, const st
 class Pairing {
  public:
   Pairing(const Scene& scene, const ObjectGeometry& geo, const IcpSettings& s)
-      : scene_(scene), geo_(geo), s_(s) {
+      : scene_(scene), geo_(geo) {
     const std::size_t C = scene.ordered.size();
     m_ = s.max_points == 0 ? C : std::min(C, s.max_points);
     use_field_ = s.metric == IcpMetric::field && !geo.field.empty();
@@ -183,7 +183,6 @@ class Pairing {
  private:
   const Scene& scene_;
   const ObjectGeometry& geo_;
-  const IcpSettings& s_;
   std::size_t m_ = 0;
   bool use_field_ = false, plane_ = false, usable_ = false;
   double gate2_ = 0.0, trim_ = 1.0, far_ = 0.0;
