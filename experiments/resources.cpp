@@ -1,9 +1,8 @@
 #include "experiments/resources.hpp"
 
-#include "experiments/allocator.hpp"
-
 #include "engine/core.hpp"
 #include "engine/database/database.hpp"
+#include "experiments/allocator.hpp"
 
 #include <tbb/info.h>
 

@@ -3,7 +3,6 @@
 // the experiment engine, the Python module and the benchmarks.
 #pragma once
 
-#include <cstddef>
 #include <optional>
 #include <string>
 
@@ -16,12 +15,11 @@ namespace ts::experiments {
 /// Host description for reports: "<cpu model>, <n> cores, <allocator>" (allocator.hpp).
 std::string machine_description();
 
-/// Default resident object geometry of `recognize`, `experiment` and the benchmarks (MB).
+/// Default resident object geometry of `recognize`, `experiment` and the Python module (MB).
 constexpr double kDefaultMemoryBudgetMb = 256;
 /// Set a database's memory budget from --memory-budget / memory_budget_mb in MB (unset: the
-/// default; 0: no limit). A budget given
-/// explicitly that cannot hold the largest object's geometry (measured by loading it) is an
-/// error naming `file` and the option.
+/// default; 0: no limit). A budget given explicitly that cannot hold the largest object's
+/// geometry (measured by loading it) is an error naming `file` and the option.
 void set_memory_budget(Database& db, const std::optional<double>& mb, const std::string& file,
                        const std::string& option = "--memory-budget");
 

@@ -320,8 +320,8 @@ inline double interpolate(const Level& L, const int raw[8], double tx, double ty
   return y0 + tz * (y1 - y0);
 }
 
-/// The last fine cell read by a batch of queries and its corners: the finite-difference probes
-/// of ICP (a point and three points 0.5 mm from it) mostly fall in one cell.
+/// The last fine cell read by a batch of queries and its corners: consecutive queries of a batch
+/// (the contacts of one hypothesis, in the scene's order) often fall in one cell.
 struct CellCache {
   bool valid = false, ok = false;
   int i = 0, j = 0, k = 0;

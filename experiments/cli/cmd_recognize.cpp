@@ -42,6 +42,7 @@
 #include <map>
 #include <numbers>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <sstream>
 
