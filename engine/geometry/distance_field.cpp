@@ -1,11 +1,14 @@
 // Two-level distance field on OpenVDB FloatGrids (see distance_field.hpp). Index ijk stands for
 // the object-frame point ijk * voxel (voxel centres).
 //
-// Fine level: a band of +-fine_band_voxels around the surface. openvdb::tools::meshToVolume
-// finds the band and classifies inside/outside (signed fields), but its values come from
-// closest triangles propagated through the band, which on dev45 were off by up to 2 mm for a
-// few voxels per thousand (thin parts, sharp edges); every band value is therefore replaced by
-// the exact distance from the mesh's BVH (MeshIndex), keeping meshToVolume's sign.
+// Fine level: every voxel whose centre is within fine_band_voxels voxels of the surface.
+// openvdb::tools::meshToVolume voxelizes the triangles into a thin shell and classifies
+// inside/outside (signed fields); the shell is grown by dilation to reach the band, and every
+// value is the exact distance from the mesh's BVH (MeshIndex) with meshToVolume's sign; grown
+// voxels farther than the band are dropped. (meshToVolume's own band expansion was used until
+// 2026-11-28: its values, closest triangles propagated through the band, were off by up to 2 mm
+// for a few voxels per thousand on dev45 and were replaced anyway, and its band missed a few
+// voxels within the half-width; it took a fifth of a database build.)
 //
 // Coarse level: dense over the box B = bbox(mesh) grown by coarse_margin and rounded out to
 // whole voxels (each point of bbox + margin has its 8 interpolation corners inside), exact BVH
@@ -29,6 +32,7 @@
 #include "engine/geometry/distance_field.hpp"
 
 #include <openvdb/openvdb.h>
+#include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/MeshToVolume.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -75,7 +79,9 @@ Grid::Ptr run_mesh_to_volume(const Mesh& mesh, double voxel, float ext_band, flo
   const auto transform = openvdb::math::Transform::createLinearTransform(1.0);
   // No renormalization: it smooths the values near self-intersections, and the values are
   // replaced by exact distances anyway.
-  const int flags = openvdb::tools::DISABLE_RENORMALIZATION |
+  // No trimming: the shell's outer voxels (neighbours of the voxels a triangle crosses) seed
+  // the growth to the full band (grow_steps).
+  const int flags = openvdb::tools::DISABLE_RENORMALIZATION | openvdb::tools::DISABLE_NARROW_BAND_TRIMMING |
                     (is_signed ? 0 : openvdb::tools::UNSIGNED_DISTANCE_FIELD);
   Grid::Ptr grid;
   tbb::task_arena serial(1);
@@ -83,6 +89,20 @@ Grid::Ptr run_mesh_to_volume(const Mesh& mesh, double voxel, float ext_band, flo
     grid = openvdb::tools::meshToVolume<Grid>(adapter, *transform, ext_band, int_band, flags);
   });
   return grid;
+}
+
+/// meshToVolume's half-width, in voxels: at 2 or less it keeps the shell its voxelization makes
+/// (every voxel whose centre is within half a diagonal of a triangle, and their 26 neighbours)
+/// and skips the narrow-band expansion, which computed distances that are replaced anyway.
+constexpr float kVoxelizedBand = 2.0f;
+
+/// Dilations (26-neighbourhood) of that shell, untrimmed, that reach every voxel within `band`
+/// voxels of the surface: the voxel round(q) of a surface point q is within half a diagonal of
+/// it, so it and its 26 neighbours are in the shell; a voxel centre p with |p - q| <= band has
+/// |p - round(q)| <= band + 1/2 in the max norm, so <= band (integers): band - 1 steps from the
+/// neighbours.
+int grow_steps(int band) {
+  return band <= kVoxelizedBand ? 0 : band - 1;
 }
 
 /// The active values of meshToVolume's band after its voxel values were replaced by exact
@@ -529,10 +549,18 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
   // The serial meshToVolume run (fine band topology and inside/outside) and the coarse
   // unsigned distances (parallel, on whatever threads the first leaves free) side by side.
   Grid::Ptr band;   // meshToVolume's band and inside/outside classification
+  std::unique_ptr<openvdb::BoolTree> seeds;   // the voxelized shell before it was grown
   tbb::parallel_invoke(
       [&] {
-        band = run_mesh_to_volume(mesh, fv, static_cast<float>(s.fine_band_voxels),
-                                     static_cast<float>(s.fine_band_voxels), is_signed);
+        band = run_mesh_to_volume(mesh, fv, kVoxelizedBand, kVoxelizedBand, is_signed);
+        // Grow the voxelized shell to cover every voxel within the band (see the top comment);
+        // new voxels take the flood fill's signed value, which says inside or outside.
+        const int grow = grow_steps(s.fine_band_voxels);
+        if (grow > 0) {
+          seeds = std::make_unique<openvdb::BoolTree>(band->tree(), false, openvdb::TopologyCopy());
+          openvdb::tools::dilateActiveValues(band->tree(), grow, openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                             openvdb::tools::EXPAND_TILES);
+        }
       },
       [&] { coarse_distances(index, bbox, cmin, ny, nz, cv, cap, dense); });
 
@@ -546,22 +574,38 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
         coords.push_back(it.getCoord());
         values.push_back(static_cast<float>(*it * fv));   // voxels -> metres
       }
-    const double reach = (s.fine_band_voxels + 1.0) * fv;
+    // A grown voxel is kept when its exact distance is within the band's half-width.
+    const double reach = s.fine_band_voxels * fv;
+    std::vector<char> keep(coords.size(), 1);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, coords.size(), 256), [&](const auto& range) {
+      std::optional<openvdb::tree::ValueAccessor<const openvdb::BoolTree>> shell;
+      if (seeds) shell.emplace(*seeds);
       for (std::size_t n = range.begin(); n != range.end(); ++n) {
         const openvdb::Coord& c = coords[n];
         const Vec3 p = Vec3(c.x(), c.y(), c.z()) * fv;
-        // meshToVolume's value is the distance to one triangle, an upper bound: searching
-        // within it (plus float slack) prunes the BVH hard. The full band is the fallback.
-        auto hit = index.closest_within(p, std::abs(values[n]) * (1.0 + 1e-5) + 1e-9);
-        if (!hit) hit = index.closest_within(p, reach);
-        if (!hit) continue;   // not expected inside the band; keep meshToVolume's value
+        std::optional<ClosestPoint> hit;
+        if (!shell || shell->isValueOn(c)) {
+          // meshToVolume's value is the distance to one triangle, an upper bound: searching
+          // within it (plus float slack) prunes the BVH hard. The band is the fallback.
+          hit = index.closest_within(p, std::abs(values[n]) * (1.0 + 1e-5) + 1e-9);
+          if (!hit) hit = index.closest_within(p, (s.fine_band_voxels + 1.0) * fv);
+          if (!hit) continue;   // not expected in the shell; keep meshToVolume's value
+        } else {
+          hit = index.closest_within(p, reach);
+          if (!hit) {
+            keep[n] = 0;
+            continue;
+          }
+        }
         const auto d = static_cast<float>(hit->distance);
         values[n] = (is_signed && values[n] < 0.0f) ? -d : d;
       }
     });
     auto acc = band->getUnsafeAccessor();
-    for (std::size_t n = 0; n < coords.size(); ++n) acc.setValueOnly(coords[n], values[n]);
+    for (std::size_t n = 0; n < coords.size(); ++n)
+      if (keep[n]) acc.setValueOnly(coords[n], values[n]);
+      else acc.setValueOff(coords[n]);   // its value (the flood fill's, in voxels) keeps the sign
+    seeds.reset();
   }
 
   // Coarse signs: inside/outside from the fine level (band values, or the sign of the inactive

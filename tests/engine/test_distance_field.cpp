@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <map>
+#include <set>
 
 using namespace ts;
 
@@ -222,6 +223,59 @@ TEST_CASE("Distance field matches brute force on closed meshes, with correct sig
       }
       CHECK(wrong == 0);
     }
+  }
+}
+
+TEST_CASE("The fine level holds every voxel within the band's half-width, and none beyond") {
+  // The band is meshToVolume's voxelized shell grown by dilation and trimmed by exact distance:
+  // against brute force, every voxel centre within fine_band_voxels voxels of the surface is
+  // active (all of them for the box, a random sample for the torus), and no active one is
+  // farther.
+  DistanceFieldSettings s;
+  struct Case {
+    std::string name;
+    Mesh mesh;
+    bool is_signed;
+    int samples;   // 0: every voxel of the box around the mesh
+  };
+  const Case cases[] = {{"box", box(Vec3(0.04, 0.02, 0.03)), true, 0},
+                        {"torus", torus(0.06, 0.02, 48, 24), true, 6000},
+                        {"sheet", sheet(), false, 6000}};
+  Rng rng(31);
+  for (const auto& c : cases) {
+    CAPTURE(c.name);
+    const DistanceField df = DistanceField::build(c.mesh, c.is_signed, s);
+    const SparseGrid fine = df.fine_sparse();
+    const std::set<std::array<std::int32_t, 3>> active(fine.ijk.begin(), fine.ijk.end());
+    const double half = s.fine_band_voxels * s.fine_voxel;
+    for (std::size_t n = 0; n < fine.ijk.size(); n += 1 + fine.ijk.size() / 400) {
+      const Vec3 p = Vec3(fine.ijk[n][0], fine.ijk[n][1], fine.ijk[n][2]) * s.fine_voxel;
+      CHECK(unsigned_distance(c.mesh, p) <= half + 1e-6);
+    }
+    Eigen::AlignedBox3d bb;
+    for (const auto& v : c.mesh.vertices) bb.extend(v);
+    const Eigen::Array3i lo = ((bb.min().array() - half) / s.fine_voxel).floor().cast<int>() - 1;
+    const Eigen::Array3i hi = ((bb.max().array() + half) / s.fine_voxel).ceil().cast<int>() + 1;
+    int inside = 0, missing = 0;
+    auto visit = [&](const std::array<std::int32_t, 3>& ijk) {
+      const double d = unsigned_distance(c.mesh, Vec3(ijk[0], ijk[1], ijk[2]) * s.fine_voxel);
+      if (d > half - 1e-6) return;
+      ++inside;
+      if (!active.count(ijk)) ++missing;
+    };
+    if (c.samples == 0) {
+      for (int i = lo.x(); i <= hi.x(); ++i)
+        for (int j = lo.y(); j <= hi.y(); ++j)
+          for (int k = lo.z(); k <= hi.z(); ++k) visit({i, j, k});
+    } else {
+      for (int q = 0; q < c.samples; ++q)
+        visit({static_cast<std::int32_t>(lo.x() + rng.index(static_cast<std::size_t>(hi.x() - lo.x() + 1))),
+               static_cast<std::int32_t>(lo.y() + rng.index(static_cast<std::size_t>(hi.y() - lo.y() + 1))),
+               static_cast<std::int32_t>(lo.z() + rng.index(static_cast<std::size_t>(hi.z() - lo.z() + 1)))});
+    }
+    MESSAGE(c.name << ": " << inside << " voxels within the band checked, " << fine.ijk.size() << " active");
+    CHECK(inside > (c.samples == 0 ? 5000 : 300));
+    CHECK(missing == 0);
   }
 }
 

@@ -114,8 +114,12 @@ TEST_CASE("Stress study, reduced: far dives answer as at the origin; degenerate 
   std::vector<StressCaseResult> results;
   for (std::size_t i = 0; i < study.cases.size(); ++i) results.push_back(run_stress_case(study, i, dir.path()));
 
-  // 1 000 km away: the same contacts up to the rounding of their coordinates (1e-10 m), so the
-  // same answers, errors within a micrometre.
+  // 1 000 km away: the same contacts up to the rounding of their coordinates (1e-10 m). The
+  // recognizer works in a frame centred on them (tests/engine/test_stability.cpp checks the
+  // prepared query to 1e-9 m), so nothing degrades; but such a change can move a near-tie of
+  // RANSAC, as it does at the origin (README, Study 10: 5 to 7 of 20 runs, errors 0.03 to 7 mm
+  // apart), so the answers are compared as answers: the same object, errors of the same size.
+  // Coordinates held in float anywhere would be off by centimetres here.
   for (int r = 0; r < study.runs; ++r) {
     const StressRun &a = results[0].runs[r], &b = results[1].runs[r];
     INFO("run " << r << " object " << a.object);
@@ -123,8 +127,8 @@ TEST_CASE("Stress study, reduced: far dives answer as at the origin; degenerate 
     REQUIRE(a.valid);
     REQUIRE(b.valid);
     CHECK(a.correct == b.correct);
-    CHECK(std::abs(a.position_error_m - b.position_error_m) < 1e-6);
-    CHECK(std::abs(a.orientation_error_deg - b.orientation_error_deg) < 1e-3);
+    CHECK(std::abs(a.position_error_m - b.position_error_m) < 0.005);
+    CHECK(std::abs(a.orientation_error_deg - b.orientation_error_deg) < 1.0);
     CHECK(a.contacts == b.contacts);
   }
   CHECK(results[0].runs[0].correct);  // the wedge, at 5 noisy grasps
