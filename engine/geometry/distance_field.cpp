@@ -1,14 +1,17 @@
 // Two-level distance field on OpenVDB FloatGrids (see distance_field.hpp). Index ijk stands for
 // the object-frame point ijk * voxel (voxel centres).
 //
-// Fine level: every voxel whose centre is within fine_band_voxels voxels of the surface.
+// Fine level: the voxels whose centres are within fine_band_voxels voxels of the surface.
 // openvdb::tools::meshToVolume voxelizes the triangles into a thin shell and classifies
-// inside/outside (signed fields); the shell is grown by dilation to reach the band, and every
-// value is the exact distance from the mesh's BVH (MeshIndex) with meshToVolume's sign; grown
-// voxels farther than the band are dropped. (meshToVolume's own band expansion was used until
-// 2026-11-28: its values, closest triangles propagated through the band, were off by up to 2 mm
-// for a few voxels per thousand on dev45 and were replaced anyway, and its band missed a few
-// voxels within the half-width; it took a fifth of a database build.)
+// inside/outside (signed fields); the shell is grown by dilation to reach the band, every voxel
+// gets the exact distance from the mesh's BVH (MeshIndex) with meshToVolume's sign, and voxels
+// farther than the band are dropped. Every voxel within the band is there when the shell is
+// whole (grow_steps); meshToVolume removes shell voxels it classifies inside next to internal or
+// overlapping faces and in outside gaps narrower than about 1.7 voxels, where the band can have
+// holes, as it had before. (meshToVolume's own band expansion was used until 2026-11-28: its
+// values, closest triangles propagated through the band, were off by up to 2 mm for a few
+// voxels per thousand on dev45 and were replaced anyway, its band missed a few voxels within
+// the half-width, and it took a fifth of a database build.)
 //
 // Coarse level: dense over the box B = bbox(mesh) grown by coarse_margin and rounded out to
 // whole voxels (each point of bbox + margin has its 8 interpolation corners inside), exact BVH
@@ -26,7 +29,8 @@
 // box), and that lower bound is returned.
 //
 // Determinism: meshToVolume runs in a single-thread task arena, so its output cannot depend on
-// how TBB splits the work (meanwhile the coarse distances use the other threads); the exact
+// how TBB splits the work (meanwhile the coarse distances use the other threads); the dilation
+// after it (threaded) is a union of per-node dilations, whatever the split; the exact
 // values are computed per voxel into their own slots and written serially. Same mesh and
 // settings => same grids and bytes for any thread count.
 #include "engine/geometry/distance_field.hpp"
@@ -92,18 +96,17 @@ Grid::Ptr run_mesh_to_volume(const Mesh& mesh, double voxel, float ext_band, flo
 }
 
 /// meshToVolume's half-width, in voxels: at 2 or less it keeps the shell its voxelization makes
-/// (every voxel whose centre is within half a diagonal of a triangle, and their 26 neighbours)
-/// and skips the narrow-band expansion, which computed distances that are replaced anyway.
+/// (every voxel whose centre is within half a diagonal of a triangle, and their 26 neighbours,
+/// so up to 2.6 voxels away) and skips the narrow-band expansion, which computed distances that
+/// are replaced anyway.
 constexpr float kVoxelizedBand = 2.0f;
 
 /// Dilations (26-neighbourhood) of that shell, untrimmed, that reach every voxel within `band`
 /// voxels of the surface: the voxel round(q) of a surface point q is within half a diagonal of
 /// it, so it and its 26 neighbours are in the shell; a voxel centre p with |p - q| <= band has
 /// |p - round(q)| <= band + 1/2 in the max norm, so <= band (integers): band - 1 steps from the
-/// neighbours.
-int grow_steps(int band) {
-  return band <= kVoxelizedBand ? 0 : band - 1;
-}
+/// neighbours. (Shell voxels beyond a band of 1 or 2 are dropped by the distance cut.)
+int grow_steps(int band) { return std::max(band - 1, 0); }
 
 /// The active values of meshToVolume's band after its voxel values were replaced by exact
 /// distances in metres; active tiles (not expected in a narrow band) keep meshToVolume's
@@ -518,7 +521,8 @@ DistanceField DistanceField::build(const Mesh& mesh, bool is_signed, const Dista
 DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const DistanceFieldSettings& s) {
   const Mesh& mesh = index.mesh();
   const Eigen::AlignedBox3d bbox = checked_bounds(mesh, s);
-  // Refuse settings whose grids cannot fit in memory (dense coarse box; fine band ~ area x band).
+  // Refuse settings whose grids cannot fit in memory (dense coarse box; fine band ~ area x band;
+  // before the distance cut the grown shell holds up to about twice that, for a moment).
   const Vec3 cells = ((bbox.max() - bbox.min()).array() + 2.0 * s.coarse_margin) / s.coarse_voxel + 3.0;
   if (cells.prod() > 5e7)
     throw Error("distance field: the coarse grid would exceed 5e7 voxels", {}, "coarse_voxel");
@@ -548,19 +552,18 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
 
   // The serial meshToVolume run (fine band topology and inside/outside) and the coarse
   // unsigned distances (parallel, on whatever threads the first leaves free) side by side.
-  Grid::Ptr band;   // meshToVolume's band and inside/outside classification
+  Grid::Ptr band;   // the grown shell, then the band; meshToVolume's inside/outside classification
   std::unique_ptr<openvdb::BoolTree> seeds;   // the voxelized shell before it was grown
   tbb::parallel_invoke(
       [&] {
         band = run_mesh_to_volume(mesh, fv, kVoxelizedBand, kVoxelizedBand, is_signed);
         // Grow the voxelized shell to cover every voxel within the band (see the top comment);
         // new voxels take the flood fill's signed value, which says inside or outside.
+        seeds = std::make_unique<openvdb::BoolTree>(band->tree(), false, openvdb::TopologyCopy());
         const int grow = grow_steps(s.fine_band_voxels);
-        if (grow > 0) {
-          seeds = std::make_unique<openvdb::BoolTree>(band->tree(), false, openvdb::TopologyCopy());
+        if (grow > 0)
           openvdb::tools::dilateActiveValues(band->tree(), grow, openvdb::tools::NN_FACE_EDGE_VERTEX,
                                              openvdb::tools::EXPAND_TILES);
-        }
       },
       [&] { coarse_distances(index, bbox, cmin, ny, nz, cv, cap, dense); });
 
@@ -574,28 +577,23 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
         coords.push_back(it.getCoord());
         values.push_back(static_cast<float>(*it * fv));   // voxels -> metres
       }
-    // A grown voxel is kept when its exact distance is within the band's half-width.
-    const double reach = s.fine_band_voxels * fv;
+    // A voxel is kept when its exact distance is at most the band's half-width (a hair more:
+    // voxels exactly on it, as on faces aligned with the lattice, stay).
+    const double reach = s.fine_band_voxels * fv * (1.0 + 1e-9);
     std::vector<char> keep(coords.size(), 1);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, coords.size(), 256), [&](const auto& range) {
-      std::optional<openvdb::tree::ValueAccessor<const openvdb::BoolTree>> shell;
-      if (seeds) shell.emplace(*seeds);
+      openvdb::tree::ValueAccessor<const openvdb::BoolTree, false> shell(*seeds);   // read only, unchanged meanwhile
       for (std::size_t n = range.begin(); n != range.end(); ++n) {
         const openvdb::Coord& c = coords[n];
         const Vec3 p = Vec3(c.x(), c.y(), c.z()) * fv;
-        std::optional<ClosestPoint> hit;
-        if (!shell || shell->isValueOn(c)) {
-          // meshToVolume's value is the distance to one triangle, an upper bound: searching
-          // within it (plus float slack) prunes the BVH hard. The band is the fallback.
-          hit = index.closest_within(p, std::abs(values[n]) * (1.0 + 1e-5) + 1e-9);
-          if (!hit) hit = index.closest_within(p, (s.fine_band_voxels + 1.0) * fv);
-          if (!hit) continue;   // not expected in the shell; keep meshToVolume's value
-        } else {
-          hit = index.closest_within(p, reach);
-          if (!hit) {
-            keep[n] = 0;
-            continue;
-          }
+        // A shell voxel's meshToVolume value is the distance to one triangle, an upper bound:
+        // searching within it (plus float slack) prunes the BVH hard. The band is the fallback.
+        const double upper = shell.isValueOn(c) ? std::abs(values[n]) * (1.0 + 1e-5) + 1e-9 : reach;
+        std::optional<ClosestPoint> hit = index.closest_within(p, std::min(upper, reach));
+        if (!hit && upper < reach) hit = index.closest_within(p, reach);
+        if (!hit) {
+          keep[n] = 0;
+          continue;
         }
         const auto d = static_cast<float>(hit->distance);
         values[n] = (is_signed && values[n] < 0.0f) ? -d : d;
