@@ -20,8 +20,11 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "engine/target_clones.hpp"
+
 #include <cmath>
 #include <limits>
+#include <memory>
 
 namespace ts {
 
@@ -93,6 +96,72 @@ inline bool pair_bins(const Vec3& ps, const Vec3& ns, const Vec3& pt, const Vec3
   return true;
 }
 
+/// Step 1 for a source (s) and a batch of targets, written for the compiler to vectorize: each
+/// lane does pair_bins's arithmetic operation for operation (Eigen's 3-vector dot products and
+/// norms sum left to right, (x + y) + z; its cross product is the textbook formula), so the bins
+/// are pair_bins's bit for bit. A lane whose angle lies within the guard of a bin edge (or whose
+/// atan2 has no argument) is marked for pair_bins itself.
+struct PairBatch {
+  static constexpr int kSize = 128;
+  int n = 0;
+  std::uint32_t target[kSize];
+  double px[kSize], py[kSize], pz[kSize], nx[kSize], ny[kSize], nz[kSize];   // targets
+  std::int32_t b0[kSize], b1[kSize], b2[kSize];
+  std::int32_t state[kSize];     // kDegenerate, kOrderedOk, kTieOk, or kRedo
+  static constexpr std::int32_t kDegenerate = 0, kOrderedOk = 1, kTieOk = 2, kRedo = 3;
+  std::int32_t ordered[kSize];   // |a_s| != |a_t| (the same origin either way)
+};
+
+TS_TARGET_CLONES
+void batch_bins(double psx, double psy, double psz, double nsx, double nsy, double nsz, PairBatch& B) {
+  constexpr double kScale = kBins / (2.0 * kPi);
+  constexpr double kGuard = 1e-3 * kScale;
+  const int n = B.n;
+  for (int k = 0; k < n; ++k) {
+    double dx = B.px[k] - psx, dy = B.py[k] - psy, dz = B.pz[k] - psz;
+    const double ntx = B.nx[k], nty = B.ny[k], ntz = B.nz[k];
+    const double len = std::sqrt((dx * dx + dy * dy) + dz * dz);
+    const double a_s = (nsx * dx + nsy * dy) + nsz * dz;
+    const double a_t = (ntx * dx + nty * dy) + ntz * dz;
+    const double abs_s = std::abs(a_s), abs_t = std::abs(a_t);
+    const bool swap = abs_s < abs_t;
+    const double ux = swap ? ntx : nsx, uy = swap ? nty : nsy, uz = swap ? ntz : nsz;
+    const double ox = swap ? nsx : ntx, oy = swap ? nsy : nty, oz = swap ? nsz : ntz;
+    dx = swap ? -dx : dx;
+    dy = swap ? -dy : dy;
+    dz = swap ? -dz : dz;
+    const double ud = swap ? -a_t : a_s;
+    const double cx = dy * uz - dz * uy, cy = dz * ux - dx * uz, cz = dx * uy - dy * ux;
+    const double vn = std::sqrt((cx * cx + cy * cy) + cz * cz);
+    const double un = (ux * ox + uy * oy) + uz * oz;
+    const double wn = (((dx * ox + dy * oy) + dz * oz) - ud * un) / vn;
+    // angle_bin(wn, un): approx_atan2, then the guard.
+    const double ax = std::abs(un), ay = std::abs(wn);
+    const double lo = ay < ax ? ay : ax, hi = ax < ay ? ay : ax;   // std::min, std::max
+    const double a = lo / hi;
+    const double sq = a * a;
+    double r = ((-0.0464964749 * sq + 0.15931422) * sq - 0.327622764) * sq * a + a;
+    r = ay > ax ? 0.5 * kPi - r : r;
+    r = un < 0 ? kPi - r : r;
+    r = wn < 0 ? -r : r;
+    const double t = (r + kPi) * kScale;
+    const double fl = std::floor(t);
+    const bool redo = ((un == 0.0) & (wn == 0.0)) | (t - fl < kGuard) | (fl + 1.0 - t < kGuard);
+    const double f2 = std::floor(kBins * (((cx * ox + cy * oy) + cz * oz) / vn - -1.0) / (1.0 - -1.0));
+    const double f3 = std::floor(kBins * (ud / len - -1.0) / (1.0 - -1.0));
+    // (bin_of's clamp; NaN, from a degenerate lane whose bins are not used, to 0)
+    const auto clamp = [](double f) { return !(f >= 0.0) ? 0.0 : (f >= kBins ? kBins - 1.0 : f); };
+    B.b0[k] = static_cast<std::int32_t>(clamp(fl));
+    B.b1[k] = static_cast<std::int32_t>(clamp(f2));
+    B.b2[k] = static_cast<std::int32_t>(clamp(f3));
+    const bool ordered = (abs_s < abs_t) | (abs_t < abs_s);
+    B.ordered[k] = ordered ? 1 : 0;
+    const bool degenerate = (len == 0.0) | (vn == 0.0);
+    B.state[k] = degenerate ? PairBatch::kDegenerate
+                            : (redo ? PairBatch::kRedo : (ordered ? PairBatch::kOrderedOk : PairBatch::kTieOk));
+  }
+}
+
 using Spfh = std::array<double, kFeatureDim>;
 
 /// Points grouped by cells of edge r: a point's r-neighbours lie in the 27 cells around its own,
@@ -143,40 +212,6 @@ struct CellGrid {
 /// Integer SPFH counts of one surface point: 33 bins, then |N| (its r-neighbourhood, itself
 /// included). Integers, so the order in which pairs add to them does not matter.
 using SpfhCount = std::array<std::int32_t, kFeatureDim + 1>;
-
-/// Step 2 for the pair (s, t), both within r of each other: each adds its pair bins to its own
-/// count when it is needed (row != kNone). bins(s, t) = bins(t, s) bit for bit unless |a_s| =
-/// |a_t| exactly (negating d negates every product of the dot products and cross product, and
-/// the swap then picks the same origin), where the source stays the origin: computed twice then.
-inline void add_pair(const PointCloud& surface, std::uint32_t s, std::uint32_t t, std::uint32_t rs,
-                     std::uint32_t rt, std::vector<SpfhCount>& count) {
-  constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
-  const Vec3 &ps = surface.points[s], &ns = surface.normals[s];
-  const Vec3 &pt = surface.points[t], &nt = surface.normals[t];
-  const auto add = [&](std::uint32_t r, const int b[3]) {
-    ++count[r][b[0]];
-    ++count[r][kBins + b[1]];
-    ++count[r][2 * kBins + b[2]];
-  };
-  int bs[3];
-  bool ok_s = false;
-  if (rs != kNone) {
-    ++count[rs][kFeatureDim];
-    ok_s = pair_bins(ps, ns, pt, nt, bs);
-    if (ok_s) add(rs, bs);
-  }
-  if (rt == kNone) return;
-  ++count[rt][kFeatureDim];
-  const Vec3 d = pt - ps;   // as pair_bins(ps, ns, pt, nt) computes it
-  const double as = std::abs(ns.dot(d)), at = std::abs(nt.dot(d));
-  const bool ordered = as < at || at < as;   // not a tie (nor a NaN): the same origin either way
-  if (rs != kNone && ordered) {
-    if (ok_s) add(rt, bs);
-    return;
-  }
-  int bt[3];
-  if (pair_bins(pt, nt, ps, ns, bt)) add(rt, bt);
-}
 
 }  // namespace
 
@@ -231,19 +266,63 @@ FpfhResult compute_fpfh(const std::vector<Vec3>& keypoints, const std::vector<Ve
       if (grid.key[c][0] != grid.key[c - 1][0]) column.push_back(c);
     column.push_back(grid.key.size());
     const std::size_t columns = column.size() - 1;
-    const auto visit = [&](std::size_t m, std::vector<std::pair<std::size_t, std::size_t>>& shell) {
+    // Step 2 for the pairs (s, t) of one source s, both within r of each other: batch_bins for
+    // its targets (in the order visited), then each of the two adds the pair's bins to its own
+    // count when it is needed (row != kNone). bins(s, t) = bins(t, s) bit for bit unless |a_s| =
+    // |a_t| exactly (negating d negates every product of the dot products and cross product, and
+    // the swap then picks the same origin), where the source stays the origin: computed twice then.
+    const auto flush = [&](std::uint32_t s, PairBatch& B) {
+      const Vec3 &ps = surface.points[s], &ns = surface.normals[s];
+      batch_bins(ps.x(), ps.y(), ps.z(), ns.x(), ns.y(), ns.z(), B);
+      const std::uint32_t rs = row[s];
+      const auto add = [&](std::uint32_t r, const int b[3]) {
+        ++count[r][b[0]];
+        ++count[r][kBins + b[1]];
+        ++count[r][2 * kBins + b[2]];
+      };
+      for (int k = 0; k < B.n; ++k) {
+        const std::uint32_t t = B.target[k], rt = row[t];
+        const Vec3 &pt = surface.points[t], &nt = surface.normals[t];
+        int bs[3] = {B.b0[k], B.b1[k], B.b2[k]};
+        bool ok_s = B.state[k] != PairBatch::kDegenerate;
+        if (B.state[k] == PairBatch::kRedo) ok_s = pair_bins(ps, ns, pt, nt, bs);
+        if (rs != kNone) {
+          ++count[rs][kFeatureDim];
+          if (ok_s) add(rs, bs);
+        }
+        if (rt == kNone) continue;
+        ++count[rt][kFeatureDim];
+        if (B.ordered[k]) {   // bins(t, s) = bins(s, t) bit for bit
+          if (ok_s) add(rt, bs);
+          continue;
+        }
+        int bt[3];
+        if (pair_bins(pt, nt, ps, ns, bt)) add(rt, bt);
+      }
+      B.n = 0;
+    };
+    const auto visit = [&](std::size_t m, std::vector<std::pair<std::size_t, std::size_t>>& shell, PairBatch& B) {
       for (std::size_t c = column[m]; c < column[m + 1]; ++c) {
         grid.half_shell(c, shell);
         for (std::uint32_t i = grid.first[c]; i < grid.first[c + 1]; ++i) {
           const std::uint32_t s = grid.order[i];
           const Vec3& ps = surface.points[s];
+          const bool s_needed = row[s] != kNone;
           const auto pair = [&](std::uint32_t t) {
-            if ((surface.points[t] - ps).squaredNorm() > r2) return;
-            if (row[s] != kNone || row[t] != kNone) add_pair(surface, s, t, row[s], row[t], count);
+            const Vec3& pt = surface.points[t];
+            if ((pt - ps).squaredNorm() > r2) return;
+            if (!s_needed && row[t] == kNone) return;
+            const Vec3& nt = surface.normals[t];
+            const int k = B.n++;
+            B.target[k] = t;
+            B.px[k] = pt.x(), B.py[k] = pt.y(), B.pz[k] = pt.z();
+            B.nx[k] = nt.x(), B.ny[k] = nt.y(), B.nz[k] = nt.z();
+            if (B.n == PairBatch::kSize) flush(s, B);
           };
           for (std::uint32_t j = i + 1; j < grid.first[c + 1]; ++j) pair(grid.order[j]);
           for (const auto& [g0, g1] : shell)
             for (std::uint32_t j = grid.first[g0]; j < grid.first[g1]; ++j) pair(grid.order[j]);
+          if (B.n > 0) flush(s, B);
         }
       }
     };
@@ -251,8 +330,9 @@ FpfhResult compute_fpfh(const std::vector<Vec3>& keypoints, const std::vector<Ve
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (columns + 1 - parity) / 2),
                         [&](const tbb::blocked_range<std::size_t>& range) {
                           std::vector<std::pair<std::size_t, std::size_t>> shell;
+                          auto batch = std::make_unique<PairBatch>();
                           for (std::size_t h = range.begin(); h != range.end(); ++h)
-                            visit(2 * h + parity, shell);   // keys of columns m, m + 2 differ by >= 2
+                            visit(2 * h + parity, shell, *batch);   // keys of columns m, m + 2 differ by >= 2
                         });
     for (std::size_t k = 0; k < needed.size(); ++k) {
       // |N| counts the point itself; a point alone has no SPFH

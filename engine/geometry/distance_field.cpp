@@ -1,47 +1,43 @@
-// Two-level distance field on OpenVDB FloatGrids (see distance_field.hpp). Index ijk stands for
-// the object-frame point ijk * voxel (voxel centres).
+// Two-level distance field (see distance_field.hpp). Index ijk stands for the object-frame point
+// ijk * voxel (voxel centres).
 //
 // Fine level: the voxels whose centres are within fine_band_voxels voxels of the surface.
-// openvdb::tools::meshToVolume voxelizes the triangles into a thin shell and classifies
-// inside/outside (signed fields); the shell is grown by dilation to reach the band, every voxel
-// gets the exact distance from the mesh's BVH (MeshIndex) with meshToVolume's sign, and voxels
-// farther than the band are dropped. Every voxel within the band is there when the shell is
-// whole (grow_steps); meshToVolume removes shell voxels it classifies inside next to internal or
-// overlapping faces and in outside gaps narrower than about 1.7 voxels, where the band can have
-// holes, as it had before. (meshToVolume's own band expansion was used until 2026-11-28: its
-// values, closest triangles propagated through the band, were off by up to 2 mm for a few
-// voxels per thousand on dev45 and were replaced anyway, its band missed a few voxels within
-// the half-width, and it took a fifth of a database build.)
+// MeshIndex::shell finds the voxel centres within half a voxel diagonal of a face, with exact
+// distances (each face tests the lattice points of its own box); OpenVDB's dilation grows that
+// shell to reach the band (kShellRadius), every grown voxel gets its exact distance from the
+// mesh's BVH, and voxels farther than the band are dropped. The band is whole: every voxel
+// within the half-width is there. (OpenVDB's meshToVolume made the shell until 2026-11-28, and
+// its band until ff668bb: its voxelization took a sixth of a database build, and it removed
+// shell voxels next to internal faces and in gaps narrower than about 1.7 voxels.)
 //
 // Coarse level: dense over the box B = bbox(mesh) grown by coarse_margin and rounded out to
 // whole voxels (each point of bbox + margin has its 8 interpolation corners inside), exact BVH
-// distances up to coarse_margin + 2 voxels and that cap (a lower bound) beyond; the sign comes
-// from the fine level's classification of space (band values, or meshToVolume's inside/outside
-// tiles). A coarse meshToVolume run was tried first: its propagated values were off by up to
-// 24 mm in thin regions.
+// distances up to coarse_margin + 2 voxels and that cap (a lower bound) beyond. A coarse
+// meshToVolume run was tried first: its propagated values were off by up to 24 mm in thin
+// regions.
 //
-// Both levels are then held as CompactGrids (4^3 bricks of int16 behind a dense brick index);
-// the OpenVDB grids are dropped after the build.
+// Signs (closed meshes): from the closest point's angle-weighted pseudonormal (MeshIndex::side)
+// when the faces are wound consistently (MeshIndex::oriented); else, and for coarse voxels
+// farther from the surface than the search reached, by ray parity (MeshIndex::inside).
+//
+// Both levels are held as CompactGrids (4^3 bricks of int16 behind a dense brick index); the
+// OpenVDB tree of the dilation is dropped after the build.
 //
 // Queries interpolate trilinearly from the fine level when its 8 corners are all active, else
 // from the coarse level. Outside B nothing is stored; there the distance to the surface is at
 // least dist(p, B) + coarse_margin (B shrunk by the margin still contains the mesh's bounding
 // box), and that lower bound is returned.
 //
-// Determinism: meshToVolume runs in a single-thread task arena, so its output cannot depend on
-// how TBB splits the work (meanwhile the coarse distances use the other threads); the dilation
-// after it (threaded) is a union of per-node dilations, whatever the split; the exact
-// values are computed per voxel into their own slots and written serially. Same mesh and
-// settings => same grids and bytes for any thread count.
+// Determinism: every value is computed for its own voxel; the shell is sorted by voxel, then
+// distance, then face; the dilation is a union. Same mesh and settings => same grids and bytes
+// for any thread count.
 #include "engine/geometry/distance_field.hpp"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Morphology.h>
-#include <openvdb/tools/MeshToVolume.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -56,86 +52,6 @@ namespace {
 void init_openvdb() {
   static std::once_flag once;
   std::call_once(once, [] { openvdb::initialize(); });
-}
-
-/// ts::Mesh in OpenVDB's MeshDataAdapter interface, scaled to index space.
-struct MeshAdapter {
-  const Mesh& mesh;
-  double inv_voxel;
-  std::size_t polygonCount() const { return mesh.faces.size(); }
-  std::size_t pointCount() const { return mesh.vertices.size(); }
-  std::size_t vertexCount(std::size_t) const { return 3; }
-  void getIndexSpacePoint(std::size_t n, std::size_t v, openvdb::Vec3d& pos) const {
-    const Vec3& p = mesh.vertices[static_cast<std::size_t>(mesh.faces[n][static_cast<int>(v)])];
-    pos = openvdb::Vec3d(p.x() * inv_voxel, p.y() * inv_voxel, p.z() * inv_voxel);
-  }
-};
-
-using Grid = openvdb::FloatGrid;
-
-/// meshToVolume in index space: the grid's values are distances in voxels (multiply by the
-/// voxel size). A transform of the voxel size itself would give metres, but OpenVDB refuses
-/// scales whose cube is below 3e-15 (voxels under 14 micrometres: objects of a few millimetres
-/// with scaled parameters), throwing ArithmeticError.
-Grid::Ptr run_mesh_to_volume(const Mesh& mesh, double voxel, float ext_band, float int_band,
-                             bool is_signed) {
-  const MeshAdapter adapter{mesh, 1.0 / voxel};
-  const auto transform = openvdb::math::Transform::createLinearTransform(1.0);
-  // No renormalization: it smooths the values near self-intersections, and the values are
-  // replaced by exact distances anyway.
-  // No trimming: the shell's outer voxels (neighbours of the voxels a triangle crosses) seed
-  // the growth to the full band (grow_steps).
-  const int flags = openvdb::tools::DISABLE_RENORMALIZATION | openvdb::tools::DISABLE_NARROW_BAND_TRIMMING |
-                    (is_signed ? 0 : openvdb::tools::UNSIGNED_DISTANCE_FIELD);
-  Grid::Ptr grid;
-  tbb::task_arena serial(1);
-  serial.execute([&] {
-    grid = openvdb::tools::meshToVolume<Grid>(adapter, *transform, ext_band, int_band, flags);
-  });
-  return grid;
-}
-
-/// meshToVolume's half-width, in voxels: at 2 or less it keeps the shell its voxelization makes
-/// (every voxel whose centre is within half a diagonal of a triangle, and their 26 neighbours,
-/// so up to 2.6 voxels away) and skips the narrow-band expansion, which computed distances that
-/// are replaced anyway.
-constexpr float kVoxelizedBand = 2.0f;
-
-/// Dilations (26-neighbourhood) of that shell, untrimmed, that reach every voxel within `band`
-/// voxels of the surface: the voxel round(q) of a surface point q is within half a diagonal of
-/// it, so it and its 26 neighbours are in the shell; a voxel centre p with |p - q| <= band has
-/// |p - round(q)| <= band + 1/2 in the max norm, so <= band (integers): band - 1 steps from the
-/// neighbours. (Shell voxels beyond a band of 1 or 2 are dropped by the distance cut.)
-int grow_steps(int band) { return std::max(band - 1, 0); }
-
-/// The active values of meshToVolume's band after its voxel values were replaced by exact
-/// distances in metres; active tiles (not expected in a narrow band) keep meshToVolume's
-/// value, in voxels, and are converted here.
-SparseGrid to_sparse(const Grid& grid, double voxel) {
-  SparseGrid s;
-  s.voxel = voxel;
-  std::vector<std::pair<std::array<std::int32_t, 3>, float>> cells;
-  cells.reserve(grid.activeVoxelCount());
-  for (auto it = grid.cbeginValueOn(); it; ++it) {
-    if (it.isVoxelValue()) {
-      const auto c = it.getCoord();
-      cells.push_back({{c.x(), c.y(), c.z()}, *it});
-    } else {   // active tile: every voxel it covers (its value still in voxels, see below)
-      openvdb::CoordBBox box;
-      it.getBoundingBox(box);
-      const auto v = static_cast<float>(*it * voxel);
-      for (auto c = box.begin(); c; ++c) cells.push_back({{(*c).x(), (*c).y(), (*c).z()}, v});
-    }
-  }
-  std::sort(cells.begin(), cells.end(),
-            [](const auto& a, const auto& b) { return a.first < b.first; });
-  s.ijk.reserve(cells.size());
-  s.value.reserve(cells.size());
-  for (const auto& [ijk, v] : cells) {
-    s.ijk.push_back(ijk);
-    s.value.push_back(v);
-  }
-  return s;
 }
 
 /// Smallest power of two q with max|v| / q <= 32000 (int16 with room to spare). Dequantized
@@ -444,7 +360,7 @@ DistanceField& DistanceField::operator=(DistanceField&&) noexcept = default;
 
 namespace {
 
-/// Throws on what meshToVolume and the BVH cannot take; returns the mesh's bounding box.
+/// Throws on what the field and the BVH cannot take; returns the mesh's bounding box.
 Eigen::AlignedBox3d checked_bounds(const Mesh& mesh, const DistanceFieldSettings& s) {
   if (!(s.fine_voxel > 0.0) || !(s.coarse_voxel > 0.0) || s.fine_band_voxels < 1 ||
       !(s.coarse_margin >= 0.0) || !std::isfinite(s.coarse_margin))
@@ -466,14 +382,27 @@ Eigen::AlignedBox3d checked_bounds(const Mesh& mesh, const DistanceFieldSettings
 
 namespace {
 
-/// Unsigned distances of the coarse box's voxel centres, column by column along k, each voxel
-/// in its own slot: exact up to `cap`, `cap` beyond. Bounds from the voxels 1 voxel away keep the
-/// BVH work small: the closest points of the previous voxel of the column and of the same voxel
-/// of the previous column bound d(p) from above (usually tightly: deep inside a sphere the BVH
-/// otherwise visits most triangles), and d(prev) - voxel bounds it from below, which skips runs of voxels beyond the cap (searched
-/// up to cap + 4 voxels to learn how far beyond they are).
+/// Which side of the surface p lies on (true: inside), for signed fields: from the closest point
+/// when one was found (the pseudonormal of an oriented mesh, MeshIndex::side), else by ray
+/// parity (MeshIndex::inside: meshes wound inconsistently, and points farther than the search
+/// reached; outside the mesh's box nothing is inside).
+bool inside_at(const MeshIndex& index, bool oriented, const Eigen::AlignedBox3d& bbox, const Vec3& p,
+               const ClosestPoint* c) {
+  if (c && oriented) return index.side(p, *c) < 0.0;
+  if (bbox.squaredExteriorDistance(p) > 0.0) return false;
+  return index.inside(p);
+}
+
+/// Distances of the coarse box's voxel centres, column by column along k, each voxel in its own
+/// slot: exact up to `cap`, `cap` beyond, negative inside when `is_signed`. Bounds from the
+/// voxels 1 voxel away keep the BVH work small: the closest points of the previous voxel of the
+/// column and of the same voxel of the previous column bound d(p) from above (usually tightly:
+/// deep inside a sphere the BVH otherwise visits most triangles), and d(prev) - voxel bounds it
+/// from below, which skips runs of voxels beyond the cap (searched up to cap + 4 voxels to learn
+/// how far beyond they are).
 void coarse_distances(const MeshIndex& index, const Eigen::AlignedBox3d& bbox, const openvdb::Coord& cmin,
-                      std::size_t ny, std::size_t nz, double cv, double cap, std::vector<float>& dense) {
+                      std::size_t ny, std::size_t nz, double cv, double cap, bool is_signed, bool oriented,
+                      std::vector<float>& dense) {
   const double reach = cap + 4.0 * cv;
   const std::size_t columns = dense.size() / nz;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, columns), [&](const auto& range) {
@@ -487,9 +416,8 @@ void coarse_distances(const MeshIndex& index, const Eigen::AlignedBox3d& bbox, c
       for (std::size_t kk = 0; kk < nz; ++kk) {
         const Vec3 p = Vec3(i, j, cmin.z() + static_cast<int>(kk)) * cv;
         double d;                   // exact, or a lower bound when >= cap
-        std::optional<Vec3> found;
+        std::optional<ClosestPoint> hit;
         if (lower < cap && bbox.squaredExteriorDistance(p) < cap * cap) {
-          std::optional<ClosestPoint> hit;
           double near = reach;
           if (last) near = std::min(near, (p - *last).norm());
           if (previous[kk]) near = std::min(near, (p - *previous[kk]).norm());
@@ -497,18 +425,83 @@ void coarse_distances(const MeshIndex& index, const Eigen::AlignedBox3d& bbox, c
           if (bound < reach) hit = index.closest_within(p, bound);
           if (!hit) hit = index.closest_within(p, reach);
           d = hit ? hit->distance : reach;
-          if (hit) found = hit->point;
         } else {
           d = std::max(lower, cap);   // d(p) >= lower, and >= dist(p, bbox) >= cap
         }
-        last = found;
-        current[kk] = found;
-        dense[ij * nz + kk] = static_cast<float>(std::min(d, cap));
+        last.reset();
+        if (hit) last = hit->point;
+        current[kk] = last;
+        const auto v = static_cast<float>(std::min(d, cap));
+        dense[ij * nz + kk] = is_signed && inside_at(index, oriented, bbox, p, hit ? &*hit : nullptr) ? -v : v;
         lower = d - cv * (1.0 + 1e-9);
       }
       std::swap(previous, current);
     }
   });
+}
+
+/// Lattice points within half a voxel diagonal of the surface, and their 26-neighbourhoods
+/// grown `band` times: every voxel centre p within `band` voxels of the surface. Its closest
+/// surface point q has a nearest lattice point u within half a diagonal (so u is in the shell),
+/// and |p - u| <= |p - q| + |q - u| <= band + 1/2 in the max norm, so <= band (integers).
+constexpr double kShellRadius = 0.8660254037844386;   // sqrt(3) / 2, in voxels
+
+/// The fine level (see the top comment): every voxel centre within `band` voxels of the surface
+/// with its exact distance, negative inside when `is_signed`; sorted by ijk.
+SparseGrid fine_band(const MeshIndex& index, const Eigen::AlignedBox3d& bbox, double fv, int band,
+                     bool is_signed, bool oriented) {
+  const std::vector<ShellVoxel> shell = index.shell(fv, kShellRadius * fv * (1.0 + 1e-9));
+  openvdb::Int32Tree tree(-1);   // active voxels: the band; value: the shell entry, or -1
+  {
+    openvdb::tree::ValueAccessor<openvdb::Int32Tree> acc(tree);
+    for (std::size_t n = 0; n < shell.size(); ++n)
+      acc.setValue(openvdb::Coord(shell[n].ijk[0], shell[n].ijk[1], shell[n].ijk[2]), static_cast<std::int32_t>(n));
+  }
+  openvdb::tools::dilateActiveValues(tree, band, openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::EXPAND_TILES);
+  std::vector<std::pair<std::array<std::int32_t, 3>, std::int32_t>> voxels;
+  voxels.reserve(tree.activeVoxelCount());
+  for (auto it = tree.cbeginValueOn(); it; ++it) {
+    openvdb::CoordBBox box;
+    it.getBoundingBox(box);   // one voxel, or every voxel of an active tile
+    for (auto c = box.begin(); c; ++c) voxels.push_back({{(*c).x(), (*c).y(), (*c).z()}, it.isVoxelValue() ? *it : -1});
+  }
+  tree.clear();
+  std::sort(voxels.begin(), voxels.end(), [](const auto& a, const auto& b) {   // by ijk (each once)
+    for (int k = 0; k < 3; ++k)
+      if (a.first[k] != b.first[k]) return a.first[k] < b.first[k];
+    return false;
+  });
+  // Exact distances: the shell's from MeshIndex::shell, the others from the BVH; voxels beyond
+  // the half-width (a hair more: voxels exactly on it, as on faces aligned with the lattice,
+  // stay) are dropped.
+  const double reach = band * fv * (1.0 + 1e-9);
+  std::vector<float> value(voxels.size());
+  std::vector<char> keep(voxels.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxels.size(), 256), [&](const auto& range) {
+    for (std::size_t n = range.begin(); n != range.end(); ++n) {
+      const auto& [ijk, which] = voxels[n];
+      const Vec3 p = Vec3(ijk[0], ijk[1], ijk[2]) * fv;
+      std::optional<ClosestPoint> hit;
+      if (which >= 0) {
+        const ShellVoxel& sv = shell[static_cast<std::size_t>(which)];
+        hit = ClosestPoint{std::sqrt(sv.sq_distance), sv.point, Vec3::Zero(), sv.face};
+      } else {
+        hit = index.closest_within(p, reach);
+      }
+      if (!hit || !(hit->distance <= reach)) continue;
+      const auto d = static_cast<float>(hit->distance);
+      value[n] = is_signed && inside_at(index, oriented, bbox, p, &*hit) ? -d : d;
+      keep[n] = 1;
+    }
+  });
+  SparseGrid out;
+  out.voxel = fv;
+  for (std::size_t n = 0; n < voxels.size(); ++n)
+    if (keep[n]) {
+      out.ijk.push_back(voxels[n].first);
+      out.value.push_back(value[n]);
+    }
+  return out;
 }
 
 }  // namespace
@@ -550,79 +543,13 @@ DistanceField DistanceField::build(const MeshIndex& index, bool is_signed, const
   const double cap = s.coarse_margin + 2.0 * cv;
   std::vector<float> dense(nx * ny * nz);
 
-  // The serial meshToVolume run (fine band topology and inside/outside) and the coarse
-  // unsigned distances (parallel, on whatever threads the first leaves free) side by side.
-  Grid::Ptr band;   // the grown shell, then the band; meshToVolume's inside/outside classification
-  std::unique_ptr<openvdb::BoolTree> seeds;   // the voxelized shell before it was grown
-  tbb::parallel_invoke(
-      [&] {
-        band = run_mesh_to_volume(mesh, fv, kVoxelizedBand, kVoxelizedBand, is_signed);
-        // Grow the voxelized shell to cover every voxel within the band (see the top comment);
-        // new voxels take the flood fill's signed value, which says inside or outside.
-        seeds = std::make_unique<openvdb::BoolTree>(band->tree(), false, openvdb::TopologyCopy());
-        const int grow = grow_steps(s.fine_band_voxels);
-        if (grow > 0)
-          openvdb::tools::dilateActiveValues(band->tree(), grow, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                             openvdb::tools::EXPAND_TILES);
-      },
-      [&] { coarse_distances(index, bbox, cmin, ny, nz, cv, cap, dense); });
-
-  // Fine level values: exact.
-  {
-    std::vector<openvdb::Coord> coords;
-    std::vector<float> values;
-    coords.reserve(band->activeVoxelCount());
-    for (auto it = band->cbeginValueOn(); it; ++it)
-      if (it.isVoxelValue()) {
-        coords.push_back(it.getCoord());
-        values.push_back(static_cast<float>(*it * fv));   // voxels -> metres
-      }
-    // A voxel is kept when its exact distance is at most the band's half-width (a hair more:
-    // voxels exactly on it, as on faces aligned with the lattice, stay).
-    const double reach = s.fine_band_voxels * fv * (1.0 + 1e-9);
-    std::vector<char> keep(coords.size(), 1);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, coords.size(), 256), [&](const auto& range) {
-      openvdb::tree::ValueAccessor<const openvdb::BoolTree, false> shell(*seeds);   // read only, unchanged meanwhile
-      for (std::size_t n = range.begin(); n != range.end(); ++n) {
-        const openvdb::Coord& c = coords[n];
-        const Vec3 p = Vec3(c.x(), c.y(), c.z()) * fv;
-        // A shell voxel's meshToVolume value is the distance to one triangle, an upper bound:
-        // searching within it (plus float slack) prunes the BVH hard. The band is the fallback.
-        const double upper = shell.isValueOn(c) ? std::abs(values[n]) * (1.0 + 1e-5) + 1e-9 : reach;
-        std::optional<ClosestPoint> hit = index.closest_within(p, std::min(upper, reach));
-        if (!hit && upper < reach) hit = index.closest_within(p, reach);
-        if (!hit) {
-          keep[n] = 0;
-          continue;
-        }
-        const auto d = static_cast<float>(hit->distance);
-        values[n] = (is_signed && values[n] < 0.0f) ? -d : d;
-      }
-    });
-    auto acc = band->getUnsafeAccessor();
-    for (std::size_t n = 0; n < coords.size(); ++n)
-      if (keep[n]) acc.setValueOnly(coords[n], values[n]);
-      else acc.setValueOff(coords[n]);   // its value (the flood fill's, in voxels) keeps the sign
-    seeds.reset();
-  }
-
-  // Coarse signs: inside/outside from the fine level (band values, or the sign of the inactive
-  // interior/exterior tiles of meshToVolume's flood fill away from the surface).
-  if (is_signed) {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nx * ny), [&](const auto& range) {
-      auto fine_acc = band->getConstUnsafeAccessor();
-      for (std::size_t ij = range.begin(); ij != range.end(); ++ij)
-        for (std::size_t kk = 0; kk < nz; ++kk) {
-          const Vec3 p = Vec3(cmin.x() + static_cast<int>(ij / ny), cmin.y() + static_cast<int>(ij % ny),
-                              cmin.z() + static_cast<int>(kk)) * cv;
-          const openvdb::Coord f(static_cast<int>(std::lround(p.x() / fv)), static_cast<int>(std::lround(p.y() / fv)),
-                                 static_cast<int>(std::lround(p.z() / fv)));
-          if (fine_acc.getValue(f) < 0.0f) dense[ij * nz + kk] = -dense[ij * nz + kk];
-        }
-    });
-  }
-  im.fine = Level::make(compact_from_sparse(to_sparse(*band, fv)), "fine");
-  band.reset();
+  // Fine level and coarse level side by side (each parallel inside).
+  const bool oriented = is_signed && index.oriented();
+  SparseGrid fine;
+  tbb::parallel_invoke([&] { fine = fine_band(index, bbox, fv, s.fine_band_voxels, is_signed, oriented); },
+                       [&] { coarse_distances(index, bbox, cmin, ny, nz, cv, cap, is_signed, oriented, dense); });
+  im.fine = Level::make(compact_from_sparse(fine), "fine");
+  fine = SparseGrid{};
   {
     std::vector<std::pair<std::array<std::int32_t, 3>, double>> cells(dense.size());
     for (std::size_t ij = 0; ij < nx * ny; ++ij)

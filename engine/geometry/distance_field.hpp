@@ -9,8 +9,8 @@
 //
 // Storage: both levels are bricks of 4^3 voxels (CompactGrid) found through a dense brick
 // index over the level's box: 2 bytes a voxel of the band instead of OpenVDB's 4 bytes a voxel
-// of every touched 8^3 leaf, and a load is a copy of two arrays. OpenVDB builds the band
-// (meshToVolume's voxelized shell, dilated to the half-width) and is then let go.
+// of every touched 8^3 leaf, and a load is a copy of two arrays. OpenVDB dilates the band from
+// the surface's shell (MeshIndex::shell) and is then let go.
 #pragma once
 
 #include "engine/core.hpp"

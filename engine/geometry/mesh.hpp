@@ -4,6 +4,8 @@
 
 #include "engine/core.hpp"
 
+#include <array>
+#include <cstdint>
 #include <memory>
 #include <optional>
 
@@ -27,6 +29,14 @@ struct RayHit {
   Vec3 point;            ///< hit point
   Vec3 normal;           ///< unit geometric normal of the hit face (as wound)
   int face = -1;
+};
+
+/// A lattice point near the surface (MeshIndex::shell).
+struct ShellVoxel {
+  std::array<std::int32_t, 3> ijk;   ///< the point ijk * voxel
+  double sq_distance = 0.0;          ///< squared distance to the surface, m^2
+  Vec3 point;                        ///< closest surface point
+  int face = -1;                     ///< the face holding it
 };
 
 struct ClosestPoint {
@@ -58,6 +68,22 @@ class MeshIndex {
   std::optional<ClosestPoint> closest_within(const Vec3& p, double max_distance) const;
   /// Inside test for closed meshes: parity of crossings along a few fixed directions (majority).
   bool inside(const Vec3& p) const;
+
+  /// Every lattice point ijk * voxel within `radius` of the surface, sorted by ijk, with what
+  /// closest() returns there (the same arithmetic; ties to the smaller face index). Each face
+  /// visits the lattice points of its own box grown by `radius`: no tree search, so a thin
+  /// shell (radius about a voxel) of a whole mesh costs a few tests per lattice point.
+  std::vector<ShellVoxel> shell(double voxel, double radius) const;
+
+  /// Whether the faces bound a solid consistently: every edge is used by exactly two faces, once
+  /// in each direction (no repeated vertex in a face). Then side() tells inside from outside.
+  bool oriented() const;
+  /// Which side of an oriented() surface p lies on, from its closest point `c` (as closest(),
+  /// closest_within() or shell() give it): > 0 outside, < 0 inside, 0 on the surface. The dot
+  /// product of p - c.point with the angle-weighted pseudonormal (Baerentzen and Aanaes 2005) of
+  /// the face, edge or vertex holding c.point, whose sign is the side for a closed, consistently
+  /// wound surface. Meaningless when !oriented().
+  double side(const Vec3& p, const ClosestPoint& c) const;
 
  private:
   struct Impl;

@@ -219,9 +219,9 @@ TEST_CASE("Distance field matches brute force on closed meshes, with correct sig
         const Vec3 p = Vec3(g.ijk[n][0], g.ijk[n][1], g.ijk[n][2]) * g.voxel;
         const double ex = exact_distance(c.mesh, p, true);
         const double want = std::abs(ex) > cap ? std::copysign(cap, ex) : ex;
-        // The sign within 0.2 voxel of the surface is meshToVolume's classification of the
-        // voxels the surface crosses, not checked (as sign_errors above): the magnitude is.
-        const bool sign_checked = std::abs(ex) > 0.2 * s.fine_voxel;
+        // Signs everywhere but on the surface itself (pseudonormals since 2026-11-28; before,
+        // meshToVolume's classification left the voxels the surface crosses unchecked).
+        const bool sign_checked = std::abs(ex) > 1e-9;
         const double got = sign_checked ? g.value[n] : std::abs(g.value[n]);
         if (std::abs(got - (sign_checked ? want : std::abs(want))) > 0.5 * quantum + 1e-7 * std::abs(want)) ++wrong;
       }
@@ -231,7 +231,7 @@ TEST_CASE("Distance field matches brute force on closed meshes, with correct sig
 }
 
 TEST_CASE("The fine level holds every voxel within the band's half-width, and none beyond") {
-  // The band is meshToVolume's voxelized shell grown by dilation and cut by exact distance:
+  // The band is the shell (MeshIndex::shell) grown by dilation and cut by exact distance:
   // against brute force, every voxel centre within fine_band_voxels voxels of the surface is
   // active (all of them for the boxes, a random sample for the torus and the sheet), and no
   // active one (a sample of about 400) is farther. Bands of 1 to 4 voxels; a box whose faces lie
@@ -245,12 +245,23 @@ TEST_CASE("The fine level holds every voxel within the band's half-width, and no
   };
   Mesh shifted = box(Vec3(0.04, 0.02, 0.03));
   for (Vec3& v : shifted.vertices) v += Vec3(0.0002, 0.0002, 0.0002);
+  // Two boxes 3 mm (1.5 voxels) apart: meshToVolume, which made the shell until 2026-11-28,
+  // left holes in gaps narrower than about 1.7 voxels.
+  Mesh pair = box(Vec3(0.02, 0.015, 0.01));
+  for (Vec3& v : pair.vertices) v.x() -= 0.0215;
+  {
+    Mesh other = box(Vec3(0.02, 0.015, 0.01));
+    const int base = static_cast<int>(pair.vertices.size());
+    for (Vec3& v : other.vertices) pair.vertices.push_back(v + Vec3(0.0215, 0.0003, 0.0));
+    for (const auto& f : other.faces) pair.faces.emplace_back(f[0] + base, f[1] + base, f[2] + base);
+  }
   const Case cases[] = {{"box", box(Vec3(0.04, 0.02, 0.03)), true, 4, 0},
                         {"box", box(Vec3(0.04, 0.02, 0.03)), true, 3, 0},
                         {"box", box(Vec3(0.04, 0.02, 0.03)), true, 2, 0},
                         {"box", box(Vec3(0.04, 0.02, 0.03)), true, 1, 0},
                         {"shifted box", shifted, true, 4, 0},
                         {"shifted box", shifted, true, 2, 0},
+                        {"two boxes 3 mm apart", pair, true, 4, 0},
                         {"torus", torus(0.06, 0.02, 48, 24), true, 4, 6000},
                         {"sheet", sheet(), false, 4, 6000}};
   Rng rng(31);
@@ -292,6 +303,36 @@ TEST_CASE("The fine level holds every voxel within the band's half-width, and no
     CHECK(inside > (c.samples == 0 ? 1000 * c.band : 300));
     CHECK(missing == 0);
   }
+}
+
+TEST_CASE("A closed mesh wound both ways gets its signs by ray parity") {
+  // Every other face of a torus turned inward: closed, but its pseudonormals mean nothing
+  // (MeshIndex::oriented is false), so the field asks ray parity, which does not care about
+  // winding. Oracle: the consistently wound torus. Sampled voxels of both levels, and queries.
+  const Mesh good = torus(0.06, 0.02, 48, 24);
+  Mesh mixed = good;
+  for (std::size_t f = 0; f < mixed.faces.size(); f += 2) std::swap(mixed.faces[f][1], mixed.faces[f][2]);
+  REQUIRE_FALSE(MeshIndex(mixed).oriented());
+  DistanceFieldSettings s;
+  const DistanceField df = DistanceField::build(mixed, true, s);
+  const DistanceField reference = DistanceField::build(good, true, s);
+  int checked = 0, wrong = 0;
+  for (const auto& [g, r] : {std::pair{df.fine_sparse(), reference.fine_sparse()},
+                             std::pair{df.coarse_sparse(), reference.coarse_sparse()}}) {
+    REQUIRE(g.ijk == r.ijk);
+    for (std::size_t n = 0; n < g.ijk.size(); n += 1 + g.ijk.size() / 500) {
+      const Vec3 p = Vec3(g.ijk[n][0], g.ijk[n][1], g.ijk[n][2]) * g.voxel;
+      const double ex = exact_distance(good, p, true);
+      if (std::abs(ex) < 1e-9) continue;
+      ++checked;
+      if ((g.value[n] < 0) != (ex < 0) || g.value[n] != r.value[n]) ++wrong;
+    }
+  }
+  CHECK(checked > 800);
+  CHECK(wrong == 0);
+  Rng rng(3);
+  const Errors e = check_field(good, true, df, s, rng, 600);
+  CHECK(e.sign_errors == 0);
 }
 
 TEST_CASE("Unsigned distance field of an open sheet matches brute force") {

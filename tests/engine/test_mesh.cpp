@@ -3,9 +3,11 @@
 
 #include <doctest/doctest.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numbers>
 
 using namespace ts;
@@ -311,4 +313,147 @@ TEST_CASE("MeshIndex handles empty meshes, bad rays and bad indices") {
   Mesh bad = make_sphere(1.0, 0);
   bad.faces.emplace_back(0, 1, 99);
   CHECK_THROWS_AS(MeshIndex{bad}, Error);
+}
+
+namespace {
+
+/// brute_distance, with a zero-area face taken as its three edges (brute_point_triangle needs a
+/// normal).
+double brute_distance_any(const Mesh& m, const Vec3& p) {
+  const auto segment_distance = [](const Vec3& q, const Vec3& a, const Vec3& b) {
+    return (b - a).squaredNorm() > 0.0 ? ::segment_distance(q, a, b) : (q - a).norm();
+  };
+  double best = kInf;
+  for (int f = 0; f < static_cast<int>(m.faces.size()); ++f) {
+    const Vec3 a = vtx(m, f, 0), b = vtx(m, f, 1), c = vtx(m, f, 2);
+    best = std::min(best, (b - a).cross(c - a).squaredNorm() > 0.0
+                              ? brute_point_triangle(p, a, b, c)
+                              : std::min({segment_distance(p, a, b), segment_distance(p, b, c), segment_distance(p, c, a)}));
+  }
+  return best;
+}
+
+}  // namespace
+
+TEST_CASE("MeshIndex shell: every lattice point within the radius, with closest()'s answer, and none beyond") {
+  // Against the brute-force distance of every lattice point of the grown box, and against
+  // closest() itself (the same distance, point and face, bit for bit). A large thin triangle
+  // (cut into pieces by the shell) and a degenerate one (zero area) too.
+  Mesh big;
+  big.vertices = {{-0.20, -0.15, 0.013}, {0.25, -0.02, -0.031}, {0.01, 0.22, 0.047}, {0.3, 0.3, 0.3}, {0.3, 0.33, 0.3}};
+  big.faces = {{0, 1, 2}, {3, 4, 4}};   // the second: a segment (repeated vertex)
+  Mesh sliver;
+  sliver.vertices = {{0, 0, 0}, {0.05, 0.01, -0.02}, {0.1, 0.02, -0.04}};   // collinear
+  sliver.faces = {{0, 1, 2}};
+  struct Case {
+    std::string name;
+    Mesh mesh;
+    double voxel, radius;
+  };
+  const Case cases[] = {{"sphere", make_sphere(0.03, 3), 0.002, 0.8660254037844386 * 0.002},
+                        {"torus", make_torus(0.03, 0.01, 32, 16), 0.0017, 0.004},
+                        {"big triangle", big, 0.01, 0.009},
+                        {"collinear sliver", sliver, 0.003, 0.0026}};
+  for (const auto& c : cases) {
+    CAPTURE(c.name);
+    const MeshIndex index(c.mesh);
+    const std::vector<ShellVoxel> shell = index.shell(c.voxel, c.radius);
+    REQUIRE(shell.size() > 50);
+    for (std::size_t n = 1; n < shell.size(); ++n) CHECK(shell[n - 1].ijk < shell[n].ijk);
+    std::map<std::array<std::int32_t, 3>, const ShellVoxel*> by_ijk;
+    for (const auto& s : shell) by_ijk[s.ijk] = &s;
+    Eigen::AlignedBox3d bb;
+    for (const auto& v : c.mesh.vertices) bb.extend(v);
+    const Eigen::Array3i lo = ((bb.min().array() - c.radius) / c.voxel).floor().cast<int>() - 1;
+    const Eigen::Array3i hi = ((bb.max().array() + c.radius) / c.voxel).ceil().cast<int>() + 1;
+    int within = 0, missing = 0, extra = 0, differ = 0;
+    for (int i = lo.x(); i <= hi.x(); ++i)
+      for (int j = lo.y(); j <= hi.y(); ++j)
+        for (int k = lo.z(); k <= hi.z(); ++k) {
+          const Vec3 p = Vec3(i, j, k) * c.voxel;
+          const double d = brute_distance_any(c.mesh, p);
+          const auto it = by_ijk.find({i, j, k});
+          if (d <= c.radius * (1 - 1e-9)) {
+            ++within;
+            if (it == by_ijk.end()) {
+              ++missing;
+              continue;
+            }
+          }
+          if (it == by_ijk.end()) continue;
+          if (d > c.radius * (1 + 1e-9)) ++extra;
+          const ShellVoxel& s = *it->second;
+          const ClosestPoint cp = index.closest(p);
+          if (std::sqrt(s.sq_distance) != cp.distance || s.point != cp.point || s.face != cp.face) ++differ;
+        }
+    MESSAGE(c.name << ": " << within << " lattice points within the radius, " << shell.size() << " in the shell");
+    CHECK(within > 50);
+    CHECK(missing == 0);
+    CHECK(extra == 0);
+    CHECK(differ == 0);
+  }
+  // The same shell for any thread count.
+  const MeshIndex torus(make_torus(0.03, 0.01, 32, 16));
+  std::vector<ShellVoxel> one;
+  tbb::task_arena(1).execute([&] { one = torus.shell(0.0017, 0.003); });
+  const std::vector<ShellVoxel> all = torus.shell(0.0017, 0.003);
+  REQUIRE(one.size() == all.size());
+  bool same = true;
+  for (std::size_t n = 0; n < one.size(); ++n)
+    same = same && one[n].ijk == all[n].ijk && one[n].sq_distance == all[n].sq_distance && one[n].face == all[n].face;
+  CHECK(same);
+  CHECK_THROWS_AS(torus.shell(0.0, 0.003), Error);
+  CHECK_THROWS_AS(torus.shell(0.001, -1.0), Error);
+}
+
+TEST_CASE("MeshIndex side: the pseudonormal tells inside from outside, on faces, edges and vertices") {
+  // Points near the surface (within a few mm, where the closest point is often an edge or a
+  // vertex) and far from it, against the analytic solid; a box's corners and edges exactly.
+  const double r = 0.05, R = 0.07, rt = 0.025;
+  const Mesh sphere_mesh = make_sphere(r, 2), torus_mesh = make_torus(R, rt, 24, 12);
+  const MeshIndex sphere(sphere_mesh), torus(torus_mesh);
+  REQUIRE(sphere.oriented());
+  REQUIRE(torus.oriented());
+  Rng rng(17);
+  int checked = 0, wrong = 0;
+  for (int i = 0; i < 6000; ++i) {
+    const bool near = i % 2 == 0;
+    const auto& v = sphere_mesh.vertices[rng.index(sphere_mesh.vertices.size())];
+    const Vec3 p = near ? Vec3(v + 0.004 * rng.unit_vector() * rng.uniform())
+                        : Vec3(rng.uniform(-0.12, 0.12), rng.uniform(-0.12, 0.12), rng.uniform(-0.12, 0.12));
+    const ClosestPoint cs = sphere.closest(p);
+    if (cs.distance > 1e-9) {
+      ++checked;
+      if ((sphere.side(p, cs) < 0.0) != sphere.inside(p)) ++wrong;
+    }
+    const Vec3 q = near ? Vec3(torus_mesh.vertices[rng.index(torus_mesh.vertices.size())] + 0.004 * rng.unit_vector() * rng.uniform())
+                        : p;
+    const ClosestPoint ct = torus.closest(q);
+    if (ct.distance > 1e-9) {
+      ++checked;
+      if ((torus.side(q, ct) < 0.0) != torus.inside(q)) ++wrong;
+    }
+  }
+  CHECK(checked > 11000);
+  CHECK(wrong == 0);
+  // A box: just outside a corner and an edge (where a face's own normal can point the wrong way).
+  const MeshIndex box(make_box(Vec3(0.05, 0.05, 0.05), 1));
+  REQUIRE(box.oriented());
+  for (const Vec3& p : {Vec3(0.051, 0.051, 0.051), Vec3(0.06, 0.0502, 0.0), Vec3(0.0501, 0.07, -0.0501)})
+    CHECK(box.side(p, box.closest(p)) > 0.0);
+  for (const Vec3& p : {Vec3(0.049, 0.049, 0.049), Vec3(0.0499, 0.0498, 0.0), Vec3(0.0, 0.0, 0.0)})
+    CHECK(box.side(p, box.closest(p)) < 0.0);
+  // Not oriented: open, faces wound both ways, a repeated vertex; side() then answers 0.
+  Mesh open = make_sphere(r, 2);
+  open.faces.pop_back();
+  Mesh mixed = make_sphere(r, 2);
+  std::swap(mixed.faces[3][1], mixed.faces[3][2]);
+  Mesh repeated = make_sphere(r, 2);
+  repeated.faces.push_back({0, 0, 1});
+  for (const Mesh* m : {&open, &mixed, &repeated}) {
+    const MeshIndex index(*m);
+    CHECK_FALSE(index.oriented());
+    CHECK(index.side(Vec3(0.2, 0, 0), index.closest(Vec3(0.2, 0, 0))) == 0.0);
+  }
+  CHECK(MeshIndex(flipped(make_sphere(r, 2))).oriented());   // consistent, if inward
 }
