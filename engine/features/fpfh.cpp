@@ -98,8 +98,9 @@ inline bool pair_bins(const Vec3& ps, const Vec3& ns, const Vec3& pt, const Vec3
 
 /// Step 1 for a source (s) and a batch of targets, written for the compiler to vectorize: each
 /// lane does pair_bins's arithmetic operation for operation (Eigen's 3-vector dot products and
-/// norms sum left to right, (x + y) + z; its cross product is the textbook formula), so the bins
-/// are pair_bins's bit for bit. A lane whose angle lies within the guard of a bin edge (or whose
+/// norms sum left to right, (x + y) + z, as Eigen 3.4 evaluates them with its SIMD path, the
+/// default; under EIGEN_DONT_VECTORIZE they associate the other way and a bin could differ; its
+/// cross product is the textbook formula), so the bins are pair_bins's bit for bit. A lane whose angle lies within the guard of a bin edge (or whose
 /// atan2 has no argument) is marked for pair_bins itself.
 struct PairBatch {
   static constexpr int kSize = 128;

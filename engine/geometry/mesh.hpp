@@ -76,7 +76,9 @@ class MeshIndex {
   std::vector<ShellVoxel> shell(double voxel, double radius) const;
 
   /// Whether the faces bound a solid consistently: every edge is used by exactly two faces, once
-  /// in each direction (no repeated vertex in a face). Then side() tells inside from outside.
+  /// in each direction (no repeated vertex in a face), and every connected part encloses a
+  /// positive volume (wound outward). Then side() tells inside from outside, except where closed
+  /// parts overlap (a face inside another part's solid): such meshes get wrong signs near it.
   bool oriented() const;
   /// Which side of an oriented() surface p lies on, from its closest point `c` (as closest(),
   /// closest_within() or shell() give it): > 0 outside, < 0 inside, 0 on the surface. The dot

@@ -317,8 +317,8 @@ TEST_CASE("MeshIndex handles empty meshes, bad rays and bad indices") {
 
 namespace {
 
-/// brute_distance, with a zero-area face taken as its three edges (brute_point_triangle needs a
-/// normal).
+/// brute_distance, with a face of (nearly) zero area taken as its three edges
+/// (brute_point_triangle needs a normal, and a collinear face's is rounding noise).
 double brute_distance_any(const Mesh& m, const Vec3& p) {
   const auto segment_distance = [](const Vec3& q, const Vec3& a, const Vec3& b) {
     return (b - a).squaredNorm() > 0.0 ? ::segment_distance(q, a, b) : (q - a).norm();
@@ -326,7 +326,7 @@ double brute_distance_any(const Mesh& m, const Vec3& p) {
   double best = kInf;
   for (int f = 0; f < static_cast<int>(m.faces.size()); ++f) {
     const Vec3 a = vtx(m, f, 0), b = vtx(m, f, 1), c = vtx(m, f, 2);
-    best = std::min(best, (b - a).cross(c - a).squaredNorm() > 0.0
+    best = std::min(best, (b - a).cross(c - a).norm() > 1e-10 * (b - a).norm() * (c - a).norm()
                               ? brute_point_triangle(p, a, b, c)
                               : std::min({segment_distance(p, a, b), segment_distance(p, b, c), segment_distance(p, c, a)}));
   }
@@ -345,15 +345,26 @@ TEST_CASE("MeshIndex shell: every lattice point within the radius, with closest(
   Mesh sliver;
   sliver.vertices = {{0, 0, 0}, {0.05, 0.01, -0.02}, {0.1, 0.02, -0.04}};   // collinear
   sliver.faces = {{0, 1, 2}};
+  // Collinear up to rounding: its cross product, (0, 0, -5.4e-20), is noise, so is its unit
+  // normal; a prefilter on that plane would skip points on the face (a review found this).
+  Mesh noisy;
+  {
+    const Vec3 a(0.03743966742580816, 0.004088340952724881, -0.049240247937363715);
+    const Vec3 b(-0.038525332369270575, -0.011190875444090989, 0.04842979907028282);
+    noisy.vertices = {a, b, a + 0.37 * (b - a)};
+    noisy.faces = {{0, 1, 2}};
+  }
   struct Case {
     std::string name;
     Mesh mesh;
     double voxel, radius;
   };
-  const Case cases[] = {{"sphere", make_sphere(0.03, 2), 0.002, 0.8660254037844386 * 0.002},
-                        {"torus", make_torus(0.03, 0.01, 24, 12), 0.0017, 0.004},
+  const Case cases[] = {{"sphere", make_sphere(0.03, 1), 0.002, 0.8660254037844386 * 0.002},
+                        {"torus", make_torus(0.03, 0.01, 16, 8), 0.0017, 0.004},
                         {"big triangle", big, 0.01, 0.009},
-                        {"collinear sliver", sliver, 0.003, 0.0026}};
+                        {"collinear sliver", sliver, 0.003, 0.0026},
+                        {"collinear up to rounding", noisy, 0.001, 0.0015},
+                        {"sphere, radius of 5 voxels", make_sphere(0.02, 1), 0.002, 0.01}};
   for (const auto& c : cases) {
     CAPTURE(c.name);
     const MeshIndex index(c.mesh);
@@ -455,5 +466,18 @@ TEST_CASE("MeshIndex side: the pseudonormal tells inside from outside, on faces,
     CHECK_FALSE(index.oriented());
     CHECK(index.side(Vec3(0.2, 0, 0), index.closest(Vec3(0.2, 0, 0))) == 0.0);
   }
-  CHECK(MeshIndex(flipped(make_sphere(r, 2))).oriented());   // consistent, if inward
+  // Every part must be wound outward: a sphere turned inward, alone or beside an outward one, is
+  // not oriented; two outward spheres are.
+  CHECK_FALSE(MeshIndex(flipped(make_sphere(r, 2))).oriented());
+  const auto two = [&](bool second_inward) {
+    Mesh m = make_sphere(r, 1);
+    Mesh other = make_sphere(0.02, 1, Vec3(0.2, 0.0, 0.0));
+    if (second_inward) other = flipped(other);
+    const int base = static_cast<int>(m.vertices.size());
+    m.vertices.insert(m.vertices.end(), other.vertices.begin(), other.vertices.end());
+    for (const auto& f : other.faces) m.faces.emplace_back(f[0] + base, f[1] + base, f[2] + base);
+    return m;
+  };
+  CHECK(MeshIndex(two(false)).oriented());
+  CHECK_FALSE(MeshIndex(two(true)).oriented());
 }
