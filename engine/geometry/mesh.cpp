@@ -154,13 +154,6 @@ inline void outward(const Vec3& lo, const Vec3& hi, float out_lo[3], float out_h
 struct Tri {
   Vec3 a, e1, e2;   ///< vertex a and edges b - a, c - a
   Vec3 normal;      ///< unit geometric normal as wound (zero for degenerate triangles)
-  /// `normal` where it bounds distances (the prefilters of closest_search and shell), zero for a
-  /// face so thin that its normal is mostly rounding (|e1 x e2| <= 1e-4 |e1| |e2|): for those
-  /// the exact test always runs, so the answer does not depend on the order faces are visited.
-  Vec3 plane;
-  /// Collinear up to rounding (|e1 x e2| <= 1e-10 |e1| |e2|): the face is its three edges, and
-  /// closest_on_triangle takes the nearest of them (Ericson's barycentric test divides by noise).
-  bool degenerate = false;
   int face;         ///< index into mesh.faces
 };
 
@@ -194,27 +187,6 @@ enum Region : int { kFace = 0, kVertexA, kVertexB, kVertexC, kEdgeAB, kEdgeBC, k
   };
   const Vec3& a = tri.a;
   const Vec3 b = a + tri.e1, c = a + tri.e2;
-  if (tri.degenerate) [[unlikely]] {   // the nearest point of the three edges (the first on ties)
-    const Vec3* ends[3][2] = {{&a, &b}, {&b, &c}, {&c, &a}};
-    constexpr int kEdge[3] = {kEdgeAB, kEdgeBC, kEdgeCA}, kFrom[3] = {kVertexA, kVertexB, kVertexC},
-                  kTo[3] = {kVertexB, kVertexC, kVertexA};
-    Vec3 best = a;
-    double best_d2 = std::numeric_limits<double>::infinity();
-    int best_region = kVertexA;
-    for (int k = 0; k < 3; ++k) {
-      const Vec3 d = *ends[k][1] - *ends[k][0];
-      const double len2 = d.squaredNorm();
-      const double t = len2 > 0.0 ? std::clamp((p - *ends[k][0]).dot(d) / len2, 0.0, 1.0) : 0.0;
-      const Vec3 q = t >= 1.0 ? *ends[k][1] : Vec3(*ends[k][0] + t * d);
-      const double d2 = (q - p).squaredNorm();
-      if (d2 < best_d2) {
-        best_d2 = d2;
-        best = q;
-        best_region = t <= 0.0 ? kFrom[k] : (t >= 1.0 ? kTo[k] : kEdge[k]);
-      }
-    }
-    return at(best_region, best);
-  }
   const Vec3& ab = tri.e1;
   const Vec3& ac = tri.e2;
   const Vec3 ap = p - a;
@@ -254,10 +226,7 @@ inline Tri make_tri(const Mesh& mesh, int f) {
   t.a = mesh.vertices[fc[0]];
   t.e1 = mesh.vertices[fc[1]] - t.a;
   t.e2 = mesh.vertices[fc[2]] - t.a;
-  const Vec3 c = t.e1.cross(t.e2);
-  t.normal = c.normalized();  // Eigen leaves a zero vector unchanged
-  t.plane = c.norm() > 1e-4 * t.e1.norm() * t.e2.norm() ? t.normal : Vec3::Zero();
-  t.degenerate = !(c.norm() > 1e-10 * t.e1.norm() * t.e2.norm());
+  t.normal = t.e1.cross(t.e2).normalized();  // Eigen leaves a zero vector unchanged
   t.face = f;
   return t;
 }
@@ -413,12 +382,7 @@ Pseudonormals make_pseudonormals(const Mesh& mesh) {
   }
   std::sort(uses.begin(), uses.end());
   pn.face.resize(n_faces);
-  // A face whose normal is rounding noise (|e1 x e2| <= 1e-10 |e1| |e2|: collinear vertices, up
-  // to rounding) is a segment, which the faces around it hold already: it adds nothing.
-  for (std::size_t f = 0; f < n_faces; ++f) {
-    const Tri t = make_tri(mesh, static_cast<int>(f));
-    pn.face[f] = t.e1.cross(t.e2).norm() > 1e-10 * t.e1.norm() * t.e2.norm() ? t.normal : Vec3::Zero();
-  }
+  for (std::size_t f = 0; f < n_faces; ++f) pn.face[f] = make_tri(mesh, static_cast<int>(f)).normal;
   pn.edge.assign(n_faces, {Vec3::Zero(), Vec3::Zero(), Vec3::Zero()});
   for (std::size_t u = 0; u < uses.size(); u += 2) {
     if (u + 1 >= uses.size() || uses[u + 1].key != uses[u].key || uses[u + 1].forward == uses[u].forward ||
@@ -786,7 +750,7 @@ void MeshIndex::Impl::closest_search(const Vec3& p, Best& best) const {
         // The distance to the triangle's plane bounds the distance from below: a triangle whose
         // plane is clearly farther than the best is skipped (the margin covers the rounding of
         // the two computations, so the answer is the one without the test).
-        const double h = tris[i].plane.dot(p - tris[i].a);
+        const double h = tris[i].normal.dot(p - tris[i].a);
         if (h * h > best.d2 * (1.0 + 1e-6) + 1e-24) continue;
         const Vec3 q = closest_on_triangle(p, tris[i]);
         const double d2 = (q - p).squaredNorm();
@@ -962,7 +926,7 @@ std::vector<ShellVoxel> MeshIndex::shell(double voxel, double radius) const {
             for (auto k = static_cast<std::int32_t>(l.z()); k <= static_cast<std::int32_t>(h.z()); ++k) {
               const Vec3 p = Vec3(i, j, k) * voxel;
               // The plane bounds the distance from below (closest_search's test and margin).
-              const double dh = tri.plane.dot(p - tri.a);
+              const double dh = tri.normal.dot(p - tri.a);
               if (dh * dh > r2 * (1.0 + 1e-6) + 1e-24) continue;
               const double d2 = (closest_on_triangle(p, tri) - p).squaredNorm();
               if (d2 <= r2) out.push_back({{i, j, k}, d2, f});
