@@ -100,16 +100,17 @@ inline bool pair_bins(const Vec3& ps, const Vec3& ns, const Vec3& pt, const Vec3
 /// lane does pair_bins's arithmetic operation for operation (Eigen's 3-vector dot products and
 /// norms sum left to right, (x + y) + z, as Eigen 3.4 evaluates them with its SIMD path, the
 /// default; under EIGEN_DONT_VECTORIZE they associate the other way and a bin could differ; its
-/// cross product is the textbook formula), so the bins are pair_bins's bit for bit. A lane whose angle lies within the guard of a bin edge (or whose
-/// atan2 has no argument) is marked for pair_bins itself.
+/// cross product is the textbook formula), so the bins are pair_bins's bit for bit. A lane whose
+/// angle lies within the guard of a bin edge (or whose atan2 has no argument) is marked for
+/// pair_bins itself.
 struct PairBatch {
   static constexpr int kSize = 128;
   int n = 0;
   std::uint32_t target[kSize];
   double px[kSize], py[kSize], pz[kSize], nx[kSize], ny[kSize], nz[kSize];   // targets
   std::int32_t b0[kSize], b1[kSize], b2[kSize];
-  std::int32_t state[kSize];     // kDegenerate, kOrderedOk, kTieOk, or kRedo
-  static constexpr std::int32_t kDegenerate = 0, kOrderedOk = 1, kTieOk = 2, kRedo = 3;
+  std::int32_t state[kSize];     // kDegenerate (no bins), kOk, or kRedo (pair_bins decides)
+  static constexpr std::int32_t kDegenerate = 0, kOk = 1, kRedo = 2;
   std::int32_t ordered[kSize];   // |a_s| != |a_t| (the same origin either way)
 };
 
@@ -158,8 +159,7 @@ void batch_bins(double psx, double psy, double psz, double nsx, double nsy, doub
     const bool ordered = (abs_s < abs_t) | (abs_t < abs_s);
     B.ordered[k] = ordered ? 1 : 0;
     const bool degenerate = (len == 0.0) | (vn == 0.0);
-    B.state[k] = degenerate ? PairBatch::kDegenerate
-                            : (redo ? PairBatch::kRedo : (ordered ? PairBatch::kOrderedOk : PairBatch::kTieOk));
+    B.state[k] = degenerate ? PairBatch::kDegenerate : (redo ? PairBatch::kRedo : PairBatch::kOk);
   }
 }
 
