@@ -39,6 +39,10 @@ struct Working {
   bool icp_converged = false;
 };
 
+/// The slot of the watched object's hypothesis at its true pose (diagnostics; above pose
+/// transfer's kTransferSlot + object).
+constexpr std::uint32_t kTruthSlot = 0xFFFFFFFFu;
+
 /// Fixed total order: weight descending, then older first, then slot.
 bool better(const Working& a, const Working& b) {
   if (a.eval.log_weight != b.eval.log_weight) return a.eval.log_weight > b.eval.log_weight;
@@ -72,6 +76,45 @@ void evaluate_each(const Scene& scene, const Database& db, const EvaluateSetting
     h.eval = evaluate(scene, geometry[h.cand.object], db.info(h.cand.object),
                       h.cand.T_scene_object, s);
   });
+}
+
+/// The answer of a step (index into `next`, sorted by `better`): the best hypothesis, unless
+/// the near-twin verification of the leading objects' best hypotheses re-decides a near tie.
+/// (Answering the object of largest posterior instead was measured and rejected: the weights are
+/// so flat that the posterior counts an object's hypotheses; 45 objects, 135 logs: 27 % right
+/// against 91 %.) `leaders` and `v`: the hypotheses V was computed for and their V.
+struct AnswerRule {
+  std::size_t chosen = 0;
+  std::vector<std::size_t> leaders;
+  std::vector<double> v;
+};
+
+AnswerRule answer_rule(const Scene& scene, const Database& db, const std::vector<Working>& next,
+                       const TwinSettings& twins) {
+  AnswerRule out;
+  std::vector<std::size_t> lead;  // first (best) hypothesis of each leading object, best first
+  for (std::size_t i = 0; i < next.size() && lead.size() < twins.rivals; ++i) {
+    if (!(next[i].eval.log_weight >= next.front().eval.log_weight - twins.max_gap)) break;
+    bool seen = false;
+    for (std::size_t j : lead) seen = seen || next[j].cand.object == next[i].cand.object;
+    if (!seen) lead.push_back(i);
+  }
+  if (twins.rivals > 1 && !scene.grasps.empty() && lead.size() > 1) {
+    std::vector<Working> leaders;
+    for (std::size_t i : lead) leaders.push_back(next[i]);
+    const GeometryPins geometry = pin(db, leaders);
+    std::vector<double> v(lead.size());
+    parallel_each(lead.size(), [&](std::size_t k) {
+      v[k] = twin_score(scene, geometry[leaders[k].cand.object], leaders[k].cand.T_scene_object, twins);
+    });
+    std::size_t best_k = 0;
+    for (std::size_t k = 1; k < v.size(); ++k)
+      if (v[k] < v[best_k]) best_k = k;
+    out.chosen = lead[best_k];
+    out.leaders = std::move(lead);
+    out.v = std::move(v);
+  }
+  return out;
 }
 
 /// The answer's fit in absolute terms (AnswerFit).
@@ -559,30 +602,37 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   if (total > 0.0)
     for (double& p : res.posteriors) p /= total;
 
-  // The answer: the best hypothesis, unless the near-twin verification of the leading
-  // objects' best hypotheses re-decides a near-tie. (Answering the object of largest posterior
-  // instead was measured and rejected: the weights are so flat that the posterior counts an
-  // object's hypotheses; 45 objects, 135 logs: 27 % right against 91 %.)
-  std::size_t chosen = 0;  // index into next of the answer
-  std::vector<std::size_t> lead;  // first (best) hypothesis of each leading object, best first
-  for (std::size_t i = 0; i < next.size() && lead.size() < s_.twins.rivals; ++i) {
-    if (!(next[i].eval.log_weight >= next.front().eval.log_weight - s_.twins.max_gap)) break;
-    bool seen = false;
-    for (std::size_t j : lead) seen = seen || next[j].cand.object == next[i].cand.object;
-    if (!seen) lead.push_back(i);
-  }
-  if (s_.twins.rivals > 1 && !scene.grasps.empty() && lead.size() > 1) {
-    std::vector<Working> leaders;
-    for (std::size_t i : lead) leaders.push_back(next[i]);
-    const GeometryPins geometry = pin(db_, leaders);
-    std::vector<double> v(lead.size());
-    parallel_each(lead.size(), [&](std::size_t k) {
-      v[k] = twin_score(scene, geometry[leaders[k].cand.object], leaders[k].cand.T_scene_object, s_.twins);
-    });
-    std::size_t best_k = 0;
-    for (std::size_t k = 1; k < v.size(); ++k)
-      if (v[k] < v[best_k]) best_k = k;
-    chosen = lead[best_k];
+  // The answer (answer_rule: the best hypothesis or the near-twin verification's choice).
+  const std::size_t chosen = answer_rule(scene, db_, next, s_.twins).chosen;  // index into next
+
+  // Diagnostics: the watched object at its true pose, through the same ICP, evaluation and
+  // answer rule (Funnel::truth_pose_*). Not timed with the step; changes nothing of it.
+  if (watching && watch_pose_) {
+    const auto t_diag = Clock::now();
+    Funnel& f = *res.watched;
+    std::vector<Working> truth(1);
+    truth[0].cand.object = *watch_;
+    truth[0].cand.T_scene_object = scene.to_scene(*watch_pose_);
+    truth[0].cand.slot = kTruthSlot;
+    truth[0].born = step_;
+    refine_all(scene, db_, s_.icp, truth);
+    evaluate_each(scene, db_, ev, truth);
+    std::vector<Working> all = next;
+    all.push_back(truth[0]);
+    std::stable_sort(all.begin(), all.end(), better);
+    const AnswerRule rule = answer_rule(scene, db_, all, s_.twins);
+    f.truth_pose_evaluated = true;
+    f.truth_pose_wins = all[rule.chosen].cand.object == *watch_;
+    f.truth_pose_log_weight = truth[0].eval.log_weight;
+    if (!next.empty()) f.answer_log_weight = next[chosen].eval.log_weight;
+    for (std::size_t k = 0; k < rule.leaders.size(); ++k) {
+      const Working& h = all[rule.leaders[k]];
+      if (h.cand.object == *watch_)   // its leading hypothesis: this one or a better of its own
+        f.truth_pose_twin_score = rule.v[k];
+      else
+        f.rival_twin_score = std::min(f.rival_twin_score, rule.v[k]);
+    }
+    f.truth_pose_s = seconds_since(t_diag);
   }
 
   // The new state in world coordinates; the best hypothesis and the posterior per object.

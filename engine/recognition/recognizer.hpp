@@ -24,6 +24,7 @@
 #include "engine/recognition/sparse_hypotheses.hpp"
 #include "engine/recognition/twins.hpp"
 
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string_view>
@@ -124,6 +125,22 @@ struct Funnel {
   std::size_t transfer_rank = 0;  ///< its rank (1 = best) in pose transfer's screening at the
                                   ///< leader's pose; 0: not screened or no fit
   std::size_t hypotheses = 0;     ///< its hypotheses in the state after the step
+  /// At its true pose (Recognizer::watch with a pose; diagnostics): the watched object's
+  /// hypothesis made from the true pose, refined by the step's ICP and evaluated by its Eq. 6,
+  /// then put beside the state through the step's answer rule (the best ln wt, near ties
+  /// re-decided by the near-twin score V). `truth_pose_wins`: the rule would name the watched
+  /// object (the answer a perfect search could give with this evidence and this rule);
+  /// otherwise the evidence favours another object even against the true pose.
+  bool truth_pose_evaluated = false;
+  bool truth_pose_wins = false;
+  double truth_pose_log_weight = -std::numeric_limits<double>::infinity();  ///< its ln wt
+  double answer_log_weight = -std::numeric_limits<double>::infinity();      ///< the answer's
+  /// V (twins.hpp) of the watched object's leading hypothesis (this one, or a better one of its
+  /// own in the state) and the lowest of the other leading objects' when the rule compared them
+  /// (+inf: not compared)
+  double truth_pose_twin_score = std::numeric_limits<double>::infinity();
+  double rival_twin_score = std::numeric_limits<double>::infinity();  ///< lowest V of the others
+  double truth_pose_s = 0.0;      ///< time it took (not in the step's stage times)
 };
 
 /// How well the answer (the best hypothesis) explains all the evidence in absolute terms: its
@@ -199,7 +216,12 @@ class Recognizer {
   /// while held (ShapePrior::shared): a caller that runs many recognizers on one database holds
   /// it, so that it is built once (4 500 objects: about 4 s), not once per recognizer.
   static std::shared_ptr<const ShapePrior> shape_prior(const Database& db, const RecognizerSettings& settings);
-  void watch(std::optional<std::uint32_t> object) { watch_ = object; }
+  /// With `T_world_object`, the object's true pose, each step also evaluates the object there
+  /// (Funnel::truth_pose_*; an ICP and an evaluation more per step, not in the stage times).
+  void watch(std::optional<std::uint32_t> object, std::optional<Pose> T_world_object = std::nullopt) {
+    watch_ = object;
+    watch_pose_ = object ? T_world_object : std::nullopt;
+  }
   int steps_done() const { return step_; }
   const std::vector<Hypothesis>& hypotheses() const { return state_; }
   const RecognizerSettings& settings() const { return s_; }
@@ -212,6 +234,7 @@ class Recognizer {
   int step_ = 0;
   std::vector<Hypothesis> state_;   ///< S_t, world poses, best first
   std::optional<std::uint32_t> watch_;
+  std::optional<Pose> watch_pose_;
   std::shared_ptr<const ShapePrior> prior_;  ///< when the shape prior acts (large databases)
   std::unique_ptr<SparseTables> sparse_;  ///< built when the sparse source first runs
 };

@@ -185,8 +185,64 @@ J summary_json(const J& per_step, const std::vector<const io::RunRecord*>& runs)
   return s;
 }
 
+/// diagnostics.truth_pose (the store's truth_pose.* values): per step, the runs where the true
+/// object at its true pose would be named by the step's answer rule (what a perfect search could
+/// answer with this evidence and rule), and the misses split into those the search lost (the
+/// truth at its pose would have won) and those the evidence lost (another object beats even the
+/// true pose). Null when the store has no such values.
+J truth_pose_json(const io::RunStoreHeader& h, const std::vector<const io::RunRecord*>& runs, bool clustered) {
+  const auto it = std::find(h.step_values.begin(), h.step_values.end(), "truth_pose.wins");
+  if (it == h.step_values.end()) return nullptr;
+  const auto col = static_cast<std::size_t>(it - h.step_values.begin());
+  J rows = J::array();
+  std::size_t evaluated_any = 0;
+  for (int k = 0; k < h.steps; ++k) {
+    std::size_t n = 0, wins = 0, right = 0, search = 0, evidence = 0;
+    std::map<int, ClusterCounts> by_object;
+    for (const io::RunRecord* r : runs) {
+      if (static_cast<std::size_t>(k) >= r->steps.size()) continue;
+      const io::RunStepRecord& s = r->steps[static_cast<std::size_t>(k)];
+      if (col >= s.values.size() || std::isnan(s.values[col])) continue;   // not evaluated
+      const bool w = s.values[col] == 1.0;
+      ++n;
+      wins += w ? 1 : 0;
+      right += s.correct ? 1 : 0;
+      if (!s.correct) (w ? search : evidence) += 1;
+      ClusterCounts& c = by_object[r->object];
+      ++c.trials;
+      c.successes += w ? 1 : 0;
+    }
+    evaluated_any += n;
+    J row;
+    row["step"] = k + 1;
+    row["runs"] = n;
+    row["correct"] = right;
+    row["truth_pose_wins"] = wins;
+    row["truth_pose_rate"] = n ? J(double(wins) / double(n)) : J(nullptr);
+    if (n) {
+      const Interval i = wilson_interval(wins, n);
+      row["truth_pose_rate_ci95"] = J::array({i.lo, i.hi});
+    } else {
+      row["truth_pose_rate_ci95"] = nullptr;
+    }
+    if (clustered && n) {
+      std::vector<ClusterCounts> c;
+      for (const auto& [object, counts] : by_object) c.push_back(counts);
+      const Interval i = cluster_bootstrap_interval(c);
+      row["truth_pose_rate_cluster_ci95"] = J::array({i.lo, i.hi});
+    } else {
+      row["truth_pose_rate_cluster_ci95"] = nullptr;
+    }
+    row["misses_lost_by_search"] = search;
+    row["misses_lost_by_evidence"] = evidence;
+    rows.push_back(row);
+  }
+  if (evaluated_any == 0) return nullptr;
+  return rows;
+}
+
 struct VariantJson {
-  J per_step, per_object, summary, confidence, open_set;
+  J per_step, per_object, summary, confidence, open_set, truth_pose;
 };
 
 
@@ -405,6 +461,7 @@ VariantJson variant_json(const io::RunStoreContents& store, int variant, const R
   v.per_step = per_step_json(h, all, h.steps, bounds, classes, objects.size() > 1);
   v.summary = summary_json(v.per_step, all);
   v.confidence = confidence_json(h, all, settings);
+  v.truth_pose = truth_pose_json(h, all, objects.size() > 1);
   v.per_object = J::array();
   for (std::size_t o = 0; o < h.objects.size(); ++o) {
     if (by_object[o].empty()) continue;
@@ -486,7 +543,7 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
     bool any = false;
     for (const auto& r : store.runs) any = any || r.variant == static_cast<int>(v);
     if (!any) {
-      vj.push_back({J::array(), J::array(), nullptr, nullptr, nullptr});
+      vj.push_back({J::array(), J::array(), nullptr, nullptr, nullptr, nullptr});
       continue;
     }
     vj.push_back(variant_json(store, static_cast<int>(v), settings));
@@ -496,6 +553,7 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
   out["summary"] = vj.empty() ? J(nullptr) : vj[0].summary;
   out["confidence"] = vj.empty() ? J(nullptr) : vj[0].confidence;
   out["open_set"] = vj.empty() ? J(nullptr) : vj[0].open_set;
+  out["truth_pose"] = vj.empty() ? J(nullptr) : vj[0].truth_pose;
 
   if (variants > 1) {
     J list = J::array();
@@ -508,6 +566,7 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
       item["summary"] = vj[v].summary;
       item["per_step"] = vj[v].per_step;
       item["per_object"] = vj[v].per_object;
+      item["truth_pose"] = vj[v].truth_pose;
       list.push_back(item);
       const J& s = vj[v].summary;
       if (s.is_null() || s["time_s_per_step_mean"].is_null()) continue;
@@ -649,6 +708,30 @@ void print_open_set(const J& report, std::ostream& out) {
   }
 }
 
+void print_truth_pose(const J& rows, const std::string& label, std::ostream& out) {
+  if (!rows.is_array()) return;
+  out << "\nThe true object at its true pose" << label
+      << " (diagnostics.truth_pose): would the step's answer rule name it? (the rate a perfect "
+         "search reaches with this evidence and rule); the misses lost by the search (it would) "
+         "and by the evidence (another object beats even the true pose)\n"
+         "  step  runs  right (%)  at the true pose (%)  Wilson (%)  obj-boot (%)  misses: search  evidence\n";
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const J& r = rows[i];
+    const int step = r["step"].get<int>();
+    if (!(step == 1 || step == 5 || step % 10 == 0 || i + 1 == rows.size())) continue;
+    const std::size_t n = r["runs"].get<std::size_t>();
+    auto range = [](const J& v) {
+      return v.is_array() ? pct(v[0]) + "-" + pct(v[1]) : std::string("-");
+    };
+    out << "  " << std::setw(4) << step << "  " << std::setw(4) << n << "  " << std::setw(9)
+        << (n ? fmt(J(r["correct"].get<double>() / double(n)), 100, 1) : std::string("-")) << "  "
+        << std::setw(19) << fmt(r["truth_pose_rate"], 100, 1) << "  " << std::setw(10)
+        << range(r["truth_pose_rate_ci95"]) << "  " << std::setw(12) << range(r["truth_pose_rate_cluster_ci95"])
+        << "  " << std::setw(14) << r["misses_lost_by_search"].get<std::size_t>() << "  " << std::setw(8)
+        << r["misses_lost_by_evidence"].get<std::size_t>() << "\n";
+  }
+}
+
 void print_confidence(const J& report, std::ostream& out) {
   const J& c = report.value("confidence", J(nullptr));
   if (!c.is_object()) {
@@ -723,6 +806,7 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
     print_intervals(report, out);
     print_confidence(report, out);
     print_open_set(report, out);
+    print_truth_pose(report.value("truth_pose", J(nullptr)), "", out);
     out << "\nPer object:\n";
     print_objects(report["per_object"], out);
     return;
@@ -758,6 +842,8 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
   }
   out << "  pareto: R = on the front of recognition rate vs time per step, E = of position error "
          "vs time per step\n";
+  for (const auto& v : report["variants"])
+    print_truth_pose(v.value("truth_pose", J(nullptr)), ", variant " + v["label"].get<std::string>(), out);
 }
 
 std::filesystem::path plot_script() {

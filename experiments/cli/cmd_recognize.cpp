@@ -71,6 +71,7 @@ struct RecognizeOptions {
   bool inside_margin = false;        ///< --free-inside-margin given (unset: 0; a probe: 1 cm)
   int suggest = 0;                   ///< --suggest N: the N best next grasps after the last step
   ActiveSettings active;             ///< the next-grasp planner's parameters (active.*)
+  bool truth_pose = false;           ///< diagnostics.truth_pose: the truth_funnel's truth_pose_*
   std::string scene;                 ///< --scene DIR: pictures of chosen steps (experiments/analysis/scene.hpp)
   std::vector<int> scene_steps;      ///< --scene-steps (empty: the last step)
   int exploration = 0;               ///< exploration.strategy (recorded; experiments act on it)
@@ -235,7 +236,8 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
   // A probe's path: free by the ball radius only, unless the flags say otherwise (log_steps.hpp).
   const RecognizerSettings rs = log ? experiments::log_settings(c.rs, *log, o.inside_margin) : c.rs;
   Recognizer rec(db, rs);
-  if (truth_object) rec.watch(static_cast<std::uint32_t>(*truth_object));   // the JSON's truth_funnel
+  if (truth_object)   // the JSON's truth_funnel (with --diagnostics.truth-pose and a true pose: truth_pose_*)
+    rec.watch(static_cast<std::uint32_t>(*truth_object), c.o.truth_pose ? run.truth_pose : std::nullopt);
   const SymmetryGroup* sym = nullptr;
   if (truth_object && run.truth_pose) sym = &c.symmetries.get(db, *truth_object);
 
@@ -432,6 +434,14 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
                             {"transfer_rank", f.transfer_rank}, {"prior_rank", f.prior_rank}, {"screen_score", f.screen_score},
                             {"screen_cut", f.screen_cut}, {"screen_rank", f.screen_rank},
                             {"hypotheses", f.hypotheses}};
+      if (f.truth_pose_evaluated) {
+        auto& t = st["truth_funnel"];
+        t["truth_pose_wins"] = f.truth_pose_wins;
+        t["truth_pose_log_weight"] = number_or_null(f.truth_pose_log_weight);
+        t["answer_log_weight"] = number_or_null(f.answer_log_weight);
+        t["truth_pose_twin_score"] = number_or_null(f.truth_pose_twin_score);
+        t["rival_twin_score"] = number_or_null(f.rival_twin_score);
+      }
     }
     st["geometry_loads"] = r.geometry_loads;
     st["geometry_resident"] = r.geometry_resident;
@@ -796,6 +806,7 @@ void register_recognize(CLI::App& app) {
     o->contact_voxel = m.contact_voxel;
     o->active = m.active;
     o->exploration = m.exploration;
+    o->truth_pose = m.truth_pose;
     o->inside_margin = o->flags.given.count("evaluate.free_inside_margin_m") > 0;
     if (o->logs.empty() && o->clouds.empty())
       throw CLI::RequiredError("--log or --cloud");

@@ -285,6 +285,11 @@ std::vector<Parameter> declaration() {
   d.push_back(real("active.coverage_radius_m", "m", 1e-4, 100, "",
                    "Active touch: distance from the contacts so far at which an aim counts as new ground",
                    {"active_coverage_radius"}, TS_FIELD(active.coverage_radius)));
+  d.push_back(boolean("diagnostics.truth_pose",
+                      "Diagnostics: each step also evaluates the true object at its true pose (ICP, Eq. 6, the "
+                      "answer rule): would a perfect search name it? (simulated runs and logs with a truth; "
+                      "changes no result)",
+                      {"truth_pose"}, TS_FIELD(truth_pose)));
   return d;
 }
 

@@ -48,6 +48,10 @@ struct MethodSettings {
   double contact_voxel = 0.002;   ///< m, voxel filter of the cumulative contact cloud
   int exploration = 0;            ///< 0: random grasps (the operator's), 1: active (the planner's)
   ActiveSettings active;          ///< the next-grasp planner (engine/touch/active_touch.hpp)
+  /// Diagnostics: with a known object and pose (simulated runs and logs), each step also
+  /// evaluates the true object at its true pose through the step's answer rule
+  /// (Recognizer::watch; the run store's truth_pose.* values, recognize's truth_funnel).
+  bool truth_pose = false;
 
   /// A preset's settings: "paper" (the paper's method exactly) or "improved" (Touchstone's
   /// extensions). Throws ts::Error on another name.

@@ -57,6 +57,7 @@ struct VariantData {
   double contact_voxel = 0.002;                ///< m, voxel filter of the cumulative contacts
   bool active = false;                         ///< exploration.strategy = active
   ActiveSettings planner;                      ///< the next-grasp planner's settings
+  bool truth_pose = false;                     ///< diagnostics.truth_pose
 };
 
 std::size_t index_of(const std::vector<std::string>& names, const std::string& name) {
@@ -127,6 +128,8 @@ class RecognitionEngine final : public RunEngine {
       d.contact_voxel = ms.contact_voxel;
       d.active = ms.exploration == 1;
       d.planner = ms.active;
+      d.truth_pose = ms.truth_pose;
+      truth_pose_ = truth_pose_ || d.truth_pose;
       if (d.active && d.simulation.sensing == Sensing::probe)
         throw Error("active exploration plans grasps of a gripper with pads, not probe touches", {},
                     "exploration.strategy");
@@ -166,6 +169,9 @@ class RecognitionEngine final : public RunEngine {
     header_.database_objects = names;
     header_.stages = recognition_stages();
     header_.step_values = recognition_step_values();
+    if (truth_pose_)
+      header_.step_values.insert(header_.step_values.end(), truth_pose_step_values().begin(),
+                                 truth_pose_step_values().end());
   }
 
   const io::RunStoreHeader& header() const override { return header_; }
@@ -286,6 +292,7 @@ class RecognitionEngine final : public RunEngine {
     }
     rs.seed = Rng(config_.seed, kRecognizerStream, name_hash(name), static_cast<std::uint64_t>(task.run)).next();
     Recognizer recognizer(*group.database, rs.ransac.feature_table ? nullptr : group.index_for(rs.index), rs);
+    if (v.truth_pose && !hidden) recognizer.watch(local_true, rec.truth);
     ExplorationSettings es;  // as `touchstone recognize`: B from the database's largest object
     es.contact_voxel = v.contact_voxel;
     es.free.res_free = rs.evaluate.res_free;
@@ -345,7 +352,8 @@ class RecognitionEngine final : public RunEngine {
       const double fusion_s = seconds_since(t0);
       const auto t1 = Clock::now();
       const StepResult sr = recognizer.step(contacts, free.points, grasps);
-      const double recognize_s = seconds_since(t1);
+      double recognize_s = seconds_since(t1);
+      if (sr.watched) recognize_s = std::max(0.0, recognize_s - sr.watched->truth_pose_s);
 
       io::RunStepRecord s;
       s.hypotheses = static_cast<std::int32_t>(sr.hypotheses.size());
@@ -373,6 +381,15 @@ class RecognitionEngine final : public RunEngine {
       s.values = {calibration_ ? calibration_->object_confidence(features) : nan,
                   calibration_ ? calibration_->pose_confidence(features) : nan};
       s.values.insert(s.values.end(), features.begin(), features.end());
+      if (truth_pose_) {
+        const std::optional<Funnel>& f = sr.watched;
+        if (f && f->truth_pose_evaluated) {
+          s.values.insert(s.values.end(), {f->truth_pose_wins ? 1.0 : 0.0, f->truth_pose_log_weight,
+                                           f->answer_log_weight, f->truth_pose_twin_score, f->rival_twin_score});
+        } else {
+          s.values.insert(s.values.end(), truth_pose_step_values().size(), nan);
+        }
+      }
       const PoseError e = pose_error(s.pose, rec.truth, &model.symmetry);
       s.position_error_m = e.position_m;
       s.orientation_error_rad = e.orientation_deg * std::numbers::pi / 180.0;
@@ -398,6 +415,7 @@ class RecognitionEngine final : public RunEngine {
   std::vector<std::size_t> explored_file_;
   std::vector<DatabaseGroup> groups_;
   std::vector<VariantData> variants_;
+  bool truth_pose_ = false;                    ///< some variant sets diagnostics.truth_pose
   std::vector<std::string> labels_, configs_;
   io::RunStoreHeader header_;
   std::map<std::pair<std::string, int>, TactileLog> pools_;   // simulated by prepare()
@@ -470,6 +488,13 @@ const std::vector<std::string>& recognition_step_values() {
     for (const std::string& f : confidence_feature_names()) n.push_back("feature." + f);
     return n;
   }();
+  return names;
+}
+
+const std::vector<std::string>& truth_pose_step_values() {
+  static const std::vector<std::string> names{"truth_pose.wins", "truth_pose.log_weight",
+                                              "truth_pose.answer_log_weight", "truth_pose.twin_score",
+                                              "truth_pose.rival_twin_score"};
   return names;
 }
 

@@ -391,3 +391,47 @@ TEST_CASE("Recognition engine: active exploration plans each grasp after the fir
   const auto parallel = run_all(*engine, c, dir / "parallel.h5", 2, true);
   check_same_results(serial, parallel);
 }
+
+TEST_CASE("Recognition engine: diagnostics.truth_pose records the truth at its pose and changes no result") {
+  test::TempDir dir("engine");
+  ExperimentConfig c = small_config();
+  set_key(c, "steps", {"4"});
+  auto plain = make_recognition_engine(c, small_database(), 1);
+  const auto a = run_all(*plain, c, dir / "plain.h5", 1, true);
+  ExperimentConfig d = c;
+  set_key(d, "diagnostics.truth_pose", {"true"});
+  auto diag = make_recognition_engine(d, small_database(), 1);
+  const auto& names = diag->header().step_values;
+  REQUIRE(names.size() == recognition_step_values().size() + truth_pose_step_values().size());
+  CHECK(std::equal(truth_pose_step_values().begin(), truth_pose_step_values().end(),
+                   names.end() - static_cast<std::ptrdiff_t>(truth_pose_step_values().size())));
+  const auto b = run_all(*diag, d, dir / "diag.h5", 2, false);
+  check_same_results(a, b);
+  const std::size_t at = recognition_step_values().size();   // truth_pose.wins
+  std::size_t steps = 0, named = 0, compared = 0;
+  for (const auto& r : b)
+    for (const auto& s : r.steps) {
+      if (s.contacts == 0) continue;
+      ++steps;
+      REQUIRE(s.values.size() == names.size());
+      const double wins = s.values[at], truth_lw = s.values[at + 1], answer_lw = s.values[at + 2];
+      CHECK((wins == 0.0 || wins == 1.0));
+      CHECK(std::isfinite(truth_lw));
+      if (s.best_object < 0) continue;
+      CHECK(answer_lw == doctest::Approx(std::log(s.weight)).epsilon(1e-9));
+      // Right answers stand also against the true pose. Where the near-twin verification
+      // compared the truth with other leaders, the lower V wins; elsewhere the better ln wt.
+      const double truth_v = s.values[at + 3], rival_v = s.values[at + 4];
+      if (s.correct) CHECK(wins == 1.0);
+      if (std::isfinite(truth_v) && std::isfinite(rival_v)) {
+        ++compared;
+        if (truth_v != rival_v) CHECK((wins == 1.0) == (truth_v < rival_v));
+      } else if (!s.correct) {
+        CHECK((wins == 1.0) == (truth_lw > answer_lw));
+      }
+      named += s.correct ? 1 : 0;
+    }
+  CHECK(steps > 0);
+  CHECK(named > 0);
+  CHECK(compared > 0);   // the improved preset's verification ran
+}
