@@ -225,6 +225,12 @@ std::vector<Parameter> declaration() {
                       {"--twins-refine", "twins_refine"}, TS_FIELD(recognizer.twins.refine)));
   d.push_back(real("twins.max_gap", "", 0, kInf, "", "Near-twin verification: ln wt gap within which objects compete",
                    {"--twins-max-gap", "twins_max_gap"}, TS_FIELD(recognizer.twins.max_gap)));
+  d.push_back(real("twins.offset_sigma_m", "m", 1e-6, 1, "",
+                   "Near-twin verification: prior sigma of a grasp's offset (the arm's pose error, per axis)",
+                   {"twins_offset_sigma"}, TS_FIELD(recognizer.twins.offset_sigma)));
+  d.push_back(real("twins.contact_sigma_m", "m", 1e-6, 1, "",
+                   "Near-twin verification: contact noise of its likelihood (residuals clamped at 3 sigma)",
+                   {"twins_contact_sigma"}, TS_FIELD(recognizer.twins.contact_sigma)));
   d.push_back(any_database(
       integer("twins.transfer", 0, 100000, "",
               "Extension: the leading pose is also tried on this many look-alike objects (0: off)",
