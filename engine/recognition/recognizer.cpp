@@ -429,7 +429,9 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
         }
         const std::size_t last = std::min(s_.shortlist.objects, sl.ranked.size());
         if (last > 0) f.screen_cut = sl.best[sl.ranked[last - 1]];
-        t0 += Clock::now() - t_diag;
+        const auto spent = Clock::now() - t_diag;
+        t0 += spent;
+        f.diagnostic_s += std::chrono::duration<double>(spent).count();
       }
       std::erase_if(cands, [&](const Candidate& c) { return !sl.mask[c.object]; });
       for (std::uint32_t o = 0; o < sl.mask.size(); ++o)
@@ -605,8 +607,9 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   // The answer (answer_rule: the best hypothesis or the near-twin verification's choice).
   const std::size_t chosen = answer_rule(scene, db_, next, s_.twins).chosen;  // index into next
 
-  // Diagnostics: the watched object at its true pose, through the same ICP, evaluation and
-  // answer rule (Funnel::truth_pose_*). Not timed with the step; changes nothing of it.
+  // Diagnostics: the watched object at its true pose, through the step's ICP (none for
+  // batch-ransac), evaluation and answer rule (Funnel::truth_pose_*). Not in the step's times;
+  // changes none of its hypotheses, weights or answer.
   if (watching && watch_pose_) {
     const auto t_diag = Clock::now();
     Funnel& f = *res.watched;
@@ -615,14 +618,16 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
     truth[0].cand.T_scene_object = scene.to_scene(*watch_pose_);
     truth[0].cand.slot = kTruthSlot;
     truth[0].born = step_;
-    refine_all(scene, db_, s_.icp, truth);
-    evaluate_each(scene, db_, ev, truth);
+    const bool refined = s_.method != Method::batch_ransac;   // the state's hypotheses' footing
+    if (refined) refine_all(scene, db_, s_.icp, truth);
+    evaluate_each(scene, db_, refined ? ev : ev_raw, truth);
     std::vector<Working> all = next;
     all.push_back(truth[0]);
     std::stable_sort(all.begin(), all.end(), better);
     const AnswerRule rule = answer_rule(scene, db_, all, s_.twins);
     f.truth_pose_evaluated = true;
-    f.truth_pose_wins = all[rule.chosen].cand.object == *watch_;
+    f.truth_pose_wins = all[rule.chosen].cand.object == *watch_ ||
+                        (!next.empty() && next[chosen].cand.object == *watch_);
     f.truth_pose_log_weight = truth[0].eval.log_weight;
     if (!next.empty()) f.answer_log_weight = next[chosen].eval.log_weight;
     for (std::size_t k = 0; k < rule.leaders.size(); ++k) {
@@ -633,6 +638,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
         f.rival_twin_score = std::min(f.rival_twin_score, rule.v[k]);
     }
     f.truth_pose_s = seconds_since(t_diag);
+    f.diagnostic_s += f.truth_pose_s;
   }
 
   // The new state in world coordinates; the best hypothesis and the posterior per object.
@@ -662,7 +668,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   db_.trim();  // nothing of this step is pinned any more
   res.geometry_loads = db_.geometry_loads();
   res.geometry_resident = db_.geometry_resident();
-  res.times.total_s = seconds_since(t_start);
+  res.times.total_s = seconds_since(t_start) - (res.watched ? res.watched->diagnostic_s : 0.0);
   return res;
 }
 

@@ -126,11 +126,13 @@ struct Funnel {
                                   ///< leader's pose; 0: not screened or no fit
   std::size_t hypotheses = 0;     ///< its hypotheses in the state after the step
   /// At its true pose (Recognizer::watch with a pose; diagnostics): the watched object's
-  /// hypothesis made from the true pose, refined by the step's ICP and evaluated by its Eq. 6,
+  /// hypothesis made from the true pose, refined by the step's ICP and evaluated by its Eq. 6
+  /// (as the state's hypotheses are: batch-ransac neither refines nor takes the grasp offsets),
   /// then put beside the state through the step's answer rule (the best ln wt, near ties
-  /// re-decided by the near-twin score V). `truth_pose_wins`: the rule would name the watched
-  /// object (the answer a perfect search could give with this evidence and this rule);
-  /// otherwise the evidence favours another object even against the true pose.
+  /// re-decided by the near-twin score V). `truth_pose_wins`: the step named the watched object,
+  /// or the rule would with this hypothesis added (the answer a perfect search could give with
+  /// this evidence and this rule); otherwise the evidence favours another object even against
+  /// the true pose.
   bool truth_pose_evaluated = false;
   bool truth_pose_wins = false;
   double truth_pose_log_weight = -std::numeric_limits<double>::infinity();  ///< its ln wt
@@ -140,7 +142,11 @@ struct Funnel {
   /// (+inf: not compared)
   double truth_pose_twin_score = std::numeric_limits<double>::infinity();
   double rival_twin_score = std::numeric_limits<double>::infinity();  ///< lowest V of the others
-  double truth_pose_s = 0.0;      ///< time it took (not in the step's stage times)
+  double truth_pose_s = 0.0;      ///< time it took
+  /// Time of all the watch's diagnostics (the shortlist's full screening, the true pose): not
+  /// in the step's stage times or its total_s. Watching changes no hypothesis, weight or
+  /// answer; the geometry counters and the cache's eviction order may differ.
+  double diagnostic_s = 0.0;
 };
 
 /// How well the answer (the best hypothesis) explains all the evidence in absolute terms: its

@@ -389,7 +389,9 @@ TEST_CASE("The watched object at its true pose: the answer rule's verdict, and n
   // search found (within ICP's convergence), the ball at the wedge's pose far worse.
   REQUIRE(b.back().best.object == wedge);
   CHECK(b.back().watched->truth_pose_wins);
-  CHECK(b.back().watched->truth_pose_log_weight > b.back().best.log_weight - 0.01);
+  CAPTURE(b.back().watched->truth_pose_log_weight);
+  CAPTURE(b.back().best.log_weight);
+  CHECK(b.back().watched->truth_pose_log_weight > b.back().best.log_weight - 1e-5);   // good fits: about -1e-6
   CHECK_FALSE(c.back().watched->truth_pose_wins);
   CHECK(c.back().watched->truth_pose_log_weight < c.back().best.log_weight - 1e-4);
   // A pose turned by 90 degrees is no true pose: ICP from it stays short of the answer's weight
@@ -446,7 +448,7 @@ TEST_CASE("The true pose against a stretched twin under the near-twin verificati
       REQUIRE(f.truth_pose_evaluated);
       if (std::isfinite(f.truth_pose_twin_score) && std::isfinite(f.rival_twin_score)) {
         ++compared;   // the rule compared V: the lower wins (exact ties go to the better ln wt)
-        if (f.truth_pose_twin_score != f.rival_twin_score)
+        if (f.truth_pose_twin_score != f.rival_twin_score && r.best.object != watched)
           CHECK(f.truth_pose_wins == (f.truth_pose_twin_score < f.rival_twin_score));
       }
       if (k == 8) {
@@ -454,6 +456,12 @@ TEST_CASE("The true pose against a stretched twin under the near-twin verificati
         // shows Eq. 6 cannot); the twin at the box's pose loses to the box.
         CHECK(f.truth_pose_wins == (name == "box"));
         CHECK(r.best.object == db.find("box"));
+        // Both compared by V: the box at its true pose explains the contacts better than the
+        // longer box does at its best (measured 15.5 against 44.4), and the reverse.
+        REQUIRE(std::isfinite(f.truth_pose_twin_score));
+        REQUIRE(std::isfinite(f.rival_twin_score));
+        if (name == "box") CHECK(f.truth_pose_twin_score < f.rival_twin_score - 5.0);
+        else CHECK(f.truth_pose_twin_score > f.rival_twin_score + 5.0);
       }
     }
     CHECK(compared > 0);

@@ -407,6 +407,16 @@ TEST_CASE("Recognition engine: diagnostics.truth_pose records the truth at its p
                    names.end() - static_cast<std::ptrdiff_t>(truth_pose_step_values().size())));
   const auto b = run_all(*diag, d, dir / "diag.h5", 2, false);
   check_same_results(a, b);
+  // The diagnostic's own values: the same for 1 and 2 threads, bit for bit (NaN as NaN).
+  const auto b1 = run_all(*diag, d, dir / "diag1.h5", 1, false);
+  REQUIRE(b1.size() == b.size());
+  for (std::size_t i = 0; i < b.size(); ++i)
+    for (std::size_t k = 0; k < b[i].steps.size(); ++k) {
+      const auto &x = b[i].steps[k].values, &y = b1[i].steps[k].values;
+      REQUIRE(x.size() == y.size());
+      for (std::size_t j = 0; j < x.size(); ++j)
+        CHECK(((std::isnan(x[j]) && std::isnan(y[j])) || x[j] == y[j]));
+    }
   const std::size_t at = recognition_step_values().size();   // truth_pose.wins
   std::size_t steps = 0, named = 0, compared = 0;
   for (const auto& r : b)
@@ -419,13 +429,14 @@ TEST_CASE("Recognition engine: diagnostics.truth_pose records the truth at its p
       CHECK(std::isfinite(truth_lw));
       if (s.best_object < 0) continue;
       CHECK(answer_lw == doctest::Approx(std::log(s.weight)).epsilon(1e-9));
-      // Right answers stand also against the true pose. Where the near-twin verification
-      // compared the truth with other leaders, the lower V wins; elsewhere the better ln wt.
+      // A right answer counts as a win (Funnel::truth_pose_wins). Where the near-twin
+      // verification compared the truth with other leaders, the lower V wins; elsewhere the
+      // better ln wt.
       const double truth_v = s.values[at + 3], rival_v = s.values[at + 4];
       if (s.correct) CHECK(wins == 1.0);
       if (std::isfinite(truth_v) && std::isfinite(rival_v)) {
         ++compared;
-        if (truth_v != rival_v) CHECK((wins == 1.0) == (truth_v < rival_v));
+        if (!s.correct && truth_v != rival_v) CHECK((wins == 1.0) == (truth_v < rival_v));
       } else if (!s.correct) {
         CHECK((wins == 1.0) == (truth_lw > answer_lw));
       }
