@@ -660,11 +660,28 @@ void print_classes(const J& report, std::ostream& out) {
     out << "  congruent classes of the database: not known (the class rate is the strict one)\n";
     return;
   }
+  // A large database has hundreds of classes: beyond 10, only those of the explored objects are
+  // listed (the class-aware rate counts with them), the rest are in the JSON.
+  constexpr std::size_t kListed = 10;
+  std::set<std::string> explored;
+  if (report.contains("store") && report["store"].contains("objects"))
+    for (const auto& o : report["store"]["objects"]) explored.insert(o.get<std::string>());
+  std::size_t objects = 0;
+  for (const auto& cls : c) objects += cls.size();
+  const bool all = c.size() <= kListed;
   out << "  congruent classes of the database: " << (c.empty() ? "none" : "");
+  if (!all)
+    out << c.size() << " classes of " << objects << " objects (all in the JSON's congruent_classes); "
+        << "those of the explored objects: ";
+  std::size_t shown = 0;
   for (std::size_t k = 0; k < c.size(); ++k) {
-    out << (k ? "; " : "");
+    bool relevant = all;
+    for (const auto& name : c[k]) relevant = relevant || explored.count(name.get<std::string>()) > 0;
+    if (!relevant) continue;
+    out << (shown++ ? "; " : "");
     for (std::size_t i = 0; i < c[k].size(); ++i) out << (i ? " = " : "") << c[k][i].get<std::string>();
   }
+  if (!all && shown == 0) out << "none";
   out << "\n";
 }
 

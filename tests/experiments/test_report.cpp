@@ -157,6 +157,18 @@ TEST_CASE("Report: class-aware rates count an answer congruent with the true obj
   std::ostringstream text;
   print_report(j, text);
   CHECK(text.str().find("congruent classes of the database: sphere = bunny") != std::string::npos);
+  // A large database's classes: beyond 10, only those of the explored objects are printed.
+  nlohmann::ordered_json many = nlohmann::ordered_json::array();
+  for (int k = 0; k < 11; ++k) many.push_back({"nut_" + std::to_string(2 * k), "nut_" + std::to_string(2 * k + 1)});
+  many.push_back({"sphere", "bunny", "ball"});
+  nlohmann::ordered_json big = j;
+  big["congruent_classes"] = many;
+  std::ostringstream large;
+  print_report(big, large);
+  INFO(large.str());
+  CHECK(large.str().find("12 classes of 25 objects") != std::string::npos);
+  CHECK(large.str().find("sphere = bunny = ball") != std::string::npos);   // an explored object's
+  CHECK(large.str().find("nut_0 = nut_1") == std::string::npos);           // none explored
 }
 
 TEST_CASE("Report: recognition rates get a cluster bootstrap over objects and say what each interval assumes") {
