@@ -142,7 +142,6 @@ struct Funnel {
   /// (+inf: not compared)
   double truth_pose_twin_score = std::numeric_limits<double>::infinity();
   double rival_twin_score = std::numeric_limits<double>::infinity();  ///< lowest V of the others
-  double truth_pose_s = 0.0;      ///< time it took
   /// Time of all the watch's diagnostics (the shortlist's full screening, the true pose): not
   /// in the step's stage times or its total_s. Watching changes no hypothesis, weight or
   /// answer; the geometry counters and the cache's eviction order may differ.
