@@ -52,7 +52,8 @@ const std::vector<std::string>& recognition_step_values();
 
 /// The per-step values that follow those when a variant sets diagnostics.truth_pose: the true
 /// object at its true pose through the step's answer rule (Funnel::truth_pose_*):
-/// "truth_pose.wins" (1: the rule would name it, 0: another object beats it), "truth_pose.log_weight"
+/// "truth_pose.wins" (1: the step named it or the rule would with it added, 0: another object
+/// beats it even there; Funnel::truth_pose_wins), "truth_pose.log_weight"
 /// and "truth_pose.answer_log_weight" (ln wt of it and of the step's answer), "truth_pose.twin_score"
 /// and "truth_pose.rival_twin_score" (V of it and the lowest of the other leaders', +inf when the
 /// rule did not compare them); NaN in runs without it (the variant's off, or the object hidden).

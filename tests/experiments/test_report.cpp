@@ -5,6 +5,8 @@
 
 #include <doctest/doctest.h>
 
+#include <limits>
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -371,4 +373,47 @@ TEST_CASE("Report: open set, false accepts of hidden objects and the known objec
   // Without a threshold there is no open-set section.
   cal.open_set_threshold.reset();
   CHECK(report_json(c, rs)["open_set"].is_null());
+}
+
+TEST_CASE("Report: the truth at its true pose per step, and the misses split into search and evidence") {
+  io::RunStoreContents c = synthetic();  // step k: runs r < k right (1, 2, 3 of 4 per object)
+  auto& h = c.header;
+  h.step_values = {"truth_pose.wins", "truth_pose.log_weight", "truth_pose.answer_log_weight",
+                   "truth_pose.twin_score", "truth_pose.rival_twin_score"};
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (auto& r : c.runs)
+    for (std::size_t k = 0; k < r.steps.size(); ++k) {
+      auto& s = r.steps[k];
+      // Right steps win; of the wrong ones, run 3 would win at its true pose (lost by the search),
+      // the others not (lost by the evidence); step 1 of the cube's run 0 was not evaluated.
+      const bool wins = s.correct || r.run == 3;
+      s.values = {wins ? 1.0 : 0.0, -1e-6, -1e-6, 10.0, 20.0};
+      if (k == 0 && r.object == 0 && r.run == 0) s.values[0] = nan;
+    }
+  const auto j = report_json(c, {});
+  const auto& rows = j["truth_pose"];
+  REQUIRE(rows.is_array());
+  REQUIRE(rows.size() == 3);
+  // Step 1: 7 evaluated (runs 0 right, except the unevaluated cube run 0), wrong: runs 1-3.
+  CHECK(rows[0]["runs"] == 7);
+  CHECK(rows[0]["correct"] == 1);
+  CHECK(rows[0]["truth_pose_wins"] == 3);                 // the sphere's run 0, both runs 3
+  CHECK(rows[0]["misses_lost_by_search"] == 2);           // runs 3
+  CHECK(rows[0]["misses_lost_by_evidence"] == 4);         // runs 1, 2 of both objects
+  // Step 3: runs 0-2 right, run 3 wrong but would win: no evidence loss.
+  CHECK(rows[2]["runs"] == 8);
+  CHECK(rows[2]["truth_pose_wins"] == 8);
+  CHECK(rows[2]["misses_lost_by_search"] == 2);
+  CHECK(rows[2]["misses_lost_by_evidence"] == 0);
+  CHECK(rows[1]["truth_pose_rate"].get<double>() == doctest::Approx(6.0 / 8));
+  REQUIRE(rows[1]["truth_pose_rate_ci95"].is_array());
+  CHECK(rows[1]["truth_pose_rate_ci95"][0].get<double>() < 0.75);
+  CHECK(rows[1]["truth_pose_rate_ci95"][1].get<double>() > 0.75);
+  CHECK(rows[1]["truth_pose_rate_cluster_ci95"].is_array());   // two objects
+  std::ostringstream text;
+  print_report(j, text);
+  CHECK(text.str().find("The true object at its true pose") != std::string::npos);
+  // A store without the columns has no such section.
+  const auto plain = report_json(synthetic(), {});
+  CHECK(plain["truth_pose"].is_null());
 }
