@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -94,14 +95,31 @@ struct PointCloud {
 struct GraspGroups {
   std::vector<Vec3> points;
   std::vector<std::uint32_t> first{0};  ///< grasps() + 1 offsets into points
+  /// Per grasp, points its hand held free at the end of the grasp (hand_surface_samples), in
+  /// the frame of `points`: grasp g's are free[free_first[g]] .. free[free_first[g + 1] - 1]
+  /// (none when unknown). They share the grasp's arm pose error with its contacts.
+  std::vector<Vec3> free;
+  std::vector<std::uint32_t> free_first{0};  ///< grasps() + 1 offsets into free
+  /// Per grasp, the point its arm pose error turns about (the measured end effector's origin),
+  /// or empty when unknown (then no grasp's error is modelled as a rotation).
+  std::vector<Vec3> pivots;
 
   std::size_t grasps() const { return first.empty() ? 0 : first.size() - 1; }
   bool empty() const { return points.empty(); }
-  /// Append one grasp's points.
-  void add(const std::vector<Vec3>& grasp) {
+  /// Append one grasp's points (and the points its hand held free, if known).
+  void add(const std::vector<Vec3>& grasp, const std::vector<Vec3>& grasp_free = {},
+           const std::optional<Vec3>& pivot = std::nullopt) {
     if (first.empty()) first.push_back(0);
+    if (free_first.empty()) free_first.push_back(0);
     points.insert(points.end(), grasp.begin(), grasp.end());
     first.push_back(static_cast<std::uint32_t>(points.size()));
+    free.insert(free.end(), grasp_free.begin(), grasp_free.end());
+    free_first.push_back(static_cast<std::uint32_t>(free.size()));
+    // Pivots are all or nothing: a grasp without one drops them all.
+    if (pivot && pivots.size() + 1 == grasps())
+      pivots.push_back(*pivot);
+    else
+      pivots.clear();
   }
 };
 

@@ -222,12 +222,19 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
 
 void set_grasps(Scene& scene, const GraspGroups& in) {
   scene.grasps = GraspGroups{};
-  std::vector<Vec3> g;
+  std::vector<Vec3> g, f;
+  const bool has_free = in.free_first.size() == in.first.size();
   for (std::size_t k = 0; k < in.grasps(); ++k) {
     g.clear();
+    f.clear();
     for (std::uint32_t i = in.first[k]; i < in.first[k + 1] && i < in.points.size(); ++i)
       if (finite(in.points[i])) g.push_back(in.points[i] - scene.origin);
-    if (!g.empty()) scene.grasps.add(g);
+    if (has_free)
+      for (std::uint32_t i = in.free_first[k]; i < in.free_first[k + 1] && i < in.free.size(); ++i)
+        if (finite(in.free[i])) f.push_back(in.free[i] - scene.origin);
+    std::optional<Vec3> pivot;
+    if (in.pivots.size() == in.grasps() && finite(in.pivots[k])) pivot = in.pivots[k] - scene.origin;
+    if (!g.empty()) scene.grasps.add(g, f, pivot);
   }
 }
 

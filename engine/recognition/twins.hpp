@@ -9,7 +9,11 @@
 // pose error, a Gaussian prior of offset_sigma per axis), each shifted contact's distance d to
 // the surface is Gaussian (contact_sigma), clamped at three sigmas (outliers):
 //     V = sum_g |t_g|^2 / offset_sigma^2 + sum_i min(d_i^2, (3 contact_sigma)^2) / contact_sigma^2
-// (-2 ln likelihood up to a constant; lower is better). A variant must pay for its shape
+// (-2 ln likelihood up to a constant; lower is better). With `free_sigma`, V also weighs what
+// each grasp's hand held free at its end (its links' faces, shifted by the same t_g): a sample
+// at depth x inside the object adds min(x, 3 free_sigma)^2 / free_sigma^2. The fingers closed
+// onto the true object and stopped at its surface, so a larger look-alike, whose offsets put
+// the contacts on its surface, has them inside it. A variant must pay for its shape
 // difference either in larger offsets or in residuals, the original does not. The best
 // hypothesis of each of the `rivals` leading objects (by weight) whose ln wt is within
 // `max_gap` of the best is scored, and the one with the lowest V is the answer of the step.
@@ -30,6 +34,15 @@ struct TwinSettings {
   double max_gap = 0.005;           ///< only objects within this of the best ln wt compete
   double contact_sigma = 0.001;     ///< m, contact noise of the likelihood
   double offset_sigma = 0.003;      ///< m, per-grasp arm offset prior (per axis)
+  /// Free-space term (0: off): each grasp's hand surfaces (GraspGroups::free), shifted by the
+  /// grasp's offset, must lie outside the object; a sample at depth x inside costs
+  /// min(x, 3 free_sigma)^2 / free_sigma^2. Needs a signed field (closed objects).
+  double free_sigma = 0.0;          ///< m
+  /// Rotations in the offsets (0: translations only): each grasp's arm error also turns its
+  /// contacts and hand samples about its pivot (the measured end effector, GraspGroups::pivots),
+  /// with a Gaussian prior of this many degrees per axis. A pad or a finger a hand's length
+  /// from the wrist moves by millimetres under a 1 degree error, which no translation takes out.
+  double rotation_sigma = 0.0;      ///< deg
   std::size_t fit_points = 64;      ///< contacts per grasp in the offset fit
   int iterations = 5;               ///< Gauss-Newton iterations of the offset fit
   /// Pose refinement under V: alternate a Gauss-Newton step of the pose on the shifted

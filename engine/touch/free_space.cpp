@@ -300,6 +300,49 @@ std::vector<Vec3> OccupancyGrid::full_free_cloud(const Eigen::AlignedBox3d& box,
   return out;
 }
 
+std::vector<Vec3> hand_surface_samples(const Gripper& gripper, const Pose& T_world_eef,
+                                       const std::vector<double>& joints, double spacing,
+                                       const FreeSpaceSettings& settings) {
+  if (static_cast<int>(joints.size()) != gripper.joint_count())
+    throw Error("joint count does not match the gripper", {}, "joints");
+  if (!(spacing > 0.0)) throw Error("hand sample spacing must be positive", {}, "spacing");
+  // Evenly spaced values from lo to hi inclusive, at most `spacing` apart.
+  auto ticks = [spacing](double lo, double hi) {
+    const int n = std::max(1, static_cast<int>(std::ceil((hi - lo) / spacing)));
+    std::vector<double> v(static_cast<std::size_t>(n) + 1);
+    for (int i = 0; i <= n; ++i) v[static_cast<std::size_t>(i)] = lo + (hi - lo) * i / n;
+    return v;
+  };
+  std::vector<Vec3> out;
+  const std::vector<Pose> links = gripper.link_poses(joints);
+  for (int j = 0; j < gripper.joint_count(); ++j) {
+    const LinkSpec& l = gripper.link(j);
+    const Pose T = T_world_eef * links[static_cast<std::size_t>(j)];
+    const Vec3 lo(-0.5 * l.thickness, -0.5 * l.width, 0.0), hi(0.5 * l.thickness, 0.5 * l.width, l.length);
+    // The six faces: for each axis a, its two faces sampled over the other two axes.
+    for (int a = 0; a < 3; ++a) {
+      const int b = (a + 1) % 3, c = (a + 2) % 3;
+      const auto tb = ticks(lo[b], hi[b]), tc = ticks(lo[c], hi[c]);
+      for (double side : {lo[a], hi[a]})
+        for (double u : tb)
+          for (double v : tc) {
+            Vec3 p;
+            p[a] = side;
+            p[b] = u;
+            p[c] = v;
+            out.push_back(T * p);
+          }
+    }
+  }
+  const auto& palm = gripper.spec().palm;
+  if (settings.palm && palm.radius > 0 && palm.thickness > 0) {
+    for (double x : ticks(-palm.radius, palm.radius))
+      for (double y : ticks(-palm.radius, palm.radius))
+        if (x * x + y * y <= palm.radius * palm.radius) out.push_back(T_world_eef * Vec3(x, y, 0.0));
+  }
+  return out;
+}
+
 void mark_swept_volume(OccupancyGrid& grid, const Gripper& gripper, const Pose& T_world_eef,
                        const std::vector<double>& joints, const FreeSpaceSettings& settings) {
   if (static_cast<int>(joints.size()) != gripper.joint_count())

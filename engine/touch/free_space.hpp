@@ -86,6 +86,15 @@ class OccupancyGrid {
 void mark_swept_volume(OccupancyGrid& grid, const Gripper& gripper, const Pose& T_world_eef,
                        const std::vector<double>& joints, const FreeSpaceSettings& settings);
 
+/// Points the hand held free at the end of one grasp: samples, at most `spacing` apart, of the
+/// faces of its rigid link boxes at the final joint angles, and of the palm's front disc when
+/// settings.palm (world frame). They are nearer the object than anything the free-space cloud
+/// keeps (every link stopped at the object or at its limit) and share the grasp's arm pose error
+/// with its contacts: the near-twin verification shifts both by the grasp's offset.
+std::vector<Vec3> hand_surface_samples(const Gripper& gripper, const Pose& T_world_eef,
+                                       const std::vector<double>& joints, double spacing,
+                                       const FreeSpaceSettings& settings);
+
 /// Box B of Eq. 3 around the cumulative contacts: centred on their centroid, sides = their
 /// bounding-box size + 2 s_obj_max. Empty box when there are no contacts.
 Eigen::AlignedBox3d free_space_box(const std::vector<Vec3>& contacts, double s_obj_max);

@@ -176,7 +176,15 @@ void Exploration::advance_to(std::size_t k) {
     for (const Vec3& p : c.points) grid_.mark_occupied(p);
     raw_.insert(raw_.end(), c.points.begin(), c.points.end());
     per_grasp_.push_back(c.points.size());
-    groups_.add(voxel_filtered(c.points));  // a grasp's contacts never change: filtered once
+    // A grasp's contacts never change: filtered once. Its hand's final surfaces ride along.
+    if (log_.sensing == Sensing::probe)
+      groups_.add(voxel_filtered(c.points));
+    else
+      groups_.add(voxel_filtered(c.points),
+                  settings_.hand_free_spacing > 0.0
+                      ? hand_surface_samples(log_.gripper, r.arm_pose, r.joints, settings_.hand_free_spacing, settings_.free)
+                      : std::vector<Vec3>{},
+                  Vec3(r.arm_pose.translation()));
   }
 }
 

@@ -115,6 +115,8 @@ struct ExplorationSettings {
                                      ///< samples are free by the ball radius only, so the
                                      ///< evaluation should use d_thresh <= ball radius; the
                                      ///< last centimetre is left out against the arm noise
+  double hand_free_spacing = 0.01;   ///< m, spacing of the hand's final surfaces kept per grasp
+                                     ///< (GraspGroups::free; 0: none)
   ContactSettings contact;
   FreeSpaceSettings free;
 };

@@ -231,6 +231,12 @@ std::vector<Parameter> declaration() {
   d.push_back(real("twins.contact_sigma_m", "m", 1e-6, 1, "",
                    "Near-twin verification: contact noise of its likelihood (residuals clamped at 3 sigma)",
                    {"twins_contact_sigma"}, TS_FIELD(recognizer.twins.contact_sigma)));
+  d.push_back(real("twins.free_sigma_m", "m", 0, 1, "",
+                   "Near-twin verification: depth scale of its free-space term, the grasps' final hand surfaces inside the object (0: off)",
+                   {"twins_free_sigma"}, TS_FIELD(recognizer.twins.free_sigma)));
+  d.push_back(real("twins.rotation_sigma_deg", "deg", 0, 30, "",
+                   "Near-twin verification: prior sigma of a grasp's arm rotation error about its end effector, per axis (0: translations only)",
+                   {"twins_rotation_sigma"}, TS_FIELD(recognizer.twins.rotation_sigma)));
   d.push_back(any_database(
       integer("twins.transfer", 0, 100000, "",
               "Extension: the leading pose is also tried on this many look-alike objects (0: off)",

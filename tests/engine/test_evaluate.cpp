@@ -468,3 +468,149 @@ TEST_CASE("Near-twin verification: the box beats its 10 % stretched twin that Eq
   // No grasp groups: no verdict.
   CHECK(std::isinf(twin_score(make_scene({Vec3(0.04, 0, 0)}), box, Pose::Identity(), ts)));
 }
+
+TEST_CASE("Near-twin verification's free-space term: fingers that closed on the box are inside its larger twin") {
+  // Each grasp's pad touches the +x face; the opposite finger stopped 0.5 mm outside the -x
+  // face (its surface samples are the grasp's free points); both share the grasp's arm error.
+  // A twin 8 mm longer in x, at the pose that puts its +x face on the contacts, explains the
+  // contacts exactly as well as the box: only the fingers tell them apart, 7.5 mm inside it.
+  const Vec3 half(0.04, 0.03, 0.02);
+  const ObjectGeometry box = field_geometry(test::make_box(half, 4));
+  const ObjectGeometry longer = field_geometry(test::make_box(Vec3(0.044, 0.03, 0.02), 4));
+  const ObjectGeometry shorter = field_geometry(test::make_box(Vec3(0.036, 0.03, 0.02), 4));
+  Pose at_longer = Pose::Identity(), at_shorter = Pose::Identity();
+  at_longer.translation() = Vec3(-0.004, 0, 0);
+  at_shorter.translation() = Vec3(0.004, 0, 0);
+  Rng rng(3);
+  std::vector<Vec3> all;
+  GraspGroups groups;
+  std::vector<Vec3> arm_errors;
+  const int grasps = 8, finger_samples = 25;
+  for (int g = 0; g < grasps; ++g) {
+    const Vec3 t = 0.002 * Vec3(rng.normal(), rng.normal(), rng.normal());  // arm error
+    arm_errors.push_back(t);
+    const double y0 = 0.02 * rng.uniform(-1, 1), z0 = 0.01 * rng.uniform(-1, 1);
+    std::vector<Vec3> pts, free;
+    for (int i = -3; i <= 3; ++i)
+      for (int j = -3; j <= 3; ++j)
+        pts.push_back(Vec3(half.x(), y0 + 0.0015 * i, z0 + 0.0015 * j) + t +
+                      0.0003 * Vec3(rng.normal(), rng.normal(), rng.normal()));
+    for (int i = -2; i <= 2; ++i)
+      for (int j = -2; j <= 2; ++j) free.push_back(Vec3(-half.x() - 0.0005, y0 + 0.004 * i, z0 + 0.002 * j) + t);
+    all.insert(all.end(), pts.begin(), pts.end());
+    groups.add(pts, free);
+  }
+  Scene sc = make_scene(all);
+  sc.grasps = groups;
+  REQUIRE(sc.grasps.free.size() == static_cast<std::size_t>(grasps * finger_samples));
+  TwinSettings off;
+  off.rivals = 2;
+  TwinSettings on = off;
+  on.free_sigma = 0.002;
+  const double box_off = twin_score(sc, box, Pose::Identity(), off);
+  const double longer_off = twin_score(sc, longer, at_longer, off);
+  const double box_on = twin_score(sc, box, Pose::Identity(), on);
+  const double longer_on = twin_score(sc, longer, at_longer, on);
+  const double shorter_on = twin_score(sc, shorter, at_shorter, on);
+  CAPTURE(box_off);
+  CAPTURE(longer_off);
+  CAPTURE(box_on);
+  CAPTURE(longer_on);
+  CAPTURE(shorter_on);
+  // Without the term the two are the same to the contact noise (the same face under the contacts).
+  CHECK(std::abs(box_off - longer_off) < 1.0);
+  // With it the box pays nothing (its fingers are outside), the longer twin for every finger
+  // sample its depth inside (the nearest face), capped at 3 sigma: 9 for most, less near the y
+  // and z faces. The grasp's offset takes out the arm error along x (to about 0.05 mm); along
+  // y and z the face leaves it to the prior, which keeps it near zero.
+  double expected = 0.0;
+  const Vec3 longer_half(0.044, 0.03, 0.02);
+  for (std::size_t k = 0; k < sc.grasps.grasps(); ++k)
+    for (std::uint32_t i = sc.grasps.free_first[k]; i < sc.grasps.free_first[k + 1]; ++i) {
+      const Vec3 x = sc.grasps.free[i] - Vec3(arm_errors[k].x(), 0, 0) - at_longer.translation();
+      const double depth = (longer_half - x.cwiseAbs()).minCoeff();
+      if (depth > 0) expected += std::pow(std::min(depth, 0.006) / 0.002, 2);
+    }
+  CHECK(expected > 4.0 * grasps * finger_samples);   // most samples well inside
+  CHECK(box_on == doctest::Approx(box_off).epsilon(1e-9));
+  // The fit weighs the fingers too: it may move a grasp's offset to trade finger depth for
+  // contact residuals, which lowers that cost a little, never to the box's.
+  CHECK(longer_on - longer_off <= expected * 1.001);
+  CHECK(longer_on - longer_off >= 0.7 * expected);
+  // One-sided: a shorter twin leaves the fingers in free space, which costs it nothing here.
+  CHECK(shorter_on == doctest::Approx(twin_score(sc, shorter, at_shorter, off)).epsilon(1e-9));
+  // An unsigned field has no inside: no term.
+  ObjectGeometry unsigned_longer;
+  unsigned_longer.field = DistanceField::build(test::make_box(Vec3(0.044, 0.03, 0.02), 4), false, DistanceFieldSettings{});
+  CHECK(twin_score(sc, unsigned_longer, at_longer, on) == doctest::Approx(twin_score(sc, unsigned_longer, at_longer, off)).epsilon(1e-12));
+}
+
+TEST_CASE("Near-twin verification with rotations in the offsets: a 1.5 degree arm error about the wrist") {
+  // Grasps on the three faces around each corner of a box, their hands' far fingers 0.5 mm
+  // outside the three opposite faces; each grasp turned by its own arm rotation about its wrist
+  // (12 cm out along the corner's diagonal) and shifted by its translation. A translation
+  // cannot explain a turn that moves the far fingers by 2-3 mm against the contacts: the truth
+  // pays for its fingers inside itself. With rotations (prior 1 degree per axis) it comes back
+  // to the noise, and its twin 10 % longer in x still loses.
+  const Vec3 half(0.04, 0.03, 0.02);
+  const ObjectGeometry box = field_geometry(test::make_box(half, 4));
+  const ObjectGeometry twin = field_geometry(test::make_box(Vec3(0.044, 0.03, 0.02), 4));
+  for (std::uint64_t seed = 1; seed <= 3; ++seed) {
+    INFO("seed " << seed);
+    Rng rng(seed);
+    std::vector<Vec3> all;
+    GraspGroups groups;
+    for (int g = 0; g < 8; ++g) {
+      const Vec3 sign(g & 1 ? 1 : -1, g & 2 ? 1 : -1, g & 4 ? 1 : -1);
+      const Vec3 wrist = sign.cwiseProduct(half) + 0.12 * sign.normalized();
+      const Vec3 w = 1.5 * EIGEN_PI / 180.0 * Vec3(rng.normal(), rng.normal(), rng.normal()).normalized();
+      const Eigen::Matrix3d R = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
+      const Vec3 t = 0.002 * Vec3(rng.normal(), rng.normal(), rng.normal());
+      auto measured = [&](const Vec3& p) { return Vec3(R * (p - wrist) + wrist + t); };  // the arm's error
+      std::vector<Vec3> pts, free;
+      for (int face = 0; face < 3; ++face)
+        for (int i = 1; i <= 5; ++i)
+          for (int j = 1; j <= 5; ++j) {
+            const int a = (face + 1) % 3, b = (face + 2) % 3;
+            Vec3 p = sign.cwiseProduct(half);
+            p[a] -= sign[a] * 0.004 * i;
+            p[b] -= sign[b] * 0.004 * j;
+            pts.push_back(measured(p) + 0.0003 * Vec3(rng.normal(), rng.normal(), rng.normal()));
+            Vec3 f = -sign.cwiseProduct(half);   // the opposite corner's faces, 0.5 mm out
+            f[face] -= sign[face] * 0.0005;
+            f[a] += sign[a] * 0.004 * i;
+            f[b] += sign[b] * 0.004 * j;
+            free.push_back(measured(f));
+          }
+      all.insert(all.end(), pts.begin(), pts.end());
+      groups.add(pts, free, wrist + t);   // the pivot: the measured wrist
+    }
+    Scene sc = make_scene(all);
+    sc.grasps = groups;
+    REQUIRE(sc.grasps.pivots.size() == 8);
+    TwinSettings trans;
+    trans.rivals = 2;
+    trans.free_sigma = 0.002;
+    TwinSettings rot = trans;
+    rot.rotation_sigma = 1.0;
+    const double box_t = twin_score(sc, box, Pose::Identity(), trans);
+    const double box_r = twin_score(sc, box, Pose::Identity(), rot);
+    const double twin_r = twin_score(sc, twin, Pose::Identity(), rot);
+    CAPTURE(box_t);
+    CAPTURE(box_r);
+    CAPTURE(twin_r);
+    // The truth's V with rotations: 8 x 3 translation terms of (2/3)^2 (about 11), 8 rotation
+    // terms of 1.5^2 (18: the error is 1.5 degrees each), 600 residuals of (0.3/1)^2 (54);
+    // about 83 at most (the fit leaves the noise part of each term), and no finger inside.
+    // Without rotations the far fingers, 8-10 cm from the contacts, cost 20-25 more here.
+    CHECK(box_r < 100.0);
+    CHECK(box_t > box_r + 15.0);
+    CHECK(twin_r > box_r + 30.0);
+  }
+  // Pivots are all or nothing: a grasp added without one drops them.
+  GraspGroups mixed;
+  mixed.add({Vec3(0, 0, 0)}, {}, Vec3(1, 0, 0));
+  CHECK(mixed.pivots.size() == 1);
+  mixed.add({Vec3(0, 0, 1)});
+  CHECK(mixed.pivots.empty());
+}
