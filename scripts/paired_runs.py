@@ -4,14 +4,17 @@ and grasps (for example one database built with two descriptors, the same study 
 
     /usr/bin/python3 scripts/paired_runs.py rec_fpfh.h5 rec_spin.h5 [--steps 5,10,20]
     /usr/bin/python3 scripts/paired_runs.py s12.h5 s12.h5 --variant-a exploration.strategy=random \
-        --variant-b exploration.strategy=active --grasps-may-differ
+        --variant-b exploration.strategy=active --grasps-may-differ [--objects bunny,pipe,...]
 
 A store with a sweep holds several variants: --variant-a / --variant-b pick one by its label as
 `touchstone report` prints it (a store of one variant needs none). Active exploration chooses
 other grasps than the random runs it is paired with: --grasps-may-differ then checks the object
 pose and the first grasp only.
 
-Per step: runs right in both, in A only, in B only; McNemar's exact test on the discordant runs
+--objects restricts both to the named explored objects (a subset chosen beforehand, e.g. the
+worst of another study: choosing it on these runs would bias the comparison).
+
+Per step: the share right in A and in B, runs right in both, in A only, in B only; McNemar's exact test on the discordant runs
 (assumes every run independent: too optimistic when runs of one object share its geometry) and a
 sign test over the explored objects (how many objects gain, how many lose; assumes only the
 objects independent), and a 95 % bootstrap interval of the difference B - A in points that
@@ -83,11 +86,19 @@ def main():
                     help="pair on the object pose and the first grasp only (active exploration)")
     ap.add_argument("--resamples", type=int, default=2000, help="bootstrap resamples of the objects")
     ap.add_argument("--seed", type=int, default=1, help="seed of the bootstrap")
+    ap.add_argument("--objects", help="only these explored objects (comma-separated names)")
     o = ap.parse_args()
     if o.resamples < 1:
         sys.exit("paired_runs: error: --resamples must be at least 1")
     A, B = load(o.a, o.variant_a, o.grasps_may_differ), load(o.b, o.variant_b, o.grasps_may_differ)
     keys = sorted(set(A) & set(B))
+    if o.objects:
+        wanted = [x for x in o.objects.split(",") if x]
+        present = {k[0] for k in keys}
+        missing = [x for x in wanted if x not in present]
+        if missing:
+            sys.exit(f"paired_runs: error: --objects: {', '.join(missing)} not explored in both stores")
+        keys = [k for k in keys if k[0] in set(wanted)]
     if not keys:
         sys.exit("paired_runs: error: the stores share no (object, run)")
     for k in keys:
@@ -97,8 +108,8 @@ def main():
     n_steps = min(len(A[keys[0]][0]), len(B[keys[0]][0]))
     objects = sorted({k[0] for k in keys})
     print(f"{len(keys)} paired runs of {len(objects)} objects; A = {o.a}, B = {o.b}")
-    print("  step  both  A only  B only  McNemar p (runs indep.)  objects B better / worse  sign p (objects indep.)"
-          "  B - A, points (95 % bootstrap over objects)")
+    print("  step  A right  B right  both  A only  B only  McNemar p (runs indep.)  objects B better / worse"
+          "  sign p (objects indep.)  B - A, points (95 % bootstrap over objects)")
     for st in steps:
         if not 1 <= st <= n_steps:
             sys.exit(f"paired_runs: error: --steps: step {st} outside 1..{n_steps}")
@@ -120,7 +131,8 @@ def main():
             pick = rng.integers(0, len(objects), len(objects))
             boot.append(per_object[pick].sum() / runs_of[pick].sum())
         lo, hi = np.percentile(boot, [2.5, 97.5])
-        print(f"  {st:4d}  {both:4d}  {a_only:6d}  {b_only:6d}  {two_sided_binomial(b_only, a_only + b_only):23.2g}"
+        print(f"  {st:4d}  {100 * a.mean():6.1f}%  {100 * b.mean():6.1f}%  {both:4d}  {a_only:6d}  {b_only:6d}"
+              f"  {two_sided_binomial(b_only, a_only + b_only):23.2g}"
               f"  {better:12d} / {worse:<5d}      {two_sided_binomial(better, better + worse):.2g}"
               f"                 {100 * (b.mean() - a.mean()):+.1f} ({100 * lo:+.1f} to {100 * hi:+.1f})")
 

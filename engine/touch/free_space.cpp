@@ -318,21 +318,14 @@ std::vector<Vec3> hand_surface_samples(const Gripper& gripper, const Pose& T_wor
   for (int j = 0; j < gripper.joint_count(); ++j) {
     const LinkSpec& l = gripper.link(j);
     const Pose T = T_world_eef * links[static_cast<std::size_t>(j)];
-    const Vec3 lo(-0.5 * l.thickness, -0.5 * l.width, 0.0), hi(0.5 * l.thickness, 0.5 * l.width, l.length);
-    // The six faces: for each axis a, its two faces sampled over the other two axes.
-    for (int a = 0; a < 3; ++a) {
-      const int b = (a + 1) % 3, c = (a + 2) % 3;
-      const auto tb = ticks(lo[b], hi[b]), tc = ticks(lo[c], hi[c]);
-      for (double side : {lo[a], hi[a]})
-        for (double u : tb)
-          for (double v : tc) {
-            Vec3 p;
-            p[a] = side;
-            p[b] = u;
-            p[c] = v;
-            out.push_back(T * p);
-          }
-    }
+    // The faces that lead the closing: the inner face (x = -thickness / 2, the side that closes
+    // onto the object, under the pad) and the tip (z = length). They stop at the object; the
+    // outer face moves away from it, and the sides move along it.
+    for (double y : ticks(-0.5 * l.width, 0.5 * l.width))
+      for (double z : ticks(0.0, l.length)) out.push_back(T * Vec3(-0.5 * l.thickness, y, z));
+    for (double x : ticks(-0.5 * l.thickness, 0.5 * l.thickness))
+      for (double y : ticks(-0.5 * l.width, 0.5 * l.width))
+        if (x > -0.5 * l.thickness) out.push_back(T * Vec3(x, y, l.length));   // its inner edge is above
   }
   const auto& palm = gripper.spec().palm;
   if (settings.palm && palm.radius > 0 && palm.thickness > 0) {

@@ -87,8 +87,8 @@ void mark_swept_volume(OccupancyGrid& grid, const Gripper& gripper, const Pose& 
                        const std::vector<double>& joints, const FreeSpaceSettings& settings);
 
 /// Points the hand held free at the end of one grasp: samples, at most `spacing` apart, of the
-/// faces of its rigid link boxes at the final joint angles, and of the palm's front disc when
-/// settings.palm (world frame). They are nearer the object than anything the free-space cloud
+/// faces of its rigid link boxes that lead the closing (the inner face and the tip) at the final
+/// joint angles, and of the palm's front disc when settings.palm (world frame). They are nearer the object than anything the free-space cloud
 /// keeps (every link stopped at the object or at its limit) and share the grasp's arm pose error
 /// with its contacts: the near-twin verification shifts both by the grasp's offset.
 std::vector<Vec3> hand_surface_samples(const Gripper& gripper, const Pose& T_world_eef,

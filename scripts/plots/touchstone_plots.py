@@ -84,7 +84,14 @@ def subtitle(report):
     c = report["config"]
     st = report["store"]
     objects = len(st.get("objects", []))
-    text = (f"{c.get('method', '?')}, {c.get('noise', '?')} noise, {c.get('sensors', '?')} pad(s), "
+    # A key the sweep varies is named by the variants' labels, not the configuration's base value.
+    swept = c.get("sweep") or {}
+    noise = c.get("noise", "?") if len(swept.get("noise", [])) <= 1 else "swept"
+    if len(swept.get("noise", [])) == 1:
+        noise = swept["noise"][0]
+    method = c.get("method", "?") if "method" not in swept else "swept"
+    sensors = c.get("sensors", "?") if "sensors" not in swept else "swept"
+    text = (f"{method}, {noise} noise, {sensors} pad(s), "
             f"{objects} object{'s' if objects != 1 else ''}, {st.get('runs_done', 0)} runs")
     if not st.get("complete", True):
         text += f" (of {st.get('runs_planned', '?')})"

@@ -204,7 +204,7 @@ TEST_CASE("swept volume: the links along the closing path, no voxel elsewhere") 
   }
 }
 
-TEST_CASE("hand surface samples: on the final link boxes' faces and the palm's front disc, none missing") {
+TEST_CASE("hand surface samples: the final links' inner faces and tips and the palm's front disc, none missing") {
   Gripper g;
   Pose T_eef = Pose::Identity();
   T_eef.linear() = Eigen::AngleAxisd(0.7, Vec3(1, -2, 0.5).normalized()).toRotationMatrix();
@@ -214,32 +214,36 @@ TEST_CASE("hand surface samples: on the final link boxes' faces and the palm's f
   const double spacing = 0.01;
   const std::vector<Vec3> s = hand_surface_samples(g, T_eef, q, spacing, fs);
   const auto links = g.link_poses(q);
-  // Each sample lies on a face of some final link box (within 1e-9 m) or on the palm's disc.
+  // Each sample lies on the inner face or the tip of some final link box (within 1e-9 m), or on
+  // the palm's disc; none on an outer face or a side.
+  std::size_t palm = 0;
   auto on_hand = [&](const Vec3& p_world) {
     const Vec3 p = T_eef.inverse() * p_world;
-    if (std::abs(p.z()) < 1e-9 && p.head<2>().norm() <= g.spec().palm.radius + 1e-9) return true;
+    if (std::abs(p.z()) < 1e-9 && p.head<2>().norm() <= g.spec().palm.radius + 1e-9) {
+      ++palm;
+      return true;
+    }
     for (int j = 0; j < g.joint_count(); ++j) {
       const LinkSpec& l = g.link(j);
       const Vec3 x = links[j].inverse() * p;
       const Vec3 lo(-0.5 * l.thickness, -0.5 * l.width, 0), hi(0.5 * l.thickness, 0.5 * l.width, l.length);
       const bool inside = (x.array() >= lo.array() - 1e-9).all() && (x.array() <= hi.array() + 1e-9).all();
-      const bool on_face = ((x - lo).cwiseAbs().minCoeff() < 1e-9) || ((x - hi).cwiseAbs().minCoeff() < 1e-9);
-      if (inside && on_face) return true;
+      const bool leading = std::abs(x.x() - lo.x()) < 1e-9 || std::abs(x.z() - hi.z()) < 1e-9;
+      if (inside && leading) return true;
     }
     return false;
   };
   for (const Vec3& p : s) REQUIRE(on_hand(p));
-  // Coverage: every point of every face (a fine sampling) has a sample within spacing / sqrt(2).
+  CHECK(palm > 50);
+  // Coverage: every point of every inner face and tip (a fine sampling) has a sample within
+  // spacing / sqrt(2).
   std::size_t checked = 0;
   for (int j = 0; j < g.joint_count(); ++j) {
     const LinkSpec& l = g.link(j);
     for (int i = 0; i < 200; ++i) {
       const double u = (i % 13) / 12.0, v = (i % 17) / 16.0;
-      const int face = i % 6, a = face / 2;
-      Vec3 x;
-      if (a == 0) x = Vec3(face % 2 ? 0.5 * l.thickness : -0.5 * l.thickness, -0.5 * l.width + u * l.width, v * l.length);
-      if (a == 1) x = Vec3(-0.5 * l.thickness + u * l.thickness, face % 2 ? 0.5 * l.width : -0.5 * l.width, v * l.length);
-      if (a == 2) x = Vec3(-0.5 * l.thickness + u * l.thickness, -0.5 * l.width + v * l.width, face % 2 ? l.length : 0.0);
+      const Vec3 x = i % 2 ? Vec3(-0.5 * l.thickness, -0.5 * l.width + u * l.width, v * l.length)   // inner face
+                           : Vec3(-0.5 * l.thickness + u * l.thickness, -0.5 * l.width + v * l.width, l.length);  // tip
       const Vec3 p = T_eef * links[j] * x;
       double nearest = 1e9;
       for (const Vec3& q_s : s) nearest = std::min(nearest, (q_s - p).norm());
@@ -251,7 +255,7 @@ TEST_CASE("hand surface samples: on the final link boxes' faces and the palm's f
   // Without the palm, only link faces; a bad spacing or joint count is an error.
   FreeSpaceSettings no_palm = fs;
   no_palm.palm = false;
-  CHECK(hand_surface_samples(g, T_eef, q, spacing, no_palm).size() < s.size());
+  CHECK(hand_surface_samples(g, T_eef, q, spacing, no_palm).size() == s.size() - palm);
   CHECK_THROWS_AS(hand_surface_samples(g, T_eef, q, 0.0, fs), Error);
   CHECK_THROWS_AS(hand_surface_samples(g, T_eef, {0.1}, spacing, fs), Error);
 }
