@@ -268,6 +268,7 @@ RecognizerSettings RecognizerSettings::scaled(double f) const {
   s.shortlist.outlier_distance *= f;
   s.twins.contact_sigma *= f;
   s.twins.offset_sigma *= f;
+  s.twins.free_sigma *= f;
   s.prior.distance_bin *= f;
   s.prior.min_pair_distance *= f;
   s.sparse.distance_tolerance *= f;

@@ -56,9 +56,10 @@ Model model_of(const Scene& scene, const DistanceField& field, const Pose& T_so,
   m.pivot.resize(G.grasps());
   m.free.resize(G.grasps());
   const Pose T_os = T_so.inverse();
-  // Farther outside than this, no offset within its limits (3 sigma of translation and of
-  // rotation at the hand's size) and no refinement step brings a sample inside.
-  const double keep = 0.03 + 3.0 * s.offset_sigma;
+  // Farther outside than this, no offset within its limits (3 sigma of translation, and of
+  // rotation at a 25 cm lever, more than the hand's reach) and no refinement step brings a
+  // sample inside.
+  const double keep = 0.02 + 3.0 * s.offset_sigma + 3.0 * (s.rotation_sigma * std::numbers::pi / 180.0) * 0.25;
   std::vector<double> d;
   for (std::size_t k = 0; k < G.grasps(); ++k) {
     Vec3 c = Vec3::Zero();
@@ -96,7 +97,8 @@ TwinFit fit_all(const Scene& scene, const DistanceField& field, const Pose& T_so
       out.offsets[k].t = fit.offsets[k];
       prior += fit.offsets[k].squaredNorm();
     }
-    out.v = prior * inv_t + fit.clamped_sq_sum * inv_c;
+    // Written as before the new terms existed, so that the default V is the same to the bit.
+    out.v = prior / (s.offset_sigma * s.offset_sigma) + fit.clamped_sq_sum / (s.contact_sigma * s.contact_sigma);
     return out;
   }
   using Mat6 = Eigen::Matrix<double, 6, 6>;

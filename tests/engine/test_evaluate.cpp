@@ -606,6 +606,27 @@ TEST_CASE("Near-twin verification with rotations in the offsets: a 1.5 degree ar
     CHECK(box_r < 100.0);
     CHECK(box_t > box_r + 15.0);
     CHECK(twin_r > box_r + 30.0);
+    // The rotation prior is charged (in radians): a loose prior (10 degrees) lets the fit turn
+    // for free, so its V is lower by about the prior's share of the truth's V.
+    TwinSettings loose = rot;
+    loose.rotation_sigma = 10.0;
+    const double box_loose = twin_score(sc, box, Pose::Identity(), loose);
+    CAPTURE(box_loose);
+    CHECK(box_loose < box_r - 3.0);
+    // Refined under V with rotations (the pose and the translations together, the rotations
+    // refitted after each step), a hypothesis 1.5 mm and 1.5 degrees off comes back near the
+    // truth's V; unrefined it stays above it.
+    Pose off = Pose::Identity();
+    off.linear() = Eigen::AngleAxisd(1.5 * EIGEN_PI / 180.0, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+    off.translation() = Vec3(0.0015, -0.0008, 0.0005);
+    TwinSettings rot_refined = rot;
+    rot_refined.refine = 8;
+    const double off_r = twin_score(sc, box, off, rot);
+    const double off_refined = twin_score(sc, box, off, rot_refined);
+    CAPTURE(off_r);
+    CAPTURE(off_refined);
+    CHECK(off_r > box_r + 5.0);
+    CHECK(off_refined < box_r + 3.0);
   }
   // Pivots are all or nothing: a grasp added without one drops them.
   GraspGroups mixed;

@@ -1,6 +1,8 @@
 // Contact fusion (Eq. 1-2, Section 4.1.2) on hand-built logs: exact contact points, the
 // cumulative voxel-filtered cloud, incremental = batch, zero-contact grasps, far coordinates.
 #include "engine/geometry/cloud.hpp"
+#include "engine/recognition/scene.hpp"
+#include "engine/touch/free_space.hpp"
 #include "engine/touch/fusion.hpp"
 
 #include <doctest/doctest.h>
@@ -130,6 +132,36 @@ TEST_CASE("exploration: grasp groups hold each grasp's own voxel-filtered contac
   CHECK(base == ex.raw_contacts().size());
   CHECK(g.grasps() == exploration_clouds(log, 4, es).grasps.grasps());
   CHECK(g.points.size() < ex.raw_contacts().size());  // the filter merged something
+  // Each grasp also carries its hand's final leading faces and its measured wrist.
+  REQUIRE(g.free_first.size() == g.first.size());
+  REQUIRE(g.pivots.size() == 4);
+  for (std::size_t k = 0; k < 4; ++k) {
+    const GraspRecord& r = log.grasps[k];
+    const std::vector<Vec3> hand = hand_surface_samples(log.gripper, r.arm_pose, r.joints, es.hand_free_spacing, es.free);
+    CHECK(std::vector<Vec3>(g.free.begin() + g.free_first[k], g.free.begin() + g.free_first[k + 1]) == hand);
+    CHECK(g.pivots[k] == Vec3(r.arm_pose.translation()));
+  }
+  // In a scene's local frame: all three moved by its origin; a grasp without contacts dropped
+  // with its hand samples and pivot, the others kept in order.
+  GraspGroups with_empty;
+  for (std::size_t k = 0; k < 4; ++k) {
+    const std::vector<Vec3> pts(g.points.begin() + g.first[k], g.points.begin() + g.first[k + 1]);
+    const std::vector<Vec3> hand(g.free.begin() + g.free_first[k], g.free.begin() + g.free_first[k + 1]);
+    with_empty.add(k == 1 ? std::vector<Vec3>{} : pts, hand, g.pivots[k]);
+  }
+  Scene sc;
+  sc.origin = ex.origin();
+  set_grasps(sc, with_empty);
+  REQUIRE(sc.grasps.grasps() == 3);
+  REQUIRE(sc.grasps.pivots.size() == 3);
+  const std::size_t kept[3] = {0, 2, 3};
+  for (std::size_t i = 0; i < 3; ++i) {
+    const std::size_t k = kept[i];
+    CHECK((sc.grasps.pivots[i] - (g.pivots[k] - ex.origin())).norm() < 1e-9);
+    REQUIRE(sc.grasps.free_first[i + 1] - sc.grasps.free_first[i] == g.free_first[k + 1] - g.free_first[k]);
+    CHECK((sc.grasps.free[sc.grasps.free_first[i]] - (g.free[g.free_first[k]] - ex.origin())).norm() < 1e-9);
+    CHECK((sc.grasps.points[sc.grasps.first[i]] - (g.points[g.first[k]] - ex.origin())).norm() < 1e-9);
+  }
 }
 
 TEST_CASE("validate names the bad field") {
