@@ -401,6 +401,16 @@ TEST_CASE("Per-grasp offsets separate a sphere from a faceted look-alike that pl
                                           .epsilon(0.25).scale(0));   // within 25 %
 }
 
+namespace {
+/// A hypothesis 1.5 mm and 1.5 degrees from the identity, as ICP without the offsets leaves one.
+Pose slightly_off() {
+  Pose off = Pose::Identity();
+  off.linear() = Eigen::AngleAxisd(1.5 * EIGEN_PI / 180.0, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  off.translation() = Vec3(0.0015, -0.0008, 0.0005);
+  return off;
+}
+}  // namespace
+
 TEST_CASE("Near-twin verification: the box beats its 10 % stretched twin that Eq. 4 cannot tell apart") {
   const Vec3 half(0.04, 0.03, 0.02);
   const ObjectGeometry box = field_geometry(test::make_box(half, 4));
@@ -448,9 +458,7 @@ TEST_CASE("Near-twin verification: the box beats its 10 % stretched twin that Eq
     // offsets absorb most of it, not all (V above the truth's); refined under V (the pose and
     // the offsets together) it comes back to the truth's V, and the twin, refined the same
     // way, still loses.
-    Pose off = Pose::Identity();
-    off.linear() = Eigen::AngleAxisd(1.5 * EIGEN_PI / 180.0, Vec3(1, 2, 3).normalized()).toRotationMatrix();
-    off.translation() = Vec3(0.0015, -0.0008, 0.0005);
+    const Pose off = slightly_off();
     TwinSettings refined = ts;
     refined.refine = 8;
     const double v_off = twin_score(sc, box, off, ts);
@@ -616,9 +624,7 @@ TEST_CASE("Near-twin verification with rotations in the offsets: a 1.5 degree ar
     // Refined under V with rotations (the pose and the translations together, the rotations
     // refitted after each step), a hypothesis 1.5 mm and 1.5 degrees off comes back near the
     // truth's V; unrefined it stays above it.
-    Pose off = Pose::Identity();
-    off.linear() = Eigen::AngleAxisd(1.5 * EIGEN_PI / 180.0, Vec3(1, 2, 3).normalized()).toRotationMatrix();
-    off.translation() = Vec3(0.0015, -0.0008, 0.0005);
+    const Pose off = slightly_off();
     TwinSettings rot_refined = rot;
     rot_refined.refine = 8;
     const double off_r = twin_score(sc, box, off, rot);
