@@ -41,7 +41,7 @@ Eigen::Matrix3d rotation_of(const Vec3& w) {
 struct Model {
   bool rotate = false;
   bool legacy = true;                    // translation offsets by fit_grasp_offsets, no free term
-  std::vector<Vec3> pivot;               // per grasp
+  std::vector<Vec3> pivot;               // per grasp (zero without rotations)
   std::vector<std::vector<Vec3>> free;   // per grasp, the samples kept
 };
 
@@ -62,9 +62,7 @@ Model model_of(const Scene& scene, const DistanceField& field, const Pose& T_so,
   const double keep = 0.02 + 3.0 * s.offset_sigma + 3.0 * (s.rotation_sigma * std::numbers::pi / 180.0) * 0.25;
   std::vector<double> d;
   for (std::size_t k = 0; k < G.grasps(); ++k) {
-    Vec3 c = Vec3::Zero();
-    for (std::uint32_t i = G.first[k]; i < G.first[k + 1]; ++i) c += G.points[i];
-    m.pivot[k] = m.rotate ? G.pivots[k] : Vec3(c / static_cast<double>(G.first[k + 1] - G.first[k]));
+    m.pivot[k] = m.rotate ? G.pivots[k] : Vec3(Vec3::Zero());   // without rotations R = I: unused
     if (!use_free) continue;
     const std::size_t n = G.free_first[k + 1] - G.free_first[k];
     d.resize(n);
