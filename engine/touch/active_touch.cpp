@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <numbers>
@@ -87,6 +88,27 @@ GraspPlanner::GraspPlanner(Gripper gripper, ActiveSettings s) : gripper_(std::mo
   const double a = 0.5 * (sensor.rows - 1) * sensor.pitch_x, b = 0.5 * (sensor.cols - 1) * sensor.pitch_y;
   for (double x : {-a, 0.0, a})
     for (double y : {-b, 0.0, b}) pad_points_.emplace_back(x, y, sensor.foam_thickness);
+}
+
+std::vector<Hypothesis> with_leader(const std::vector<Hypothesis>& hypotheses, std::uint32_t object,
+                                    const Pose& pose, double share, double temperature) {
+  if (!(share > 0.0 && share < 1.0)) throw Error("a leader's share must lie in (0, 1)", {}, "share");
+  if (!(temperature > 0.0) || !std::isfinite(temperature)) throw Error("temperature must be > 0", {}, "temperature");
+  double top = -std::numeric_limits<double>::infinity();
+  for (const Hypothesis& h : hypotheses) top = std::max(top, h.log_weight);
+  double others = 0.0;   // the others' tempered weights, relative to the top
+  for (const Hypothesis& h : hypotheses)
+    if (std::isfinite(h.log_weight)) others += std::exp((h.log_weight - top) / temperature);
+  Hypothesis leader;
+  leader.object = object;
+  leader.pose = pose;
+  leader.log_weight = others > 0.0 ? top + temperature * std::log(share / (1.0 - share) * others) : 0.0;
+  leader.weight = std::exp(leader.log_weight);
+  std::vector<Hypothesis> out;
+  out.reserve(hypotheses.size() + 1);
+  out.push_back(leader);
+  out.insert(out.end(), hypotheses.begin(), hypotheses.end());
+  return out;
 }
 
 GraspPlanner::Selected GraspPlanner::select(const std::vector<Hypothesis>& hyps, const PlanObjects& objects) const {

@@ -105,6 +105,14 @@ struct PlannedGrasp {
                                     ///< + coverage_weight * coverage
 };
 
+/// `hypotheses` (best first) with one more put first: `object` at `pose`, weighted so that the
+/// planner (ln wt tempered by `temperature`, normalized over the hypotheses it selects, a subset)
+/// gives it at least the share `share` of the belief (0 < share < 1). Experiments use it with the
+/// true object and pose (diagnostics.oracle_belief): how a planner would do with a belief that
+/// holds the truth. Throws ts::Error on a share or temperature out of range.
+std::vector<Hypothesis> with_leader(const std::vector<Hypothesis>& hypotheses, std::uint32_t object,
+                                    const Pose& pose, double share, double temperature);
+
 /// What the planner reads of one object (object frame): its distance field, points of its
 /// surface with normals (aims), and the radius of a sphere about its origin that holds it.
 struct PlanObject {

@@ -807,6 +807,10 @@ void register_recognize(CLI::App& app) {
     o->active = m.active;
     o->exploration = m.exploration;
     o->truth_pose = m.truth_pose;
+    if (m.oracle_belief > 0)
+      throw CLI::ValidationError("--diagnostics.oracle-belief",
+                                 "is a diagnostic of simulated experiments (touchstone experiment), where the planner "
+                                 "executes its grasps; recognize only suggests them");
     o->inside_margin = o->flags.given.count("evaluate.free_inside_margin_m") > 0;
     if (o->logs.empty() && o->clouds.empty())
       throw CLI::RequiredError("--log or --cloud");

@@ -52,6 +52,11 @@ struct MethodSettings {
   /// evaluates the true object at its true pose through the step's answer rule
   /// (Recognizer::watch; the run store's truth_pose.* values, recognize's truth_funnel).
   bool truth_pose = false;
+  /// Diagnostics of active exploration: the share of the planner's belief given to the true
+  /// object at its true pose (0: off). The planner then plans as if the recognizer's state held
+  /// the truth with this weight: an upper bound on what a better belief could give the planner,
+  /// not a method (it reads the ground truth).
+  double oracle_belief = 0.0;
 
   /// A preset's settings: "paper" (the paper's method exactly) or "improved" (Touchstone's
   /// extensions). Throws ts::Error on another name.

@@ -58,6 +58,7 @@ struct VariantData {
   bool active = false;                         ///< exploration.strategy = active
   ActiveSettings planner;                      ///< the next-grasp planner's settings
   bool truth_pose = false;                     ///< diagnostics.truth_pose
+  double oracle_belief = 0.0;                  ///< diagnostics.oracle_belief
 };
 
 std::size_t index_of(const std::vector<std::string>& names, const std::string& name) {
@@ -129,6 +130,10 @@ class RecognitionEngine final : public RunEngine {
       d.active = ms.exploration == 1;
       d.planner = ms.active;
       d.truth_pose = ms.truth_pose;
+      d.oracle_belief = ms.oracle_belief;
+      if (d.oracle_belief > 0 && !d.active)
+        throw Error("diagnostics.oracle_belief plans with the truth in the belief: it needs exploration.strategy = "
+                    "\"active\"", {}, "diagnostics.oracle_belief");
       truth_pose_ = truth_pose_ || d.truth_pose;
       if (d.active && d.simulation.sensing == Sensing::probe)
         throw Error("active exploration plans grasps of a gripper with pads, not probe touches", {},
@@ -326,7 +331,10 @@ class RecognitionEngine final : public RunEngine {
           if (!recognizer.hypotheses().empty()) {
             std::vector<GraspCommand> commands;
             for (std::size_t i : unused) commands.push_back(*aims[i]);
-            const auto scored = planner->evaluate(commands, recognizer.hypotheses(), plan_objects, contacts_so_far);
+            const auto scored =
+                planner->evaluate(commands, v.oracle_belief > 0 && !hidden ? with_leader(recognizer.hypotheses(), local_true, rec.truth, v.oracle_belief, v.planner.temperature)
+                                                                : recognizer.hypotheses(),
+                                  plan_objects, contacts_so_far);
             std::size_t best = 0;
             for (std::size_t i = 1; i < scored.size(); ++i)
               if (scored[i].score > scored[best].score) best = i;

@@ -285,3 +285,40 @@ TEST_CASE("active touch: bad input is one clear error") {
   auto no_field = [&](std::uint32_t) { return PlanObject{}; };
   CHECK_THROWS_WITH_AS(planner.plan(scene.hyps, no_field, 1, 3), doctest::Contains("distance field"), Error);
 }
+
+TEST_CASE("active touch: with_leader puts a hypothesis first with the share asked for") {
+  TwoBoxes scene;
+  auto hyps = scene.hyps;
+  hyps[1].log_weight = hyps[0].log_weight - 2.0;   // unequal, so the share is not a ratio of counts
+  for (double temperature : {1.0, 3.0})
+    for (double share : {0.2, 0.5, 0.9}) {
+      CAPTURE(temperature);
+      CAPTURE(share);
+      const Pose truth = scene.world * Pose(Eigen::Translation3d(0.0, 0.001, 0.0));
+      const auto with = with_leader(hyps, 1, truth, share, temperature);
+      REQUIRE(with.size() == 3);
+      CHECK(with[0].object == 1);
+      CHECK(with[0].pose.isApprox(truth, 0.0));
+      CHECK(with[1].log_weight == hyps[0].log_weight);   // the others unchanged, in order
+      CHECK(with[2].log_weight == hyps[1].log_weight);
+      double top = with[0].log_weight, sum = 0.0;
+      for (const auto& h : with) top = std::max(top, h.log_weight);
+      for (const auto& h : with) sum += std::exp((h.log_weight - top) / temperature);
+      CHECK(std::exp((with[0].log_weight - top) / temperature) / sum == doctest::Approx(share).scale(0).epsilon(1e-12));
+    }
+  // A belief nearly sure of one box leaves little to learn; an even one between the two boxes
+  // (the leader the cube, half the weight) keeps the telling grasps.
+  ActiveSettings s;
+  s.candidates = 120;
+  const GraspPlanner planner(Gripper(), s);
+  const auto sure = planner.plan(with_leader(scene.hyps, 0, scene.world, 0.99, 1.0), scene.objects(), 3, 1);
+  const auto even = planner.plan(with_leader({scene.hyps[1]}, 0, scene.world, 0.5, 1.0), scene.objects(), 3, 1);
+  REQUIRE(sure.size() == 1);
+  REQUIRE(even.size() == 1);
+  // The mutual information is at most the belief's entropy: 0.99 on the cube (the cube twice).
+  const double h_sure = -(0.99 * std::log(0.99) + 0.01 * std::log(0.01));
+  CHECK(sure[0].object_information <= h_sure + 1e-9);
+  CHECK(even[0].object_information > 0.5);
+  CHECK_THROWS_WITH_AS(with_leader(scene.hyps, 0, scene.world, 1.0, 1.0), doctest::Contains("share"), Error);
+  CHECK_THROWS_WITH_AS(with_leader(scene.hyps, 0, scene.world, 0.5, 0.0), doctest::Contains("temperature"), Error);
+}

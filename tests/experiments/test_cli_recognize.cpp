@@ -924,6 +924,10 @@ TEST_CASE("cli recognize --suggest: bad input is one clear error") {
   expect_error("recognize --db db.h5 --log probe.h5 --suggest 2" + kFast, "probe log");
   REQUIRE(touchstone(dir, "log export log.h5 --out c.ply").code == 0);
   expect_error("recognize --db db.h5 --cloud c.ply --suggest 2" + kFast, "--suggest");
+  // The oracle diagnostic reads a truth the planner of experiments executes against; recognize
+  // only suggests grasps, so it is refused rather than ignored.
+  expect_error("recognize --db db.h5 --log log.h5 --suggest 2 --diagnostics.oracle-belief 0.5" + kFast,
+               "--diagnostics.oracle-belief");
 }
 
 TEST_CASE("cli recognize --scene: each chosen step drawn in the world frame, a PNG and a self-contained page") {

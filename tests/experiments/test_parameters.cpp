@@ -105,6 +105,7 @@ TEST_CASE("Parameters: a value set is the value read, and explicit extensions ac
     // Another value in range: the setter and the getter must address the same field.
     double other = p.type == Parameter::Type::boolean ? 1.0 - now
                    : now + 1.0 <= p.hi                ? now + 1.0
+                   : p.type == Parameter::Type::real  ? 0.5 * (p.lo + p.hi)   // a range narrower than 1
                                                       : p.lo;
     if (p.type == Parameter::Type::real && now > p.lo) other = p.lo + 0.5 * (now - p.lo);
     REQUIRE(other != now);

@@ -392,6 +392,32 @@ TEST_CASE("Recognition engine: active exploration plans each grasp after the fir
   check_same_results(serial, parallel);
 }
 
+TEST_CASE("Recognition engine: diagnostics.oracle_belief plans with the truth in the belief, deterministically") {
+  test::TempDir dir("engine_oracle");
+  ExperimentConfig c = small_config();
+  set_key(c, "diagnostics.oracle_belief", {"0.9"});
+  CHECK_THROWS_WITH_AS(make_recognition_engine(c, small_database(), 1), doctest::Contains("diagnostics.oracle_belief"),
+                       Error);   // random grasps have no planner to give the truth to
+  set_key(c, "exploration.strategy", {"active"});
+  set_key(c, "active.candidates", {"12"});
+  set_key(c, "sweep.diagnostics.oracle_belief", {"0", "0.9"});
+  validate(c);
+  auto engine = make_recognition_engine(c, small_database(), 2);
+  const auto serial = run_all(*engine, c, dir / "serial.h5", 1, false);
+  REQUIRE(serial.size() == 8);
+  int differing = 0;
+  for (const auto& r : serial)
+    if (r.variant == 1)
+      for (const auto& o : serial)
+        if (o.variant == 0 && o.object == r.object && o.run == r.run) {
+          CHECK(r.grasps.front() == o.grasps.front());   // the same first grasp, then planned
+          differing += r.grasps != o.grasps;
+        }
+  CHECK(differing > 0);   // a belief that holds the truth changes the planner's choices
+  const auto parallel = run_all(*engine, c, dir / "parallel.h5", 2, true);
+  check_same_results(serial, parallel);
+}
+
 TEST_CASE("Recognition engine: diagnostics.truth_pose records the truth at its pose and changes no result") {
   test::TempDir dir("engine");
   ExperimentConfig c = small_config();
