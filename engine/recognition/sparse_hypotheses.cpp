@@ -205,13 +205,14 @@ std::size_t isolated_contacts(const Scene& scene) {
 }
 
 bool sparse_active(const Scene& scene, const SparseSettings& s) {
-  if (!s.enabled || scene.contacts.size() < 3) return false;
+  if (s.mode == kSparseNever || scene.contacts.size() < 3) return false;
+  if (s.mode == kSparseAlways) return true;
   const std::size_t iso = isolated_contacts(scene);
   return iso >= s.min_isolated && static_cast<double>(iso) >= s.min_isolated_share * static_cast<double>(scene.contacts.size());
 }
 
 std::vector<Vec3> scene_contact_normals(const Scene& scene, const PointCloud& contacts_world) {
-  if (!contacts_world.has_normals()) return {};
+  if (!contacts_world.has_normals()) return scene.contacts.normals;
   std::vector<Vec3> local;
   std::vector<std::size_t> index;
   for (std::size_t i = 0; i < contacts_world.size(); ++i)

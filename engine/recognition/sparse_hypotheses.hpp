@@ -8,12 +8,18 @@
 // RANSAC's before the evaluation (Eq. 4-6), so dense patches and isolated contacts mix in one
 // exploration, and the swept free space of the probe is the evidence that separates them.
 //
-// When: decided from the data, per step. A contact with no other contact within the FPFH feature
-// radius (hence no feature) is isolated; the source runs when at least `min_isolated` of them
-// make up at least `min_isolated_share` of the contacts. A tactile pad's contacts come in
-// patches (5 mm apart), so pad logs do not turn it on (measured: dev45 logs of cow, cube, bar,
-// stellated_octahedron, 20 grasps: never, where "no feature" alone turned it on in 28 of 80
-// steps).
+// When (`mode`): `kSparseAuto` decides from the data, per step. A contact with no other contact
+// within the FPFH feature radius (hence no feature) is isolated; the source runs when at least
+// `min_isolated` of them make up at least `min_isolated_share` of the contacts. A tactile pad's
+// contacts come in patches (5 mm apart), so pad logs do not turn it on (measured: dev45 logs of
+// cow, cube, bar, stellated_octahedron, 20 grasps: never, where "no feature" alone turned it on in
+// 28 of 80 steps). `kSparseAlways` runs it on every scene of at least 3 contacts, pads too: its
+// triplets span patches of different grasps (sides of at least `min_side_share` of the contacts'
+// diameter), which FPFH's neighbourhoods, inside one patch, never relate. `kSparseNever`: off.
+//
+// Normals: the sensor's where it gives them (a probe: minus its approach direction), else the
+// scene's own (PCA within the FPFH normal radius, turned away from the contacts' centroid; zero
+// for an isolated contact, which is then matched on distances).
 //
 // Tables (SparseTables): each object's keypoints (the stored coarse cloud with normals)
 // thinned by a voxel filter to at most `max_model_points` points, and for each of them every
@@ -42,8 +48,12 @@
 
 namespace ts {
 
+constexpr int kSparseAuto = 0;        ///< SparseSettings::mode: when the contacts are isolated
+constexpr int kSparseAlways = 1;      ///< on every scene of at least 3 contacts (pads too)
+constexpr int kSparseNever = 2;       ///< off (Batch RANSAC alone)
+
 struct SparseSettings {
-  bool enabled = true;                ///< false: never (Batch RANSAC alone, the paper)
+  int mode = kSparseAuto;             ///< kSparseAuto, kSparseAlways or kSparseNever
   std::size_t min_isolated = 3;       ///< isolated contacts needed before the source runs
   double min_isolated_share = 0.3;    ///< and their share of the contacts
   int triplets = 16;                  ///< contact triplets drawn per step
@@ -135,7 +145,7 @@ std::vector<Candidate> sparse_candidates(const Scene& scene, SparseTables& table
 
 /// The contacts' normals in the scene's order: each scene contact takes the normal of the
 /// nearest input contact (within 1e-9 m after the scene's translation), zero where the input
-/// has none. Empty when `contacts_world` has no normals.
+/// has none. When `contacts_world` has no normals: the scene's own (PCA; zero where undefined).
 std::vector<Vec3> scene_contact_normals(const Scene& scene, const PointCloud& contacts_world);
 
 /// Mean distance of the contacts (world frame) to the object's surface under T_world_object,

@@ -246,6 +246,17 @@ std::vector<Parameter> declaration() {
                       "Extension: with the shape prior, pose transfer screens only its this-many best objects of "
                       "the step (0: every object)",
                       {"--transfer-pool", "transfer_pool"}, TS_FIELD(recognizer.twins.transfer_pool)));
+  // The feature-free proposal source (engine/recognition/sparse_hypotheses.hpp).
+  {
+    Parameter p = declare("sparse.mode", Type::choice, "", 0, 2, "",
+                          "Feature-free triplets matched on point-pair distances and angles: auto (when the "
+                          "contacts are isolated: probes), always (pads too: triplets across grasps), never",
+                          {"--sparse", "sparse"}, TS_FIELD(recognizer.sparse.mode));
+    p.choices = {"auto", "always", "never"};
+    d.push_back(std::move(p));
+  }
+  d.push_back(integer("sparse.triplets", 1, 100000, "", "Feature-free source: contact triplets drawn per step",
+                      {"--sparse-triplets", "sparse_triplets"}, TS_FIELD(recognizer.sparse.triplets)));
   d.push_back(integer("prior.angle_bins", 1, 64, "", "Shape prior: bins of each angle term",
                       {"--prior-angle-bins"}, TS_FIELD(recognizer.prior.angle_bins)));
   d.push_back(real("prior.distance_bin_m", "m", 1e-4, 1, "", "Shape prior: pair-distance bin",

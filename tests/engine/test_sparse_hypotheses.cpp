@@ -112,10 +112,48 @@ TEST_CASE("The source runs on isolated contacts, not on tactile patches") {
   CHECK(isolated_contacts(sparse) == 12);
   CHECK(sparse_active(sparse, s));
   SparseSettings off = s;
-  off.enabled = false;
+  off.mode = kSparseNever;
   CHECK_FALSE(sparse_active(sparse, off));
+  SparseSettings always = s;
+  always.mode = kSparseAlways;
+  CHECK(sparse_active(dense, always));   // patches too
+  CHECK(sparse_active(sparse, always));
+  CHECK_FALSE(sparse_active(scene_of(db, isolated(*src, 4, T, 2, 3)), always));
   // Two contacts are no triplet.
   CHECK_FALSE(sparse_active(scene_of(db, isolated(*src, 4, T, 2, 3)), s));
+}
+
+TEST_CASE("Always: on tactile patches without sensor normals, the scene's normals find the true pose") {
+  auto src = test::make_source();
+  Database db(src);
+  SymmetryCache symmetries;
+  SparseSettings s;
+  s.mode = kSparseAlways;
+  SparseTables tables(db, s);
+  const std::vector<std::uint8_t> all(db.size(), 1);
+  for (std::size_t obj : {std::size_t{4}, std::size_t{0}}) {
+    CAPTURE(obj);
+    const Pose T = test::random_pose(70 + obj, Vec3(0.1, -0.3, 0.2));
+    const PointCloud patches = test::touch(src->fines[obj], T, 6, 11 + obj);   // points, no normals
+    REQUIRE_FALSE(patches.has_normals());
+    const Scene scene = scene_of(db, patches);
+    // The scene's own normals stand in for the sensor's.
+    const std::vector<Vec3> normals = scene_contact_normals(scene, patches);
+    REQUIRE(normals.size() == scene.contacts.size());
+    std::size_t defined = 0;
+    for (const Vec3& n : normals) defined += n.squaredNorm() > 0.5;
+    CHECK(defined > scene.contacts.size() / 2);
+    SparseStats st;
+    const auto cands = sparse_candidates(scene, tables, normals, all, s, 5, 1, &st);
+    CHECK(st.active);
+    CHECK(st.isolated == 0);   // patches: the automatic mode would not have run
+    REQUIRE(!cands.empty());
+    const auto [dp, dr] = closest(scene, cands, static_cast<std::uint32_t>(obj), T, &symmetries.get(db, obj));
+    CHECK(dp < 0.012);
+    CHECK(dr < 12.0);
+    // The automatic mode leaves these scenes to Batch RANSAC.
+    CHECK(sparse_candidates(scene, tables, normals, all, SparseSettings{}, 5, 1).empty());
+  }
 }
 
 TEST_CASE("The true pose is among the candidates: asymmetric, symmetric, noisy, quantized") {
