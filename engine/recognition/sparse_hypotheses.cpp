@@ -185,12 +185,24 @@ SparseTables::SparseTables(const Database& db, SparseSettings settings)
 
 void SparseTables::prepare(const std::vector<std::uint8_t>& wanted) {
   std::lock_guard lock(mutex_);
+  auto is_wanted = [&](std::size_t o) { return wanted.empty() || (o < wanted.size() && wanted[o]); };
   std::vector<std::size_t> missing;
   for (std::size_t o = 0; o < tables_.size(); ++o)
-    if ((wanted.empty() || (o < wanted.size() && wanted[o])) && !tables_[o]) missing.push_back(o);
+    if (is_wanted(o) && !tables_[o]) missing.push_back(o);
+  // Large databases (the shape prior's best objects change from step to step): drop the tables
+  // this step does not want before the held ones outgrow the budget. A table is a function of
+  // the object's keypoints alone, so a dropped one comes back bit for bit.
+  const double budget = s_.table_budget_mb * 1024.0 * 1024.0;
+  if (static_cast<double>(held_) > budget && !wanted.empty())
+    for (std::size_t o = 0; o < tables_.size(); ++o)
+      if (tables_[o] && !is_wanted(o)) {
+        held_ -= tables_[o]->memory_bytes();
+        tables_[o].reset();
+      }
   parallel_each(missing.size(), [&](std::size_t k) {
     tables_[missing[k]] = std::make_unique<ObjectPairs>(build_object_pairs(db_.keypoints(missing[k]), s_));
   });
+  for (std::size_t o : missing) held_ += tables_[o]->memory_bytes();
 }
 
 std::size_t isolated_contacts(const Scene& scene) {

@@ -69,6 +69,8 @@ struct SparseSettings {
   double min_side_share = 0.2;        ///< triplet sides at least this share of the contacts'
                                       ///< diameter (and 2 x distance_tolerance)
   int triplet_attempts = 400;         ///< draws per triplet slot before it is given up
+  double table_budget_mb = 256.0;     ///< pair tables held beyond this: those a step does not
+                                      ///< want are dropped (rebuilt alike when wanted again)
 };
 
 /// One object's point-pair table: for every thinned keypoint i, every other point j sorted by
@@ -95,8 +97,10 @@ ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSet
 class SparseTables {
  public:
   SparseTables(const Database& db, SparseSettings settings);
-  /// Build the tables of the objects with wanted[o] != 0 that are missing (in parallel).
+  /// Build the tables of the objects with wanted[o] != 0 that are missing (in parallel). When
+  /// the tables held exceed `table_budget_mb`, those not wanted are dropped first.
   void prepare(const std::vector<std::uint8_t>& wanted);
+  std::size_t held_bytes() const { return held_; }
   /// The table of object o; prepare() must have covered it.
   const ObjectPairs& object(std::size_t o) const { return *tables_[o]; }
 
@@ -105,6 +109,7 @@ class SparseTables {
   SparseSettings s_;
   std::mutex mutex_;
   std::vector<std::unique_ptr<ObjectPairs>> tables_;
+  std::size_t held_ = 0;              ///< bytes of the tables held
 };
 
 /// Free space of a probe's path in the evaluation: its samples are free by the ball radius only

@@ -302,3 +302,32 @@ TEST_CASE("The recognizer recognizes and localizes from isolated contacts alone"
     CHECK(wrong > d);
   }
 }
+
+TEST_CASE("Pair tables beyond the budget: the unwanted are dropped and come back alike") {
+  auto src = test::make_source();
+  Database db(src);
+  SparseSettings tight;
+  tight.table_budget_mb = 0.0;   // drop whatever a step does not want
+  SparseTables dropping(db, tight), keeping(db, SparseSettings{});
+  auto only = [&](std::size_t o) {
+    std::vector<std::uint8_t> w(db.size(), 0);
+    w[o] = 1;
+    return w;
+  };
+  dropping.prepare(only(4));
+  const std::size_t wedge = dropping.held_bytes();
+  CHECK(wedge > 0);
+  dropping.prepare(only(1));
+  CHECK(dropping.held_bytes() == dropping.object(1).memory_bytes());   // the wedge's is gone
+  keeping.prepare(only(4));
+  keeping.prepare(only(1));
+  CHECK(keeping.held_bytes() == wedge + keeping.object(1).memory_bytes());   // within the budget: both kept
+  dropping.prepare(only(4));   // rebuilt: the same table
+  const ObjectPairs &a = dropping.object(4), &b = keeping.object(4);
+  REQUIRE(a.near.size() == b.near.size());
+  CHECK(a.points == b.points);
+  CHECK(a.unit == b.unit);
+  CHECK(std::equal(a.near.begin(), a.near.end(), b.near.begin(), [](const ObjectPairs::Near& x, const ObjectPairs::Near& y) {
+    return x.distance == y.distance && x.index == y.index && x.a_i == y.a_i && x.a_j == y.a_j && x.a_ij == y.a_ij;
+  }));
+}
