@@ -390,7 +390,8 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
     if (!sparse_) sparse_ = std::make_unique<SparseTables>(db_, s_.sparse);
     SparseStats sp;
     const std::vector<Candidate> more = sparse_candidates(
-        scene, *sparse_, scene_contact_normals(scene, contacts_world), sparse_mask, s_.sparse, s_.seed, step_u, &sp);
+        scene, *sparse_, sparse_contact_normals(scene, contacts_world, s_.sparse), sparse_mask, s_.sparse, s_.seed,
+        step_u, &sp);
     cands.insert(cands.end(), more.begin(), more.end());
     res.sparse_active = true;
     res.sparse_candidates = sp.candidates;

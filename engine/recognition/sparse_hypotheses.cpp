@@ -189,9 +189,10 @@ void SparseTables::prepare(const std::vector<std::uint8_t>& wanted) {
   std::vector<std::size_t> missing;
   for (std::size_t o = 0; o < tables_.size(); ++o)
     if (is_wanted(o) && !tables_[o]) missing.push_back(o);
-  // Large databases (the shape prior's best objects change from step to step): drop the tables
-  // this step does not want before the held ones outgrow the budget. A table is a function of
-  // the object's keypoints alone, so a dropped one comes back bit for bit.
+  // Large databases (the shape prior's best objects change from step to step): once the held
+  // tables exceed the budget, the next step drops those it does not want (so the tables held
+  // reach at most the budget plus one step's). A table is a function of the object's keypoints
+  // alone, so a dropped one comes back bit for bit.
   const double budget = s_.table_budget_mb * 1024.0 * 1024.0;
   if (static_cast<double>(held_) > budget && !wanted.empty())
     for (std::size_t o = 0; o < tables_.size(); ++o)
@@ -202,7 +203,9 @@ void SparseTables::prepare(const std::vector<std::uint8_t>& wanted) {
   parallel_each(missing.size(), [&](std::size_t k) {
     tables_[missing[k]] = std::make_unique<ObjectPairs>(build_object_pairs(db_.keypoints(missing[k]), s_));
   });
-  for (std::size_t o : missing) held_ += tables_[o]->memory_bytes();
+  held_ = 0;   // counted anew: a build that threw leaves no table uncounted
+  for (const auto& t : tables_)
+    if (t) held_ += t->memory_bytes();
 }
 
 std::size_t isolated_contacts(const Scene& scene) {
@@ -224,7 +227,7 @@ bool sparse_active(const Scene& scene, const SparseSettings& s) {
 }
 
 std::vector<Vec3> scene_contact_normals(const Scene& scene, const PointCloud& contacts_world) {
-  if (!contacts_world.has_normals()) return scene.contacts.normals;
+  if (!contacts_world.has_normals()) return {};
   std::vector<Vec3> local;
   std::vector<std::size_t> index;
   for (std::size_t i = 0; i < contacts_world.size(); ++i)
@@ -243,6 +246,13 @@ std::vector<Vec3> scene_contact_normals(const Scene& scene, const PointCloud& co
     if (std::isfinite(len) && len > 0.5) out[k] = nw / len;
   }
   return out;
+}
+
+std::vector<Vec3> sparse_contact_normals(const Scene& scene, const PointCloud& contacts_world,
+                                         const SparseSettings& s) {
+  std::vector<Vec3> n = scene_contact_normals(scene, contacts_world);
+  if (n.empty() && s.mode == kSparseAlways) n = scene.contacts.normals;
+  return n;
 }
 
 std::vector<Candidate> sparse_candidates(const Scene& scene, SparseTables& tables,

@@ -17,9 +17,11 @@
 // triplets span patches of different grasps (sides of at least `min_side_share` of the contacts'
 // diameter), which FPFH's neighbourhoods, inside one patch, never relate. `kSparseNever`: off.
 //
-// Normals: the sensor's where it gives them (a probe: minus its approach direction), else the
-// scene's own (PCA within the FPFH normal radius, turned away from the contacts' centroid; zero
-// for an isolated contact, which is then matched on distances).
+// Normals: the sensor's where it gives them (a probe: minus its approach direction). Under
+// `kSparseAlways` a cloud without them (pads) takes the scene's own (PCA within the FPFH normal
+// radius, turned away from the contacts' centroid, which concave regions can get wrong; zero for
+// an isolated contact, which is then matched on distances); `kSparseAuto` matches such a cloud
+// on distances alone, as before.
 //
 // Tables (SparseTables): each object's keypoints (the stored coarse cloud with normals)
 // thinned by a voxel filter to at most `max_model_points` points, and for each of them every
@@ -101,7 +103,8 @@ class SparseTables {
   /// the tables held exceed `table_budget_mb`, those not wanted are dropped first.
   void prepare(const std::vector<std::uint8_t>& wanted);
   std::size_t held_bytes() const { return held_; }
-  /// The table of object o; prepare() must have covered it.
+  /// The table of object o; prepare() must have covered it. Valid until the next prepare(),
+  /// which may drop it: not to be held across steps or shared between concurrent callers.
   const ObjectPairs& object(std::size_t o) const { return *tables_[o]; }
 
  private:
@@ -150,8 +153,12 @@ std::vector<Candidate> sparse_candidates(const Scene& scene, SparseTables& table
 
 /// The contacts' normals in the scene's order: each scene contact takes the normal of the
 /// nearest input contact (within 1e-9 m after the scene's translation), zero where the input
-/// has none. When `contacts_world` has no normals: the scene's own (PCA; zero where undefined).
+/// has none. Empty when `contacts_world` has no normals.
 std::vector<Vec3> scene_contact_normals(const Scene& scene, const PointCloud& contacts_world);
+/// The normals the source matches with: scene_contact_normals, or, under kSparseAlways when the
+/// input has none (pads), the scene's own PCA normals (zero where undefined).
+std::vector<Vec3> sparse_contact_normals(const Scene& scene, const PointCloud& contacts_world,
+                                         const SparseSettings& s);
 
 /// Mean distance of the contacts (world frame) to the object's surface under T_world_object,
 /// from the distance field (|d|); NaN without contacts. What Vezzani et al. (2017) report.

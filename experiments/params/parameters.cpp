@@ -314,9 +314,9 @@ std::vector<Parameter> declaration() {
                       "changes no result)",
                       {"truth_pose"}, TS_FIELD(truth_pose)));
   d.push_back(real("diagnostics.oracle_belief", "", 0, 0.99, "",
-                   "Diagnostics of active exploration: the share of the planner's belief given to the true object at "
-                   "its true pose (0: off): an upper bound on what a better belief would give the planner, not a "
-                   "method (it reads the ground truth; simulated runs only)",
+                   "Diagnostics of active exploration: at least this share of the planner's belief goes to the true "
+                   "object at its true pose (0: off): an upper bound on what a better belief would give the planner, "
+                   "not a method (it reads the ground truth; simulated runs whose object the recognizer may name)",
                    {"oracle_belief"}, TS_FIELD(oracle_belief)));
   return d;
 }

@@ -52,10 +52,12 @@ struct MethodSettings {
   /// evaluates the true object at its true pose through the step's answer rule
   /// (Recognizer::watch; the run store's truth_pose.* values, recognize's truth_funnel).
   bool truth_pose = false;
-  /// Diagnostics of active exploration: the share of the planner's belief given to the true
-  /// object at its true pose (0: off). The planner then plans as if the recognizer's state held
-  /// the truth with this weight: an upper bound on what a better belief could give the planner,
-  /// not a method (it reads the ground truth).
+  /// Diagnostics of active exploration: at least this share of the planner's belief goes to the
+  /// true object at its true pose (0: off; with_leader: the share counts all the recognizer's
+  /// hypotheses, the planner normalizes over the K it selects). The planner then plans as if the
+  /// recognizer's state held the truth: an upper bound on what a better belief could give the
+  /// planner, not a method (it reads the ground truth). Off in runs whose object is hidden from
+  /// the recognizer (open set, leave-one-out).
   double oracle_belief = 0.0;
 
   /// A preset's settings: "paper" (the paper's method exactly) or "improved" (Touchstone's

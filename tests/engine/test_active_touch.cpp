@@ -315,8 +315,9 @@ TEST_CASE("active touch: with_leader puts a hypothesis first with the share aske
   const auto even = planner.plan(with_leader({scene.hyps[1]}, 0, scene.world, 0.5, 1.0), scene.objects(), 3, 1);
   REQUIRE(sure.size() == 1);
   REQUIRE(even.size() == 1);
-  // The mutual information is at most the belief's entropy: 0.99 on the cube (the cube twice).
-  const double h_sure = -(0.99 * std::log(0.99) + 0.01 * std::log(0.01));
+  // The information about the object is at most the entropy of the object's belief: the cube
+  // holds 0.99 + 0.005 (the leader and the cube's own hypothesis), the box 0.005.
+  const double h_sure = -(0.995 * std::log(0.995) + 0.005 * std::log(0.005));
   CHECK(sure[0].object_information <= h_sure + 1e-9);
   CHECK(even[0].object_information > 0.5);
   CHECK_THROWS_WITH_AS(with_leader(scene.hyps, 0, scene.world, 1.0, 1.0), doctest::Contains("share"), Error);

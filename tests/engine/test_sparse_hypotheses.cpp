@@ -137,8 +137,10 @@ TEST_CASE("Always: on tactile patches without sensor normals, the scene's normal
     const PointCloud patches = test::touch(src->fines[obj], T, 6, 11 + obj);   // points, no normals
     REQUIRE_FALSE(patches.has_normals());
     const Scene scene = scene_of(db, patches);
-    // The scene's own normals stand in for the sensor's.
-    const std::vector<Vec3> normals = scene_contact_normals(scene, patches);
+    // The scene's own normals stand in for the sensor's, under `always` only.
+    CHECK(scene_contact_normals(scene, patches).empty());
+    CHECK(sparse_contact_normals(scene, patches, SparseSettings{}).empty());
+    const std::vector<Vec3> normals = sparse_contact_normals(scene, patches, s);
     REQUIRE(normals.size() == scene.contacts.size());
     std::size_t defined = 0;
     for (const Vec3& n : normals) defined += n.squaredNorm() > 0.5;
