@@ -196,10 +196,7 @@ void SparseTables::prepare(const std::vector<std::uint8_t>& wanted) {
   const double budget = s_.table_budget_mb * 1024.0 * 1024.0;
   if (static_cast<double>(held_) > budget && !wanted.empty())
     for (std::size_t o = 0; o < tables_.size(); ++o)
-      if (tables_[o] && !is_wanted(o)) {
-        held_ -= tables_[o]->memory_bytes();
-        tables_[o].reset();
-      }
+      if (tables_[o] && !is_wanted(o)) tables_[o].reset();
   parallel_each(missing.size(), [&](std::size_t k) {
     tables_[missing[k]] = std::make_unique<ObjectPairs>(build_object_pairs(db_.keypoints(missing[k]), s_));
   });

@@ -91,6 +91,17 @@ Parameter boolean(std::string key, std::string help, std::vector<std::string> al
                  field);
 }
 
+/// One of `choices`, held by the method settings as its index (an integer field).
+template <class F>
+Parameter choice(std::string key, std::vector<std::string> choices, std::string paper, std::string help,
+                 std::vector<std::string> aliases, F field) {
+  const double hi = static_cast<double>(choices.size()) - 1.0;
+  Parameter p = declare(std::move(key), Type::choice, "", 0, hi, std::move(paper), std::move(help),
+                        std::move(aliases), field);
+  p.choices = std::move(choices);
+  return p;
+}
+
 /// An extension the improved preset turns on only on databases of more objects than a threshold.
 template <class F>
 Parameter any_database(Parameter p, F threshold) {
@@ -197,14 +208,10 @@ std::vector<Parameter> declaration() {
                    {"--icp-max-correspondence", "icp_max_correspondence"}, TS_FIELD(recognizer.icp.max_correspondence)));
   d.push_back(integer("icp.points", 0, kLarge, "", "Contacts used by ICP (0: all)",
                       {"--icp-points", "icp_points", "icp_max_points"}, TS_FIELD(recognizer.icp.max_points)));
-  {
-    Parameter p = declare("icp.metric", Type::choice, "", 0, 2, "point_to_point (Section 4.4)",
-                          "ICP error metric: point_to_point (the paper), point_to_plane (k-d tree), field "
-                          "(point-to-plane on the distance field)",
-                          {"--icp-metric", "icp_metric"}, TS_FIELD(recognizer.icp.metric));
-    p.choices = {"point_to_point", "point_to_plane", "field"};
-    d.push_back(std::move(p));
-  }
+  d.push_back(choice("icp.metric", {"point_to_point", "point_to_plane", "field"}, "point_to_point (Section 4.4)",
+                     "ICP error metric: point_to_point (the paper), point_to_plane (k-d tree), field "
+                     "(point-to-plane on the distance field)",
+                     {"--icp-metric", "icp_metric"}, TS_FIELD(recognizer.icp.metric)));
   // Large databases (shortlist, near-twin verification, shape prior).
   d.push_back(any_database(
       integer("shortlist.objects", 0, kLarge, "",
@@ -247,14 +254,10 @@ std::vector<Parameter> declaration() {
                       "the step (0: every object)",
                       {"--transfer-pool", "transfer_pool"}, TS_FIELD(recognizer.twins.transfer_pool)));
   // The feature-free proposal source (engine/recognition/sparse_hypotheses.hpp).
-  {
-    Parameter p = declare("sparse.mode", Type::choice, "", 0, 2, "",
-                          "Feature-free triplets matched on point-pair distances and angles: auto (when the "
-                          "contacts are isolated: probes), always (pads too: triplets across grasps), never",
-                          {"--sparse", "sparse"}, TS_FIELD(recognizer.sparse.mode));
-    p.choices = {"auto", "always", "never"};
-    d.push_back(std::move(p));
-  }
+  d.push_back(choice("sparse.mode", {"auto", "always", "never"}, "",
+                     "Feature-free triplets matched on point-pair distances and angles: auto (when the "
+                     "contacts are isolated: probes), always (pads too: triplets across grasps), never",
+                     {"--sparse", "sparse"}, TS_FIELD(recognizer.sparse.mode)));
   d.push_back(integer("sparse.triplets", 1, 100000, "", "Feature-free source: contact triplets drawn per step",
                       {"--sparse-triplets", "sparse_triplets"}, TS_FIELD(recognizer.sparse.triplets)));
   d.push_back(integer("prior.angle_bins", 1, 64, "", "Shape prior: bins of each angle term",
@@ -268,14 +271,10 @@ std::vector<Parameter> declaration() {
                    {"--contact-voxel", "contact_voxel"}, TS_FIELD(contact_voxel)));
   // Active touch (engine/touch/active_touch.hpp): experiments choose each grasp after the first with
   // the planner; `recognize --suggest` reads the planner's parameters.
-  {
-    Parameter p = declare("exploration.strategy", Type::choice, "", 0, 1, "random (Section 5.1: the operator's grasps)",
-                          "Experiments: grasps after the first drawn at random from the pool, or chosen by the "
-                          "next-grasp planner (active) and executed on the true object",
-                          {"--exploration", "exploration"}, TS_FIELD(exploration));
-    p.choices = {"random", "active"};
-    d.push_back(std::move(p));
-  }
+  d.push_back(choice("exploration.strategy", {"random", "active"}, "random (Section 5.1: the operator's grasps)",
+                     "Experiments: grasps after the first drawn at random from the pool, or chosen by the "
+                     "next-grasp planner (active) and executed on the true object",
+                     {"--exploration", "exploration"}, TS_FIELD(exploration)));
   d.push_back(integer("active.candidates", 1, 100000, "", "Active touch: candidate grasps scored per step",
                       {"active_candidates"}, TS_FIELD(active.candidates)));
   d.push_back(integer("active.hypotheses", 1, 100000, "",
