@@ -307,6 +307,10 @@ std::shared_ptr<const ShapePrior> Recognizer::shape_prior(const Database& db, co
   return nullptr;
 }
 
+std::shared_ptr<SparseTables> Recognizer::sparse_tables(const Database& db, const RecognizerSettings& s) {
+  return s.sparse.mode == kSparseNever ? nullptr : SparseTables::shared(db, s.sparse);
+}
+
 Recognizer::Recognizer(const Database& db, RecognizerSettings settings)
     : Recognizer(db, nullptr, std::move(settings)) {}
 
@@ -387,7 +391,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   }
   if (std::find(sparse_mask.begin(), sparse_mask.end(), 1) != sparse_mask.end() &&
       sparse_active(scene, s_.sparse)) {  // isolated contacts: feature-free triplets join in
-    if (!sparse_) sparse_ = std::make_unique<SparseTables>(db_, s_.sparse);
+    if (!sparse_) sparse_ = sparse_tables(db_, s_);
     SparseStats sp;
     const std::vector<Candidate> more = sparse_candidates(
         scene, *sparse_, sparse_contact_normals(scene, contacts_world, s_.sparse), sparse_mask, s_.sparse, s_.seed,

@@ -221,6 +221,10 @@ class Recognizer {
   /// while held (ShapePrior::shared): a caller that runs many recognizers on one database holds
   /// it, so that it is built once (4 500 objects: about 4 s), not once per recognizer.
   static std::shared_ptr<const ShapePrior> shape_prior(const Database& db, const RecognizerSettings& settings);
+  /// The sparse source's pair-table cache a recognizer with these settings uses on `db` (null:
+  /// the source is off), shared alike (SparseTables::shared): held by a caller that runs many
+  /// recognizers, each table is built once (when first wanted), not once per recognizer.
+  static std::shared_ptr<SparseTables> sparse_tables(const Database& db, const RecognizerSettings& settings);
   /// With `T_world_object`, the object's true pose, each step also evaluates the object there
   /// (Funnel::truth_pose_*; an ICP and an evaluation more per step, not in the stage times).
   void watch(std::optional<std::uint32_t> object, std::optional<Pose> T_world_object = std::nullopt) {
@@ -241,7 +245,7 @@ class Recognizer {
   std::optional<std::uint32_t> watch_;
   std::optional<Pose> watch_pose_;
   std::shared_ptr<const ShapePrior> prior_;  ///< when the shape prior acts (large databases)
-  std::unique_ptr<SparseTables> sparse_;  ///< built when the sparse source first runs
+  std::shared_ptr<SparseTables> sparse_;  ///< taken (SparseTables::shared) when the sparse source first runs
 };
 
 }  // namespace ts

@@ -5,10 +5,13 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <map>
+#include <tuple>
 #include <numbers>
 
 namespace ts {
@@ -74,42 +77,77 @@ void parallel_each(std::size_t n, F&& f) {
 }
 
 
-/// Candidates of one (triplet, object): oriented model pairs matching the longest side
-/// (distance, and the point-pair angles where the contacts have normals), then the model points
-/// closing the triangle (from the first point's sorted row), registered by Kabsch and checked on
-/// the normals.
-void match_object(const ObjectPairs& T, const Vec3 (&p)[3], const Vec3 (&n)[3], bool normals,
-                  const SparseSettings& s, Rng& rng, std::vector<Pose>& out) {
-  const std::size_t m = T.points.size();
-  if (m < 3 || !(T.unit > 0.0)) return;
-  const double tol = s.distance_tolerance;
-  const double ntol = s.normal_tolerance_deg * std::numbers::pi / 180.0;
-  const int utol = angle_units(ntol);
-  const double d01 = (p[1] - p[0]).norm(), d02 = (p[2] - p[0]).norm(), d12 = (p[2] - p[1]).norm();
-  auto units = [&](double d) { return std::clamp(d / T.unit, 0.0, 65535.0); };
-  const double lo01 = units(d01 - tol), hi01 = units(d01 + tol), lo02 = units(d02 - tol), hi02 = units(d02 + tol);
+/// One contact triplet against one object's table: its sides in the table's distance units
+/// (integer bounds: a stored distance u matches a side d when d - tol <= u * unit <= d + tol)
+/// and its point-pair angles in the table's angle units.
+struct TripletQuery {
+  Vec3 p[3], n[3];
+  bool normals = false;
+  int lo01 = 0, hi01 = -1, lo02 = 0, hi02 = -1;
+  double d12 = 0.0;
   int sa = 0, sb = 0, sab = 0, ta = 0, tb = 0, tab = 0;
+};
+
+TripletQuery make_query(const ObjectPairs& T, const Vec3 (&p)[3], const Vec3 (&n)[3], bool normals,
+                        const SparseSettings& s) {
+  TripletQuery q;
+  std::copy(p, p + 3, q.p);
+  std::copy(n, n + 3, q.n);
+  q.normals = normals;
+  const double tol = s.distance_tolerance;
+  const double d01 = (p[1] - p[0]).norm(), d02 = (p[2] - p[0]).norm();
+  q.d12 = (p[2] - p[1]).norm();
+  auto units = [&](double d) { return std::clamp(d / T.unit, 0.0, 65535.0); };
+  // u >= lo (real) is u >= ceil(lo); u <= hi is u <= floor(hi): the same pairs, in integers.
+  q.lo01 = static_cast<int>(std::ceil(units(d01 - tol))), q.hi01 = static_cast<int>(std::floor(units(d01 + tol)));
+  q.lo02 = static_cast<int>(std::ceil(units(d02 - tol))), q.hi02 = static_cast<int>(std::floor(units(d02 + tol)));
   if (normals) {
     const PairAngles a = pair_angles(p[0], n[0], p[1], n[1]);
-    sa = angle_units(a.a), sb = angle_units(a.b), sab = angle_units(a.ab);
+    q.sa = angle_units(a.a), q.sb = angle_units(a.b), q.sab = angle_units(a.ab);
     const PairAngles c = pair_angles(p[0], n[0], p[2], n[2]);   // the third side, from contact 0
-    ta = angle_units(c.a), tb = angle_units(c.b), tab = angle_units(c.ab);
+    q.ta = angle_units(c.a), q.tb = angle_units(c.b), q.tab = angle_units(c.ab);
   }
-  const double cos_ntol = std::cos(ntol);
-  auto first_at_least = [](auto row, auto end, double v) {
-    return std::lower_bound(row, end, v, [](const ObjectPairs::Near& x, double w) { return x.distance < w; });
-  };
-  // Oriented model pairs (i on contact 0, j on contact 1) that agree with the contacts.
-  std::vector<std::pair<std::uint16_t, std::uint16_t>> matched;
+  return q;
+}
+
+using Row = std::vector<ObjectPairs::Near>::const_iterator;
+Row first_at_least(Row row, Row end, int v) {
+  return std::lower_bound(row, end, v, [](const ObjectPairs::Near& x, int w) { return x.distance < w; });
+}
+
+/// The oriented model pairs (i on contact 0, j on contact 1) that agree with each query's
+/// longest side (distance, and the point-pair angles where the contacts have normals), in row
+/// order. One sweep over the rows serves every query, so each row is read from memory once a
+/// step, not once a triplet (the binary searches were most of the source's time).
+std::vector<std::vector<std::pair<std::uint16_t, std::uint16_t>>> matched_pairs(
+    const ObjectPairs& T, const std::vector<TripletQuery>& queries, int utol) {
+  std::vector<std::vector<std::pair<std::uint16_t, std::uint16_t>>> matched(queries.size());
+  const std::size_t m = T.points.size();
   for (std::size_t i = 0; i < m; ++i) {
-    const auto row = T.near.begin() + static_cast<std::ptrdiff_t>(i * (m - 1));
-    const auto end = row + static_cast<std::ptrdiff_t>(m - 1);
-    for (auto it = first_at_least(row, end, lo01); it != end && it->distance <= hi01; ++it) {
-      if (normals && (std::abs(sab - it->a_ij) > utol || std::abs(sa - it->a_i) > utol || std::abs(sb - it->a_j) > utol))
-        continue;
-      matched.emplace_back(static_cast<std::uint16_t>(i), it->index);
+    const Row row = T.near.begin() + static_cast<std::ptrdiff_t>(i * (m - 1));
+    const Row end = row + static_cast<std::ptrdiff_t>(m - 1);
+    for (std::size_t k = 0; k < queries.size(); ++k) {
+      const TripletQuery& q = queries[k];
+      for (Row it = first_at_least(row, end, q.lo01); it != end && it->distance <= q.hi01; ++it) {
+        if (q.normals && (std::abs(q.sab - it->a_ij) > utol || std::abs(q.sa - it->a_i) > utol ||
+                          std::abs(q.sb - it->a_j) > utol))
+          continue;
+        matched[k].emplace_back(static_cast<std::uint16_t>(i), it->index);
+      }
     }
   }
+  return matched;
+}
+
+/// Candidates of one (triplet, object): a deterministic random subset of its matched pairs, then
+/// the model points closing the triangle (from the first point's sorted row), registered by
+/// Kabsch and checked on the normals.
+void close_triangles(const ObjectPairs& T, const TripletQuery& q,
+                     std::vector<std::pair<std::uint16_t, std::uint16_t>>& matched, int utol,
+                     const SparseSettings& s, Rng& rng, std::vector<Pose>& out) {
+  const std::size_t m = T.points.size();
+  const double tol = s.distance_tolerance;
+  const double cos_ntol = std::cos(s.normal_tolerance_deg * std::numbers::pi / 180.0);
   // A deterministic random subset of them (partial Fisher-Yates).
   const std::size_t take = std::min(matched.size(), s.pairs_per_triplet);
   for (std::size_t k = 0; k < take; ++k) std::swap(matched[k], matched[k + rng.index(matched.size() - k)]);
@@ -117,22 +155,22 @@ void match_object(const ObjectPairs& T, const Vec3 (&p)[3], const Vec3 (&n)[3], 
   ks.min_sv_ratio = s.min_sv_ratio;
   for (std::size_t k = 0; k < take && out.size() < s.per_object; ++k) {
     const auto [i, j] = matched[k];
-    const auto row = T.near.begin() + static_cast<std::ptrdiff_t>(std::size_t{i} * (m - 1));
-    const auto end = row + static_cast<std::ptrdiff_t>(m - 1);
-    for (auto it = first_at_least(row, end, lo02); it != end && it->distance <= hi02 && out.size() < s.per_object; ++it) {
+    const Row row = T.near.begin() + static_cast<std::ptrdiff_t>(std::size_t{i} * (m - 1));
+    const Row end = row + static_cast<std::ptrdiff_t>(m - 1);
+    for (Row it = first_at_least(row, end, q.lo02); it != end && it->distance <= q.hi02 && out.size() < s.per_object; ++it) {
       const std::size_t r = it->index;
       if (r == j) continue;
-      if (normals && (std::abs(tab - it->a_ij) > utol || std::abs(ta - it->a_i) > utol || std::abs(tb - it->a_j) > utol))
+      if (q.normals && (std::abs(q.tab - it->a_ij) > utol || std::abs(q.ta - it->a_i) > utol || std::abs(q.tb - it->a_j) > utol))
         continue;
-      if (std::abs((T.points[r] - T.points[j]).norm() - d12) > tol) continue;
+      if (std::abs((T.points[r] - T.points[j]).norm() - q.d12) > tol) continue;
       const Vec3 src[3] = {T.points[i], T.points[j], T.points[r]};
-      const RigidFit fit = kabsch(std::span<const Vec3>(src, 3), std::span<const Vec3>(p, 3), {}, ks);
+      const RigidFit fit = kabsch(std::span<const Vec3>(src, 3), std::span<const Vec3>(q.p, 3), {}, ks);
       if (!fit.valid) continue;
-      if (normals) {
+      if (q.normals) {
         const Mat3 R = fit.T_target_source.linear();
         const std::size_t idx[3] = {i, j, r};
         bool ok = true;
-        for (int q = 0; q < 3 && ok; ++q) ok = (R * T.normals[idx[q]]).dot(n[q]) >= cos_ntol;
+        for (int c = 0; c < 3 && ok; ++c) ok = (R * T.normals[idx[c]]).dot(q.n[c]) >= cos_ntol;
         if (!ok) continue;
       }
       out.push_back(fit.T_target_source);
@@ -183,7 +221,27 @@ std::size_t ObjectPairs::memory_bytes() const {
 SparseTables::SparseTables(const Database& db, SparseSettings settings)
     : db_(db), s_(settings), tables_(db.size()) {}
 
-void SparseTables::prepare(const std::vector<std::uint8_t>& wanted) {
+std::shared_ptr<SparseTables> SparseTables::shared(const Database& db, const SparseSettings& s) {
+  // Keyed by the database's address and what a table or the cache depends on; weak, so the
+  // tables live only while used (as ShapePrior::shared).
+  using Key = std::tuple<const Database*, double, std::size_t, double>;
+  static std::mutex mutex;
+  static std::map<Key, std::weak_ptr<SparseTables>> cache;
+  std::lock_guard<std::mutex> lock(mutex);
+  for (auto it = cache.begin(); it != cache.end();) it = it->second.expired() ? cache.erase(it) : std::next(it);
+  auto& slot = cache[Key{&db, s.model_spacing, s.max_model_points, s.table_budget_mb}];
+  if (auto p = slot.lock()) return p;
+  auto p = std::make_shared<SparseTables>(db, s);
+  slot = p;
+  return p;
+}
+
+std::size_t SparseTables::held_bytes() const {
+  std::lock_guard lock(mutex_);
+  return held_;
+}
+
+SparseTables::View SparseTables::prepare(const std::vector<std::uint8_t>& wanted) {
   std::lock_guard lock(mutex_);
   auto is_wanted = [&](std::size_t o) { return wanted.empty() || (o < wanted.size() && wanted[o]); };
   std::vector<std::size_t> missing;
@@ -192,17 +250,26 @@ void SparseTables::prepare(const std::vector<std::uint8_t>& wanted) {
   // Large databases (the shape prior's best objects change from step to step): once the held
   // tables exceed the budget, the next step drops those it does not want (so the tables held
   // reach at most the budget plus one step's). A table is a function of the object's keypoints
-  // alone, so a dropped one comes back bit for bit.
+  // alone, so a dropped one comes back bit for bit; a caller's view keeps its own alive.
   const double budget = s_.table_budget_mb * 1024.0 * 1024.0;
   if (static_cast<double>(held_) > budget && !wanted.empty())
     for (std::size_t o = 0; o < tables_.size(); ++o)
       if (tables_[o] && !is_wanted(o)) tables_[o].reset();
-  parallel_each(missing.size(), [&](std::size_t k) {
-    tables_[missing[k]] = std::make_unique<ObjectPairs>(build_object_pairs(db_.keypoints(missing[k]), s_));
+  // Isolated: while this thread waits for the builds under the lock, it must not take up
+  // another run's task, which could ask for the same lock.
+  tbb::this_task_arena::isolate([&] {
+    parallel_each(missing.size(), [&](std::size_t k) {
+      tables_[missing[k]] = std::make_shared<const ObjectPairs>(build_object_pairs(db_.keypoints(missing[k]), s_));
+    });
   });
   held_ = 0;   // counted anew: a build that threw leaves no table uncounted
-  for (const auto& t : tables_)
-    if (t) held_ += t->memory_bytes();
+  View view(tables_.size());
+  for (std::size_t o = 0; o < tables_.size(); ++o) {
+    if (!tables_[o]) continue;
+    held_ += tables_[o]->memory_bytes();
+    if (is_wanted(o)) view[o] = tables_[o];
+  }
+  return view;
 }
 
 std::size_t isolated_contacts(const Scene& scene) {
@@ -285,23 +352,33 @@ std::vector<Candidate> sparse_candidates(const Scene& scene, SparseTables& table
   for (std::uint32_t o = 0; o < allowed.size(); ++o)
     if (allowed[o]) objects.push_back(o);
   if (triplets.empty() || objects.empty()) return finish();
-  tables.prepare(allowed);
+  const SparseTables::View view = tables.prepare(allowed);
 
-  // (triplet, object) tasks, each into its own slot.
+  // One task per object sweeps its table once for every triplet; each (triplet, object) draws
+  // from its own stream and fills its own slot, so the candidates do not depend on the order.
   const std::size_t tasks = triplets.size() * objects.size();
   std::vector<std::vector<Pose>> slots(tasks);
-  parallel_each(tasks, [&](std::size_t task) {
-    const Triplet& tr = triplets[task / objects.size()];
-    const std::uint32_t o = objects[task % objects.size()];
-    Vec3 p[3], n[3];
-    bool normals = with_normals;
-    for (int q = 0; q < 3; ++q) {
-      p[q] = pts[tr.k[q]];
-      n[q] = with_normals ? contact_normals[tr.k[q]] : Vec3::Zero();
-      normals = normals && n[q].squaredNorm() > 0.0;
+  const int utol = angle_units(s.normal_tolerance_deg * std::numbers::pi / 180.0);
+  parallel_each(objects.size(), [&](std::size_t k) {
+    const ObjectPairs& T = *view[objects[k]];
+    if (T.points.size() < 3 || !(T.unit > 0.0)) return;
+    std::vector<TripletQuery> queries;
+    for (const Triplet& tr : triplets) {
+      Vec3 p[3], n[3];
+      bool normals = with_normals;
+      for (int q = 0; q < 3; ++q) {
+        p[q] = pts[tr.k[q]];
+        n[q] = with_normals ? contact_normals[tr.k[q]] : Vec3::Zero();
+        normals = normals && n[q].squaredNorm() > 0.0;
+      }
+      queries.push_back(make_query(T, p, n, normals, s));
     }
-    Rng r(seed, step, kSparseStream + 1, task);
-    match_object(tables.object(o), p, n, normals, s, r, slots[task]);
+    auto matched = matched_pairs(T, queries, utol);
+    for (std::size_t t = 0; t < triplets.size(); ++t) {
+      const std::size_t task = t * objects.size() + k;
+      Rng r(seed, step, kSparseStream + 1, task);
+      close_triangles(T, queries[t], matched[t], utol, s, r, slots[task]);
+    }
   });
   std::uint32_t slot = kSparseSlot;
   for (std::size_t task = 0; task < tasks; ++task)

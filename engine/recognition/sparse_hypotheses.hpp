@@ -26,8 +26,9 @@
 // Tables (SparseTables): each object's keypoints (the stored coarse cloud with normals)
 // thinned by a voxel filter to at most `max_model_points` points, and for each of them every
 // other one sorted by distance, with the pair's angles. Built from the database on first use (no
-// file format change: the coarse cloud is already stored; at most 2.9 MB an object), kept by the
-// recognizer for its steps.
+// file format change: the coarse cloud is already stored; at most 2.9 MB an object), shared by
+// the recognizers of one database (SparseTables::shared) for as long as one of them holds them.
+// Matching sweeps each object's table once a step for all the step's triplets.
 //
 // Numerics: triplets, in the scene and in the model, must be well-conditioned triangles
 // (triangle_well_conditioned: near-collinear sets are rejected by geometry, never by residual);
@@ -99,19 +100,24 @@ ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSet
 class SparseTables {
  public:
   SparseTables(const Database& db, SparseSettings settings);
-  /// Build the tables of the objects with wanted[o] != 0 that are missing (in parallel). When
-  /// the tables held exceed `table_budget_mb`, those not wanted are dropped first.
-  void prepare(const std::vector<std::uint8_t>& wanted);
-  std::size_t held_bytes() const { return held_; }
-  /// The table of object o; prepare() must have covered it. Valid until the next prepare(),
-  /// which may drop it: not to be held across steps or shared between concurrent callers.
-  const ObjectPairs& object(std::size_t o) const { return *tables_[o]; }
+  /// One cache per (database, table settings), shared while someone holds it: the recognizers of
+  /// an experiment's runs (or of `recognize` over many logs) build each table once, not once per
+  /// run (45 objects: about 0.7 s a run), and hold it once.
+  static std::shared_ptr<SparseTables> shared(const Database& db, const SparseSettings& settings);
+
+  /// Per database object, its table where wanted (null elsewhere). Each table stays valid while
+  /// the view holds it, whatever other callers' prepare() drops meanwhile.
+  using View = std::vector<std::shared_ptr<const ObjectPairs>>;
+  /// The tables of the objects with wanted[o] != 0 (all when empty), building those missing (in
+  /// parallel). When the tables held exceed `table_budget_mb`, those not wanted are dropped first.
+  View prepare(const std::vector<std::uint8_t>& wanted);
+  std::size_t held_bytes() const;
 
  private:
   const Database& db_;
   SparseSettings s_;
-  std::mutex mutex_;
-  std::vector<std::unique_ptr<ObjectPairs>> tables_;
+  mutable std::mutex mutex_;
+  std::vector<std::shared_ptr<const ObjectPairs>> tables_;
   std::size_t held_ = 0;              ///< bytes of the tables held
 };
 

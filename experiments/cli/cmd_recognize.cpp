@@ -614,6 +614,7 @@ int recognize_many(const Context& c, const std::vector<Input>& inputs,
   // (FeatureTable::shared keeps a table only while someone holds it).
   const auto table = c.rs.ransac.feature_table ? FeatureTable::shared(c.db, c.rs.objects) : nullptr;
   const auto prior = Recognizer::shape_prior(c.db, c.rs);   // the same: built once, not per input
+  const auto sparse = Recognizer::sparse_tables(c.db, c.rs);   // and the pair tables, as inputs want them
   experiments::release_free_memory();   // what building them freed (experiments/allocator.hpp)
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(0, inputs.size(), 1),

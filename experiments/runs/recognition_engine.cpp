@@ -219,6 +219,7 @@ class RecognitionEngine final : public RunEngine {
       for (const VariantData& v : variants_) {
         if (v.group != g) continue;
         if (auto prior = Recognizer::shape_prior(*group.database, v.recognizer)) group.priors.push_back(std::move(prior));
+        if (auto t = Recognizer::sparse_tables(*group.database, v.recognizer)) group.sparse_tables.push_back(std::move(t));
         if (v.recognizer.ransac.feature_table) {
           if (!masks.insert(v.recognizer.objects).second) continue;
           if (note_) note_("Building the feature table of a " + std::to_string(group.objects.size()) + "-object database...");

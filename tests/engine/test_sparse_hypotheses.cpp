@@ -316,20 +316,62 @@ TEST_CASE("Pair tables beyond the budget: the unwanted are dropped and come back
     w[o] = 1;
     return w;
   };
-  dropping.prepare(only(4));
+  const SparseTables::View first = dropping.prepare(only(4));
+  REQUIRE(first[4]);
+  CHECK_FALSE(first[1]);   // not wanted: not in the view
   const std::size_t wedge = dropping.held_bytes();
-  CHECK(wedge > 0);
-  dropping.prepare(only(1));
-  CHECK(dropping.held_bytes() == dropping.object(1).memory_bytes());   // the wedge's is gone
+  CHECK(wedge == first[4]->memory_bytes());
+  const SparseTables::View second = dropping.prepare(only(1));
+  REQUIRE(second[1]);
+  CHECK_FALSE(second[4]);
+  CHECK(dropping.held_bytes() == second[1]->memory_bytes());   // the wedge's is gone from the cache
+  CHECK(first[4]->memory_bytes() == wedge);                    // but the first view still holds it
   keeping.prepare(only(4));
-  keeping.prepare(only(1));
-  CHECK(keeping.held_bytes() == wedge + keeping.object(1).memory_bytes());   // within the budget: both kept
-  dropping.prepare(only(4));   // rebuilt: the same table
-  const ObjectPairs &a = dropping.object(4), &b = keeping.object(4);
-  REQUIRE(a.near.size() == b.near.size());
-  CHECK(a.points == b.points);
-  CHECK(a.unit == b.unit);
-  CHECK(std::equal(a.near.begin(), a.near.end(), b.near.begin(), [](const ObjectPairs::Near& x, const ObjectPairs::Near& y) {
-    return x.distance == y.distance && x.index == y.index && x.a_i == y.a_i && x.a_j == y.a_j && x.a_ij == y.a_ij;
-  }));
+  const SparseTables::View kept = keeping.prepare(only(1));
+  CHECK(keeping.held_bytes() == wedge + kept[1]->memory_bytes());   // within the budget: both kept
+  const SparseTables::View again = dropping.prepare(only(4));       // rebuilt: the same table
+  const SparseTables::View other = keeping.prepare(only(4));
+  REQUIRE(again[4]);
+  REQUIRE(other[4]);
+  CHECK(again[4] != first[4]);   // a new build, not the old one
+  for (const ObjectPairs* b : {other[4].get(), first[4].get()}) {
+    const ObjectPairs& a = *again[4];
+    REQUIRE(a.near.size() == b->near.size());
+    CHECK(a.points == b->points);
+    CHECK(a.unit == b->unit);
+    CHECK(std::equal(a.near.begin(), a.near.end(), b->near.begin(), [](const ObjectPairs::Near& x, const ObjectPairs::Near& y) {
+      return x.distance == y.distance && x.index == y.index && x.a_i == y.a_i && x.a_j == y.a_j && x.a_ij == y.a_ij;
+    }));
+  }
+}
+
+TEST_CASE("Pair tables are shared per database and table settings, while held") {
+  auto src = test::make_source();
+  Database db(src), other_db(src);
+  SparseSettings s;
+  auto a = SparseTables::shared(db, s);
+  SparseSettings matching = s;   // settings the tables do not depend on: the same cache
+  matching.triplets = 3;
+  matching.mode = kSparseAlways;
+  CHECK(SparseTables::shared(db, matching) == a);
+  SparseSettings coarser = s;
+  coarser.max_model_points = 100;
+  CHECK(SparseTables::shared(db, coarser) != a);
+  CHECK(SparseTables::shared(other_db, s) != a);
+  // A table built through one holder is found by the next.
+  const std::vector<std::uint8_t> all;
+  a->prepare(all);
+  const std::size_t held = a->held_bytes();
+  CHECK(held > 0);
+  CHECK(SparseTables::shared(db, s)->held_bytes() == held);
+  // Released by everyone: gone, and a new cache starts empty.
+  a.reset();
+  CHECK(SparseTables::shared(db, s)->held_bytes() == 0);
+  // The recognizer's: none when the source is off.
+  RecognizerSettings rs;
+  rs.sparse.mode = kSparseNever;
+  CHECK(Recognizer::sparse_tables(db, rs) == nullptr);
+  rs.sparse.mode = kSparseAuto;
+  const auto held_by_test = Recognizer::sparse_tables(db, rs);
+  CHECK(held_by_test == SparseTables::shared(db, rs.sparse));
 }
