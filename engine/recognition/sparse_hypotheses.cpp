@@ -5,7 +5,6 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
@@ -99,8 +98,14 @@ TripletQuery make_query(const ObjectPairs& T, const Vec3 (&p)[3], const Vec3 (&n
   q.d12 = (p[2] - p[1]).norm();
   auto units = [&](double d) { return std::clamp(d / T.unit, 0.0, 65535.0); };
   // u >= lo (real) is u >= ceil(lo); u <= hi is u <= floor(hi): the same pairs, in integers.
-  q.lo01 = static_cast<int>(std::ceil(units(d01 - tol))), q.hi01 = static_cast<int>(std::floor(units(d01 + tol)));
-  q.lo02 = static_cast<int>(std::ceil(units(d02 - tol))), q.hi02 = static_cast<int>(std::floor(units(d02 + tol)));
+  // A side that is not a number matches nothing.
+  auto bounds = [&](double d, int& lo, int& hi) {
+    const double l = units(d - tol), h = units(d + tol);
+    if (!(l <= h)) return;   // NaN (or a negative tolerance): lo 0 > hi -1
+    lo = static_cast<int>(std::ceil(l)), hi = static_cast<int>(std::floor(h));
+  };
+  bounds(d01, q.lo01, q.hi01);
+  bounds(d02, q.lo02, q.hi02);
   if (normals) {
     const PairAngles a = pair_angles(p[0], n[0], p[1], n[1]);
     q.sa = angle_units(a.a), q.sb = angle_units(a.b), q.sab = angle_units(a.ab);
@@ -117,8 +122,9 @@ Row first_at_least(Row row, Row end, int v) {
 
 /// The oriented model pairs (i on contact 0, j on contact 1) that agree with each query's
 /// longest side (distance, and the point-pair angles where the contacts have normals), in row
-/// order. One sweep over the rows serves every query, so each row is read from memory once a
-/// step, not once a triplet (the binary searches were most of the source's time).
+/// order. One sweep over the rows serves all the queries: each row is read from memory once a
+/// step and searched once a query while it is in cache (the searches, one row fetched from
+/// memory each, were most of the source's time).
 std::vector<std::vector<std::pair<std::uint16_t, std::uint16_t>>> matched_pairs(
     const ObjectPairs& T, const std::vector<TripletQuery>& queries, int utol) {
   std::vector<std::vector<std::pair<std::uint16_t, std::uint16_t>>> matched(queries.size());
@@ -219,7 +225,7 @@ std::size_t ObjectPairs::memory_bytes() const {
 }
 
 SparseTables::SparseTables(const Database& db, SparseSettings settings)
-    : db_(db), s_(settings), tables_(db.size()) {}
+    : db_(db), s_(settings), tables_(db.size()), last_wanted_(db.size(), 0) {}
 
 std::shared_ptr<SparseTables> SparseTables::shared(const Database& db, const SparseSettings& s) {
   // Keyed by the database's address and what a table or the cache depends on; weak, so the
@@ -242,32 +248,49 @@ std::size_t SparseTables::held_bytes() const {
 }
 
 SparseTables::View SparseTables::prepare(const std::vector<std::uint8_t>& wanted) {
-  std::lock_guard lock(mutex_);
   auto is_wanted = [&](std::size_t o) { return wanted.empty() || (o < wanted.size() && wanted[o]); };
   std::vector<std::size_t> missing;
-  for (std::size_t o = 0; o < tables_.size(); ++o)
-    if (is_wanted(o) && !tables_[o]) missing.push_back(o);
-  // Large databases (the shape prior's best objects change from step to step): once the held
-  // tables exceed the budget, the next step drops those it does not want (so the tables held
-  // reach at most the budget plus one step's). A table is a function of the object's keypoints
-  // alone, so a dropped one comes back bit for bit; a caller's view keeps its own alive.
-  const double budget = s_.table_budget_mb * 1024.0 * 1024.0;
-  if (static_cast<double>(held_) > budget && !wanted.empty())
-    for (std::size_t o = 0; o < tables_.size(); ++o)
-      if (tables_[o] && !is_wanted(o)) tables_[o].reset();
-  // Isolated: while this thread waits for the builds under the lock, it must not take up
-  // another run's task, which could ask for the same lock.
-  tbb::this_task_arena::isolate([&] {
-    parallel_each(missing.size(), [&](std::size_t k) {
-      tables_[missing[k]] = std::make_shared<const ObjectPairs>(build_object_pairs(db_.keypoints(missing[k]), s_));
-    });
+  {
+    std::lock_guard lock(mutex_);
+    ++calls_;
+    for (std::size_t o = 0; o < tables_.size(); ++o) {
+      if (!is_wanted(o)) continue;
+      last_wanted_[o] = calls_;
+      if (!tables_[o]) missing.push_back(o);
+    }
+  }
+  // Built outside the lock. A table is a function of the object's keypoints alone, so two
+  // callers that build the same one build the same table; the first installed is kept.
+  std::vector<std::shared_ptr<const ObjectPairs>> built(missing.size());
+  parallel_each(missing.size(), [&](std::size_t k) {
+    built[k] = std::make_shared<const ObjectPairs>(build_object_pairs(db_.keypoints(missing[k]), s_));
   });
-  held_ = 0;   // counted anew: a build that threw leaves no table uncounted
+  std::lock_guard lock(mutex_);
+  for (std::size_t k = 0; k < missing.size(); ++k)
+    if (!tables_[missing[k]]) tables_[missing[k]] = std::move(built[k]);
   View view(tables_.size());
+  held_ = 0;
   for (std::size_t o = 0; o < tables_.size(); ++o) {
     if (!tables_[o]) continue;
     held_ += tables_[o]->memory_bytes();
     if (is_wanted(o)) view[o] = tables_[o];
+  }
+  // Large databases (the shape prior's best objects change from step to step): beyond the
+  // budget, the least recently wanted tables nobody uses are dropped until the rest fit, so the
+  // cache holds at most the budget plus what its callers use at once. A dropped table comes
+  // back bit for bit.
+  const double budget = s_.table_budget_mb * 1024.0 * 1024.0;
+  if (static_cast<double>(held_) > budget) {
+    std::vector<std::size_t> idle;
+    for (std::size_t o = 0; o < tables_.size(); ++o)
+      if (tables_[o] && !is_wanted(o) && tables_[o].use_count() == 1) idle.push_back(o);
+    std::sort(idle.begin(), idle.end(), [&](std::size_t a, std::size_t b) {
+      return last_wanted_[a] != last_wanted_[b] ? last_wanted_[a] < last_wanted_[b] : a < b;
+    });
+    for (std::size_t k = 0; k < idle.size() && static_cast<double>(held_) > budget; ++k) {
+      held_ -= tables_[idle[k]]->memory_bytes();
+      tables_[idle[k]].reset();
+    }
   }
   return view;
 }
@@ -354,30 +377,35 @@ std::vector<Candidate> sparse_candidates(const Scene& scene, SparseTables& table
   if (triplets.empty() || objects.empty()) return finish();
   const SparseTables::View view = tables.prepare(allowed);
 
-  // One task per object sweeps its table once for every triplet; each (triplet, object) draws
-  // from its own stream and fills its own slot, so the candidates do not depend on the order.
+  // Each task sweeps one object's table once for a group of the triplets (all of them when
+  // there are enough objects to keep the threads busy; a few objects split them, so that
+  // `--only NAME` is not left to one thread). Each (triplet, object) draws from its own stream
+  // and fills its own slot, so the candidates depend on neither the grouping nor the order.
   const std::size_t tasks = triplets.size() * objects.size();
   std::vector<std::vector<Pose>> slots(tasks);
   const int utol = angle_units(s.normal_tolerance_deg * std::numbers::pi / 180.0);
-  parallel_each(objects.size(), [&](std::size_t k) {
+  const std::size_t groups = std::clamp<std::size_t>((16 + objects.size() - 1) / objects.size(), 1, triplets.size());
+  parallel_each(objects.size() * groups, [&](std::size_t job) {
+    const std::size_t k = job / groups, g = job % groups;
+    const std::size_t t0 = g * triplets.size() / groups, t1 = (g + 1) * triplets.size() / groups;
     const ObjectPairs& T = *view[objects[k]];
     if (T.points.size() < 3 || !(T.unit > 0.0)) return;
     std::vector<TripletQuery> queries;
-    for (const Triplet& tr : triplets) {
+    for (std::size_t t = t0; t < t1; ++t) {
       Vec3 p[3], n[3];
       bool normals = with_normals;
       for (int q = 0; q < 3; ++q) {
-        p[q] = pts[tr.k[q]];
-        n[q] = with_normals ? contact_normals[tr.k[q]] : Vec3::Zero();
+        p[q] = pts[triplets[t].k[q]];
+        n[q] = with_normals ? contact_normals[triplets[t].k[q]] : Vec3::Zero();
         normals = normals && n[q].squaredNorm() > 0.0;
       }
       queries.push_back(make_query(T, p, n, normals, s));
     }
     auto matched = matched_pairs(T, queries, utol);
-    for (std::size_t t = 0; t < triplets.size(); ++t) {
+    for (std::size_t t = t0; t < t1; ++t) {
       const std::size_t task = t * objects.size() + k;
       Rng r(seed, step, kSparseStream + 1, task);
-      close_triangles(T, queries[t], matched[t], utol, s, r, slots[task]);
+      close_triangles(T, queries[t - t0], matched[t - t0], utol, s, r, slots[task]);
     }
   });
   std::uint32_t slot = kSparseSlot;

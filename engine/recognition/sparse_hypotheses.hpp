@@ -37,9 +37,9 @@
 // ambiguous (a flat face) is left to the evaluation and the free space. Symmetric objects give
 // many equally good matches; they are all proposed and scored alike.
 //
-// Deterministic: every draw comes from Rng(seed, step, tag, triplet * objects + object); the
-// (triplet, object) tasks fill their own slots, concatenated in order: the same candidates for
-// any thread count.
+// Deterministic: every draw comes from Rng(seed, step, tag, triplet * objects + object), and each
+// (triplet, object) fills its own slot, concatenated in that order, whichever task computed it:
+// the same candidates for any thread count.
 #pragma once
 
 #include "engine/database/database.hpp"
@@ -109,7 +109,9 @@ class SparseTables {
   /// the view holds it, whatever other callers' prepare() drops meanwhile.
   using View = std::vector<std::shared_ptr<const ObjectPairs>>;
   /// The tables of the objects with wanted[o] != 0 (all when empty), building those missing (in
-  /// parallel). When the tables held exceed `table_budget_mb`, those not wanted are dropped first.
+  /// parallel, outside the lock: callers sharing the cache never wait for each other's builds).
+  /// When the tables held exceed `table_budget_mb`, the least recently wanted that no caller is
+  /// using are dropped until they fit (a table in some view would stay in memory anyway).
   View prepare(const std::vector<std::uint8_t>& wanted);
   std::size_t held_bytes() const;
 
@@ -118,7 +120,9 @@ class SparseTables {
   SparseSettings s_;
   mutable std::mutex mutex_;
   std::vector<std::shared_ptr<const ObjectPairs>> tables_;
-  std::size_t held_ = 0;              ///< bytes of the tables held
+  std::vector<std::uint64_t> last_wanted_;   ///< per object, the prepare() call that last wanted it
+  std::uint64_t calls_ = 0;                  ///< prepare() calls so far
+  std::size_t held_ = 0;                     ///< bytes of the tables held
 };
 
 /// Free space of a probe's path in the evaluation: its samples are free by the ball radius only

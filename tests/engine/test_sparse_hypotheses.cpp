@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 
 using namespace ts;
 
@@ -305,44 +306,60 @@ TEST_CASE("The recognizer recognizes and localizes from isolated contacts alone"
   }
 }
 
-TEST_CASE("Pair tables beyond the budget: the unwanted are dropped and come back alike") {
+TEST_CASE("Pair tables beyond the budget: the least recently wanted idle ones go, and come back alike") {
   auto src = test::make_source();
   Database db(src);
-  SparseSettings tight;
-  tight.table_budget_mb = 0.0;   // drop whatever a step does not want
-  SparseTables dropping(db, tight), keeping(db, SparseSettings{});
   auto only = [&](std::size_t o) {
     std::vector<std::uint8_t> w(db.size(), 0);
     w[o] = 1;
     return w;
   };
-  const SparseTables::View first = dropping.prepare(only(4));
-  REQUIRE(first[4]);
-  CHECK_FALSE(first[1]);   // not wanted: not in the view
-  const std::size_t wedge = dropping.held_bytes();
-  CHECK(wedge == first[4]->memory_bytes());
-  const SparseTables::View second = dropping.prepare(only(1));
-  REQUIRE(second[1]);
-  CHECK_FALSE(second[4]);
-  CHECK(dropping.held_bytes() == second[1]->memory_bytes());   // the wedge's is gone from the cache
-  CHECK(first[4]->memory_bytes() == wedge);                    // but the first view still holds it
-  keeping.prepare(only(4));
-  const SparseTables::View kept = keeping.prepare(only(1));
-  CHECK(keeping.held_bytes() == wedge + kept[1]->memory_bytes());   // within the budget: both kept
-  const SparseTables::View again = dropping.prepare(only(4));       // rebuilt: the same table
-  const SparseTables::View other = keeping.prepare(only(4));
-  REQUIRE(again[4]);
-  REQUIRE(other[4]);
-  CHECK(again[4] != first[4]);   // a new build, not the old one
-  for (const ObjectPairs* b : {other[4].get(), first[4].get()}) {
-    const ObjectPairs& a = *again[4];
-    REQUIRE(a.near.size() == b->near.size());
-    CHECK(a.points == b->points);
-    CHECK(a.unit == b->unit);
-    CHECK(std::equal(a.near.begin(), a.near.end(), b->near.begin(), [](const ObjectPairs::Near& x, const ObjectPairs::Near& y) {
-      return x.distance == y.distance && x.index == y.index && x.a_i == y.a_i && x.a_j == y.a_j && x.a_ij == y.a_ij;
-    }));
-  }
+  // The tables' sizes, from a cache without a budget problem.
+  SparseTables keeping(db, SparseSettings{});
+  std::vector<std::size_t> bytes(db.size());
+  for (std::size_t o = 0; o < db.size(); ++o) bytes[o] = keeping.prepare(only(o))[o]->memory_bytes();
+  CHECK(keeping.held_bytes() == std::accumulate(bytes.begin(), bytes.end(), std::size_t{0}));   // all kept
+  // Objects a, b, c with c's table no larger than b's: a budget of a + b holds a and c after
+  // the LRU drops b.
+  std::vector<std::size_t> order(db.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) { return bytes[x] > bytes[y]; });
+  REQUIRE(order.size() >= 3);
+  const std::size_t a = order[1], b = order[0], c = order[2];
+  REQUIRE(bytes[c] <= bytes[b]);
+  SparseSettings tight;
+  tight.table_budget_mb = static_cast<double>(bytes[a] + bytes[b]) / (1024.0 * 1024.0);
+  SparseTables lru(db, tight);
+  SparseTables::View first_a = lru.prepare(only(a));
+  REQUIRE(first_a[a]);
+  CHECK_FALSE(first_a[b]);   // not wanted: not in the view
+  lru.prepare(only(b));
+  CHECK(lru.held_bytes() == bytes[a] + bytes[b]);   // within the budget: both kept
+  lru.prepare(only(a));                             // a is now wanted more recently than b
+  first_a = {};
+  lru.prepare(only(c));   // over the budget: b, the least recently wanted, goes
+  CHECK(lru.held_bytes() == bytes[a] + bytes[c]);
+  // A table some caller still uses is not dropped (it would stay in memory anyway).
+  SparseSettings none;
+  none.table_budget_mb = 0.0;
+  SparseTables dropping(db, none);
+  const SparseTables::View held_a = dropping.prepare(only(a));
+  dropping.prepare(only(b));
+  CHECK(dropping.held_bytes() == bytes[a] + bytes[b]);   // a is in held_a
+  dropping.prepare(only(c));
+  CHECK(dropping.held_bytes() == bytes[a] + bytes[c]);   // b was idle: gone
+  // Rebuilt when wanted again: the same table as one never dropped.
+  const SparseTables::View again = dropping.prepare(only(b));
+  const SparseTables::View kept = keeping.prepare(only(b));
+  REQUIRE(again[b]);
+  REQUIRE(kept[b]);
+  const ObjectPairs &x = *again[b], &y = *kept[b];
+  REQUIRE(x.near.size() == y.near.size());
+  CHECK(x.points == y.points);
+  CHECK(x.unit == y.unit);
+  CHECK(std::equal(x.near.begin(), x.near.end(), y.near.begin(), [](const ObjectPairs::Near& u, const ObjectPairs::Near& v) {
+    return u.distance == v.distance && u.index == v.index && u.a_i == v.a_i && u.a_j == v.a_j && u.a_ij == v.a_ij;
+  }));
 }
 
 TEST_CASE("Pair tables are shared per database and table settings, while held") {
@@ -367,11 +384,77 @@ TEST_CASE("Pair tables are shared per database and table settings, while held") 
   // Released by everyone: gone, and a new cache starts empty.
   a.reset();
   CHECK(SparseTables::shared(db, s)->held_bytes() == 0);
-  // The recognizer's: none when the source is off.
-  RecognizerSettings rs;
+  // The recognizer's: none when the source is off; otherwise the shared cache, which a
+  // recognizer's step on isolated contacts fills.
+  RecognizerSettings rs = test::fast_settings();
   rs.sparse.mode = kSparseNever;
   CHECK(Recognizer::sparse_tables(db, rs) == nullptr);
   rs.sparse.mode = kSparseAuto;
   const auto held_by_test = Recognizer::sparse_tables(db, rs);
-  CHECK(held_by_test == SparseTables::shared(db, rs.sparse));
+  REQUIRE(held_by_test);
+  CHECK(held_by_test->held_bytes() == 0);
+  Recognizer rec(db, rs);
+  const StepResult r = rec.step(isolated(*src, 4, test::random_pose(5, Vec3(0.1, 0.0, 0.3)), 12, 8), {});
+  CHECK(r.sparse_active);
+  CHECK(held_by_test->held_bytes() > 0);
+}
+
+namespace {
+
+/// FNV-1a over the candidates' objects, slots and pose bits.
+std::uint64_t candidates_hash(const std::vector<Candidate>& cands) {
+  std::uint64_t h = 1469598103934665603ull;
+  auto mix = [&](const void* p, std::size_t n) {
+    const auto* b = static_cast<const unsigned char*>(p);
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ b[i]) * 1099511628211ull;
+  };
+  for (const Candidate& c : cands) {
+    mix(&c.object, sizeof c.object);
+    mix(&c.slot, sizeof c.slot);
+    const Eigen::Matrix4d m = c.T_scene_object.matrix();
+    mix(m.data(), sizeof(double) * 16);
+  }
+  return h;
+}
+
+}  // namespace
+
+TEST_CASE("Sparse candidates: the same as the per-(triplet, object) matcher they replaced") {
+  // The expected counts and hashes were printed by the matcher of commit d6f182e (one task per
+  // (triplet, object), its own binary searches, real-valued bounds) on these inputs; the
+  // per-object sweep with integer bounds must give the same candidates bit for bit.
+  auto src = test::make_source();
+  Database db(src);
+  const Pose T = test::random_pose(12, Vec3(0.0, 0.0, 0.5));
+  const PointCloud c = isolated(*src, 1, T, 20, 5, 0.02, 15.0, 0.001);
+  const Scene scene = scene_of(db, c);
+  const std::vector<std::uint8_t> all(db.size(), 1);
+  std::vector<std::uint8_t> one(db.size(), 0);
+  one[1] = 1;
+  SparseSettings wide;
+  wide.distance_tolerance = 0.02;   // wide bands (and bounds beyond the small objects' tables)
+  struct Case {
+    const char* name;
+    SparseSettings s;
+    bool normals;
+    const std::vector<std::uint8_t>* allowed;
+  };
+  const Case cases[] = {{"normals, all objects", SparseSettings{}, true, &all},
+                        {"distances only, all objects", SparseSettings{}, false, &all},
+                        {"normals, one object", SparseSettings{}, true, &one},
+                        {"wide bands, distances only", wide, false, &all}};
+  std::vector<std::pair<std::size_t, std::uint64_t>> got;
+  for (const Case& k : cases) {
+    SparseTables tables(db, k.s);
+    const auto cands = sparse_candidates(scene, tables, k.normals ? scene_contact_normals(scene, c) : std::vector<Vec3>{},
+                                         *k.allowed, k.s, 3, 2);
+    got.emplace_back(cands.size(), candidates_hash(cands));
+    MESSAGE(std::string(k.name) << ": " << cands.size() << " candidates, hash " << got.back().second);
+  }
+  const std::pair<std::size_t, std::uint64_t> expected[] = {{1247, 10388630797745070833ull}, {2269, 1882848317045372430ull}, {309, 8675346054493745836ull}, {2304, 15144142114756254813ull}};
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    CAPTURE(cases[i].name);
+    CHECK(got[i].second == expected[i].second);
+    CHECK(got[i].first == expected[i].first);
+  }
 }
