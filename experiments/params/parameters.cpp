@@ -260,6 +260,10 @@ std::vector<Parameter> declaration() {
                      {"--sparse", "sparse"}, TS_FIELD(recognizer.sparse.mode)));
   d.push_back(integer("sparse.triplets", 1, 100000, "", "Feature-free source: contact triplets drawn per step",
                       {"--sparse-triplets", "sparse_triplets"}, TS_FIELD(recognizer.sparse.triplets)));
+  d.push_back(real("sparse.table_budget_mb", "MB", 0, 1e9, "",
+                   "Feature-free source: point-pair tables held besides those in use; beyond this, the "
+                   "least recently wanted are dropped and rebuilt when wanted again. Never changes results",
+                   {"--sparse-table-budget", "sparse_table_budget"}, TS_FIELD(recognizer.sparse.table_budget_mb)));
   d.push_back(integer("prior.angle_bins", 1, 64, "", "Shape prior: bins of each angle term",
                       {"--prior-angle-bins"}, TS_FIELD(recognizer.prior.angle_bins)));
   d.push_back(real("prior.distance_bin_m", "m", 1e-4, 1, "", "Shape prior: pair-distance bin",
