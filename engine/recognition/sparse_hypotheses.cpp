@@ -249,6 +249,9 @@ std::size_t SparseTables::held_bytes() const {
 
 SparseTables::View SparseTables::prepare(const std::vector<std::uint8_t>& wanted) {
   auto is_wanted = [&](std::size_t o) { return wanted.empty() || (o < wanted.size() && wanted[o]); };
+  // The wanted tables held now go into the view at once: held by it, another caller's
+  // prepare() cannot drop them while this one builds the missing.
+  View view(tables_.size());
   std::vector<std::size_t> missing;
   {
     std::lock_guard lock(mutex_);
@@ -256,7 +259,8 @@ SparseTables::View SparseTables::prepare(const std::vector<std::uint8_t>& wanted
     for (std::size_t o = 0; o < tables_.size(); ++o) {
       if (!is_wanted(o)) continue;
       last_wanted_[o] = calls_;
-      if (!tables_[o]) missing.push_back(o);
+      if (tables_[o]) view[o] = tables_[o];
+      else missing.push_back(o);
     }
   }
   // Built outside the lock. A table is a function of the object's keypoints alone, so two
@@ -266,15 +270,14 @@ SparseTables::View SparseTables::prepare(const std::vector<std::uint8_t>& wanted
     built[k] = std::make_shared<const ObjectPairs>(build_object_pairs(db_.keypoints(missing[k]), s_));
   });
   std::lock_guard lock(mutex_);
-  for (std::size_t k = 0; k < missing.size(); ++k)
-    if (!tables_[missing[k]]) tables_[missing[k]] = std::move(built[k]);
-  View view(tables_.size());
-  held_ = 0;
-  for (std::size_t o = 0; o < tables_.size(); ++o) {
-    if (!tables_[o]) continue;
-    held_ += tables_[o]->memory_bytes();
-    if (is_wanted(o)) view[o] = tables_[o];
+  for (std::size_t k = 0; k < missing.size(); ++k) {
+    auto& table = tables_[missing[k]];
+    if (!table) table = std::move(built[k]);
+    view[missing[k]] = table;
   }
+  held_ = 0;
+  for (const auto& t : tables_)
+    if (t) held_ += t->memory_bytes();
   // Large databases (the shape prior's best objects change from step to step): beyond the
   // budget, the least recently wanted tables nobody uses are dropped until the rest fit, so the
   // cache holds at most the budget plus what its callers use at once. A dropped table comes

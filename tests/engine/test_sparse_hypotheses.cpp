@@ -9,9 +9,11 @@
 #include "recognition_fixture.hpp"
 
 #include <doctest/doctest.h>
+#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <numeric>
 
@@ -360,6 +362,30 @@ TEST_CASE("Pair tables beyond the budget: the least recently wanted idle ones go
   CHECK(std::equal(x.near.begin(), x.near.end(), y.near.begin(), [](const ObjectPairs::Near& u, const ObjectPairs::Near& v) {
     return u.distance == v.distance && u.index == v.index && u.a_i == v.a_i && u.a_j == v.a_j && u.a_ij == v.a_ij;
   }));
+}
+
+TEST_CASE("Pair tables shared by concurrent callers: every view holds every table it wanted") {
+  // Callers on several threads with no budget at all: each one's prepare() drops whatever it
+  // does not want and nobody uses, while others build; no view may miss a table it asked for.
+  auto src = test::make_source();
+  Database db(src);
+  SparseSettings none;
+  none.table_budget_mb = 0.0;
+  SparseTables tables(db, none), reference(db, SparseSettings{});
+  const SparseTables::View all = reference.prepare({});
+  std::atomic<int> wrong{0};
+  tbb::task_arena arena(4);
+  arena.execute([&] {
+    tbb::parallel_for(0, 48, [&](int call) {
+      std::vector<std::uint8_t> w(db.size(), 0);
+      w[static_cast<std::size_t>(call) % db.size()] = 1;
+      w[static_cast<std::size_t>(call * 7 + 3) % db.size()] = 1;
+      const SparseTables::View v = tables.prepare(w);
+      for (std::size_t o = 0; o < db.size(); ++o)
+        if (w[o] && (!v[o] || v[o]->near.size() != all[o]->near.size() || v[o]->points != all[o]->points)) ++wrong;
+    });
+  });
+  CHECK(wrong == 0);
 }
 
 TEST_CASE("Pair tables are shared per database and table settings, while held") {
