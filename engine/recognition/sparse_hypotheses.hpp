@@ -72,8 +72,9 @@ struct SparseSettings {
   double min_side_share = 0.2;        ///< triplet sides at least this share of the contacts'
                                       ///< diameter (and 2 x distance_tolerance)
   int triplet_attempts = 400;         ///< draws per triplet slot before it is given up
-  double table_budget_mb = 256.0;     ///< pair tables held beyond this: those a step does not
-                                      ///< want are dropped (rebuilt alike when wanted again)
+  double table_budget_mb = 256.0;     ///< pair tables held beyond this: the least recently
+                                      ///< wanted that no caller uses are dropped (rebuilt alike
+                                      ///< when wanted again; SparseTables::prepare)
 };
 
 /// One object's point-pair table: for every thinned keypoint i, every other point j sorted by
