@@ -309,11 +309,17 @@ std::size_t isolated_contacts(const Scene& scene) {
   return n;
 }
 
-bool sparse_active(const Scene& scene, const SparseSettings& s) {
+namespace {
+/// sparse_active with the scene's isolated contacts already counted.
+bool active_with(const Scene& scene, const SparseSettings& s, std::size_t iso) {
   if (s.mode == kSparseNever || scene.contacts.size() < 3) return false;
   if (s.mode == kSparseAlways) return true;
-  const std::size_t iso = isolated_contacts(scene);
   return iso >= s.min_isolated && static_cast<double>(iso) >= s.min_isolated_share * static_cast<double>(scene.contacts.size());
+}
+}  // namespace
+
+bool sparse_active(const Scene& scene, const SparseSettings& s) {
+  return active_with(scene, s, s.mode == kSparseAuto ? isolated_contacts(scene) : 0);
 }
 
 std::vector<Vec3> scene_contact_normals(const Scene& scene, const PointCloud& contacts_world) {
@@ -360,7 +366,7 @@ std::vector<Candidate> sparse_candidates(const Scene& scene, SparseTables& table
     if (stats) *stats = st;
     return out;
   };
-  if (!sparse_active(scene, s)) return finish();
+  if (!active_with(scene, s, st.isolated)) return finish();
   st.active = true;
   const std::vector<Vec3>& pts = scene.contacts.points;
   const bool with_normals = contact_normals.size() == pts.size();
