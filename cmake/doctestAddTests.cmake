@@ -2,6 +2,7 @@
 # a test-case name containing ';' used to be split by CMake's list handling, so ctest ran a
 # filter that matched nothing and passed without running the test. ';' is now the '?'
 # wildcard in the filter and in the ctest name. Selected by tests/CMakeLists.txt.
+# Each test case also gets the label of its tier and a timeout (tests/tiers.cmake).
 # Distributed under the OSI-approved BSD 3-Clause License.  See accompanying
 # file Copyright.txt or https://cmake.org/licensing for details.
 
@@ -13,6 +14,7 @@ set(properties ${TEST_PROPERTIES})
 set(add_labels ${TEST_ADD_LABELS})
 set(junit_output_dir "${TEST_JUNIT_OUTPUT_DIR}")
 set(script)
+include("${CMAKE_CURRENT_LIST_DIR}/../tests/tiers.cmake")
 set(suite)
 set(tests)
 
@@ -107,12 +109,13 @@ foreach(line ${output})
     "${TEST_JUNIT_OUTPUT_PARAM}"
     ${extra_args}
   )
+  ts_test_tier("${prefix}${test}${suffix}" tier_properties)
   add_command(set_tests_properties
     "${prefix}${test}${suffix}"
     PROPERTIES
     WORKING_DIRECTORY "${TEST_WORKING_DIR}"
     ${properties}
-    LABELS ${labels}
+    ${tier_properties}
   )
   unset(labels)
   list(APPEND tests "${prefix}${test}${suffix}")

@@ -40,6 +40,28 @@ void run_command(const CommonOptions& o, const std::function<int()>& body) {
 
 int exit_code() { return g_exit_code; }
 
+int run_touchstone(int argc, char** argv, const char* version) {
+  g_exit_code = 0;
+  CLI::App app{"touchstone: tactile object recognition and 6-DOF localization"};
+  app.require_subcommand(1);
+  app.set_help_all_flag("--help-all", "Help for every subcommand");
+  app.set_version_flag("--version", std::string("touchstone ") + version);
+  register_db(app);
+  register_tactile(app);
+  register_recognize(app);
+  register_experiment(app);
+  register_catalogue(app);
+  register_stress(app);
+  register_params(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int rc = app.exit(e);  // prints help or "error message + usage hint"
+    return rc == 0 ? 0 : 2;      // usage errors exit 2
+  }
+  return exit_code();
+}
+
 bool stderr_is_terminal() { return isatty(STDERR_FILENO) == 1; }
 
 }  // namespace ts::cli

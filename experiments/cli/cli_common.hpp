@@ -38,4 +38,9 @@ void register_catalogue(CLI::App& app);   // catalogue
 void register_stress(CLI::App& app);      // stress
 void register_params(CLI::App& app);      // params
 
+/// The whole `touchstone` command line: registers every command, parses `argv`, runs the chosen
+/// command and returns its exit code (0 done, 1 error, 2 usage). main() is this; the CLI tests
+/// call it in process (tests/cli_run.hpp). `version` follows "touchstone " in --version.
+int run_touchstone(int argc, char** argv, const char* version);
+
 }  // namespace ts::cli

@@ -185,8 +185,10 @@ TEST_CASE("Report: recognition rates get a cluster bootstrap over objects and sa
   h.variant_labels = {""};
   h.variant_configs = {"{}"};
   for (int o = 0; o < 10; ++o) {
-    h.objects.push_back("o" + std::to_string(o));
-    h.database_objects.push_back("o" + std::to_string(o));
+    // (not "o" + std::to_string(o): GCC 12 warns of a memcpy bound there, a false positive)
+    const std::string name = std::string("o").append(std::to_string(o));
+    h.objects.push_back(name);
+    h.database_objects.push_back(name);
   }
   std::vector<ClusterCounts> expected;
   for (int o = 0; o < 10; ++o) {
