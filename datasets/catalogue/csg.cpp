@@ -1,5 +1,7 @@
 #include "datasets/catalogue/csg.hpp"
 
+#include "engine/geometry/eigen_solvers.hpp"
+
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Composite.h>
 #include <openvdb/tools/MeshToVolume.h>
@@ -335,7 +337,7 @@ Mesh sector(double r, double angle, double z0, double z1) {
 
 Pose frame(const Vec3& origin, const Vec3& axis) {
   Pose T = Pose::Identity();
-  T.linear() = Eigen::Quaterniond::FromTwoVectors(Vec3::UnitZ(), axis.normalized()).toRotationMatrix();
+  T.linear() = quaternion_from_two_vectors(Vec3::UnitZ(), axis.normalized()).toRotationMatrix();
   T.translation() = origin;
   return T;
 }

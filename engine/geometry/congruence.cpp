@@ -1,5 +1,6 @@
 #include "engine/geometry/congruence.hpp"
 
+#include "engine/geometry/eigen_solvers.hpp"
 #include "engine/geometry/kabsch.hpp"
 #include "engine/geometry/mesh.hpp"
 #include "engine/geometry/symmetry.hpp"
@@ -301,7 +302,7 @@ void sweep_candidates(const CongruenceShape& a, const CongruenceShape& b, int un
   for (double sign : {1.0, -1.0}) {
     // normalized(): for nearly opposite vectors (1 + cos small, but above Eigen's threshold
     // for its exact branch) FromTwoVectors' quaternion is off unit length by up to 1e-4.
-    const Mat3 R0 = Eigen::Quaterniond::FromTwoVectors(ua, sign * ub).normalized().toRotationMatrix();
+    const Mat3 R0 = quaternion_from_two_vectors(ua, sign * ub).normalized().toRotationMatrix();
     for (int k = 0; k < kSteps; ++k) {
       const Mat3 R = Eigen::AngleAxisd(2.0 * std::numbers::pi * k / kSteps, ub).toRotationMatrix() * R0;
       out.push_back(R);

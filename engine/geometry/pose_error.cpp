@@ -1,5 +1,6 @@
 #include "engine/geometry/pose_error.hpp"
 
+#include "engine/geometry/eigen_solvers.hpp"
 #include "engine/geometry/kabsch.hpp"
 
 #include <algorithm>
@@ -16,7 +17,7 @@ constexpr double kDeg = 180.0 / std::numbers::pi;
 /// Minimal rotation taking unit vector `from` to unit vector `to` (the quaternion normalized:
 /// see sweep_candidates in congruence.cpp).
 Mat3 minimal_rotation(const Vec3& from, const Vec3& to) {
-  return Eigen::Quaterniond::FromTwoVectors(from, to).normalized().toRotationMatrix();
+  return quaternion_from_two_vectors(from, to).normalized().toRotationMatrix();
 }
 
 }  // namespace

@@ -1,9 +1,9 @@
 #include "engine/recognition/icp.hpp"
 
+#include "engine/geometry/eigen_solvers.hpp"
 #include "engine/geometry/kabsch.hpp"
 
 #include <Eigen/Cholesky>
-#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <cmath>
@@ -269,8 +269,7 @@ IcpSystem icp_system(const Scene& scene, const ObjectGeometry& geo, const Pose& 
   out.radius = std::sqrt(spread2 / static_cast<double>(y.size()));
   const Matrix6 H = normal_matrix(y, n, c);
   const auto condition = [](const Matrix6& A, int* small) {
-    const Eigen::SelfAdjointEigenSolver<Matrix6> es(A, Eigen::EigenvaluesOnly);
-    const Eigen::Matrix<double, 6, 1> ev = es.eigenvalues();  // ascending
+    const Eigen::Matrix<double, 6, 1> ev = symmetric_eigenvalues(A);  // ascending
     const double top = ev(5);
     if (!(top > 0.0) || !std::isfinite(top)) return kIcpSingular;
     if (small) *small = static_cast<int>((ev.array() < 0.01 * top).count());

@@ -1,8 +1,8 @@
 #include "engine/recognition/scene.hpp"
 
 #include "engine/geometry/cloud.hpp"
+#include "engine/geometry/eigen_solvers.hpp"
 
-#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <cmath>
@@ -81,8 +81,7 @@ int unobservable_dof(const std::vector<Vec3>& points, const std::vector<Vec3>& n
     J.tail<3>() = ((points[i] - c) / L).cross(normals[i]);
     H.noalias() += J * J.transpose();
   }
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(H, Eigen::EigenvaluesOnly);
-  const auto ev = es.eigenvalues();
+  const Eigen::Matrix<double, 6, 1> ev = symmetric_eigenvalues(H);
   const double top = ev[5];
   if (!(top > 0.0)) return 6;
   int k = 0;
