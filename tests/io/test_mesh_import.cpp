@@ -6,8 +6,11 @@
 
 #include <doctest/doctest.h>
 
+#include <filesystem>
 #include <limits>
 #include <string>
+#include <utility>
+#include <vector>
 
 using ts::test::TempDir;
 namespace io = ts::io;
@@ -240,6 +243,77 @@ TEST_CASE("mesh import: an OFF header declaring more vertices or faces than the 
   // Without the keyword, Assimp reads a .off file's first numbers as the counts (4 GB asked).
   CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("041875966818443 1243\n3 0 3 2\n3 1 2 3\n", "k.off"),
                        doctest::Contains("declares 041875966818443 vertices"), ts::Error);
+}
+
+TEST_CASE("mesh import: a file is read as OFF exactly when Assimp's OFF importer would read it") {
+  // Issue 62, found by fuzzing (tests/fuzz/corpus/mesh/, its first byte chose the .off name):
+  // "OFF4 1111111111111..." is OFF, 4 vertices and 1111111111111 faces (Assimp 5.2 allocated
+  // 48 GB for them), where the check wanted a keyword ending in OFF.
+  const std::string fuzz =
+      ts::test::read_bytes(std::filesystem::path(TS_SOURCE_DIR) / "tests/fuzz/corpus/mesh/finding-off-keyword-glued-to-count").substr(1);
+  REQUIRE(fuzz.size() == 94);
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(fuzz, "fuzz.off"),
+                       "OFF header declares 1111111111111 faces, more than the 94 bytes of the file can hold "
+                       "(fuzz.off, header, faces)",
+                       ts::Error);
+  // Assimp sniffs the content when no importer owns the extension: its OFF reader takes a file
+  // beginning with "off" in any case. Another format's extension decides alone (an STL reader
+  // reads it as STL, and refuses it).
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(fuzz, "fuzz.unknown"), doctest::Contains("1111111111111 faces"), ts::Error);
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(fuzz, "fuzz"), doctest::Contains("1111111111111 faces"), ts::Error);
+  try {
+    io::import_mesh_from_memory(fuzz, "fuzz.stl");
+  } catch (const ts::Error& e) {
+    CHECK(std::string(e.what()).find("OFF") == std::string::npos);
+  }
+  TempDir dir("mesh");
+  ts::test::write_text(dir / "disguised.gltf", fuzz);   // glTF's own check refuses it: sniffed
+  CHECK_THROWS_WITH_AS(io::import_mesh(dir / "disguised.gltf"), doctest::Contains("1111111111111 faces"), ts::Error);
+
+  // Every keyword Assimp reads: letters ST (texture coordinates), C (colour), N (normal),
+  // 4 (homogeneous coordinates) and n (a dimension) before OFF, each reading the tetrahedron
+  // (0,0,0), (2,0,0), (0,2,0), (0,0,2) and refusing a face count the file cannot hold.
+  const std::string faces = "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+  const std::vector<std::pair<std::string, std::vector<std::string>>> variants = {
+      {"OFF", {"0 0 0", "2 0 0", "0 2 0", "0 0 2"}},
+      {"COFF", {"0 0 0 255 0 0 255", "2 0 0 0 255 0 255", "0 2 0 0 0 255 255", "0 0 2 1 1 1 1"}},
+      {"NOFF", {"0 0 0 -1 -1 -1", "2 0 0 1 0 0", "0 2 0 0 1 0", "0 0 2 0 0 1"}},
+      {"CNOFF", {"0 0 0 -1 -1 -1 1 0 0 1", "2 0 0 1 0 0 0 1 0 1", "0 2 0 0 1 0 0 0 1 1", "0 0 2 0 0 1 1 1 1 1"}},
+      {"STOFF", {"0 0 0 0 0", "2 0 0 1 0", "0 2 0 0 1", "0 0 2 1 1"}},
+      {"4OFF", {"0 0 0 1", "4 0 0 2", "0 1 0 0.5", "0 0 -6 -3"}},
+      {"nOFF 3", {"0 0 0", "2 0 0", "0 2 0", "0 0 2"}},
+      {"STCN4nOFF\n3", {"0 0 0 1 0 0 1 1 1 1 1 0 0", "2 0 0 1 1 0 0 1 1 1 1 1 0", "0 4 0 2 0 1 0 1 1 1 1 0 1",
+                        "0 0 2 1 0 0 1 1 1 1 1 1 1"}},
+      {"", {"0 0 0", "2 0 0", "0 2 0", "0 0 2"}},   // no keyword: the counts come first
+  };
+  for (const auto& [keyword, vertices] : variants) {
+    CAPTURE(keyword);
+    std::string body;
+    for (const auto& v : vertices) body += v + "\n";
+    const std::string head = keyword.empty() ? "" : keyword + "\n";
+    const auto m = io::import_mesh_from_memory(head + "4 4 6\n" + body + faces, "v.off",
+                                               {.scale = ts::ObjectScale::keep, .units = 1.0});
+    CHECK(m.mesh.vertices.size() == 4);
+    CHECK(m.mesh.faces.size() == 4);
+    CHECK(m.closed);
+    CHECK(m.extent.isApprox(ts::Vec3(2, 2, 2)));
+    CHECK(ts::mesh_signed_volume(m.mesh) == doctest::Approx(8.0 / 6.0));
+    CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(head + "4 4000000000 6\n" + body + faces, "v.off"),
+                         doctest::Contains("declares 4000000000 faces, more than the"), ts::Error);
+    CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(head + "40000000000 4 6\n" + body + faces, "v.off"),
+                         doctest::Contains("declares 40000000000 vertices"), ts::Error);
+  }
+  // nOFF of dimension 2: the z coordinates are 0.
+  const auto flat = io::import_mesh_from_memory("nOFF 2 4 2 0\n0 0\n1 0\n1 1\n0 1\n3 0 1 2\n3 0 2 3\n", "f.off",
+                                                {.scale = ts::ObjectScale::keep, .units = 1.0});
+  CHECK(flat.extent.isApprox(ts::Vec3(1, 1, 0)));
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("nOFF 4 4 2 0\n0 0 0 0\n1 0 0 0\n1 1 0 0\n0 1 0 0\n3 0 1 2\n", "d.off"),
+                       doctest::Contains("(d.off, header, dimension)"), ts::Error);
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("4OFF 3 1 0\n0 0 0 1\n1 0 0 0\n0 1 0 1\n3 0 1 2\n", "w.off"),
+                       doctest::Contains("(w.off, vertex 1)"), ts::Error);
+  // Assimp takes the keyword case as written: "off" is not OFF, nor "COF".
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("off\n4 4 6\n" + std::string("0 0 0\n2 0 0\n0 2 0\n0 0 2\n") + faces, "l.off"),
+                       doctest::Contains("(l.off, header)"), ts::Error);
 }
 
 TEST_CASE("mesh import: OFF records are checked before Assimp reads them") {
