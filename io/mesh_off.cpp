@@ -175,7 +175,7 @@ std::string off_for_assimp(const std::string& bytes, const std::string& name) {
   const std::size_t coordinates = static_cast<std::size_t>(dims) + (homogeneous ? 1 : 0);
   std::uint64_t record = 0;
   while (record < n_vertices + n_faces) {
-    while (p < s.size() && line_end(s[p])) ++p;   // empty lines
+    while (p < s.size() && line_end(s[p])) ++p;
     if (p >= s.size())
       throw Error("the file ends after " + std::to_string(std::min(record, n_vertices)) + " of " +
                       std::to_string(n_vertices) + " vertices and " +
@@ -184,7 +184,10 @@ std::string off_for_assimp(const std::string& bytes, const std::string& name) {
                   name, record < n_vertices ? "vertices" : "faces");
     const std::size_t start = p;
     while (p < s.size() && !line_end(s[p])) ++p;
-    const auto w = words(s.substr(start, p - start));
+    std::string_view line = s.substr(start, p - start);
+    line = line.substr(0, line.find('#'));   // a comment, to the end of the line
+    const auto w = words(line);
+    if (w.empty()) continue;   // a blank or comment line
     const bool vertex = record < n_vertices;
     const std::string where = (vertex ? "vertex " : "face ") + std::to_string(vertex ? record : record - n_vertices);
     ++record;

@@ -323,9 +323,8 @@ TEST_CASE("mesh import: OFF records are checked before Assimp reads them") {
   const std::string faces = "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
   CHECK(io::import_mesh_from_memory(head + faces, "t.off").mesh.faces.size() == 4);
   CHECK(io::import_mesh_from_memory(head + "\n" + faces + "\n", "t.off").mesh.faces.size() == 4);
-  // Assimp reads a comment among the records as a face of no vertices and drops it: refused.
-  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(head + "# comment\n" + faces, "h.off"),
-                       doctest::Contains("not '#'"), ts::Error);
+  // A comment among the records is skipped (Assimp read it as a face and dropped the last).
+  CHECK(io::import_mesh_from_memory(head + "# comment\n" + faces, "h.off").mesh.faces.size() == 4);
   // (Face 1 replaced; written out whole: GCC 12 warns falsely on std::string::replace here.)
   const std::string rest = "3 0 3 2\n3 1 2 3\n";
   CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(head + "3 0 2 1\n3 2 12\n" + rest, "s.off"),
@@ -339,4 +338,42 @@ TEST_CASE("mesh import: OFF records are checked before Assimp reads them") {
                        ts::Error);
   CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("OFF\n4 4 6\n0 0 0\n1 0\n0 1 0\n0 0 1\n" + faces, "v.off"),
                        doctest::Contains("(v.off, vertex 1)"), ts::Error);
+}
+
+TEST_CASE("mesh import: OFF comment and blank lines are read anywhere a line may be") {
+  // Issue 57: a comment after the header was refused ("a vertex needs three finite numbers, not
+  // '#'"); Assimp 5.2 itself throws on one among the vertices and drops the last faces after one
+  // among the faces. A cube with quads, as Geomview writes OFF.
+  const std::string cube =
+      "# a unit cube\n"
+      "OFF # keyword\n"
+      "\n"
+      "# vertices, faces, edges\n"
+      "8 6 12\n"
+      "# the vertices\n"
+      "0 0 0\n1 0 0\n   \n0 1 0\n1 1 0   # a comment after a vertex\n"
+      "# the top\n"
+      "0 0 1\n1 0 1\n\t\n0 1 1\n1 1 1\n"
+      "\n# the faces\n"
+      "4 0 2 3 1\n4 4 5 7 6\n# a comment among the faces\n4 0 1 5 4\r\n4 2 6 7 3\r\n\r\n"
+      "4 0 4 6 2 # after a face\n   # indented\n4 1 3 7 5\n"
+      "# the end\n";
+  const auto m = io::import_mesh_from_memory(cube, "cube.off", {.scale = ts::ObjectScale::keep, .units = 1.0});
+  CHECK(m.mesh.vertices.size() == 8);
+  CHECK(m.mesh.faces.size() == 12);
+  CHECK(m.closed);
+  CHECK(m.extent.isApprox(ts::Vec3(1, 1, 1)));
+  CHECK(ts::mesh_signed_volume(m.mesh) == doctest::Approx(1.0));
+  // The same file from disk, and its mesh equal to the one without comments.
+  TempDir dir("mesh");
+  ts::test::write_text(dir / "cube.off", cube);
+  ts::test::write_text(dir / "plain.off",
+                       "OFF\n8 6 12\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n0 0 1\n1 0 1\n0 1 1\n1 1 1\n"
+                       "4 0 2 3 1\n4 4 5 7 6\n4 0 1 5 4\n4 2 6 7 3\n4 0 4 6 2\n4 1 3 7 5\n");
+  const auto a = io::import_mesh(dir / "cube.off"), b = io::import_mesh(dir / "plain.off");
+  CHECK(a.mesh.vertices == b.mesh.vertices);
+  CHECK(a.mesh.faces == b.mesh.faces);
+  // A comment does not stand for a missing record.
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("OFF\n3 1 0\n0 0 0\n# 1 0 0\n0 1 0\n3 0 1 2\n", "c.off"),
+                       doctest::Contains("the file ends after 3 of 3 vertices and 0 of 1 faces (c.off, faces)"), ts::Error);
 }
