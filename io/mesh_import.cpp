@@ -2,9 +2,11 @@
 
 #include "io/cloud_io.hpp"
 #include "io/mesh_off.hpp"
+#include "io/mesh_references.hpp"
 #include "io/sha256.hpp"
 
 #include <assimp/BaseImporter.h>
+#include <assimp/DefaultIOSystem.h>
 #include <assimp/Importer.hpp>
 #include <assimp/MemoryIOWrapper.h>
 #include <assimp/config.h>
@@ -296,6 +298,33 @@ bool reads_extension(Assimp::BaseImporter* chosen, const std::string& extension)
   return extensions.count(extension) > 0;
 }
 
+/// Assimp's file access for one import: the default file system, only regular files inside
+/// `folder` (none at all when it is empty: a mesh read from memory). The paths refused are kept;
+/// Assimp may go on without the file (an OBJ without its material library), so the import is
+/// refused after it returns.
+class FolderIO final : public Assimp::DefaultIOSystem {
+ public:
+  explicit FolderIO(std::filesystem::path folder) : folder_(std::move(folder)) {}
+  bool Exists(const char* file) const override { return allowed(file) && DefaultIOSystem::Exists(file); }
+  Assimp::IOStream* Open(const char* file, const char* mode) override {
+    return allowed(file) ? DefaultIOSystem::Open(file, mode) : nullptr;
+  }
+  /// The first path refused, as Assimp asked for it ("" when none).
+  const std::string& refused() const { return refused_; }
+
+ private:
+  bool allowed(const char* file) const {
+    std::error_code ec;
+    if (!folder_.empty() && inside_folder(file, folder_) &&
+        (!std::filesystem::exists(file, ec) || std::filesystem::is_regular_file(file, ec)))
+      return true;
+    if (refused_.empty()) refused_ = file;
+    return false;
+  }
+  std::filesystem::path folder_;
+  mutable std::string refused_;
+};
+
 /// What both entry points share. `file`: the mesh's path (null: `bytes` come from memory, an
 /// archive member, named by the extension `hint`).
 ImportedMesh read_mesh(const std::string& bytes, const std::string& name, const std::filesystem::path* file,
@@ -303,10 +332,15 @@ ImportedMesh read_mesh(const std::string& bytes, const std::string& name, const 
   check_ply_header(bytes, name, hint);
   Assimp::Importer importer;
   configure(importer);
+  const std::filesystem::path folder = !file ? std::filesystem::path()
+                                       : file->parent_path().empty() ? std::filesystem::path(".")
+                                                                     : file->parent_path();
+  auto* io = new FolderIO(folder);
+  importer.SetIOHandler(io);   // the importer owns it
   // The importer Assimp will use, chosen as ReadFile and ReadFileFromMemory choose it.
   Assimp::BaseImporter* chosen = nullptr;
   if (file) {
-    chosen = chosen_importer(importer, name, importer.GetIOHandler());
+    chosen = chosen_importer(importer, name, io);
   } else {
     Assimp::MemoryIOSystem memory(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size(), nullptr);
     chosen = chosen_importer(importer, std::string(AI_MEMORYIO_MAGIC_FILENAME) + "." + hint, &memory);
@@ -316,11 +350,24 @@ ImportedMesh read_mesh(const std::string& bytes, const std::string& name, const 
     // Assimp's OFF reader is given the mesh as plain OFF, read and checked whole here first.
     const std::string text = off_for_assimp(bytes, name);
     scene = importer.ReadFileFromMemory(text.data(), text.size(), 0, "off");
-  } else if (file) {
-    // From the file (not memory) so formats with companion files (OBJ + MTL, glTF + BIN) work.
-    scene = importer.ReadFile(name, 0);
   } else {
-    scene = importer.ReadFileFromMemory(bytes.data(), bytes.size(), 0, hint.c_str());
+    std::string ext = hint;
+    for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    if (reads_extension(chosen, "gltf") || ext == "gltf" || ext == ".gltf" || ext == "glb" || ext == ".glb")
+      check_gltf_references(bytes, name, folder);
+    // From the file (not memory) so formats with companion files (OBJ + MTL, glTF + BIN) work.
+    scene = file ? importer.ReadFile(name, 0) : importer.ReadFileFromMemory(bytes.data(), bytes.size(), 0, hint.c_str());
+  }
+  // A file outside the mesh's folder was asked for. From memory, an OBJ's material library
+  // cannot be read and is skipped (no material is used); any other reference is refused.
+  if (!io->refused().empty() && (file || !reads_extension(chosen, "obj"))) {
+    std::string reference = io->refused();   // as written in the mesh, where Assimp prefixed the folder
+    const std::string prefix = folder.string() + "/";
+    if (file && reference.rfind(prefix, 0) == 0) reference.erase(0, prefix.size());
+    throw Error("refers to '" + reference.substr(0, 200) + "', " +
+                    (file ? "outside the mesh's folder: a mesh may read only files inside its own folder"
+                          : "and a mesh read from an archive reads no other file"),
+                name, reads_extension(chosen, "obj") ? "mtllib" : "a file it refers to");
   }
   scene = checked_scene(importer, scene, name);
   ImportedMesh out = normalize_mesh(scene_mesh(scene, importer, name), name, settings);

@@ -6,6 +6,8 @@
 
 #include <doctest/doctest.h>
 
+#include <algorithm>
+#include <cstdint>
 #include <filesystem>
 #include <limits>
 #include <string>
@@ -376,4 +378,111 @@ TEST_CASE("mesh import: OFF comment and blank lines are read anywhere a line may
   // A comment does not stand for a missing record.
   CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("OFF\n3 1 0\n0 0 0\n# 1 0 0\n0 1 0\n3 0 1 2\n", "c.off"),
                        doctest::Contains("the file ends after 3 of 3 vertices and 0 of 1 faces (c.off, faces)"), ts::Error);
+}
+
+namespace {
+std::string base64(const std::string& bytes) {
+  static const char* digits = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  for (std::size_t i = 0; i < bytes.size(); i += 3) {
+    std::uint32_t v = 0;
+    for (std::size_t k = 0; k < 3; ++k) v = (v << 8) | (i + k < bytes.size() ? static_cast<unsigned char>(bytes[i + k]) : 0u);
+    const std::size_t have = std::min<std::size_t>(3, bytes.size() - i);
+    for (std::size_t k = 0; k < 4; ++k) out += k <= have ? digits[(v >> (18 - 6 * k)) & 63] : '=';
+  }
+  return out;
+}
+/// A tetrahedron's vertices (4 x 3 float32) and faces (12 x uint16), as a glTF buffer.
+std::string tetra_buffer(float size) {
+  const float v[12] = {0, 0, 0, size, 0, 0, 0, size, 0, 0, 0, size};
+  const std::uint16_t f[12] = {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3};
+  return std::string(reinterpret_cast<const char*>(v), sizeof v) + std::string(reinterpret_cast<const char*>(f), sizeof f);
+}
+/// A glTF 2 mesh whose one buffer is `uri` (72 bytes: tetra_buffer); `image`: an image uri too.
+std::string gltf_with(const std::string& uri, const std::string& image = "") {
+  return R"({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+  "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+  "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [2, 2, 2]},
+                {"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"}],
+  "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
+  "buffers": [{"uri": ")" + uri + R"(", "byteLength": 72}])" +
+         (image.empty() ? std::string() : R"(, "images": [{"uri": "data:image/png;base64,AAAA"}, {"uri": ")" + image + R"("}])") + "}";
+}
+}  // namespace
+
+TEST_CASE("mesh import: a glTF may read only files inside its own folder") {
+  // Issue 57: a buffer uri leading out of the mesh's folder made that file's bytes a mesh of the
+  // database. A "secret" beside the mesh's folder holds a tetrahedron's bytes: read, it would be
+  // a mesh of 4 vertices.
+  TempDir root("gltf");
+  const auto folder = root / "mesh";
+  std::filesystem::create_directories(folder / "sub");
+  ts::test::write_text(root / "secret.bin", tetra_buffer(3));
+  ts::test::write_text(folder / "tetra.bin", tetra_buffer(2));
+  ts::test::write_text(folder / "sub/tetra.bin", tetra_buffer(2));
+
+  // Inside: read, from the folder and from a subfolder.
+  for (const std::string uri : {"tetra.bin", "sub/tetra.bin", "sub/../tetra.bin", "./sub/tetra.bin"}) {
+    CAPTURE(uri);
+    ts::test::write_text(folder / "in.gltf", gltf_with(uri));
+    const auto m = io::import_mesh(folder / "in.gltf", {.scale = ts::ObjectScale::keep, .units = 1.0});
+    CHECK(m.mesh.vertices.size() == 4);
+    CHECK(m.mesh.faces.size() == 4);
+    CHECK(m.extent.isApprox(ts::Vec3(2, 2, 2)));
+  }
+  // Out: refused, naming the file and the field, whatever way the uri leads there.
+  const std::string secret = (root / "secret.bin").string();
+  std::filesystem::create_symlink(secret, folder / "link.bin");
+  const std::vector<std::pair<std::string, std::string>> out = {
+      {"../secret.bin", "leads out of the mesh's folder"},
+      {"sub/../../secret.bin", "leads out of the mesh's folder"},
+      {"%2e%2e/secret.bin", "leads out of the mesh's folder"},
+      {"sub%2F..%2F..%2Fsecret.bin", "leads out of the mesh's folder"},
+      {"../../../../../../../../etc/shadow", "leads out of the mesh's folder"},
+      {secret, "is an absolute path"},
+      {"file://" + secret, "is a URI of the scheme 'file:'"},
+      {"http://example.org/secret.bin", "is a URI of the scheme 'http:'"},
+      {"link.bin", "leads out of the mesh's folder (through a symbolic link)"},
+  };
+  auto refused = [&](const std::string& gltf, const std::string& uri, const std::string& why, const std::string& field) {
+    ts::test::write_text(folder / "out.gltf", gltf);
+    try {
+      (void)io::import_mesh(folder / "out.gltf");
+      FAIL("read");
+    } catch (const ts::Error& e) {
+      CHECK_MESSAGE(e.message().rfind("'" + uri + "' " + why, 0) == 0, std::string(e.what()));
+      CHECK(e.file() == (folder / "out.gltf").string());
+      CHECK(e.field() == field);
+    }
+  };
+  for (const auto& [uri, why] : out) {
+    CAPTURE(uri);
+    refused(gltf_with(uri), uri, why, "buffers[0].uri");
+  }
+  refused(gltf_with("tetra.bin", "../secret.png"), "../secret.png", "leads out of the mesh's folder", "images[1].uri");
+  // glTF 1 names its buffers.
+  const std::string v1 = R"({"asset": {"version": "1.0"}, "buffers": {"geometry": {"uri": "../secret.bin", "byteLength": 72}}})";
+  refused(v1, "../secret.bin", "leads out of the mesh's folder", "buffers[\"geometry\"].uri");
+
+  // From memory (an archive member) a mesh reads no file at all; data: URIs are in the file.
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(gltf_with("tetra.bin"), "pkg.tar:in.gltf"),
+                       doctest::Contains("a mesh read from an archive reads no other file (pkg.tar:in.gltf"), ts::Error);
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(gltf_with("../tetra.bin"), "pkg.tar:in.gltf"),
+                       doctest::Contains("(pkg.tar:in.gltf, buffers[0].uri)"), ts::Error);
+  const auto embedded = io::import_mesh_from_memory(gltf_with("data:application/octet-stream;base64," + base64(tetra_buffer(2))),
+                                                    "pkg.tar:in.gltf");
+  CHECK(embedded.mesh.faces.size() == 4);
+
+  // An OBJ's material library: read inside the folder, refused outside.
+  const std::string obj = "v 0 0 0\nv 2 0 0\nv 0 2 0\nv 0 0 2\nusemtl red\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+  ts::test::write_text(root / "secret.mtl", "newmtl red\nKd 1 0 0\n");
+  ts::test::write_text(folder / "red.mtl", "newmtl red\nKd 1 0 0\n");
+  ts::test::write_text(folder / "in.obj", "mtllib red.mtl\n" + obj);
+  CHECK(io::import_mesh(folder / "in.obj").mesh.faces.size() == 4);
+  ts::test::write_text(folder / "out.obj", "mtllib ../secret.mtl\n" + obj);
+  const std::string obj_refused =
+      "outside the mesh's folder: a mesh may read only files inside its own folder (" + (folder / "out.obj").string() + ", mtllib)";
+  CHECK_THROWS_WITH_AS(io::import_mesh(folder / "out.obj"), doctest::Contains(obj_refused.c_str()), ts::Error);
+  // From memory the library cannot be read: the mesh is read without it (no material is used).
+  CHECK(io::import_mesh_from_memory("mtllib red.mtl\n" + obj, "pkg.tar:in.obj").mesh.faces.size() == 4);
 }
