@@ -7,7 +7,9 @@
 #include <algorithm>
 #include <array>
 #include <cstring>
+#include <cstdint>
 #include <functional>
+#include <optional>
 
 namespace ts::datasets {
 
@@ -24,6 +26,10 @@ class Reader {
     file_ = gzopen(path.c_str(), "rb");
     if (!file_) throw Error("cannot open the archive", name_);
     gzbuffer(file_, 1 << 17);
+    if (gzdirect(file_)) {   // not compressed (gzdirect looks at the first bytes, read here)
+      const auto size = std::filesystem::file_size(path, ec);
+      if (!ec) plain_size_ = size;
+    }
   }
   ~Reader() {
     if (file_) gzclose(file_);
@@ -56,6 +62,9 @@ class Reader {
     offset_ += total;
     return total;
   }
+  /// Bytes left after the offset: known for a plain tar (gzread passes it through unchanged),
+  /// not for a compressed one (the largest value).
+  std::uint64_t left() const { return plain_size_ ? *plain_size_ - std::min(offset_, *plain_size_) : UINT64_MAX; }
   void skip(std::uint64_t n, const std::string& member) {
     std::array<unsigned char, 1 << 16> scratch;
     while (n > 0) {
@@ -74,7 +83,25 @@ class Reader {
   std::string name_;
   gzFile file_ = nullptr;
   std::uint64_t offset_ = 0;
+  std::optional<std::uint64_t> plain_size_;
 };
+
+/// A member's body of `size` bytes, read as it arrives: nothing is sized by the header's count
+/// before the archive has held that much (a compressed archive's size after decompression is not
+/// known before it is read).
+std::string read_body(Reader& in, std::uint64_t size, const std::string& member) {
+  std::string data;
+  while (data.size() < size) {
+    const std::size_t have = data.size(), chunk = static_cast<std::size_t>(std::min<std::uint64_t>(size - have, 1u << 20));
+    data.resize(have + chunk);
+    const std::size_t got = in.read(data.data() + have, chunk);
+    if (got != chunk)
+      throw Error("archive is truncated: member '" + member + "' declares " + std::to_string(size) +
+                      " bytes, and the archive ends after " + std::to_string(have + got) + " of them",
+                  in.name(), "member '" + member + "'");
+  }
+  return data;
+}
 
 std::string field_string(const unsigned char* b, std::size_t n) {
   const auto* end = static_cast<const unsigned char*>(std::memchr(b, 0, n));
@@ -164,6 +191,10 @@ void walk(const std::filesystem::path& archive,
       long_name.clear();
     }
     name = normalize(name);
+    if (size > in.left())
+      throw Error("archive is truncated or corrupt: member '" + name + "' declares " + std::to_string(size) +
+                      " bytes, more than the " + std::to_string(in.left()) + " bytes left in the archive",
+                  in.name(), "member '" + name + "'");
     const std::uint64_t padded = (size + kBlock - 1) / kBlock * kBlock;
     const char type = static_cast<char>(h[156]);
     if (type == 'L' || type == 'x') {  // GNU long name / pax header for the next entry
@@ -177,8 +208,7 @@ void walk(const std::filesystem::path& archive,
     }
     const bool regular = type == '0' || type == '\0' || type == '7';
     if (regular && want(name, size)) {
-      std::string data(size, '\0');
-      if (in.read(data.data(), size) != size) in.truncated(name);
+      std::string data = read_body(in, size, name);
       in.skip(padded - size, name);
       body(name, std::move(data));
     } else {

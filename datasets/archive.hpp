@@ -12,7 +12,9 @@ namespace ts::datasets {
 
 /// Read one regular-file member (its path inside the archive; a leading "./" is ignored).
 /// Throws ts::Error naming the archive (and the member) when the archive is missing, corrupt or
-/// truncated, or the member is absent.
+/// truncated, or the member is absent. Nothing is sized by a header's size field unchecked: a
+/// member declaring more than the rest of a plain tar is refused at its header, and one of a
+/// compressed archive is read as it arrives.
 std::string read_archive_member(const std::filesystem::path& archive, const std::string& member);
 
 /// Read several members in one pass over the archive (one decompression). Every requested member

@@ -5,6 +5,7 @@
 #include "experiments/allocator.hpp"
 
 #include <tbb/info.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdio>
@@ -29,6 +30,11 @@ void set_memory_budget(Database& db, const std::optional<double>& mb, const std:
     }
   }
   db.set_memory_budget(budget);
+}
+
+double physical_memory_bytes() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+  return pages > 0 && page > 0 ? static_cast<double>(pages) * static_cast<double>(page) : 0.0;
 }
 
 std::string machine_description() {

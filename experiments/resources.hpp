@@ -15,6 +15,9 @@ namespace ts::experiments {
 /// Host description for reports: "<cpu model>, <n> cores, <allocator>" (allocator.hpp).
 std::string machine_description();
 
+/// This machine's physical memory, bytes (0 when unknown).
+double physical_memory_bytes();
+
 /// Default resident object geometry of `recognize`, `experiment` and the Python module (MB).
 constexpr double kDefaultMemoryBudgetMb = 256;
 /// Set a database's memory budget from --memory-budget / memory_budget_mb in MB (unset: the

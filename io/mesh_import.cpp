@@ -1,9 +1,14 @@
 #include "io/mesh_import.hpp"
 
 #include "io/cloud_io.hpp"
+#include "io/mesh_off.hpp"
+#include "io/mesh_references.hpp"
 #include "io/sha256.hpp"
 
+#include <assimp/BaseImporter.h>
+#include <assimp/DefaultIOSystem.h>
 #include <assimp/Importer.hpp>
+#include <assimp/MemoryIOWrapper.h>
 #include <assimp/config.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
@@ -13,8 +18,8 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
-#include <sstream>
 #include <iterator>
+#include <set>
 #include <unordered_map>
 
 namespace ts::io {
@@ -252,101 +257,122 @@ void check_ply_header(const std::string& bytes, const std::string& name, const s
   if (head == "ply" || ext == "ply" || ext == ".ply") check_ply_structure(bytes, name);
 }
 
-/// Assimp (5.2) allocates OFF vertex and face arrays from the counts in the header without
-/// checking them against the file (a 70-byte file asked for 53 GB), and crashes on some face
-/// lines: the whole file is walked first. Counts beyond half the bytes after them are refused
-/// at once (each record takes at least two bytes, "0\n").
-void check_off_structure(const std::string& bytes, const std::string& name, const std::string& extension) {
-  std::size_t pos = bytes.find_first_not_of(" \t\r\n");
-  if (pos == std::string::npos) return;
-  const std::size_t token_end = std::min(bytes.find_first_of(" \t\r\n", pos), bytes.size());
-  std::string keyword = bytes.substr(pos, token_end - pos);
-  for (char& c : keyword) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-  const bool keyword_off = keyword.size() >= 3 && keyword.size() <= 8 && keyword.compare(keyword.size() - 3, 3, "OFF") == 0;
-  std::string ext = extension;
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  // Assimp chooses its OFF reader by the keyword or by the extension; without the keyword it
-  // takes the first numbers of the file as the counts.
-  if (!keyword_off && ext != "off" && ext != ".off") return;
-  if (keyword_off) pos = token_end;
-  double counts[2] = {0, 0};
-  std::string texts[2];
-  for (int k = 0; k < 2; ++k) {
-    for (;;) {   // blanks, and comment lines before the counts
-      pos = bytes.find_first_not_of(" \t\r\n", pos);
-      if (pos == std::string::npos) return;   // no counts: Assimp refuses it
-      if (bytes[pos] != '#') break;
-      pos = bytes.find('\n', pos);
-      if (pos == std::string::npos) return;
-    }
-    const std::size_t end = std::min(bytes.find_first_not_of("0123456789", pos), bytes.size());
-    if (end == pos) return;   // not a count: Assimp's own parsing decides
-    texts[k] = bytes.substr(pos, std::min<std::size_t>(end - pos, 30));
-    counts[k] = std::strtod(texts[k].c_str(), nullptr);
-    pos = end;
-  }
-  const double room = static_cast<double>(bytes.size() - std::min(pos, bytes.size())) / 2.0;
-  const char* what[2] = {"vertices", "faces"};
-  for (int k = 0; k < 2; ++k)
-    if (counts[k] > room)
-      throw Error("OFF header declares " + texts[k] + " " + what[k] + ", more than the " + std::to_string(bytes.size() - pos) +
-                      " bytes after it can hold",
-                  name, std::string("header, ") + what[k]);
-
-  // The records, one a line (empty lines skipped): each vertex three numbers; each face
-  // a count of 1 to 9 (Assimp's OFF reader drops larger polygons and crashed on a face line
-  // holding fewer indices than it declares) and that many indices below the vertex count.
-  pos = bytes.find('\n', pos);   // rest of the counts line (the edge count)
-  const auto n_vertices = static_cast<std::uint64_t>(counts[0]), n_faces = static_cast<std::uint64_t>(counts[1]);
-  std::uint64_t record = 0;
-  while (record < n_vertices + n_faces) {
-    if (pos == std::string::npos || pos + 1 >= bytes.size())
-      throw Error("the file ends after " + std::to_string(std::min(record, n_vertices)) + " of " +
-                      std::to_string(n_vertices) + " vertices and " +
-                      std::to_string(record > n_vertices ? record - n_vertices : 0) + " of " +
-                      std::to_string(n_faces) + " faces",
-                  name, record < n_vertices ? "vertices" : "faces");
-    const std::size_t start = pos + 1;
-    pos = bytes.find('\n', start);
-    std::string text = bytes.substr(start, (pos == std::string::npos ? bytes.size() : pos) - start);
-    if (!text.empty() && text.back() == '\r') text.pop_back();
-    if (text.empty()) continue;   // Assimp skips empty lines only: a comment or blank line is a record
-    std::istringstream line(text);
-    const bool vertex = record < n_vertices;
-    std::string where = vertex ? "vertex " : "face ";
-    where += std::to_string(vertex ? record : record - n_vertices);
-    ++record;
-    std::string first;
-    line >> first;
-    if (vertex) {
-      // Three finite numbers: Assimp reads "nan" or "inf" as 0 and would place the vertex there.
-      std::string ys, zs;
-      line >> ys >> zs;
-      for (const std::string* t : {&first, &ys, &zs}) {
-        char* end = nullptr;
-        const double v = std::strtod(t->c_str(), &end);
-        if (t->empty() || *end != '\0' || !std::isfinite(v))
-          throw Error("a vertex needs three finite numbers, not '" + t->substr(0, 20) + "'", name, where);
+/// The importer Assimp's ReadFile (5.2.5, code/Common/Importer.cpp) picks for `file`: the one
+/// importer whose extensions end the name (any case); when several do (.gltf, .glb, .xml) the
+/// first of them whose CanRead with the signature check takes the file, and when none does (or
+/// no extension matches) the first of all importers that takes it. Null when none would.
+Assimp::BaseImporter* chosen_importer(const Assimp::Importer& importer, const std::string& file, Assimp::IOSystem* io) {
+  std::string lower = file;
+  for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  std::vector<Assimp::BaseImporter*> by_extension;
+  for (std::size_t i = 0; i < importer.GetImporterCount(); ++i) {
+    Assimp::BaseImporter* candidate = importer.GetImporter(i);
+    std::set<std::string> extensions;
+    candidate->GetExtensionList(extensions);
+    for (const std::string& e : extensions)
+      if (lower.ends_with("." + e)) {
+        by_extension.push_back(candidate);
+        break;
       }
-      continue;
-    }
-    unsigned long long n = 0;
-    char* end = nullptr;
-    n = std::strtoull(first.c_str(), &end, 10);
-    if (*end != '\0' || first[0] == '-' || n < 1 || n > 9)
-      throw Error("a face's vertex count must be 1 to 9 (Assimp's OFF reader), not '" + first.substr(0, 20) + "'",
-                  name, where);
-    for (unsigned long long k = 0; k < n; ++k) {
-      std::string index;
-      unsigned long long i = 0;
-      if (line >> index) i = std::strtoull(index.c_str(), &end, 10);
-      if (index.empty() || *end != '\0' || index[0] == '-' || i >= n_vertices)
-        throw Error("face declares " + std::to_string(n) + " vertices; index " + std::to_string(k) + " ('" +
-                        index.substr(0, 20) + "') is missing or not one of the " + std::to_string(n_vertices) +
-                        " vertices",
-                    name, where);
-    }
   }
+  if (by_extension.size() == 1) return by_extension.front();
+  auto takes = [&](Assimp::BaseImporter* candidate) {
+    try {
+      return candidate->CanRead(file, io, true);
+    } catch (const std::exception&) {   // ReadFile fails then: no importer reads the file
+      return false;
+    }
+  };
+  for (Assimp::BaseImporter* candidate : by_extension)
+    if (takes(candidate)) return candidate;
+  for (std::size_t i = 0; i < importer.GetImporterCount(); ++i)
+    if (takes(importer.GetImporter(i))) return importer.GetImporter(i);
+  return nullptr;
+}
+
+/// True when `chosen` is the importer of files named *.`extension` ("off", "gltf", "obj").
+bool reads_extension(Assimp::BaseImporter* chosen, const std::string& extension) {
+  if (!chosen) return false;
+  std::set<std::string> extensions;
+  chosen->GetExtensionList(extensions);
+  return extensions.count(extension) > 0;
+}
+
+/// Assimp's file access for one import: the default file system, only regular files inside
+/// `folder` (none at all when it is empty: a mesh read from memory). The paths refused are kept;
+/// Assimp may go on without the file (an OBJ without its material library), so the import is
+/// refused after it returns.
+class FolderIO final : public Assimp::DefaultIOSystem {
+ public:
+  explicit FolderIO(std::filesystem::path folder) : folder_(std::move(folder)) {}
+  bool Exists(const char* file) const override { return allowed(file) && DefaultIOSystem::Exists(file); }
+  Assimp::IOStream* Open(const char* file, const char* mode) override {
+    return allowed(file) ? DefaultIOSystem::Open(file, mode) : nullptr;
+  }
+  /// The first path refused, as Assimp asked for it ("" when none).
+  const std::string& refused() const { return refused_; }
+
+ private:
+  bool allowed(const char* file) const {
+    std::error_code ec;
+    if (!folder_.empty() && inside_folder(file, folder_) &&
+        (!std::filesystem::exists(file, ec) || std::filesystem::is_regular_file(file, ec)))
+      return true;
+    if (refused_.empty()) refused_ = file;
+    return false;
+  }
+  std::filesystem::path folder_;
+  mutable std::string refused_;
+};
+
+/// What both entry points share. `file`: the mesh's path (null: `bytes` come from memory, an
+/// archive member, named by the extension `hint`).
+ImportedMesh read_mesh(const std::string& bytes, const std::string& name, const std::filesystem::path* file,
+                       const std::string& hint, const MeshImportSettings& settings) {
+  check_ply_header(bytes, name, hint);
+  Assimp::Importer importer;
+  configure(importer);
+  const std::filesystem::path folder = !file ? std::filesystem::path()
+                                       : file->parent_path().empty() ? std::filesystem::path(".")
+                                                                     : file->parent_path();
+  auto* io = new FolderIO(folder);
+  importer.SetIOHandler(io);   // the importer owns it
+  // The importer Assimp will use, chosen as ReadFile and ReadFileFromMemory choose it.
+  Assimp::BaseImporter* chosen = nullptr;
+  if (file) {
+    chosen = chosen_importer(importer, name, io);
+  } else {
+    Assimp::MemoryIOSystem memory(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size(), nullptr);
+    chosen = chosen_importer(importer, std::string(AI_MEMORYIO_MAGIC_FILENAME) + "." + hint, &memory);
+  }
+  const aiScene* scene = nullptr;
+  if (reads_extension(chosen, "off")) {
+    // Assimp's OFF reader is given the mesh as plain OFF, read and checked whole here first.
+    const std::string text = off_for_assimp(bytes, name);
+    scene = importer.ReadFileFromMemory(text.data(), text.size(), 0, "off");
+  } else {
+    std::string ext = hint;
+    for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    if (reads_extension(chosen, "gltf") || ext == "gltf" || ext == ".gltf" || ext == "glb" || ext == ".glb")
+      check_gltf_references(bytes, name, folder);
+    // From the file (not memory) so formats with companion files (OBJ + MTL, glTF + BIN) work.
+    scene = file ? importer.ReadFile(name, 0) : importer.ReadFileFromMemory(bytes.data(), bytes.size(), 0, hint.c_str());
+  }
+  // A file outside the mesh's folder was asked for. From memory, an OBJ's material library
+  // cannot be read and is skipped (no material is used); any other reference is refused.
+  if (!io->refused().empty() && (file || !reads_extension(chosen, "obj"))) {
+    std::string reference = io->refused();   // as written in the mesh, where Assimp prefixed the folder
+    const std::string prefix = folder.string() + "/";
+    if (file && reference.rfind(prefix, 0) == 0) reference.erase(0, prefix.size());
+    throw Error("refers to '" + reference.substr(0, 200) + "', " +
+                    (file ? "outside the mesh's folder: a mesh may read only files inside its own folder"
+                          : "and a mesh read from an archive reads no other file"),
+                name, reads_extension(chosen, "obj") ? "mtllib" : "a file it refers to");
+  }
+  scene = checked_scene(importer, scene, name);
+  ImportedMesh out = normalize_mesh(scene_mesh(scene, importer, name), name, settings);
+  out.sha256 = sha256_hex(bytes);
+  return out;
 }
 
 }  // namespace
@@ -359,17 +385,8 @@ bool is_mesh_extension(const std::string& extension) {
 }
 
 ImportedMesh import_mesh(const std::filesystem::path& file, const MeshImportSettings& settings) {
-  const std::string name = file.string();
   const std::string bytes = read_bytes(file);
-  check_ply_header(bytes, name, file.extension().string());
-  check_off_structure(bytes, name, file.extension().string());
-  Assimp::Importer importer;
-  configure(importer);
-  // From the file (not memory) so formats with companion files (OBJ + MTL, glTF + BIN) work.
-  const aiScene* scene = checked_scene(importer, importer.ReadFile(name, 0), name);
-  ImportedMesh out = normalize_mesh(scene_mesh(scene, importer, name), name, settings);
-  out.sha256 = sha256_hex(bytes);
-  return out;
+  return read_mesh(bytes, file.string(), &file, file.extension().string(), settings);
 }
 
 ImportedMesh import_mesh_from_memory(const std::string& bytes, const std::string& name,
@@ -377,15 +394,7 @@ ImportedMesh import_mesh_from_memory(const std::string& bytes, const std::string
   std::string hint = std::filesystem::path(name).extension().string();
   if (!hint.empty() && hint[0] == '.') hint.erase(0, 1);
   if (bytes.empty()) throw Error("mesh file is empty", name);
-  check_ply_header(bytes, name, hint);
-  check_off_structure(bytes, name, hint);
-  Assimp::Importer importer;
-  configure(importer);
-  const aiScene* scene =
-      checked_scene(importer, importer.ReadFileFromMemory(bytes.data(), bytes.size(), 0, hint.c_str()), name);
-  ImportedMesh out = normalize_mesh(scene_mesh(scene, importer, name), name, settings);
-  out.sha256 = sha256_hex(bytes);
-  return out;
+  return read_mesh(bytes, name, nullptr, hint, settings);
 }
 
 }  // namespace ts::io

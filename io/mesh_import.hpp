@@ -16,6 +16,19 @@
 // topology checked (open / non-manifold meshes are kept, with a warning).
 // Rejected with ts::Error (naming the file): a mesh Assimp cannot read, no faces, a non-finite
 // coordinate, zero extent.
+//
+// Before Assimp reads a file, the importer it will use is found as Assimp finds it (by the
+// extension, else by its importers' own sniffing: a .off file is OFF whatever it holds, a file
+// named otherwise may be OFF by its first bytes). OFF and PLY files are read whole by Touchstone
+// first (io/mesh_off.hpp, check_ply_structure in io/cloud_io.hpp): Assimp 5.2 sizes arrays from
+// their counts unchecked.
+//
+// A mesh may read only regular files inside its own folder (symbolic links resolved): every
+// file Assimp opens goes through a guard, and a mesh that asked for another is refused, naming
+// the reference (glTF's buffers[i].uri and images[i].uri are checked before Assimp reads:
+// io/mesh_references.hpp; an OBJ's mtllib). A mesh read from memory (an archive member) reads
+// no other file: data: URIs only; an OBJ member's material library is skipped (Touchstone uses
+// no materials).
 #pragma once
 
 #include "engine/core.hpp"

@@ -342,6 +342,8 @@ int run_experiment_in(const ExperimentOptions& o, experiments::MpiSession* mpi) 
   }
   io::RunStoreHeader header = engine->header();
   if (shard) header.shard = shard->label();
+  // Sizes again with the explored objects known (all of the database), before any output.
+  experiments::check_memory(config, header.objects.size(), o.config_file);
   if (mpi) return run_mpi(o, config, *engine, header, threads, *mpi);
   const std::filesystem::path out = o.out;
   std::error_code ec;

@@ -1,14 +1,21 @@
 #include "experiments/params/config.hpp"
 
+#include "engine/recognition/evaluate.hpp"
+#include "engine/touch/fusion.hpp"
 #include "experiments/params/parameters.hpp"
+#include "experiments/resources.hpp"
+#include "io/run_store.hpp"
 
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <functional>
+#include <iterator>
 #include <map>
+#include <optional>
 #include <set>
 
 namespace ts::experiments {
@@ -140,6 +147,45 @@ void validate(const ExperimentConfig& c, const std::string& file) {
   for (const auto& a : c.sweep) {
     variants *= a.values.size();
     if (variants > 10000) throw Error("the sweep has more than 10000 variants", file, "sweep");
+  }
+  check_memory(c, std::max<std::size_t>(c.objects.size(), 1), file);
+}
+
+void check_memory(const ExperimentConfig& c, std::size_t explored_objects, const std::string& file,
+                  double memory_bytes) {
+  if (memory_bytes <= 0.0) memory_bytes = physical_memory_bytes();
+  if (memory_bytes <= 0.0) return;   // unknown: nothing to compare with
+  auto refuse = [&](const std::string& what, double count, double element_bytes, const std::string& key) {
+    const double bytes = count * element_bytes;
+    if (bytes <= memory_bytes) return;
+    char text[400];
+    std::snprintf(text, sizeof text, "%s: at least %.3g GB (%.0f bytes each), more than the %.3g GB of this machine's memory",
+                  what.c_str(), bytes / 1e9, element_bytes, memory_bytes / 1e9);
+    throw Error(text, file, key);
+  };
+  const std::vector<Variant> variants = expand_variants(c);
+  // The step records: the largest factor names the key.
+  const std::pair<double, std::string> factors[] = {{static_cast<double>(c.runs), "runs"},
+                                                    {static_cast<double>(c.steps), "steps"},
+                                                    {static_cast<double>(variants.size()), "sweep"},
+                                                    {static_cast<double>(explored_objects), "objects"}};
+  const auto largest = std::max_element(std::begin(factors), std::end(factors),
+                                        [](const auto& a, const auto& b) { return a.first < b.first; });
+  refuse("runs x steps x variants x explored objects = " + std::to_string(c.runs) + " x " + std::to_string(c.steps) +
+             " x " + std::to_string(variants.size()) + " x " + std::to_string(explored_objects) + " step records",
+         static_cast<double>(c.runs) * c.steps * static_cast<double>(variants.size()) * static_cast<double>(explored_objects),
+         static_cast<double>(sizeof(io::RunStepRecord)), largest->second);
+  refuse("a pool of " + std::to_string(c.pool) + " simulated grasps", c.pool,
+         static_cast<double>(sizeof(GraspRecord) + sizeof(Pose)), "pool");
+  std::string swept;   // the sweep's key of the RANSAC sampling, if any
+  for (const auto& a : c.sweep)
+    if (a.key == "ransac.samples" || a.key == "ransac.triplets" || a.key == "ransac.registrations") swept = "sweep." + a.key;
+  for (const Variant& v : variants) {
+    const RansacSettings& r = method_settings(v.config).recognizer.ransac;
+    refuse("ransac.triplets x ransac.registrations = " + std::to_string(r.triplets) + " x " + std::to_string(r.registrations) +
+               " registrations a step" + (v.label.empty() ? std::string() : " (" + v.label + ")"),
+           static_cast<double>(r.triplets) * r.registrations, static_cast<double>(sizeof(std::optional<Candidate>)),
+           v.label.empty() || swept.empty() ? "ransac.samples" : swept);
   }
 }
 

@@ -89,9 +89,21 @@ void set_key(ExperimentConfig& config, const std::string& key,
 /// and unreadable files throw ts::Error naming the file and the key.
 void load_config_file(ExperimentConfig& config, const std::filesystem::path& file);
 
-/// Checks that need all keys together (pool >= steps, sweep values valid...). Throws ts::Error
-/// naming the key.
+/// Checks that need all keys together (pool >= steps, sweep values valid, check_memory with the
+/// explored objects listed, or one for all). Throws ts::Error naming the key.
 void validate(const ExperimentConfig& config, const std::string& file = {});
+
+/// Checks, from the configuration alone and before anything runs or is written, that what an
+/// experiment holds in memory at once can fit in `memory_bytes` (0: this machine's physical
+/// memory). Lower bounds, each a product of keys times the bytes of one element:
+///   - the run store's step records, variants (the sweep) x `explored_objects` x runs x steps
+///     (the report and --resume read them all);
+///   - a grasp pool: pool grasps (one run's, or one explored object's with shared_pool);
+///   - a step's RANSAC registrations: ransac.triplets x ransac.registrations slots, per variant.
+/// Throws ts::Error naming `file` and the key: the product's largest factor (runs, steps,
+/// sweep, objects), pool, ransac.samples (sweep.KEY when the sweep sets it).
+void check_memory(const ExperimentConfig& config, std::size_t explored_objects, const std::string& file = {},
+                  double memory_bytes = 0.0);
 
 /// Resolve explored and database objects against the database's names: "all" expands, unknown
 /// names throw ts::Error naming the key ("objects" or "database") and the name.

@@ -564,15 +564,19 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
       const auto cross = t.find_first_of("xX*");
       if (cross == std::string::npos)
         throw Error(name + " must read NxR, e.g. 15x200 (got '" + t + "')", file, name);
-      auto part = [&](const std::string& text, const char* what) {
+      // N and R within the ranges of ransac.triplets and ransac.registrations.
+      auto part = [&](const std::string& text, const char* what, const std::string& key) {
+        const auto hi = static_cast<long long>(find_parameter(key)->hi);
         long long v = 0;
         auto [q, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
-        if (ec != std::errc() || q != text.data() + text.size() || text.empty() || v < 1 || v > kLarge)
-          throw Error(name + ": " + what + " must be a positive integer (got '" + t + "')", file, name);
+        if (ec != std::errc() || q != text.data() + text.size() || text.empty() || v < 1 || v > hi)
+          throw Error(name + ": " + what + " must be a whole number from 1 to " + std::to_string(hi) + " (" + key +
+                          "; got '" + t + "')",
+                      file, name);
         return static_cast<double>(v);
       };
-      c.params["ransac.triplets"] = part(t.substr(0, cross), "N");
-      c.params["ransac.registrations"] = part(t.substr(cross + 1), "R");
+      c.params["ransac.triplets"] = part(t.substr(0, cross), "N", "ransac.triplets");
+      c.params["ransac.registrations"] = part(t.substr(cross + 1), "R", "ransac.registrations");
     };
     d.push_back(std::move(p));   // no getter: it sets ransac.triplets and ransac.registrations
   }

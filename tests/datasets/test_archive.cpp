@@ -4,8 +4,11 @@
 
 #include <doctest/doctest.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <string>
+#include <utility>
 
 namespace fs = std::filesystem;
 using ts::test::TempDir;
@@ -75,4 +78,59 @@ TEST_CASE("archive: missing, foreign, corrupt and truncated archives give one cl
   const auto plain = ts::test::read_bytes(dir / "p.tar");
   ts::test::write_text(dir / "pcut.tar", plain.substr(0, 1024 + 700));
   CHECK_THROWS_WITH_AS(ts::datasets::list_archive(dir / "pcut.tar"), doctest::Contains("truncated"), ts::Error);
+}
+
+namespace {
+/// A ustar header for a regular file `name` whose size field holds `size` (12 bytes: octal, or
+/// GNU base-256 when it starts with 0x80), its checksum right.
+std::string tar_header(const std::string& name, const std::string& size) {
+  std::string h(512, '\0');
+  h.replace(0, name.size(), name);
+  h.replace(100, 8, "0000644", 8);
+  h.replace(108, 8, "0000000", 8);
+  h.replace(116, 8, "0000000", 8);
+  h.replace(124, 12, size);
+  h.replace(136, 12, "00000000000", 12);
+  h[156] = '0';
+  h.replace(257, 8, std::string("ustar\0" "00", 8));
+  unsigned sum = 0;
+  for (std::size_t i = 0; i < 512; ++i) sum += (i >= 148 && i < 156) ? ' ' : static_cast<unsigned char>(h[i]);
+  char text[8];
+  std::snprintf(text, sizeof text, "%06o", sum);
+  h.replace(148, 8, std::string(text, 6) + std::string("\0 ", 2));
+  return h;
+}
+}  // namespace
+
+TEST_CASE("archive: a member declaring more bytes than the archive holds is refused, naming it and the archive") {
+  // Issue 57: a header declaring gigabytes in a 1.5 kB archive made db build allocate them
+  // (std::bad_alloc, or a hang while the pages were filled).
+  TempDir dir("tar");
+  const std::string data = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  char octal[13];
+  std::snprintf(octal, sizeof octal, "%011o", static_cast<unsigned>(data.size()));
+  const std::string good = tar_header("ok.off", std::string(octal, 12)) + data + std::string(512 - data.size(), '\0');
+  const std::string end(1024, '\0');
+  ts::test::write_text(dir / "good.tar", good + end);
+  CHECK(ts::datasets::read_archive_member(dir / "good.tar", "ok.off") == data);   // the header is right
+  const std::string gnu_huge = std::string(1, '\x80') + std::string(3, '\0') + std::string("\x40\0\0\0\0\0\0\0", 8);   // 2^62
+  for (const auto& [size, declared] : {std::pair{std::string("77777777777") + '\0', std::string("8589934591")},
+                                       std::pair{gnu_huge, std::string("4611686018427387904")}}) {
+    CAPTURE(declared);
+    const std::string tar = good + tar_header("big.off", size) + data + std::string(512 - data.size(), '\0') + end;
+    REQUIRE(tar.size() == 3072);
+    ts::test::write_text(dir / "big.tar", tar);
+    const std::string plain = "archive is truncated or corrupt: member 'big.off' declares " + declared +
+                              " bytes, more than the 1536 bytes left in the archive (" + (dir / "big.tar").string() +
+                              ", member 'big.off')";
+    CHECK_THROWS_WITH_AS(ts::datasets::read_archive_members(dir / "big.tar", {"ok.off", "big.off"}), plain.c_str(), ts::Error);
+    CHECK_THROWS_WITH_AS(ts::datasets::list_archive(dir / "big.tar"), doctest::Contains("member 'big.off' declares"), ts::Error);
+    // Compressed, the bytes left are not known before they are read: the member is read as it
+    // arrives and refused where the archive ends.
+    REQUIRE(run("gzip -kf " + (dir / "big.tar").string()) == 0);
+    const std::string compressed = "archive is truncated: member 'big.off' declares " + declared +
+                                   " bytes, and the archive ends after 1536 of them (" + (dir / "big.tar.gz").string() +
+                                   ", member 'big.off')";
+    CHECK_THROWS_WITH_AS(ts::datasets::read_archive_member(dir / "big.tar.gz", "big.off"), compressed.c_str(), ts::Error);
+  }
 }

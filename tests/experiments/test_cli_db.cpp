@@ -302,6 +302,23 @@ TEST_CASE("cli db: bad input gives one error line, exit 1, and no output file") 
   CHECK_FALSE(leftovers(dir.path()));
 }
 
+TEST_CASE("cli db: build on a folder holding the fuzzed OFF4 mesh gives one error naming it, and no database") {
+  // Issue 62: "OFF4 1111111111111..." (94 bytes) made Assimp allocate 48 GB, and db build said
+  // "cannot read the mesh: std::bad_alloc" (the corpus file's first byte chose the .off name).
+  TempDir dir("cli");
+  write_meshes(dir);
+  const std::string off4 =
+      ts::test::read_bytes(fs::path(TS_SOURCE_DIR) / "tests/fuzz/corpus/mesh/finding-off-keyword-glued-to-count").substr(1);
+  ts::test::write_text(dir / "meshes/off4.off", off4);
+  const auto r = touchstone(dir, "db build --meshes meshes --out x.h5" + kFast);
+  CHECK(r.code == 1);
+  CHECK(r.err ==
+        "touchstone: error: OFF header declares 1111111111111 faces, more than the 94 bytes of the file can hold "
+        "(meshes/off4.off, header, faces)\n");
+  CHECK_FALSE(fs::exists(dir / "x.h5"));
+  CHECK_FALSE(leftovers(dir.path()));
+}
+
 TEST_CASE("cli db: usage errors exit 2") {
   TempDir dir("cli");
   CHECK(touchstone(dir, "db build --meshes m --out x.h5 --frobnicate").code == 2);

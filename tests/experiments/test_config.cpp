@@ -155,6 +155,40 @@ TEST_CASE("Impossible values and unknown keys name the key") {
   CHECK_THROWS_AS(load_config_file(c, "/nonexistent/exp.toml"), Error);
 }
 
+TEST_CASE("Sizes that cannot fit in memory are refused from the configuration, naming the key") {
+  // Issue 57: a sampling of 1e8 x 1e8, or runs and steps of 1e8, ended in std::bad_alloc after
+  // the run store was made.
+  auto e = load_error("ransac.samples = \"100000000x100000000\"\n");
+  CHECK(e.second == "ransac.samples");
+  CHECK(e.first.find("from 1 to 1000000 (ransac.triplets") != std::string::npos);
+  e = load_error("ransac.samples = \"1000000x1000000\"\n");
+  CHECK(e.second == "ransac.samples");
+  CHECK(e.first.find("ransac.triplets x ransac.registrations = 1000000 x 1000000 registrations a step") != std::string::npos);
+  CHECK(load_error("[sweep]\nransac.samples = [\"15x200\", \"1000000x1000000\"]\n").second == "sweep.ransac.samples");
+  CHECK(load_error("runs = 100000000\nsteps = 1000000\npool = 1000000\n").second == "runs");
+  CHECK(load_error("runs = 2\nsteps = 100000000\npool = 100000000\n").second == "steps");
+
+  // The bounds, against a memory given: 45 objects x 20 runs x 40 steps x 4 variants of step
+  // records fit in 1 GB, 1 000 runs do not; the objects count where the configuration lists
+  // none (all of the database).
+  ExperimentConfig c;
+  set_key(c, "sweep.method", {"bricpsf", "batch-ransac", "ransac-icp", "ransac-icp-fs"});
+  CHECK_NOTHROW(check_memory(c, 45, "exp.toml", 1e9));
+  c.runs = 1000;
+  try {
+    check_memory(c, 45, "exp.toml", 1e9);
+    FAIL("no error");
+  } catch (const Error& x) {
+    CHECK(x.file() == "exp.toml");
+    CHECK(x.field() == "runs");
+    CHECK(x.message().find("1000 x 40 x 4 x 45 step records") != std::string::npos);
+  }
+  c.runs = 20;
+  CHECK_THROWS_WITH_AS(check_memory(c, 2000000, "exp.toml", 1e9), doctest::Contains("(exp.toml, objects)"), Error);
+  c.pool = 10000000;   // 10^7 grasps of a pool: at least a few GB
+  CHECK_THROWS_WITH_AS(check_memory(c, 1, "exp.toml", 1e9), doctest::Contains("(exp.toml, pool)"), Error);
+}
+
 TEST_CASE("Flags use the same setter as files") {
   ExperimentConfig c;
   set_key(c, "objects", {"sphere,cube , bunny"});

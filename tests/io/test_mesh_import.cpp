@@ -6,8 +6,13 @@
 
 #include <doctest/doctest.h>
 
+#include <algorithm>
+#include <cstdint>
+#include <filesystem>
 #include <limits>
 #include <string>
+#include <utility>
+#include <vector>
 
 using ts::test::TempDir;
 namespace io = ts::io;
@@ -242,6 +247,77 @@ TEST_CASE("mesh import: an OFF header declaring more vertices or faces than the 
                        doctest::Contains("declares 041875966818443 vertices"), ts::Error);
 }
 
+TEST_CASE("mesh import: a file is read as OFF exactly when Assimp's OFF importer would read it") {
+  // Issue 62, found by fuzzing (tests/fuzz/corpus/mesh/, its first byte chose the .off name):
+  // "OFF4 1111111111111..." is OFF, 4 vertices and 1111111111111 faces (Assimp 5.2 allocated
+  // 48 GB for them), where the check wanted a keyword ending in OFF.
+  const std::string fuzz =
+      ts::test::read_bytes(std::filesystem::path(TS_SOURCE_DIR) / "tests/fuzz/corpus/mesh/finding-off-keyword-glued-to-count").substr(1);
+  REQUIRE(fuzz.size() == 94);
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(fuzz, "fuzz.off"),
+                       "OFF header declares 1111111111111 faces, more than the 94 bytes of the file can hold "
+                       "(fuzz.off, header, faces)",
+                       ts::Error);
+  // Assimp sniffs the content when no importer owns the extension: its OFF reader takes a file
+  // beginning with "off" in any case. Another format's extension decides alone (an STL reader
+  // reads it as STL, and refuses it).
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(fuzz, "fuzz.unknown"), doctest::Contains("1111111111111 faces"), ts::Error);
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(fuzz, "fuzz"), doctest::Contains("1111111111111 faces"), ts::Error);
+  try {
+    io::import_mesh_from_memory(fuzz, "fuzz.stl");
+  } catch (const ts::Error& e) {
+    CHECK(std::string(e.what()).find("OFF") == std::string::npos);
+  }
+  TempDir dir("mesh");
+  ts::test::write_text(dir / "disguised.gltf", fuzz);   // glTF's own check refuses it: sniffed
+  CHECK_THROWS_WITH_AS(io::import_mesh(dir / "disguised.gltf"), doctest::Contains("1111111111111 faces"), ts::Error);
+
+  // Every keyword Assimp reads: letters ST (texture coordinates), C (colour), N (normal),
+  // 4 (homogeneous coordinates) and n (a dimension) before OFF, each reading the tetrahedron
+  // (0,0,0), (2,0,0), (0,2,0), (0,0,2) and refusing a face count the file cannot hold.
+  const std::string faces = "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+  const std::vector<std::pair<std::string, std::vector<std::string>>> variants = {
+      {"OFF", {"0 0 0", "2 0 0", "0 2 0", "0 0 2"}},
+      {"COFF", {"0 0 0 255 0 0 255", "2 0 0 0 255 0 255", "0 2 0 0 0 255 255", "0 0 2 1 1 1 1"}},
+      {"NOFF", {"0 0 0 -1 -1 -1", "2 0 0 1 0 0", "0 2 0 0 1 0", "0 0 2 0 0 1"}},
+      {"CNOFF", {"0 0 0 -1 -1 -1 1 0 0 1", "2 0 0 1 0 0 0 1 0 1", "0 2 0 0 1 0 0 0 1 1", "0 0 2 0 0 1 1 1 1 1"}},
+      {"STOFF", {"0 0 0 0 0", "2 0 0 1 0", "0 2 0 0 1", "0 0 2 1 1"}},
+      {"4OFF", {"0 0 0 1", "4 0 0 2", "0 1 0 0.5", "0 0 -6 -3"}},
+      {"nOFF 3", {"0 0 0", "2 0 0", "0 2 0", "0 0 2"}},
+      {"STCN4nOFF\n3", {"0 0 0 1 0 0 1 1 1 1 1 0 0", "2 0 0 1 1 0 0 1 1 1 1 1 0", "0 4 0 2 0 1 0 1 1 1 1 0 1",
+                        "0 0 2 1 0 0 1 1 1 1 1 1 1"}},
+      {"", {"0 0 0", "2 0 0", "0 2 0", "0 0 2"}},   // no keyword: the counts come first
+  };
+  for (const auto& [keyword, vertices] : variants) {
+    CAPTURE(keyword);
+    std::string body;
+    for (const auto& v : vertices) body += v + "\n";
+    const std::string head = keyword.empty() ? "" : keyword + "\n";
+    const auto m = io::import_mesh_from_memory(head + "4 4 6\n" + body + faces, "v.off",
+                                               {.scale = ts::ObjectScale::keep, .units = 1.0});
+    CHECK(m.mesh.vertices.size() == 4);
+    CHECK(m.mesh.faces.size() == 4);
+    CHECK(m.closed);
+    CHECK(m.extent.isApprox(ts::Vec3(2, 2, 2)));
+    CHECK(ts::mesh_signed_volume(m.mesh) == doctest::Approx(8.0 / 6.0));
+    CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(head + "4 4000000000 6\n" + body + faces, "v.off"),
+                         doctest::Contains("declares 4000000000 faces, more than the"), ts::Error);
+    CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(head + "40000000000 4 6\n" + body + faces, "v.off"),
+                         doctest::Contains("declares 40000000000 vertices"), ts::Error);
+  }
+  // nOFF of dimension 2: the z coordinates are 0.
+  const auto flat = io::import_mesh_from_memory("nOFF 2 4 2 0\n0 0\n1 0\n1 1\n0 1\n3 0 1 2\n3 0 2 3\n", "f.off",
+                                                {.scale = ts::ObjectScale::keep, .units = 1.0});
+  CHECK(flat.extent.isApprox(ts::Vec3(1, 1, 0)));
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("nOFF 4 4 2 0\n0 0 0 0\n1 0 0 0\n1 1 0 0\n0 1 0 0\n3 0 1 2\n", "d.off"),
+                       doctest::Contains("(d.off, header, dimension)"), ts::Error);
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("4OFF 3 1 0\n0 0 0 1\n1 0 0 0\n0 1 0 1\n3 0 1 2\n", "w.off"),
+                       doctest::Contains("(w.off, vertex 1)"), ts::Error);
+  // Assimp takes the keyword case as written: "off" is not OFF, nor "COF".
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("off\n4 4 6\n" + std::string("0 0 0\n2 0 0\n0 2 0\n0 0 2\n") + faces, "l.off"),
+                       doctest::Contains("(l.off, header)"), ts::Error);
+}
+
 TEST_CASE("mesh import: OFF records are checked before Assimp reads them") {
   // Found by fuzzing: Assimp 5.2's OFF reader crashed (SEGV) on face lines holding fewer indices
   // than they declare.
@@ -249,9 +325,8 @@ TEST_CASE("mesh import: OFF records are checked before Assimp reads them") {
   const std::string faces = "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
   CHECK(io::import_mesh_from_memory(head + faces, "t.off").mesh.faces.size() == 4);
   CHECK(io::import_mesh_from_memory(head + "\n" + faces + "\n", "t.off").mesh.faces.size() == 4);
-  // Assimp reads a comment among the records as a face of no vertices and drops it: refused.
-  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(head + "# comment\n" + faces, "h.off"),
-                       doctest::Contains("not '#'"), ts::Error);
+  // A comment among the records is skipped (Assimp read it as a face and dropped the last).
+  CHECK(io::import_mesh_from_memory(head + "# comment\n" + faces, "h.off").mesh.faces.size() == 4);
   // (Face 1 replaced; written out whole: GCC 12 warns falsely on std::string::replace here.)
   const std::string rest = "3 0 3 2\n3 1 2 3\n";
   CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(head + "3 0 2 1\n3 2 12\n" + rest, "s.off"),
@@ -265,4 +340,149 @@ TEST_CASE("mesh import: OFF records are checked before Assimp reads them") {
                        ts::Error);
   CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("OFF\n4 4 6\n0 0 0\n1 0\n0 1 0\n0 0 1\n" + faces, "v.off"),
                        doctest::Contains("(v.off, vertex 1)"), ts::Error);
+}
+
+TEST_CASE("mesh import: OFF comment and blank lines are read anywhere a line may be") {
+  // Issue 57: a comment after the header was refused ("a vertex needs three finite numbers, not
+  // '#'"); Assimp 5.2 itself throws on one among the vertices and drops the last faces after one
+  // among the faces. A cube with quads, as Geomview writes OFF.
+  const std::string cube =
+      "# a unit cube\n"
+      "OFF # keyword\n"
+      "\n"
+      "# vertices, faces, edges\n"
+      "8 6 12\n"
+      "# the vertices\n"
+      "0 0 0\n1 0 0\n   \n0 1 0\n1 1 0   # a comment after a vertex\n"
+      "# the top\n"
+      "0 0 1\n1 0 1\n\t\n0 1 1\n1 1 1\n"
+      "\n# the faces\n"
+      "4 0 2 3 1\n4 4 5 7 6\n# a comment among the faces\n4 0 1 5 4\r\n4 2 6 7 3\r\n\r\n"
+      "4 0 4 6 2 # after a face\n   # indented\n4 1 3 7 5\n"
+      "# the end\n";
+  const auto m = io::import_mesh_from_memory(cube, "cube.off", {.scale = ts::ObjectScale::keep, .units = 1.0});
+  CHECK(m.mesh.vertices.size() == 8);
+  CHECK(m.mesh.faces.size() == 12);
+  CHECK(m.closed);
+  CHECK(m.extent.isApprox(ts::Vec3(1, 1, 1)));
+  CHECK(ts::mesh_signed_volume(m.mesh) == doctest::Approx(1.0));
+  // The same file from disk, and its mesh equal to the one without comments.
+  TempDir dir("mesh");
+  ts::test::write_text(dir / "cube.off", cube);
+  ts::test::write_text(dir / "plain.off",
+                       "OFF\n8 6 12\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n0 0 1\n1 0 1\n0 1 1\n1 1 1\n"
+                       "4 0 2 3 1\n4 4 5 7 6\n4 0 1 5 4\n4 2 6 7 3\n4 0 4 6 2\n4 1 3 7 5\n");
+  const auto a = io::import_mesh(dir / "cube.off"), b = io::import_mesh(dir / "plain.off");
+  CHECK(a.mesh.vertices == b.mesh.vertices);
+  CHECK(a.mesh.faces == b.mesh.faces);
+  // A comment does not stand for a missing record.
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory("OFF\n3 1 0\n0 0 0\n# 1 0 0\n0 1 0\n3 0 1 2\n", "c.off"),
+                       doctest::Contains("the file ends after 3 of 3 vertices and 0 of 1 faces (c.off, faces)"), ts::Error);
+}
+
+namespace {
+std::string base64(const std::string& bytes) {
+  static const char* digits = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  for (std::size_t i = 0; i < bytes.size(); i += 3) {
+    std::uint32_t v = 0;
+    for (std::size_t k = 0; k < 3; ++k) v = (v << 8) | (i + k < bytes.size() ? static_cast<unsigned char>(bytes[i + k]) : 0u);
+    const std::size_t have = std::min<std::size_t>(3, bytes.size() - i);
+    for (std::size_t k = 0; k < 4; ++k) out += k <= have ? digits[(v >> (18 - 6 * k)) & 63] : '=';
+  }
+  return out;
+}
+/// A tetrahedron's vertices (4 x 3 float32) and faces (12 x uint16), as a glTF buffer.
+std::string tetra_buffer(float size) {
+  const float v[12] = {0, 0, 0, size, 0, 0, 0, size, 0, 0, 0, size};
+  const std::uint16_t f[12] = {0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3};
+  return std::string(reinterpret_cast<const char*>(v), sizeof v) + std::string(reinterpret_cast<const char*>(f), sizeof f);
+}
+/// A glTF 2 mesh whose one buffer is `uri` (72 bytes: tetra_buffer); `image`: an image uri too.
+std::string gltf_with(const std::string& uri, const std::string& image = "") {
+  return R"({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+  "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+  "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [2, 2, 2]},
+                {"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"}],
+  "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48}, {"buffer": 0, "byteOffset": 48, "byteLength": 24}],
+  "buffers": [{"uri": ")" + uri + R"(", "byteLength": 72}])" +
+         (image.empty() ? std::string() : R"(, "images": [{"uri": "data:image/png;base64,AAAA"}, {"uri": ")" + image + R"("}])") + "}";
+}
+}  // namespace
+
+TEST_CASE("mesh import: a glTF may read only files inside its own folder") {
+  // Issue 57: a buffer uri leading out of the mesh's folder made that file's bytes a mesh of the
+  // database. A "secret" beside the mesh's folder holds a tetrahedron's bytes: read, it would be
+  // a mesh of 4 vertices.
+  TempDir root("gltf");
+  const auto folder = root / "mesh";
+  std::filesystem::create_directories(folder / "sub");
+  ts::test::write_text(root / "secret.bin", tetra_buffer(3));
+  ts::test::write_text(folder / "tetra.bin", tetra_buffer(2));
+  ts::test::write_text(folder / "sub/tetra.bin", tetra_buffer(2));
+
+  // Inside: read, from the folder and from a subfolder.
+  for (const std::string uri : {"tetra.bin", "sub/tetra.bin", "sub/../tetra.bin", "./sub/tetra.bin"}) {
+    CAPTURE(uri);
+    ts::test::write_text(folder / "in.gltf", gltf_with(uri));
+    const auto m = io::import_mesh(folder / "in.gltf", {.scale = ts::ObjectScale::keep, .units = 1.0});
+    CHECK(m.mesh.vertices.size() == 4);
+    CHECK(m.mesh.faces.size() == 4);
+    CHECK(m.extent.isApprox(ts::Vec3(2, 2, 2)));
+  }
+  // Out: refused, naming the file and the field, whatever way the uri leads there.
+  const std::string secret = (root / "secret.bin").string();
+  std::filesystem::create_symlink(secret, folder / "link.bin");
+  const std::vector<std::pair<std::string, std::string>> out = {
+      {"../secret.bin", "leads out of the mesh's folder"},
+      {"sub/../../secret.bin", "leads out of the mesh's folder"},
+      {"%2e%2e/secret.bin", "leads out of the mesh's folder"},
+      {"sub%2F..%2F..%2Fsecret.bin", "leads out of the mesh's folder"},
+      {"../../../../../../../../etc/shadow", "leads out of the mesh's folder"},
+      {secret, "is an absolute path"},
+      {"file://" + secret, "is a URI of the scheme 'file:'"},
+      {"http://example.org/secret.bin", "is a URI of the scheme 'http:'"},
+      {"link.bin", "leads out of the mesh's folder (through a symbolic link)"},
+  };
+  auto refused = [&](const std::string& gltf, const std::string& uri, const std::string& why, const std::string& field) {
+    ts::test::write_text(folder / "out.gltf", gltf);
+    try {
+      (void)io::import_mesh(folder / "out.gltf");
+      FAIL("read");
+    } catch (const ts::Error& e) {
+      CHECK_MESSAGE(e.message().rfind("'" + uri + "' " + why, 0) == 0, std::string(e.what()));
+      CHECK(e.file() == (folder / "out.gltf").string());
+      CHECK(e.field() == field);
+    }
+  };
+  for (const auto& [uri, why] : out) {
+    CAPTURE(uri);
+    refused(gltf_with(uri), uri, why, "buffers[0].uri");
+  }
+  refused(gltf_with("tetra.bin", "../secret.png"), "../secret.png", "leads out of the mesh's folder", "images[1].uri");
+  // glTF 1 names its buffers.
+  const std::string v1 = R"({"asset": {"version": "1.0"}, "buffers": {"geometry": {"uri": "../secret.bin", "byteLength": 72}}})";
+  refused(v1, "../secret.bin", "leads out of the mesh's folder", "buffers[\"geometry\"].uri");
+
+  // From memory (an archive member) a mesh reads no file at all; data: URIs are in the file.
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(gltf_with("tetra.bin"), "pkg.tar:in.gltf"),
+                       doctest::Contains("a mesh read from an archive reads no other file (pkg.tar:in.gltf"), ts::Error);
+  CHECK_THROWS_WITH_AS(io::import_mesh_from_memory(gltf_with("../tetra.bin"), "pkg.tar:in.gltf"),
+                       doctest::Contains("(pkg.tar:in.gltf, buffers[0].uri)"), ts::Error);
+  const auto embedded = io::import_mesh_from_memory(gltf_with("data:application/octet-stream;base64," + base64(tetra_buffer(2))),
+                                                    "pkg.tar:in.gltf");
+  CHECK(embedded.mesh.faces.size() == 4);
+
+  // An OBJ's material library: read inside the folder, refused outside.
+  const std::string obj = "v 0 0 0\nv 2 0 0\nv 0 2 0\nv 0 0 2\nusemtl red\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+  ts::test::write_text(root / "secret.mtl", "newmtl red\nKd 1 0 0\n");
+  ts::test::write_text(folder / "red.mtl", "newmtl red\nKd 1 0 0\n");
+  ts::test::write_text(folder / "in.obj", "mtllib red.mtl\n" + obj);
+  CHECK(io::import_mesh(folder / "in.obj").mesh.faces.size() == 4);
+  ts::test::write_text(folder / "out.obj", "mtllib ../secret.mtl\n" + obj);
+  const std::string obj_refused =
+      "outside the mesh's folder: a mesh may read only files inside its own folder (" + (folder / "out.obj").string() + ", mtllib)";
+  CHECK_THROWS_WITH_AS(io::import_mesh(folder / "out.obj"), doctest::Contains(obj_refused.c_str()), ts::Error);
+  // From memory the library cannot be read: the mesh is read without it (no material is used).
+  CHECK(io::import_mesh_from_memory("mtllib red.mtl\n" + obj, "pkg.tar:in.obj").mesh.faces.size() == 4);
 }
