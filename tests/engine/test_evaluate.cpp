@@ -313,7 +313,7 @@ TEST_CASE("Per-grasp offsets: a single flat patch keeps its unobservable offsets
   CHECK(f.contacts == n);
   CHECK(f.far == n);
   CHECK(f.far10 == n);
-  CHECK(f.clamped_sq_sum == doctest::Approx(9e-6 * double(n)));
+  CHECK(f.clamped_sq_sum == doctest::Approx(9e-6 * double(n)).epsilon(1e-12).scale(0));   // n clamped terms
   sc.grasps = GraspGroups();
   sc.grasps.add(pts);                                // 2 mm above the face again
   const GraspFit close = contact_fit(sc, box.field, Pose::Identity(), s);
@@ -327,7 +327,8 @@ TEST_CASE("Per-grasp offsets: a single flat patch keeps its unobservable offsets
   CHECK(unshifted.offsets.empty());
   CHECK(unshifted.far == 0);
   CHECK(unshifted.far10 == 0);
-  CHECK(unshifted.clamped_sq_sum == doctest::Approx(4e-6 * double(sc.contacts.size())).epsilon(0.03));
+  // The field is linear across a face (interpolation error 0.015 % here): within 0.1 %.
+  CHECK(unshifted.clamped_sq_sum == doctest::Approx(4e-6 * double(sc.contacts.size())).epsilon(1e-3).scale(0));
 }
 
 TEST_CASE("Grasp diagnostics: each patch's distance and the angle of its normal to the model's") {
@@ -398,7 +399,7 @@ TEST_CASE("Per-grasp offsets separate a sphere from a faceted look-alike that pl
   CHECK(sphere_on.log_weight > facets_on.log_weight);
   CHECK(sphere_on.grasp_offset_rms == doctest::Approx(std::sqrt([&] {
           double s2 = 0; for (const Vec3& t : g.offsets) s2 += t.squaredNorm(); return s2 / 12; }()))
-                                          .epsilon(0.25).scale(0));   // within 25 %
+                                          .epsilon(0.1).scale(0));   // within 10 % (3.5 % low here)
 }
 
 namespace {
@@ -525,8 +526,9 @@ TEST_CASE("Near-twin verification's free-space term: fingers that closed on the 
   CAPTURE(box_on);
   CAPTURE(longer_on);
   CAPTURE(shorter_on);
-  // Without the term the two are the same to the contact noise (the same face under the contacts).
-  CHECK(std::abs(box_off - longer_off) < 1.0);
+  // Without the term the two are the same (the same face under the contacts, where both fields
+  // are exact): equal to rounding (1e-14 here), not merely within 1 of 37.8.
+  CHECK(box_off == doctest::Approx(longer_off).epsilon(1e-9));
   // With it the box pays nothing (its fingers are outside), the longer twin for every finger
   // sample its depth inside (the nearest face), capped at 3 sigma: 9 for most, less near the y
   // and z faces. The grasp's offset takes out the arm error along x (to about 0.05 mm); along

@@ -7,6 +7,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <numeric>
 
@@ -86,6 +87,33 @@ TEST_CASE("Recognizer invariants: state size, posterior, objects kept for life")
       CHECK(h.weight == doctest::Approx(std::exp(h.log_weight)));
     }
     check_finite(r);
+  }
+}
+
+TEST_CASE("BRICPSF resampling keeps Psi n_p evolved hypotheses and takes (1 - Psi) n_p new ones") {
+  // Algorithm 1, line 9. Without dedupe and with RANSAC candidates to spare, the shares are exact:
+  // a hypothesis born before the step is an evolved old one.
+  auto src = test::make_source();
+  Database db(src);
+  const Pose T = test::random_pose(5, Vec3(0, 0, 0));
+  for (double psi : {0.8, 0.25}) {
+    CAPTURE(psi);
+    RecognizerSettings s = fast();
+    s.psi = psi;
+    Recognizer rec(db, s);
+    const auto steps = explore(rec, 4, T, 3, 3);
+    const int first = steps.front().hypotheses.front().born;
+    const auto want_old = static_cast<std::size_t>(std::lround(psi * double(s.n_p)));
+    for (std::size_t k = 1; k < steps.size(); ++k) {
+      CAPTURE(k);
+      REQUIRE(steps[k - 1].hypotheses.size() == s.n_p);
+      REQUIRE(steps[k].hypotheses.size() == s.n_p);
+      const int now = first + static_cast<int>(k);
+      const auto old = static_cast<std::size_t>(std::count_if(steps[k].hypotheses.begin(), steps[k].hypotheses.end(),
+                                                              [&](const Hypothesis& h) { return h.born < now; }));
+      CHECK(old == want_old);
+      for (const Hypothesis& h : steps[k].hypotheses) CHECK(h.born <= now);
+    }
   }
 }
 

@@ -10,7 +10,9 @@
 #include <doctest/doctest.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 
@@ -61,35 +63,33 @@ TEST_CASE("Stress study configuration: cases over a baseline, errors name the fi
   CHECK(key == "contacts");
 }
 
-TEST_CASE("The shipped study 10 covers the brief's ranges") {
-  // Apart from experiments/studies/*.toml, which are experiment configurations.
-  const StressStudy s = load_stress_study(std::filesystem::path(TS_SOURCE_DIR) / "experiments" /
-                                          "studies" / "stress" / "study10_extreme.toml");
-  double smallest = 1e9, largest = 0, farthest = 0, arm = 0;
-  long fewest = 1000000000, most = 0;
-  bool dup = false, line = false, flat = false, rod = false;
-  for (const StressCase& c : s.cases) {
-    smallest = std::min(smallest, c.size_m);
-    largest = std::max(largest, c.size_m);
-    farthest = std::max(farthest, c.distance_m);
-    arm = std::max(arm, c.arm_noise_m);
-    fewest = std::min(fewest, long(c.grasps) * c.contacts);
-    most = std::max(most, long(c.grasps) * c.contacts);
-    dup = dup || c.duplicates > 1;
-    line = line || c.collinear_m > 0.0;
-    flat = flat || (c.flat && c.grasps == 1);
-    rod = rod || (c.rod_length_m >= 2.0 && c.rod_section_m <= 0.01);
+TEST_CASE("Every stress study of experiments/studies/stress loads, and the driver runs study 10") {
+  // The README's `touchstone stress --config ...` commands run these files: a key the loader
+  // renames or a range it narrows must fail here, not at the start of an hour-long study. (What
+  // the cases cover is the study's design, stated in the file and the README, not code.)
+  const auto dir = std::filesystem::path(TS_SOURCE_DIR) / "experiments" / "studies" / "stress";
+  std::size_t n = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    if (e.path().extension() != ".toml") continue;
+    ++n;
+    CAPTURE(e.path().string());
+    StressStudy s;
+    REQUIRE_NOTHROW(s = load_stress_study(e.path()));
+    CHECK_FALSE(s.cases.empty());
   }
-  CHECK(smallest <= 0.01);
-  CHECK(largest >= 2.0);
-  CHECK(farthest >= 1e6);
-  CHECK(arm >= 0.02);
-  CHECK(fewest <= 3);
-  CHECK(most >= 5000);
-  CHECK(dup);
-  CHECK(line);
-  CHECK(flat);
-  CHECK(rod);
+  CHECK(n >= 1);
+  // The driver takes study 10 as it stands (its preset and seed): one run of its cheapest case,
+  // one grasp of three contacts, gives the known outcome, no answer and said so.
+  StressStudy s = load_stress_study(dir / "study10_extreme.toml");
+  const auto it = std::find_if(s.cases.begin(), s.cases.end(), [](const StressCase& c) { return c.name == "contacts_3"; });
+  REQUIRE(it != s.cases.end());
+  s.runs = 1;
+  const StressCaseResult r = run_stress_case(s, static_cast<std::size_t>(it - s.cases.begin()), {});
+  REQUIRE(r.runs.size() == 1);
+  CHECK(r.runs[0].contacts == 3);
+  CHECK_FALSE(r.runs[0].valid);
+  CHECK(r.runs[0].ambiguous);
+  CHECK(r.runs[0].finite);
 }
 
 TEST_CASE("Stress study, reduced: far dives answer as at the origin; degenerate contacts flagged") {
