@@ -28,7 +28,6 @@
 #include <chrono>
 #include <cstdio>
 #include <map>
-#include <regex>
 #include <string>
 #include <vector>
 
@@ -69,10 +68,16 @@ int main(int argc, char** argv) {
 
     auto reader = std::make_shared<io::DbReader>(db_path);
     Database db(reader);
-    const std::regex variant(".*_v[0-9]+$");
+    // A variant's name ends in _v and digits (the regular expression .*_v[0-9]+$).
+    const auto is_variant = [](const std::string& name) {
+      const auto v = name.rfind("_v");
+      return v != std::string::npos && v + 2 < name.size() &&
+             std::all_of(name.begin() + static_cast<std::ptrdiff_t>(v + 2), name.end(),
+                         [](char c) { return c >= '0' && c <= '9'; });
+    };
     std::vector<std::size_t> explored;
     for (std::size_t o = 0; o < db.size(); ++o)
-      if (explore == "all" || !std::regex_match(db.info(o).name, variant)) explored.push_back(o);
+      if (explore == "all" || !is_variant(db.info(o).name)) explored.push_back(o);
     if (explored.size() > max_explore) {  // evenly spread
       std::vector<std::size_t> pick;
       for (std::size_t i = 0; i < max_explore; ++i) pick.push_back(explored[i * explored.size() / max_explore]);
