@@ -110,6 +110,9 @@ foreach(line ${output})
     ${extra_args}
   )
   ts_test_tier("${prefix}${test}${suffix}" tier_properties)
+  if(labels)   # ADD_LABELS: the test suites join the tier (LABELS <tier> <suites>...)
+    list(INSERT tier_properties 2 ${labels})
+  endif()
   add_command(set_tests_properties
     "${prefix}${test}${suffix}"
     PROPERTIES

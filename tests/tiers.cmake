@@ -5,7 +5,7 @@
 #   integration  the parts together: the command's code, drivers, stores, the fuzz corpus,
 #                benchmarks that start (experiments/, bench/)
 #   slow         unit or integration tests that take longest (TS_SLOW_TESTS below): the release
-#                suite runs them, the sanitizer run leaves them out (scripts/sanitize)
+#                suite runs them, CI's sanitizer run leaves them out (.ci/run: -LE slow)
 #   python       the Python module under pytest
 #   package      `cmake --install` and a consumer project built against it
 #
