@@ -164,9 +164,9 @@ std::vector<std::uint8_t> inflate(const std::string& compression, std::span<cons
   return out;
 }
 
-class Reader {
+class McapReader {
  public:
-  Reader(const std::filesystem::path& path, const McapHandlers& h) : file_(path.string()), h_(h) {}
+  McapReader(const std::filesystem::path& path, const McapHandlers& h) : file_(path.string()), h_(h) {}
 
   McapReadSummary run() {
     std::error_code ec;
@@ -370,7 +370,7 @@ class Reader {
 }  // namespace
 
 McapReadSummary read_mcap(const std::filesystem::path& path, const McapHandlers& handlers) {
-  return Reader(path, handlers).run();
+  return McapReader(path, handlers).run();
 }
 
 namespace {

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "engine/core.hpp"
+#include "engine/mesh_shapes.hpp"  // flipped()
 
 #include <cmath>
 #include <filesystem>
@@ -49,7 +50,7 @@ inline Mesh moved_mesh(Mesh m, const Mat3& L, const Vec3& t) {
 }
 
 /// Icosphere of `radius` around `centre`, `subdivisions` times refined; wound outward.
-inline Mesh sphere_mesh(double radius, int subdivisions, const Vec3& centre = Vec3::Zero()) {
+inline Mesh icosphere_mesh(double radius, int subdivisions, const Vec3& centre = Vec3::Zero()) {
   const double t = (1.0 + std::sqrt(5.0)) / 2.0;
   Mesh m;
   for (const auto& v : {Vec3(-1, t, 0), Vec3(1, t, 0), Vec3(-1, -t, 0), Vec3(1, -t, 0), Vec3(0, -1, t),
@@ -80,11 +81,6 @@ inline Mesh sphere_mesh(double radius, int subdivisions, const Vec3& centre = Ve
     m.faces = std::move(faces);
   }
   for (auto& v : m.vertices) v = centre + radius * v;
-  return m;
-}
-
-inline Mesh flipped(Mesh m) {
-  for (auto& f : m.faces) std::swap(f[1], f[2]);
   return m;
 }
 

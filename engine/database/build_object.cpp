@@ -2,6 +2,7 @@
 // filtered dense and coarse clouds, FPFH features of the coarse points (Section 4.3.1), and the
 // object's distance field for hypothesis scoring.
 #include "engine/database/database.hpp"
+#include "engine/detail.hpp"
 #include "engine/geometry/cloud.hpp"
 #include "engine/geometry/mesh.hpp"
 
@@ -11,9 +12,7 @@ namespace ts {
 
 namespace {
 
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
+using detail::seconds_since;
 
 /// PCA normals (the kind the query side computes from contacts), turned to agree with the
 /// scanner's outward normals. Where PCA has too few neighbours the scanner normal is used.

@@ -7,6 +7,7 @@
 // themselves, PFH's increment counting degenerate pairs) they are kept: the point is to
 // reproduce the descriptors the paper compared.
 #include "engine/features/descriptors.hpp"
+#include "engine/detail.hpp"
 
 #include "engine/features/fpfh.hpp"
 
@@ -21,7 +22,7 @@ namespace ts {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
+using detail::kPi;
 
 // ---- PFH (PCL's PFHEstimation::computePointPFHSignature, nr_split = 5) ----------------------
 

@@ -16,6 +16,7 @@
 //     each 11-bin block rescaled to sum to 100. Like PCL (and unlike Rusu 2009, Eq. 2) the
 //     keypoint's own SPFH is not added, so the keypoint's normal plays no part.
 #include "engine/features/fpfh.hpp"
+#include "engine/detail.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -31,7 +32,7 @@ namespace ts {
 namespace {
 
 constexpr int kBins = 11;
-constexpr double kPi = 3.14159265358979323846;
+using detail::kPi;
 
 /// Bin of x in [lo, hi] split into kBins, clamped (PCL's floor-and-clamp).
 inline int bin_of(double x, double lo, double hi) {

@@ -32,6 +32,7 @@
 // distance, then face; the dilation is a union. Same mesh and settings => same grids and bytes
 // for any thread count.
 #include "engine/geometry/distance_field.hpp"
+#include "engine/detail.hpp"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Morphology.h>
@@ -49,10 +50,7 @@ namespace ts {
 
 namespace {
 
-void init_openvdb() {
-  static std::once_flag once;
-  std::call_once(once, [] { openvdb::initialize(); });
-}
+using detail::init_openvdb;
 
 /// Smallest power of two q with max|v| / q <= 32000 (int16 with room to spare). Dequantized
 /// values k*q are exact in float and double, so quantizing them again gives them back.

@@ -1,4 +1,5 @@
 #include "engine/geometry/pose_error.hpp"
+#include "engine/detail.hpp"
 
 #include "engine/geometry/eigen_solvers.hpp"
 #include "engine/geometry/kabsch.hpp"
@@ -12,7 +13,7 @@ namespace ts {
 
 namespace {
 
-constexpr double kDeg = 180.0 / std::numbers::pi;
+using detail::kDegPerRad;
 
 /// Minimal rotation taking unit vector `from` to unit vector `to` (the quaternion normalized:
 /// see sweep_candidates in congruence.cpp).
@@ -35,7 +36,7 @@ PoseError pose_error(const Pose& estimate, const Pose& truth, const SymmetryGrou
   const Mat3 Rt = truth.linear(), Re = estimate.linear();
   e.position_m = (estimate.translation() - truth.translation()).norm();
   const Mat3 Q = Rt.transpose() * Re;  // relative rotation in the object frame
-  e.orientation_deg = rotation_angle(Q) * kDeg;
+  e.orientation_deg = rotation_angle(Q) * kDegPerRad;
   e.symmetric_orientation_deg = e.orientation_deg;
   e.symmetric_position_m = e.position_m;
   if (sym == nullptr || sym->trivial()) return e;
@@ -64,7 +65,7 @@ PoseError pose_error(const Pose& estimate, const Pose& truth, const SymmetryGrou
   } else {
     for (const Mat3& G : sym->rotations) consider(G);
   }
-  e.symmetric_orientation_deg = best * kDeg;
+  e.symmetric_orientation_deg = best * kDegPerRad;
   const Pose equivalent = truth * sym->transform(bestG);
   e.symmetric_position_m = (estimate.translation() - equivalent.translation()).norm();
   return e;

@@ -1,4 +1,5 @@
 #include "engine/geometry/symmetry.hpp"
+#include "engine/detail.hpp"
 
 #include <array>
 #include <map>
@@ -16,7 +17,7 @@ namespace ts {
 
 namespace {
 
-constexpr double kPi = std::numbers::pi;
+using detail::kPi;
 
 Mat3 axis_rotation(const Vec3& axis, double angle) {
   return Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();

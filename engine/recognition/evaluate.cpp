@@ -1,4 +1,5 @@
 #include "engine/recognition/evaluate.hpp"
+#include "engine/detail.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <tbb/blocked_range.h>
@@ -191,13 +192,6 @@ GeometryPins pin(const Database& db, const std::vector<Candidate>& cands) {
   return GeometryPins(db, cands, [](const Candidate& c) { return c.object; });
 }
 
-template <class F>
-void parallel_each(std::size_t n, F&& f) {
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 8),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
-                    });
-}
 
 }  // namespace
 
@@ -206,7 +200,7 @@ std::vector<Evaluation> evaluate_all(const Scene& scene, const Database& db,
                                      const EvaluateSettings& s) {
   const GeometryPins geometry = pin(db, cands);
   std::vector<Evaluation> out(cands.size());
-  parallel_each(cands.size(), [&](std::size_t i) {
+  detail::parallel_each(cands.size(), 8, [&](std::size_t i) {
     const Candidate& c = cands[i];
     out[i] = evaluate(scene, geometry[c.object], db.info(c.object), c.T_scene_object, s);
   });
@@ -234,7 +228,7 @@ std::vector<ScoredCandidate> select_top(const Scene& scene, const Database& db,
 
   // Phase 1: the bound after the first prefix of the fixed evaluation order, for everyone.
   std::vector<Evaluation> ev(n);
-  parallel_each(n, [&](std::size_t i) { ev[i] = eval(i, kInf); });
+  detail::parallel_each(n, 8, [&](std::size_t i) { ev[i] = eval(i, kInf); });
 
   // Phase 2: best-first by bound, in fixed chunks. After each chunk the threshold tau is the
   // k-th best exact weight found so far, which the k-th best overall reaches; a candidate
@@ -252,7 +246,7 @@ std::vector<ScoredCandidate> select_top(const Scene& scene, const Database& db,
   for (std::size_t pos = 0; pos < n; pos += chunk) {
     if (ev[idx[pos]].log_weight < tau) break;  // sorted by bound: nobody further can enter
     const std::size_t end = std::min(n, pos + chunk);
-    parallel_each(end - pos, [&](std::size_t j) {
+    detail::parallel_each(end - pos, 8, [&](std::size_t j) {
       const std::uint32_t i = idx[pos + j];
       if (!ev[i].complete && ev[i].log_weight >= tau) ev[i] = eval(i, tau);
     });

@@ -23,7 +23,7 @@ struct Pair {
 
 using Matrix6 = Eigen::Matrix<double, 6, 6>;
 
-Vec3 centroid(const std::vector<Vec3>& y) {
+Vec3 mean_point(const std::vector<Vec3>& y) {
   Vec3 c = Vec3::Zero();
   for (const Vec3& p : y) c += p;
   return c / static_cast<double>(y.size());
@@ -49,7 +49,7 @@ Matrix6 normal_matrix(const std::vector<Vec3>& y, const std::vector<Vec3>& n, co
 bool plane_step(const std::vector<Vec3>& y, const std::vector<Vec3>& z, const std::vector<Vec3>& n,
                 Pose& delta) {
   const std::size_t m = y.size();
-  const Vec3 c = centroid(y);
+  const Vec3 c = mean_point(y);
   Eigen::Matrix<double, 6, 1> g = Eigen::Matrix<double, 6, 1>::Zero();
   Matrix6 H = normal_matrix(y, n, c, &z, &g);
   // A little damping keeps directions the contacts do not constrain (a flat patch) still.
@@ -263,7 +263,7 @@ IcpSystem icp_system(const Scene& scene, const ObjectGeometry& geo, const Pose& 
   const std::vector<Vec3>& n = pairing.nrm;
   out.pairs = y.size();
   if (y.size() < 6) return out;
-  const Vec3 c = centroid(y);
+  const Vec3 c = mean_point(y);
   double spread2 = 0.0;
   for (const Vec3& p : y) spread2 += (p - c).squaredNorm();
   out.radius = std::sqrt(spread2 / static_cast<double>(y.size()));

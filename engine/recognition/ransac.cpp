@@ -1,4 +1,5 @@
 #include "engine/recognition/ransac.hpp"
+#include "engine/detail.hpp"
 
 #include "engine/geometry/kabsch.hpp"
 #include "engine/target_clones.hpp"
@@ -16,15 +17,13 @@
 namespace ts {
 
 namespace {
+using detail::seconds_since;
 
 constexpr std::uint64_t kTagTriplet = 0x7121;
 constexpr std::uint64_t kTagRegistration = 0x7e61;
 constexpr std::uint64_t kTagObjects = 0x0b1e;
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 /// One pruned feature: which object, which coarse point.
 struct Pruned {

@@ -1,4 +1,5 @@
 #include "engine/recognition/recognizer.hpp"
+#include "engine/detail.hpp"
 
 #include "engine/geometry/kabsch.hpp"
 #include "engine/recognition/shortlist.hpp"
@@ -16,19 +17,10 @@
 namespace ts {
 
 namespace {
+using detail::seconds_since;
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
-template <class F>
-void parallel_each(std::size_t n, F&& f) {
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
-                    });
-}
 
 /// Hypotheses in the scene frame while a step works on them.
 struct Working {
@@ -58,7 +50,7 @@ GeometryPins pin(const Database& db, const std::vector<Working>& w) {
 void refine_all(const Scene& scene, const Database& db, const IcpSettings& s,
                 std::vector<Working>& w) {
   const GeometryPins geometry = pin(db, w);
-  parallel_each(w.size(), [&](std::size_t i) {
+  detail::parallel_each(w.size(), 1, [&](std::size_t i) {
     Working& h = w[i];
     const IcpResult r = icp(scene, geometry[h.cand.object], h.cand.T_scene_object, s);
     if (r.valid) h.cand.T_scene_object = r.T_scene_object;
@@ -71,7 +63,7 @@ void refine_all(const Scene& scene, const Database& db, const IcpSettings& s,
 void evaluate_each(const Scene& scene, const Database& db, const EvaluateSettings& s,
                    std::vector<Working>& w) {
   const GeometryPins geometry = pin(db, w);
-  parallel_each(w.size(), [&](std::size_t i) {
+  detail::parallel_each(w.size(), 1, [&](std::size_t i) {
     Working& h = w[i];
     h.eval = evaluate(scene, geometry[h.cand.object], db.info(h.cand.object),
                       h.cand.T_scene_object, s);
@@ -104,7 +96,7 @@ AnswerRule answer_rule(const Scene& scene, const Database& db, const std::vector
     for (std::size_t i : lead) leaders.push_back(next[i]);
     const GeometryPins geometry = pin(db, leaders);
     std::vector<double> v(lead.size());
-    parallel_each(lead.size(), [&](std::size_t k) {
+    detail::parallel_each(lead.size(), 1, [&](std::size_t k) {
       v[k] = twin_score(scene, geometry[leaders[k].cand.object], leaders[k].cand.T_scene_object, twins);
     });
     std::size_t best_k = 0;

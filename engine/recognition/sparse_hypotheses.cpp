@@ -1,4 +1,5 @@
 #include "engine/recognition/sparse_hypotheses.hpp"
+#include "engine/detail.hpp"
 
 #include "engine/geometry/cloud.hpp"
 #include "engine/geometry/kabsch.hpp"
@@ -38,13 +39,13 @@ int angle_units(double rad) {
   return static_cast<int>(std::lround(std::clamp(rad, 0.0, std::numbers::pi) * 255.0 / std::numbers::pi));
 }
 
-struct Triplet {
+struct ContactTriplet {
   std::uint32_t k[3] = {0, 0, 0};
 };
 
 /// A well-conditioned triplet of contacts with sides >= min_side, or none.
 bool draw_triplet(const std::vector<Vec3>& pts, double min_side, const SparseSettings& s, Rng& rng,
-                  Triplet& out) {
+                  ContactTriplet& out) {
   const std::size_t n = pts.size();
   if (n < 3) return false;
   for (int attempt = 0; attempt < s.triplet_attempts; ++attempt) {
@@ -67,13 +68,6 @@ bool draw_triplet(const std::vector<Vec3>& pts, double min_side, const SparseSet
   return false;
 }
 
-template <class F>
-void parallel_each(std::size_t n, F&& f) {
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
-                    });
-}
 
 
 /// One contact triplet against one object's table: its sides in the table's distance units
@@ -266,7 +260,7 @@ SparseTables::View SparseTables::prepare(const std::vector<std::uint8_t>& wanted
   // Built outside the lock. A table is a function of the object's keypoints alone, so two
   // callers that build the same one build the same table; the first installed is kept.
   std::vector<std::shared_ptr<const ObjectPairs>> built(missing.size());
-  parallel_each(missing.size(), [&](std::size_t k) {
+  detail::parallel_each(missing.size(), 1, [&](std::size_t k) {
     built[k] = std::make_shared<const ObjectPairs>(build_object_pairs(db_.keypoints(missing[k]), s_));
   });
   std::lock_guard lock(mutex_);
@@ -374,9 +368,9 @@ std::vector<Candidate> sparse_candidates(const Scene& scene, SparseTables& table
   // Triplets (serial: few draws, one stream).
   Rng rng(seed, step, kSparseStream);
   const double min_side = std::max(2.0 * s.distance_tolerance, s.min_side_share * scene.diameter);
-  std::vector<Triplet> triplets;
+  std::vector<ContactTriplet> triplets;
   for (int t = 0; t < s.triplets; ++t) {
-    Triplet tr;
+    ContactTriplet tr;
     if (draw_triplet(pts, min_side, s, rng, tr)) triplets.push_back(tr);
   }
   st.triplets = triplets.size();
@@ -394,7 +388,7 @@ std::vector<Candidate> sparse_candidates(const Scene& scene, SparseTables& table
   std::vector<std::vector<Pose>> slots(tasks);
   const int utol = angle_units(s.normal_tolerance_deg * std::numbers::pi / 180.0);
   const std::size_t groups = std::clamp<std::size_t>((16 + objects.size() - 1) / objects.size(), 1, triplets.size());
-  parallel_each(objects.size() * groups, [&](std::size_t job) {
+  detail::parallel_each(objects.size() * groups, 1, [&](std::size_t job) {
     const std::size_t k = job / groups, g = job % groups;
     const std::size_t t0 = g * triplets.size() / groups, t1 = (g + 1) * triplets.size() / groups;
     const ObjectPairs& T = *view[objects[k]];

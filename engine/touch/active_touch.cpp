@@ -1,4 +1,5 @@
 #include "engine/touch/active_touch.hpp"
+#include "engine/detail.hpp"
 
 #include "engine/database/database.hpp"
 
@@ -14,7 +15,7 @@
 namespace ts {
 
 namespace {
-constexpr double kDeg = std::numbers::pi / 180.0;
+using detail::kRadPerDeg;
 
 std::vector<double> grid_1d(double lo, double hi, double spacing) {
   const int n = std::max(1, static_cast<int>(std::ceil((hi - lo) / spacing)));
@@ -312,7 +313,7 @@ std::vector<PlannedGrasp> GraspPlanner::plan(const std::vector<Hypothesis>& hypo
         const int j = gripper_.joint_index(pad.finger, l);
         const LinkSpec& spec = gripper_.link(j);
         joints[static_cast<std::size_t>(j)] =
-            std::clamp(rng.uniform(s_.aim_min_deg, s_.aim_max_deg) * kDeg, spec.min, spec.max);
+            std::clamp(rng.uniform(s_.aim_min_deg, s_.aim_max_deg) * kRadPerDeg, spec.min, spec.max);
       }
       cmd.T_world_eef = T_world_pad * gripper_.pad_pose(joints, pad_).inverse();
       cmd.approach = z;

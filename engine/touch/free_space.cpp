@@ -1,4 +1,5 @@
 #include "engine/touch/free_space.hpp"
+#include "engine/detail.hpp"
 
 #include <openvdb/openvdb.h>
 
@@ -10,14 +11,16 @@
 
 namespace ts {
 
-namespace {
-constexpr std::int32_t kFree = 1;
-constexpr std::int32_t kOccupied = 2;
-
-void init_openvdb() {
+void detail::init_openvdb() {
   static std::once_flag once;
   std::call_once(once, [] { openvdb::initialize(); });
 }
+
+namespace {
+using detail::init_openvdb;
+constexpr std::int32_t kFree = 1;
+constexpr std::int32_t kOccupied = 2;
+
 
 using Key = std::array<std::int64_t, 3>;
 struct KeyHash {

@@ -1,4 +1,5 @@
 #include "engine/touch/fusion.hpp"
+#include "engine/detail.hpp"
 
 #include "engine/geometry/cloud.hpp"
 
@@ -8,9 +9,7 @@
 namespace ts {
 
 namespace {
-void require(bool ok, const std::string& what, const std::string& file, const std::string& field) {
-  if (!ok) throw Error(what, file, field);
-}
+using detail::require;
 
 bool rigid_pose(const Pose& T) {
   if (!T.matrix().allFinite()) return false;

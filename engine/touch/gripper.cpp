@@ -1,4 +1,5 @@
 #include "engine/touch/gripper.hpp"
+#include "engine/detail.hpp"
 
 #include <cmath>
 #include <numbers>
@@ -6,11 +7,9 @@
 namespace ts {
 
 namespace {
-constexpr double kDeg = std::numbers::pi / 180.0;
+using detail::require;
+using detail::kRadPerDeg;
 
-void require(bool ok, const std::string& what, const std::string& file, const std::string& field) {
-  if (!ok) throw Error(what, file, field);
-}
 
 bool finite_pose(const Pose& T) { return T.matrix().allFinite(); }
 
@@ -44,29 +43,29 @@ GripperSpec default_gripper_spec() {
   for (int f = 0; f < 3; ++f) {
     FingerSpec finger;
     finger.name = names[f];
-    const double azimuth = f * 120.0 * kDeg;
+    const double azimuth = f * 120.0 * kRadPerDeg;
     finger.T_eef_base = rpy(0, 0, azimuth, Vec3(0.05 * std::cos(azimuth), 0.05 * std::sin(azimuth), 0));
     LinkSpec proximal;
     proximal.name = "proximal";
     proximal.length = 0.075;
     proximal.joint_origin = Vec3::Zero();
-    proximal.open = -40.0 * kDeg;
-    proximal.min = -45.0 * kDeg;
-    proximal.max = 100.0 * kDeg;
+    proximal.open = -40.0 * kRadPerDeg;
+    proximal.min = -45.0 * kRadPerDeg;
+    proximal.max = 100.0 * kRadPerDeg;
     LinkSpec distal;
     distal.name = "distal";
     distal.length = 0.064;  // the 60 mm pad covers it nearly to the tip
     distal.joint_origin = Vec3(0, 0, proximal.length);
     distal.open = 0.0;
-    distal.min = -10.0 * kDeg;
-    distal.max = 100.0 * kDeg;
+    distal.min = -10.0 * kRadPerDeg;
+    distal.max = 100.0 * kRadPerDeg;
     for (LinkSpec* l : {&proximal, &distal}) {
       l->width = 0.035;
       l->thickness = 0.02;
       l->joint_axis = Vec3(0, -1, 0);
       l->has_pad = true;
       // Pad on the inner face (link -x), centred along the link: pad x = link z, pad z = -link x.
-      l->T_link_pad = rpy(0, -90.0 * kDeg, 0, Vec3(-0.5 * l->thickness, 0, 0.5 * l->length));
+      l->T_link_pad = rpy(0, -90.0 * kRadPerDeg, 0, Vec3(-0.5 * l->thickness, 0, 0.5 * l->length));
     }
     finger.links = {proximal, distal};
     g.fingers.push_back(finger);

@@ -1,4 +1,5 @@
 #include "engine/touch/tactile.hpp"
+#include "engine/detail.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -6,6 +7,7 @@
 namespace ts {
 
 namespace {
+using detail::require;
 // Slope of the linear part of the rising branch: f(cp) = s (ck + cp) / 2 = 1.
 double rise_slope(const SensorSettings& s) {
   return 2.0 / (s.knee_compression + s.peak_compression);
@@ -27,9 +29,6 @@ double invert_falling(const SensorSettings& s, double r) {
   return s.peak_compression + v * (1.0 - s.peak_compression);
 }
 
-void require(bool ok, const std::string& what, const std::string& file, const std::string& field) {
-  if (!ok) throw Error(what, file, field);
-}
 }  // namespace
 
 Vec3 SensorSettings::sensel_position(int j) const {

@@ -30,7 +30,7 @@ J object_points(const Database& db, std::size_t object, const Pose& T_world_obje
   return pts;
 }
 
-J pose_json(const Pose& T) {
+J matrix_json(const Pose& T) {
   J m = J::array();
   for (int i = 0; i < 4; ++i) {
     J row = J::array();
@@ -64,12 +64,12 @@ J scene_json(const Database& db, const StepResult& r, const PointCloud& contacts
     hj["object"] = db.info(h.object).name;
     hj["posterior"] = h.object < r.posteriors.size() ? r.posteriors[h.object] : 0.0;
     hj["log_weight"] = std::isfinite(h.log_weight) ? J(h.log_weight) : J(nullptr);
-    hj["pose"] = pose_json(h.pose);
+    hj["pose"] = matrix_json(h.pose);
     hj["points"] = object_points(db, h.object, h.pose, limits.object_points);
     s["hypotheses"].push_back(hj);
   }
   if (truth_object && truth_pose) {
-    s["truth"] = {{"object", db.info(*truth_object).name}, {"pose", pose_json(*truth_pose)},
+    s["truth"] = {{"object", db.info(*truth_object).name}, {"pose", matrix_json(*truth_pose)},
                   {"points", object_points(db, *truth_object, *truth_pose, limits.object_points)}};
   } else {
     s["truth"] = nullptr;

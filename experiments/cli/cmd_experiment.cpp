@@ -139,7 +139,7 @@ class SignalGuard {
   struct sigaction old_int_ {}, old_term_ {};
 };
 
-std::string duration_text(double s) {
+std::string eta_text(double s) {
   std::ostringstream o;
   if (s < 60) {
     o << static_cast<int>(std::ceil(s)) << " s";
@@ -369,7 +369,7 @@ int run_experiment_in(const ExperimentOptions& o, experiments::MpiSession* mpi) 
            << 100.0 * static_cast<double>(p.done) / static_cast<double>(std::max<std::size_t>(1, p.total))
            << " %), " << std::setprecision(2) << 60.0 * static_cast<double>(p.session_done) / std::max(1e-9, p.elapsed_s)
            << " runs/min";
-      if (auto left = p.remaining_s()) line << ", " << duration_text(*left) << " left";
+      if (auto left = p.remaining_s()) line << ", " << eta_text(*left) << " left";
       line << "      ";
       std::cerr << line.str() << std::flush;
     };

@@ -27,7 +27,7 @@ namespace ts::cli {
 namespace {
 using ojson = nlohmann::ordered_json;
 
-ojson pose_json(const Pose& T) {
+ojson tactile_pose_json(const Pose& T) {
   const Eigen::Quaterniond q(T.linear());
   const Vec3 t = T.translation();
   return {{"t", {t.x(), t.y(), t.z()}}, {"q", {q.w(), q.x(), q.y(), q.z()}}};
@@ -138,7 +138,7 @@ int run_log_info(const LogInfoOptions& o) {
     j["object"] = log.object;
     j["grasps"] = log.grasps.size();
     j["contacts_per_grasp"] = per_grasp;
-    j["ground_truth"] = log.truth ? pose_json(log.truth->object_pose) : ojson(nullptr);
+    j["ground_truth"] = log.truth ? tactile_pose_json(log.truth->object_pose) : ojson(nullptr);
     j["noise"] = log.noise;
     j["sensors"] = log.pads.size();
     j["pads"] = pads;
@@ -168,7 +168,7 @@ int run_log_info(const LogInfoOptions& o) {
   if (ambiguous) std::cout << ", " << ambiguous << " sensels on an unknown side of the fold";
   std::cout << ")\n  ground truth  ";
   if (log.truth) {
-    const auto j = pose_json(log.truth->object_pose);
+    const auto j = tactile_pose_json(log.truth->object_pose);
     std::cout << "object at t = " << j["t"].dump() << ", q = " << j["q"].dump() << "\n";
   } else {
     std::cout << "none\n";

@@ -22,7 +22,7 @@ namespace ts::experiments {
 
 namespace {
 
-std::string joined(const std::vector<std::string>& inputs) {
+std::string joined_inputs(const std::vector<std::string>& inputs) {
   std::string s;
   for (const auto& i : inputs) s += (s.empty() ? "" : ",") + i;
   return s;
@@ -247,7 +247,7 @@ std::vector<Variant> expand_variants(const ExperimentConfig& config) {
       for (const auto& value : axis.values) {
         Variant n = v;
         set_key(n.config, axis.key, value);
-        n.label += (n.label.empty() ? "" : ", ") + axis.key + "=" + joined(value);
+        n.label += (n.label.empty() ? "" : ", ") + axis.key + "=" + joined_inputs(value);
         next.push_back(std::move(n));
       }
     out = std::move(next);
@@ -262,7 +262,7 @@ nlohmann::ordered_json to_json(const ExperimentConfig& config) {
   nlohmann::ordered_json sweep = nlohmann::ordered_json::object();
   for (const auto& a : config.sweep) {
     nlohmann::ordered_json values = nlohmann::ordered_json::array();
-    for (const auto& v : a.values) values.push_back(joined(v));
+    for (const auto& v : a.values) values.push_back(joined_inputs(v));
     sweep[a.key] = values;
   }
   j["sweep"] = sweep;

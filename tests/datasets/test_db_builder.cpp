@@ -75,7 +75,7 @@ TEST_CASE("db builder: meshes inside an archive; the first bad mesh in input ord
   TempDir dir("builder");
   fs::create_directories(dir / "src/m");
   ts::test::write_off(dir / "src/m/box.off", ts::test::box_mesh({0, 0, 0}, {2, 1, 1}));
-  ts::test::write_off(dir / "src/m/ball.off", ts::test::sphere_mesh(1.0, 1));
+  ts::test::write_off(dir / "src/m/ball.off", ts::test::icosphere_mesh(1.0, 1));
   REQUIRE(std::system(("tar -C '" + (dir / "src").string() + "' -czf '" + (dir / "meshes.tar.gz").string() +
                        "' m >/dev/null 2>&1")
                           .c_str()) == 0);
@@ -119,7 +119,7 @@ TEST_CASE("db builder: meshes inside an archive; the first bad mesh in input ord
 TEST_CASE("db builder: a stopped build keeps its finished objects and resumes to the same bytes") {
   TempDir dir("builder");
   ts::test::write_off(dir / "box.off", ts::test::box_mesh({0, 0, 0}, {2, 1, 1}));
-  ts::test::write_off(dir / "ball.off", ts::test::sphere_mesh(1.0, 1));
+  ts::test::write_off(dir / "ball.off", ts::test::icosphere_mesh(1.0, 1));
   ts::test::write_off(dir / "slab.off", ts::test::box_mesh({0, 0, 0}, {3, 2, 0.5}));
   ts::test::write_text(dir / "m.tsv", "pkg\tbox.off\tbox\npkg\tball.off\tball\npkg\tslab.off\tslab\n");
   const auto inputs = ts::datasets::inputs_from_manifest(dir / "m.tsv");
@@ -183,7 +183,7 @@ TEST_CASE("db builder: --scale keep builds objects at their real sizes, in their
   TempDir dir("builder");
   // A 6 x 3 x 3 cm block in centimetres and a 10 cm ball (radius 0.05) in metres.
   ts::test::write_off(dir / "block.off", ts::test::box_mesh({0, 0, 0}, {6, 3, 3}));
-  ts::test::write_off(dir / "ball.off", ts::test::sphere_mesh(0.05, 2));
+  ts::test::write_off(dir / "ball.off", ts::test::icosphere_mesh(0.05, 2));
   ts::test::write_text(dir / "m.tsv", "pkg\tblock.off\tblock\tcm\npkg\tball.off\tball\n");
   ts::datasets::BuildSettings settings;
   settings.database = fast_settings();

@@ -117,7 +117,7 @@ TEST_CASE("Congruence: a regular octahedron turned by 45 degrees (no principal a
   CHECK(m.kind == Congruence::congruent);
   CHECK(m.proper_distance < 1e-6);
   // A sphere of the same size is not: its surface bulges 42 mm beyond the faces.
-  const auto s = compare_meshes(a, sphere_mesh(0.1, 3));
+  const auto s = compare_meshes(a, icosphere_mesh(0.1, 3));
   CHECK(s.kind == Congruence::none);
   CHECK(s.proper_distance > 0.03);
 }
@@ -158,7 +158,7 @@ TEST_CASE("Congruence: pairs over many objects and their classes") {
                                     moved(c, some_rotation(), Vec3(1, 0, 0)),              // 2: congruent to 0
                                     moved(c, Vec3(-1, 1, 1).asDiagonal(), Vec3::Zero()),   // 3: mirror of 0 and 2
                                     moved(c, some_rotation().transpose(), Vec3(0, 1, 0)),  // 4: congruent to 0, 2
-                                    sphere_mesh(0.05, 2)};                                 // 5
+                                    icosphere_mesh(0.05, 2)};                                 // 5
   std::vector<ShapeSignature> sigs;
   for (const auto& m : meshes) sigs.push_back(surface_signature(m));
   CongruenceSearchStats stats;

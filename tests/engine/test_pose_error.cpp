@@ -1,3 +1,4 @@
+#include "engine/detail.hpp"
 #include "engine/geometry/kabsch.hpp"
 #include "engine/geometry/pose_error.hpp"
 
@@ -10,10 +11,10 @@ using namespace ts;
 
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using ts::detail::kRadPerDeg;
 
 Mat3 rot(const Vec3& axis, double deg) {
-  return Eigen::AngleAxisd(deg * kDeg, axis.normalized()).toRotationMatrix();
+  return Eigen::AngleAxisd(deg * kRadPerDeg, axis.normalized()).toRotationMatrix();
 }
 
 Pose pose(const Mat3& R, const Vec3& t) {
@@ -31,7 +32,7 @@ double axial_oracle(const Pose& est, const Pose& truth, const SymmetryGroup& g) 
       const Mat3 G = rot(g.axis, i * 0.01) * D;
       best = std::min(best, rotation_angle((truth.linear() * G).transpose() * est.linear()));
     }
-  return best / kDeg;
+  return best / kRadPerDeg;
 }
 
 }  // namespace
@@ -46,7 +47,7 @@ TEST_CASE("Plain errors: position distance and Eq. 10 angle") {
   CHECK(e.orientation_deg == doctest::Approx(30.0));
   CHECK(e.symmetric_orientation_deg == doctest::Approx(30.0));
   CHECK(rotation_angle_eq10(truth.linear().transpose() * est.linear()) ==
-        doctest::Approx(30.0 * kDeg));
+        doctest::Approx(30.0 * kRadPerDeg));
 }
 
 TEST_CASE("Discrete symmetry: a right pose up to symmetry is not counted wrong") {

@@ -59,7 +59,7 @@ std::shared_ptr<FeatureSource> feature_source() {
   return src;
 }
 
-double sqf(const Feature& a, const Feature& b) {
+double feature_sq(const Feature& a, const Feature& b) {
   double s = 0.0;
   for (int i = 0; i < kFeatureDim; ++i) s += (double(a[i]) - double(b[i])) * (double(a[i]) - double(b[i]));
   return s;
@@ -78,7 +78,7 @@ FeatureRows random_queries(const FeatureSource& src, int n, std::uint64_t seed, 
   return queries;
 }
 
-RecognizerSettings fast() {
+RecognizerSettings shortlist_settings() {
   RecognizerSettings s = test::fast_settings();
   s.ransac.prune_per_object = 100;
   return s;
@@ -114,7 +114,7 @@ TEST_CASE("FeatureTable: per-object search restricted to a mask equals brute for
         if (!in) continue;
         std::vector<double> d;
         const FeatureRows& fo = src->feats[o].features;
-        for (std::size_t i = 0; i < fo.size(); ++i) d.push_back(sqf(queries.fpfh(q), fo.fpfh(i)));
+        for (std::size_t i = 0; i < fo.size(); ++i) d.push_back(feature_sq(queries.fpfh(q), fo.fpfh(i)));
         std::sort(d.begin(), d.end());
         const auto& mine = by_object[o];
         REQUIRE(mine.size() == std::min<std::size_t>(7, d.size()));
@@ -224,7 +224,7 @@ TEST_CASE("Recognizer with a shortlist: right object, fewer objects loaded, same
     const Pose T = test::random_pose(90 + obj, Vec3(-0.2, 0.1, 0.3));
     auto run = [&](int threads, std::size_t shortlist, std::size_t min_database = 0) {
       Database db(src);
-      RecognizerSettings s = fast();
+      RecognizerSettings s = shortlist_settings();
       s.shortlist.objects = shortlist;
       s.shortlist.min_database = min_database;
       Recognizer rec(db, s);
@@ -284,7 +284,7 @@ TEST_CASE("Object draws: each triplet searches the objects its draws reach; all 
   FeatureSearch search;
   search.table = FeatureTable::shared(db);
   const std::vector<std::uint8_t> allowed(db.size(), 1);
-  RansacSettings s = fast().ransac;
+  RansacSettings s = shortlist_settings().ransac;
   auto run = [&](std::size_t draws, int threads) {
     RansacSettings x = s;
     x.object_draws = draws;
@@ -332,7 +332,7 @@ TEST_CASE("Object draws rotate: every allowed object is searched once before any
   std::vector<std::uint8_t> allowed(A, 1);
   allowed[2] = 0;   // never searched
   const std::size_t allowed_n = A - 1;
-  RansacSettings x = fast().ransac;
+  RansacSettings x = shortlist_settings().ransac;
   x.triplets = 2;
   x.object_draws = 1;   // each step searches 2 objects
   std::vector<int> count(A, 0);
@@ -438,7 +438,7 @@ TEST_CASE("Pose transfer: the leader's pose tried on its look-alikes, at that po
   const Pose T = test::random_pose(77, Vec3(0.1, -0.2, 0.3));
   auto run = [&](int threads, std::size_t transfer, std::size_t min_database) {
     Database db(src);
-    RecognizerSettings s = fast();
+    RecognizerSettings s = shortlist_settings();
     s.n_p = 20;
     s.twins.transfer = transfer;
     s.twins.transfer_min_database = min_database;
@@ -498,7 +498,7 @@ TEST_CASE("Pose transfer's pool: with the shape prior, only the prior's best obj
   const Pose T = test::random_pose(77, Vec3(0.1, -0.2, 0.3));
   auto run = [&](std::size_t pool, std::optional<std::uint32_t> watch) {
     Database db(src);
-    RecognizerSettings s = fast();
+    RecognizerSettings s = shortlist_settings();
     s.n_p = 20;
     s.twins.transfer = 2;
     s.twins.transfer_min_database = 0;

@@ -2,6 +2,7 @@
 // brute force, when the source runs, the true pose among the candidates (asymmetric, symmetric,
 // coplanar, 1 mm quantized contacts), degenerate sets, determinism, and the recognizer with
 // isolated contacts alone.
+#include "engine/detail.hpp"
 #include "engine/geometry/pose_error.hpp"
 #include "engine/geometry/symmetry.hpp"
 #include "engine/recognition/recognizer.hpp"
@@ -21,7 +22,7 @@ using namespace ts;
 
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+using ts::detail::kRadPerDeg;
 
 /// `n` isolated contacts of object `obj` at T (world), at least `spacing` apart, with outward
 /// normals tilted by up to `tilt_deg`, noise `noise` per axis, rounded to `quantum` (0: not).
@@ -43,7 +44,7 @@ PointCloud isolated(const test::TestSource& src, std::size_t obj, const Pose& T,
     const Vec3 nrm = T.linear() * fine.normals[i];
     const Vec3 axis = nrm.cross(rng.unit_vector()).normalized();
     out.points.push_back(w);
-    out.normals.push_back(Eigen::AngleAxisd(tilt_deg * kDeg * rng.uniform(), axis) * nrm);
+    out.normals.push_back(Eigen::AngleAxisd(tilt_deg * kRadPerDeg * rng.uniform(), axis) * nrm);
   }
   return out;
 }
@@ -79,7 +80,7 @@ TEST_CASE("Pair tables: every other point per point, sorted by distance, with th
   CHECK(n <= 120);
   REQUIRE(t.near.size() == n * (n - 1));
   auto deg = [](std::uint8_t u) { return u * 180.0 / 255.0; };
-  auto angle = [](const Vec3& a, const Vec3& b) { return std::atan2(a.cross(b).norm(), a.dot(b)) / kDeg; };
+  auto angle = [](const Vec3& a, const Vec3& b) { return std::atan2(a.cross(b).norm(), a.dot(b)) / kRadPerDeg; };
   for (std::size_t i = 0; i < n; ++i) {
     std::vector<std::uint8_t> seen(n, 0);
     for (std::size_t k = 0; k < n - 1; ++k) {

@@ -14,7 +14,6 @@ using namespace ts;
 
 namespace {
 
-constexpr double kPi = std::numbers::pi;
 
 /// Area-uniform samples of a triangle mesh, thinned to one point per `voxel` (first in order),
 /// which is how the database's fine clouds look (voxel-filtered scans).
@@ -52,7 +51,7 @@ std::vector<Vec3> sample_mesh(const Mesh& m, std::size_t n, std::uint64_t seed) 
   return out;
 }
 
-Mesh box_mesh(const Vec3& size) {
+Mesh sym_box_mesh(const Vec3& size) {
   Mesh m;
   const Vec3 h = size / 2;
   for (int i = 0; i < 8; ++i)
@@ -67,11 +66,11 @@ Mesh box_mesh(const Vec3& size) {
 
 /// Regular n-gon prism about z, circumradius r, height h, shifted so that its bounding-box
 /// centre is the origin (the centroid is then off the origin, as in the database frame).
-Mesh prism_mesh(int n, double r, double h) {
+Mesh sym_prism_mesh(int n, double r, double h) {
   Mesh m;
   for (int z = 0; z < 2; ++z)
     for (int i = 0; i < n; ++i)
-      m.vertices.emplace_back(r * std::cos(2 * kPi * i / n), r * std::sin(2 * kPi * i / n),
+      m.vertices.emplace_back(r * std::cos(2 * std::numbers::pi * i / n), r * std::sin(2 * std::numbers::pi * i / n),
                               z ? h / 2 : -h / 2);
   m.vertices.emplace_back(0, 0, -h / 2);
   m.vertices.emplace_back(0, 0, h / 2);
@@ -99,37 +98,37 @@ void check_same_group(const std::vector<Mat3>& found, const std::vector<Mat3>& i
   CHECK(found.size() == ideal.size());
   for (const Mat3& F : found) {
     double best = 1e9;
-    for (const Mat3& I : ideal) best = std::min(best, rotation_angle(I.transpose() * F) * 180 / kPi);
+    for (const Mat3& I : ideal) best = std::min(best, rotation_angle(I.transpose() * F) * 180 / std::numbers::pi);
     CHECK(best < tol_deg);
   }
 }
 
-Mat3 rot(const Vec3& axis, double rad) { return Eigen::AngleAxisd(rad, axis.normalized()).toRotationMatrix(); }
+Mat3 sym_rot(const Vec3& axis, double rad) { return Eigen::AngleAxisd(rad, axis.normalized()).toRotationMatrix(); }
 
 }  // namespace
 
 TEST_CASE("Symmetry: a box with distinct sides has the 4-element group D2") {
-  const auto pts = thin(sample_mesh(box_mesh(Vec3(0.2, 0.1, 0.05)), 60000, 1), 0.002);
+  const auto pts = thin(sample_mesh(sym_box_mesh(Vec3(0.2, 0.1, 0.05)), 60000, 1), 0.002);
   const SymmetryGroup g = find(pts);
   CHECK(g.kind == SymmetryGroup::Kind::discrete);
-  check_same_group(g.rotations, {Mat3::Identity(), rot(Vec3::UnitX(), kPi), rot(Vec3::UnitY(), kPi),
-                                 rot(Vec3::UnitZ(), kPi)}, 1.0);
+  check_same_group(g.rotations, {Mat3::Identity(), sym_rot(Vec3::UnitX(), std::numbers::pi), sym_rot(Vec3::UnitY(), std::numbers::pi),
+                                 sym_rot(Vec3::UnitZ(), std::numbers::pi)}, 1.0);
   CHECK(g.centre.norm() < 0.002);
 }
 
 TEST_CASE("Symmetry: a cube has the 24 rotations of the octahedral group") {
-  const auto pts = thin(sample_mesh(box_mesh(Vec3(0.1, 0.1, 0.1)), 60000, 2), 0.002);
+  const auto pts = thin(sample_mesh(sym_box_mesh(Vec3(0.1, 0.1, 0.1)), 60000, 2), 0.002);
   const SymmetryGroup g = find(pts);
   CHECK(g.kind == SymmetryGroup::Kind::discrete);
   std::vector<Mat3> ideal;
   // The 24: identity, 9 face rotations, 8 vertex rotations, 6 edge rotations.
   ideal.push_back(Mat3::Identity());
   for (const Vec3& a : {Vec3(Vec3::UnitX()), Vec3(Vec3::UnitY()), Vec3(Vec3::UnitZ())})
-    for (int k = 1; k < 4; ++k) ideal.push_back(rot(a, k * kPi / 2));
+    for (int k = 1; k < 4; ++k) ideal.push_back(sym_rot(a, k * std::numbers::pi / 2));
   for (const Vec3& a : {Vec3(1, 1, 1), Vec3(1, 1, -1), Vec3(1, -1, 1), Vec3(-1, 1, 1)})
-    for (int k = 1; k < 3; ++k) ideal.push_back(rot(a, k * 2 * kPi / 3));
+    for (int k = 1; k < 3; ++k) ideal.push_back(sym_rot(a, k * 2 * std::numbers::pi / 3));
   for (const Vec3& a : {Vec3(1, 1, 0), Vec3(1, -1, 0), Vec3(1, 0, 1), Vec3(1, 0, -1), Vec3(0, 1, 1), Vec3(0, 1, -1)})
-    ideal.push_back(rot(a, kPi));
+    ideal.push_back(sym_rot(a, std::numbers::pi));
   check_same_group(g.rotations, ideal, 1.5);
 
   SUBCASE("sampled unevenly, as a scanner does: the same group about the true centre") {
@@ -152,43 +151,43 @@ TEST_CASE("Symmetry: a thin square bar has D4, no near-identity turn about its a
   // 22 x 22 x 200 mm, dev45's bar, scanned as the database does: a turn of several degrees
   // about the long axis moves its surface by less than the tolerance (3 mm), so every point
   // passes; such a turn must not become an element (it did: 9 elements, one of 6.7 degrees).
-  const Mesh bar = box_mesh(Vec3(0.022, 0.022, 0.2));
+  const Mesh bar = sym_box_mesh(Vec3(0.022, 0.022, 0.2));
   const PointCloud fine = scan_mesh(MeshIndex(bar), ScanSettings{}, 1).fine;
   const SymmetryGroup g = find(fine.points);
   CHECK(g.kind == SymmetryGroup::Kind::discrete);
   std::vector<Mat3> ideal{Mat3::Identity()};
-  for (int k = 1; k < 4; ++k) ideal.push_back(rot(Vec3::UnitZ(), k * kPi / 2));
+  for (int k = 1; k < 4; ++k) ideal.push_back(sym_rot(Vec3::UnitZ(), k * std::numbers::pi / 2));
   for (const Vec3& a : {Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(1, 1, 0), Vec3(1, -1, 0)})
-    ideal.push_back(rot(a, kPi));
+    ideal.push_back(sym_rot(a, std::numbers::pi));
   // The elements themselves are only as exact as the cloud allows: its 1.5 mm spacing is 8
   // degrees of arc at the bar's 11 mm half-width, and the refinement (point to point) settles
   // within a few degrees of the ideal half-turns.
   check_same_group(g.rotations, ideal, 3.0);
   for (std::size_t i = 1; i < g.rotations.size(); ++i)
-    CHECK(rotation_angle(g.rotations[i]) * 180 / kPi > 45.0);
+    CHECK(rotation_angle(g.rotations[i]) * 180 / std::numbers::pi > 45.0);
 }
 
 TEST_CASE("Symmetry: a pentagonal prism (nut) has D5 about its centroid, not its box centre") {
-  const Mesh m = prism_mesh(5, 0.08, 0.04);
+  const Mesh m = sym_prism_mesh(5, 0.08, 0.04);
   const auto pts = thin(sample_mesh(m, 60000, 3), 0.002);
   const SymmetryGroup g = find(pts);
   CHECK(g.kind == SymmetryGroup::Kind::discrete);
   // The pentagon's centre in the box-centred frame.
   Eigen::AlignedBox3d box;
-  for (int i = 0; i < 5; ++i) box.extend(Vec3(0.08 * std::cos(2 * kPi * i / 5), 0.08 * std::sin(2 * kPi * i / 5), 0));
+  for (int i = 0; i < 5; ++i) box.extend(Vec3(0.08 * std::cos(2 * std::numbers::pi * i / 5), 0.08 * std::sin(2 * std::numbers::pi * i / 5), 0));
   const Vec3 centre = -box.center();
   CHECK((g.centre - centre).norm() < 0.002);
   std::vector<Mat3> ideal;
-  for (int k = 0; k < 5; ++k) ideal.push_back(rot(Vec3::UnitZ(), 2 * kPi * k / 5));
-  for (int k = 0; k < 5; ++k) ideal.push_back(rot(Vec3(std::cos(kPi * k / 5), std::sin(kPi * k / 5), 0), kPi));
+  for (int k = 0; k < 5; ++k) ideal.push_back(sym_rot(Vec3::UnitZ(), 2 * std::numbers::pi * k / 5));
+  for (int k = 0; k < 5; ++k) ideal.push_back(sym_rot(Vec3(std::cos(std::numbers::pi * k / 5), std::sin(std::numbers::pi * k / 5), 0), std::numbers::pi));
   check_same_group(g.rotations, ideal, 1.5);
 
   // A pose right up to a 72-degree turn is right for the symmetric error.
   Pose truth = Pose::Identity();
-  truth.linear() = rot(Vec3(1, 2, 3), 0.7);
+  truth.linear() = sym_rot(Vec3(1, 2, 3), 0.7);
   truth.translation() = Vec3(1e5, 2e5, -3e3);
   Pose about = Pose::Identity();
-  about.linear() = rot(Vec3::UnitZ(), 2 * kPi / 5);
+  about.linear() = sym_rot(Vec3::UnitZ(), 2 * std::numbers::pi / 5);
   about.translation() = centre - about.linear() * centre;
   const PoseError e = pose_error(truth * about, truth, &g);
   CHECK(e.orientation_deg == doctest::Approx(72.0).epsilon(1e-6));
@@ -219,9 +218,9 @@ TEST_CASE("Symmetry: sphere, cylinder and cone are continuous") {
   SUBCASE("cylinder") {
     std::vector<Vec3> pts;
     const double r = 0.05, h = 0.15;
-    const double side = 2 * kPi * r * h, cap = kPi * r * r;
+    const double side = 2 * std::numbers::pi * r * h, cap = std::numbers::pi * r * r;
     for (int i = 0; i < 60000; ++i) {
-      const double u = rng.uniform() * (side + 2 * cap), phi = rng.uniform(0, 2 * kPi);
+      const double u = rng.uniform() * (side + 2 * cap), phi = rng.uniform(0, 2 * std::numbers::pi);
       if (u < side) {
         pts.emplace_back(r * std::cos(phi), r * std::sin(phi), rng.uniform(-h / 2, h / 2));
       } else {
@@ -237,9 +236,9 @@ TEST_CASE("Symmetry: sphere, cylinder and cone are continuous") {
   SUBCASE("cone") {
     std::vector<Vec3> pts;
     const double r = 0.05, h = 0.12, slant = std::sqrt(r * r + h * h);
-    const double side = kPi * r * slant, base = kPi * r * r;
+    const double side = std::numbers::pi * r * slant, base = std::numbers::pi * r * r;
     for (int i = 0; i < 60000; ++i) {
-      const double phi = rng.uniform(0, 2 * kPi);
+      const double phi = rng.uniform(0, 2 * std::numbers::pi);
       if (rng.uniform() * (side + base) < side) {
         const double s = std::sqrt(rng.uniform());  // area-uniform along the slant
         pts.emplace_back(s * r * std::cos(phi), s * r * std::sin(phi), h / 2 - s * h);

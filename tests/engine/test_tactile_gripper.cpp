@@ -1,4 +1,5 @@
 // Forward kinematics (Eq. 2) of the default gripper against poses computed by hand.
+#include "engine/detail.hpp"
 #include "engine/touch/gripper.hpp"
 
 #include <doctest/doctest.h>
@@ -9,7 +10,7 @@
 using namespace ts;
 
 namespace {
-constexpr double kDeg = std::numbers::pi / 180.0;
+using ts::detail::kRadPerDeg;
 
 void check_vec(const Vec3& a, const Vec3& b, double tol = 1e-12) {
   INFO("got " << a.transpose() << " expected " << b.transpose());
@@ -58,12 +59,12 @@ TEST_CASE("forward kinematics: straight fingers") {
   check_vec(T.linear().col(0), Vec3(0, 0, 1));    // pad length along the finger
   check_vec(T.linear().col(1), Vec3(0, 1, 0));
   // Left finger at azimuth 120°: base 0.05 (cos 120°, sin 120°, 0), same offsets rotated.
-  const double c = std::cos(120 * kDeg), s = std::sin(120 * kDeg);
+  const double c = std::cos(120 * kRadPerDeg), s = std::sin(120 * kRadPerDeg);
   const Pose L = g.pad_pose(q, g.pad_index("left.distal"));
   check_vec(L.translation(), Vec3(0.05 * c - 0.01 * c, 0.05 * s - 0.01 * s, 0.107));
   check_vec(L.linear().col(2), Vec3(-c, -s, 0));
   const Pose P = g.pad_pose(q, g.pad_index("right.proximal"));
-  const double c3 = std::cos(240 * kDeg), s3 = std::sin(240 * kDeg);
+  const double c3 = std::cos(240 * kRadPerDeg), s3 = std::sin(240 * kRadPerDeg);
   check_vec(P.translation(), Vec3(0.04 * c3, 0.04 * s3, 0.0375));
 }
 
@@ -71,7 +72,7 @@ TEST_CASE("forward kinematics: bent middle finger, computed by hand") {
   Gripper g;
   // θ1 = 90°: the proximal link lies across the palm, the distal pad faces the palm (-z).
   {
-    const Pose T = g.pad_pose(joints_of(g, 90 * kDeg, 0.0), 1);
+    const Pose T = g.pad_pose(joints_of(g, 90 * kRadPerDeg, 0.0), 1);
     // pad origin = base + Ry(-90°) (-0.01, 0, 0.107) = (0.05, 0, 0) + (-0.107, 0, -0.01)
     check_vec(T.translation(), Vec3(-0.057, 0.0, -0.01), 1e-12);
     check_vec(T.linear().col(2), Vec3(0, 0, -1), 1e-12);
@@ -81,7 +82,7 @@ TEST_CASE("forward kinematics: bent middle finger, computed by hand") {
   //   v  = Ry(-45°) (-0.01, 0, 0.032) + (0, 0, 0.075)
   //   p  = (0.05, 0, 0) + Ry(-30°) v
   {
-    const double a1 = 30 * kDeg, a2 = 45 * kDeg;
+    const double a1 = 30 * kRadPerDeg, a2 = 45 * kRadPerDeg;
     const double vx = std::cos(a2) * -0.01 - std::sin(a2) * 0.032;
     const double vz = std::sin(a2) * -0.01 + std::cos(a2) * 0.032 + 0.075;
     const double px = 0.05 + std::cos(a1) * vx - std::sin(a1) * vz;
@@ -90,14 +91,14 @@ TEST_CASE("forward kinematics: bent middle finger, computed by hand") {
     check_vec(T.translation(), Vec3(px, 0.0, pz), 1e-12);
     check_vec(T.translation(), Vec3(-0.020997, 0.0, 0.063575), 1e-6);  // the same, by calculator
     // the pad normal turned by 75° from -x toward -z
-    check_vec(T.linear().col(2), Vec3(-std::cos(75 * kDeg), 0, -std::sin(75 * kDeg)), 1e-12);
+    check_vec(T.linear().col(2), Vec3(-std::cos(75 * kRadPerDeg), 0, -std::sin(75 * kRadPerDeg)), 1e-12);
   }
 }
 
 TEST_CASE("Eq. 2: world contact = T_EEF * T_sensor * P^L") {
   Gripper g;
   Pose T_eef = Pose::Identity();
-  T_eef.linear() = Eigen::AngleAxisd(90 * kDeg, Vec3::UnitZ()).toRotationMatrix();
+  T_eef.linear() = Eigen::AngleAxisd(90 * kRadPerDeg, Vec3::UnitZ()).toRotationMatrix();
   T_eef.translation() = Vec3(1.0, 2.0, 3.0);
   const std::vector<double> q(6, 0.0);
   // Sensel 0 of the middle distal pad, contact 1 mm above the base: P^L = (-0.0275, -0.0125, 0.001).

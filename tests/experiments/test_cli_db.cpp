@@ -38,7 +38,7 @@ const std::string kFast =
 void write_meshes(const TempDir& dir) {
   fs::create_directories(dir / "meshes");
   ts::test::write_off(dir / "meshes/box.off", ts::test::box_mesh({0, 0, 0}, {3, 2, 1}));
-  ts::test::write_off(dir / "meshes/ball.off", ts::test::flipped(ts::test::sphere_mesh(5.0, 2, {1, 2, 3})));
+  ts::test::write_off(dir / "meshes/ball.off", ts::test::flipped(ts::test::icosphere_mesh(5.0, 2, {1, 2, 3})));
   ts::test::write_off(dir / "meshes/bar.off", ts::test::box_mesh({-1, -1, -10}, {1, 1, 10}));
 }
 

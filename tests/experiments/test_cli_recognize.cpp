@@ -36,7 +36,7 @@ using ts::test::touchstone;
 using ts::test::make_db;
 
 // Small method parameters: the tests check plumbing, determinism and errors, not accuracy.
-const std::string kFast = " -N 6 -R 40 -W 800 --n-p 20 --icp-points 64";
+const std::string kFastFlags = " -N 6 -R 40 -W 800 --n-p 20 --icp-points 64";
 
 bool finite_numbers(const nlohmann::json& j) {
   if (j.is_number_float()) return std::isfinite(j.get<double>());
@@ -54,9 +54,9 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
   const Run sim = touchstone(dir, "simulate --db db.h5 --object wedge --grasps 6 --noise ideal --seed 4 --out log.h5");
   REQUIRE_MESSAGE(sim.code == 0, sim.err);
 
-  const Run a = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --threads 1 --out r1.h5" + kFast);
+  const Run a = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --threads 1 --out r1.h5" + kFastFlags);
   REQUIRE_MESSAGE(a.code == 0, a.err);
-  const Run b = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --threads 2 --out r2.h5" + kFast);
+  const Run b = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --threads 2 --out r2.h5" + kFastFlags);
   REQUIRE_MESSAGE(b.code == 0, b.err);
   CHECK(test::read_bytes(dir / "r1.h5") == test::read_bytes(dir / "r2.h5"));
 
@@ -109,28 +109,28 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
                      {"ransac.object_draws", 100.0}, {"shortlist.objects", 16.0}, {"twins.rivals", 5.0}, {"ransac.prune_blocks", 8.0}});
 
   SUBCASE("--preset paper, and a flag on top of a preset") {
-    const Run p = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --preset paper --out rp.h5" + kFast);
+    const Run p = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --preset paper --out rp.h5" + kFastFlags);
     REQUIRE_MESSAGE(p.code == 0, p.err);
     CHECK(nlohmann::json::parse(p.out)["preset"] == "paper");
     check_params(io::read_result(dir / "rp.h5"),
                  {{"ransac.prune_per_object", 0.0}, {"bricpsf.refine_new", 0.0}, {"bricpsf.dedupe", 0.0}, {"evaluate.grasp_offset_sigma_m", 0.0},
                   {"ransac.object_draws", 0.0}, {"shortlist.objects", 0.0}, {"twins.rivals", 0.0}});
     const Run q = touchstone(dir, "recognize --db db.h5 --log log.h5 --steps 1 --prune-per-object 50 --no-dedupe "
-                                  "--grasp-offset-sigma 0.005 --shortlist 3 --twins 0 --prune-blocks 2 --out rq.h5" + kFast);
+                                  "--grasp-offset-sigma 0.005 --shortlist 3 --twins 0 --prune-blocks 2 --out rq.h5" + kFastFlags);
     REQUIRE_MESSAGE(q.code == 0, q.err);
     check_params(io::read_result(dir / "rq.h5"),
                  {{"ransac.prune_per_object", 50.0}, {"bricpsf.dedupe", 0.0}, {"evaluate.grasp_offset_sigma_m", 0.005}, {"bricpsf.refine_new", 1.0},
                   {"shortlist.objects", 3.0}, {"twins.rivals", 0.0}, {"ransac.prune_blocks", 2.0}, {"ransac.object_draws", 100.0}});
   }
   SUBCASE("--steps and --method") {
-    const Run c = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --method batch-ransac" + kFast);
+    const Run c = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --steps 2 --method batch-ransac" + kFastFlags);
     REQUIRE_MESSAGE(c.code == 0, c.err);
     const auto jc = nlohmann::json::parse(c.out);
     CHECK(jc["method"] == "batch-ransac");
     CHECK(jc["steps"].size() == 2);
   }
   SUBCASE("human output") {
-    const Run h = touchstone(dir, "recognize --db db.h5 --log log.h5 --steps 2" + kFast);
+    const Run h = touchstone(dir, "recognize --db db.h5 --log log.h5 --steps 2" + kFastFlags);
     REQUIRE(h.code == 0);
     CHECK(h.out.find("step") != std::string::npos);
     CHECK(h.out.find("bricpsf") != std::string::npos);
@@ -151,13 +151,13 @@ TEST_CASE("cli recognize --cloud: one step, ground truth from a 4x4 file, nulls 
       for (int c = 0; c < 4; ++c) gt << T.matrix()(r, c) << (c < 3 ? " " : "\n");
     }
   }
-  const Run a = touchstone(dir, "recognize --db db.h5 --cloud cloud.ply --ground-truth T.txt --object nut --json" + kFast);
+  const Run a = touchstone(dir, "recognize --db db.h5 --cloud cloud.ply --ground-truth T.txt --object nut --json" + kFastFlags);
   REQUIRE_MESSAGE(a.code == 0, a.err);
   const auto j = nlohmann::json::parse(a.out);
   REQUIRE(j["steps"].size() == 1);
   CHECK(j["steps"][0]["position_error_m"].is_number());
   CHECK(j["steps"][0]["correct"].is_boolean());
-  const Run b = touchstone(dir, "recognize --db db.h5 --cloud cloud.ply --json" + kFast);
+  const Run b = touchstone(dir, "recognize --db db.h5 --cloud cloud.ply --json" + kFastFlags);
   REQUIRE_MESSAGE(b.code == 0, b.err);
   const auto jb = nlohmann::json::parse(b.out);
   CHECK(jb["steps"][0]["position_error_m"].is_null());
@@ -183,7 +183,7 @@ TEST_CASE("cli recognize: bad input gives one clear error and no output file") {
   };
   expect_error("recognize --db db.h5 --log log.h5 --steps 4 --out out.h5", "exceeds the log's 3 grasps");
   {  // a log of an object outside the database (the open set) is recognized, and scored wrong
-    const Run r = touchstone(dir, "recognize --db small.h5 --log log.h5 --json" + kFast);
+    const Run r = touchstone(dir, "recognize --db small.h5 --log log.h5 --json" + kFastFlags);
     REQUIRE_MESSAGE(r.code == 0, r.err);
     const auto j = nlohmann::json::parse(r.out);
     CHECK(j["truth_object"] == "wedge");
@@ -206,7 +206,7 @@ TEST_CASE("cli recognize: bad input gives one clear error and no output file") {
     }());
     for (Vec3& p : mm.points) p *= 1000.0;
     io::write_cloud(dir / "mm.ply", mm);
-    expect_error("recognize --db db.h5 --cloud mm.ply --out out.h5" + kFast, "same units");
+    expect_error("recognize --db db.h5 --cloud mm.ply --out out.h5" + kFastFlags, "same units");
   }
   {  // malformed ground truth
     test::write_text(dir / "bad.txt", "1 0 0 0\n0 1 0 0\n0 0 1 zero\n0 0 0 1\n");
@@ -216,20 +216,20 @@ TEST_CASE("cli recognize: bad input gives one clear error and no output file") {
     expect_error("recognize --db db.h5 --cloud c2.ply --ground-truth short.txt", "16 numbers");
   }
   // a memory budget that cannot hold the largest object's geometry
-  expect_error("recognize --db db.h5 --log log.h5 --memory-budget 0.01 --out out.h5" + kFast,
+  expect_error("recognize --db db.h5 --log log.h5 --memory-budget 0.01 --out out.h5" + kFastFlags,
                "cannot hold one object");
-  expect_error("recognize --db db.h5 --log log.h5 --memory-budget 0.01 --out out.h5" + kFast,
+  expect_error("recognize --db db.h5 --log log.h5 --memory-budget 0.01 --out out.h5" + kFastFlags,
                "(db.h5, --memory-budget)");
   {  // a database truncated mid-object
     const auto size = fs::file_size(dir / "db.h5");
     fs::copy_file(dir / "db.h5", dir / "cut.h5");
     fs::resize_file(dir / "cut.h5", size * 2 / 3);
-    expect_error("recognize --db cut.h5 --log log.h5 --out out.h5" + kFast, "cut.h5");
+    expect_error("recognize --db cut.h5 --log log.h5 --out out.h5" + kFastFlags, "cut.h5");
   }
   // a budget that holds the largest object and little more: the same answer as no limit
   // (eviction changes nothing)
   {
-    const Run refused = touchstone(dir, "recognize --db db.h5 --log log.h5 --memory-budget 0.01" + kFast);
+    const Run refused = touchstone(dir, "recognize --db db.h5 --log log.h5 --memory-budget 0.01" + kFastFlags);
     // "... needs N MB ...": N (std::regex would double this file's compile time)
     const auto at = refused.err.find("needs ");
     REQUIRE_MESSAGE(at != std::string::npos, refused.err);
@@ -237,8 +237,8 @@ TEST_CASE("cli recognize: bad input gives one clear error and no output file") {
     const double needs_mb = std::stod(refused.err.substr(at + 6), &digits);
     REQUIRE(refused.err.compare(at + 6 + digits, 3, " MB") == 0);
     const std::string budget = std::to_string(1.3 * needs_mb);
-    const Run small = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --memory-budget " + budget + kFast);
-    const Run none = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --memory-budget 0" + kFast);
+    const Run small = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --memory-budget " + budget + kFastFlags);
+    const Run none = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --memory-budget 0" + kFastFlags);
     REQUIRE_MESSAGE(small.code == 0, small.err);
     REQUIRE_MESSAGE(none.code == 0, none.err);
     auto strip = [](nlohmann::json j) {
@@ -280,7 +280,7 @@ nlohmann::json input_fields(const nlohmann::json& single) {
 
 /// `recognize` on one input alone (the oracle of the batch tests); its JSON.
 nlohmann::json alone(const test::TempDir& dir, const std::string& args) {
-  const Run r = touchstone(dir, "recognize --json " + args + kFast);
+  const Run r = touchstone(dir, "recognize --json " + args + kFastFlags);
   REQUIRE_MESSAGE(r.code == 0, r.err);
   return nlohmann::json::parse(r.out);
 }
@@ -314,9 +314,9 @@ TEST_CASE("cli recognize, several logs: each input's steps and result file as al
   // the inputs differ, so a mix-up of inputs cannot pass unnoticed
   CHECK(singles[0]["truth_object"] != singles[1]["truth_object"]);
 
-  const Run one = touchstone(dir, "recognize --db db.h5 --json --threads 1 --out r1 --log" + list + kFast);
+  const Run one = touchstone(dir, "recognize --db db.h5 --json --threads 1 --out r1 --log" + list + kFastFlags);
   REQUIRE_MESSAGE(one.code == 0, one.err);
-  const Run two = touchstone(dir, "recognize --db db.h5 --json --threads 2 --out r2 --log" + list + kFast);
+  const Run two = touchstone(dir, "recognize --db db.h5 --json --threads 2 --out r2 --log" + list + kFastFlags);
   REQUIRE_MESSAGE(two.code == 0, two.err);
   const auto j1 = nlohmann::json::parse(one.out), j2 = nlohmann::json::parse(two.out);
   CHECK(j1["threads"] == 1);
@@ -334,7 +334,7 @@ TEST_CASE("cli recognize, several logs: each input's steps and result file as al
   CHECK(std::distance(fs::directory_iterator(dir / "r1"), fs::directory_iterator{}) == 3);
 
   SUBCASE("human output: each input's table in input order under its name") {
-    const Run h = touchstone(dir, "recognize --db db.h5 --log" + list + kFast);
+    const Run h = touchstone(dir, "recognize --db db.h5 --log" + list + kFastFlags);
     REQUIRE_MESSAGE(h.code == 0, h.err);
     const auto a = h.out.find("input wedge.h5 (object wedge)"), b = h.out.find("input nut.h5 (object nut)"),
                c = h.out.find("input box.h5 (object box)");
@@ -364,7 +364,7 @@ TEST_CASE("cli recognize --cloud DIR/: every .ply/.pcd file of the folder, in na
   std::vector<nlohmann::json> singles;
   for (const char* file : {"a.pcd", "b.ply", "c.ply"})
     singles.push_back(alone(dir, "--db db.h5 --cloud clouds/" + std::string(file)));
-  const Run r = touchstone(dir, "recognize --db db.h5 --cloud clouds/ --json --threads 2" + kFast);
+  const Run r = touchstone(dir, "recognize --db db.h5 --cloud clouds/ --json --threads 2" + kFastFlags);
   REQUIRE_MESSAGE(r.code == 0, r.err);
   const auto j = nlohmann::json::parse(r.out);
   REQUIRE(j["inputs"].size() == 3);
@@ -376,12 +376,12 @@ TEST_CASE("cli recognize --cloud DIR/: every .ply/.pcd file of the folder, in na
   // a folder alone is several inputs even with one file in it (the output keeps one shape)
   fs::create_directories(dir / "one");
   fs::copy_file(dir / "clouds" / "b.ply", dir / "one" / "b.ply");
-  const Run o = touchstone(dir, "recognize --db db.h5 --cloud one --json" + kFast);
+  const Run o = touchstone(dir, "recognize --db db.h5 --cloud one --json" + kFastFlags);
   REQUIRE_MESSAGE(o.code == 0, o.err);
   check_entries(nlohmann::json::parse(o.out), {alone(dir, "--db db.h5 --cloud one/b.ply")});
   // an empty folder is an error
   fs::create_directories(dir / "empty");
-  const Run e = touchstone(dir, "recognize --db db.h5 --cloud empty" + kFast);
+  const Run e = touchstone(dir, "recognize --db db.h5 --cloud empty" + kFastFlags);
   CHECK(e.code == 1);
   CHECK_MESSAGE(e.err.find("no .ply or .pcd file (empty, --cloud)") != std::string::npos, e.err);
 }
@@ -401,7 +401,7 @@ TEST_CASE("cli recognize, several logs: broken inputs are reported, the others s
       alone(dir, "--db small.h5 --log nut.h5 --out nut_alone.h5"),
       alone(dir, "--db small.h5 --log box.h5 --out box_alone.h5")};
   // inputs: good, not HDF5, good, truncated, object not in the database (recognized: open set)
-  const Run r = touchstone(dir, "recognize --db small.h5 --log nut.h5 junk.h5 box.h5 cut.h5 wedge.h5 --json --out res" + kFast);
+  const Run r = touchstone(dir, "recognize --db small.h5 --log nut.h5 junk.h5 box.h5 cut.h5 wedge.h5 --json --out res" + kFastFlags);
   CHECK(r.code == 1);
   const auto j = nlohmann::json::parse(r.out);  // the JSON is complete all the same
   REQUIRE(j["inputs"].size() == 5);
@@ -490,7 +490,7 @@ TEST_CASE("cli recognize: each answer's class of congruent objects, and whether 
   const auto db = make_db(dir);
   REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 4 --noise ideal --seed 4 --out log.h5").code == 0);
   // No classes recorded: each answer is its own class.
-  const Run plain = touchstone(dir, "recognize --db db.h5 --log log.h5 --json" + kFast);
+  const Run plain = touchstone(dir, "recognize --db db.h5 --log log.h5 --json" + kFastFlags);
   REQUIRE_MESSAGE(plain.code == 0, plain.err);
   const auto jp = nlohmann::json::parse(plain.out);
   CHECK(jp["congruent_classes_known"] == false);
@@ -513,7 +513,7 @@ TEST_CASE("cli recognize: each answer's class of congruent objects, and whether 
     if (i != wedge) rec.pairs.push_back({static_cast<std::uint32_t>(std::min(i, wedge)), static_cast<std::uint32_t>(std::max(i, wedge))});
   std::sort(rec.pairs.begin(), rec.pairs.end(), [](const auto& x, const auto& y) { return x.a != y.a ? x.a < y.a : x.b < y.b; });
   io::write_congruence(db, rec);
-  const Run twin = touchstone(dir, "recognize --db db.h5 --log log.h5 --json" + kFast);
+  const Run twin = touchstone(dir, "recognize --db db.h5 --log log.h5 --json" + kFastFlags);
   REQUIRE_MESSAGE(twin.code == 0, twin.err);
   const auto jt = nlohmann::json::parse(twin.out);
   CHECK(jt["congruent_classes_known"] == true);
@@ -542,7 +542,7 @@ TEST_CASE("cli probe: simulate --sensing probe, recognize the log, --only, --clo
   // The log among the six objects, and the wedge alone (localization of a known object).
   for (const std::string only : {"", " --only wedge", " --only wedge,nut"}) {
     INFO(only);
-    const Run r = touchstone(dir, "recognize --db db.h5 --log probe.h5 --json" + only + kFast);
+    const Run r = touchstone(dir, "recognize --db db.h5 --log probe.h5 --json" + only + kFastFlags);
     REQUIRE_MESSAGE(r.code == 0, r.err);
     const auto j = nlohmann::json::parse(r.out);
     REQUIRE(j["steps"].size() == 24);
@@ -564,7 +564,7 @@ TEST_CASE("cli probe: simulate --sensing probe, recognize the log, --only, --clo
   // The same touches as a plain contact cloud (with normals) and a free-space cloud.
   REQUIRE(touchstone(dir, "log export probe.h5 --out contacts.ply --free free.ply").code == 0);
   const Run c = touchstone(dir, "recognize --db db.h5 --cloud contacts.ply --free free.ply --d-thresh 0.0001 "
-                                "--free-inside-margin 0.01 --only wedge --json" + kFast);
+                                "--free-inside-margin 0.01 --only wedge --json" + kFastFlags);
   REQUIRE_MESSAGE(c.code == 0, c.err);
   const auto jc = nlohmann::json::parse(c.out);
   CHECK(jc["steps"][0]["free_points"].get<int>() > 50);
@@ -572,7 +572,7 @@ TEST_CASE("cli probe: simulate --sensing probe, recognize the log, --only, --clo
   CHECK(jc["steps"][0]["contact_model_distance_m"].get<double>() < 0.0015);
 
   // Bad input: one clear error.
-  const Run bad = touchstone(dir, "recognize --db db.h5 --log probe.h5 --only wedge,teapot --json" + kFast);
+  const Run bad = touchstone(dir, "recognize --db db.h5 --log probe.h5 --only wedge,teapot --json" + kFastFlags);
   CHECK(bad.code == 1);
   CHECK(bad.err.find("no object 'teapot'") != std::string::npos);
   CHECK(bad.err.find("--only") != std::string::npos);
@@ -623,7 +623,7 @@ TEST_CASE("cli recognize --calibration: confidences, and the open-set answer bel
   cal.open_set_threshold = 0.6;
   experiments::write_calibration(dir / "open.json", cal);
 
-  const Run plain = touchstone(dir, "recognize --db small.h5 --log box.h5 --json --calibration cal.json" + kFast);
+  const Run plain = touchstone(dir, "recognize --db small.h5 --log box.h5 --json --calibration cal.json" + kFastFlags);
   REQUIRE_MESSAGE(plain.code == 0, plain.err);
   const auto jp = nlohmann::json::parse(plain.out);  // kept alive: the loop reads into it
   for (const auto& st : jp["steps"]) {
@@ -635,7 +635,7 @@ TEST_CASE("cli recognize --calibration: confidences, and the open-set answer bel
   // Below the threshold (steps 2 on): "not in the database"; right for the wedge (not in
   // small.h5), wrong for the box (it is). At step 1 the score is 0.7: the object is named.
   for (const auto& [log, outside] : {std::pair{"wedge.h5", true}, {"box.h5", false}}) {
-    const Run r = touchstone(dir, std::string("recognize --db small.h5 --log ") + log + " --json --calibration open.json" + kFast);
+    const Run r = touchstone(dir, std::string("recognize --db small.h5 --log ") + log + " --json --calibration open.json" + kFastFlags);
     REQUIRE_MESSAGE(r.code == 0, r.err);
     const auto j = nlohmann::json::parse(r.out);
     CHECK(j["truth_in_database"] == !outside);
@@ -652,7 +652,7 @@ TEST_CASE("cli recognize --calibration: confidences, and the open-set answer bel
     CHECK(st["correct"] == outside);
   }
   // --open-set-threshold overrides the file's (0: always name an object), needs a calibration.
-  const Run named = touchstone(dir, "recognize --db small.h5 --log wedge.h5 --json --calibration open.json --open-set-threshold 0" + kFast);
+  const Run named = touchstone(dir, "recognize --db small.h5 --log wedge.h5 --json --calibration open.json --open-set-threshold 0" + kFastFlags);
   REQUIRE_MESSAGE(named.code == 0, named.err);
   CHECK(nlohmann::json::parse(named.out)["steps"][0]["object"].is_string());
   const Run lone = touchstone(dir, "recognize --db small.h5 --log wedge.h5 --open-set-threshold 0.5");
@@ -862,7 +862,7 @@ TEST_CASE("cli recognize --suggest: the N best next grasps in the world frame, t
   test::TempDir dir("cli_suggest");
   make_db(dir);
   REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 3 --noise underwater --seed 4 --out log.h5").code == 0);
-  const std::string args = "recognize --db db.h5 --log log.h5 --json --suggest 3 --active.candidates 24" + kFast;
+  const std::string args = "recognize --db db.h5 --log log.h5 --json --suggest 3 --active.candidates 24" + kFastFlags;
   const Run a = touchstone(dir, args + " --threads 1");
   REQUIRE_MESSAGE(a.code == 0, a.err);
   const Run b = touchstone(dir, args + " --threads 2");
@@ -914,22 +914,22 @@ TEST_CASE("cli recognize --suggest: bad input is one clear error") {
     CHECK(r.code != 0);
     CHECK_MESSAGE(r.err.find(what) != std::string::npos, r.err);
   };
-  expect_error("recognize --db db.h5 --log log.h5 --suggest 0" + kFast, "--suggest");
-  expect_error("recognize --db db.h5 --log log.h5 --suggest 2 --active.candidates 0" + kFast, "active.candidates");
+  expect_error("recognize --db db.h5 --log log.h5 --suggest 0" + kFastFlags, "--suggest");
+  expect_error("recognize --db db.h5 --log log.h5 --suggest 2 --active.candidates 0" + kFastFlags, "active.candidates");
   {  // no contact yet: every sensel silent
     TactileLog silent = io::read_log(dir / "log.h5");
     for (auto& g : silent.grasps)
       for (auto& e : g.tactile) e = 0.0f;
     io::write_log(dir / "silent.h5", silent);
-    expect_error("recognize --db db.h5 --log silent.h5 --suggest 2" + kFast, "no contact yet");
+    expect_error("recognize --db db.h5 --log silent.h5 --suggest 2" + kFastFlags, "no contact yet");
   }
   REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 2 --sensing probe --noise ideal --out probe.h5").code == 0);
-  expect_error("recognize --db db.h5 --log probe.h5 --suggest 2" + kFast, "probe log");
+  expect_error("recognize --db db.h5 --log probe.h5 --suggest 2" + kFastFlags, "probe log");
   REQUIRE(touchstone(dir, "log export log.h5 --out c.ply").code == 0);
-  expect_error("recognize --db db.h5 --cloud c.ply --suggest 2" + kFast, "--suggest");
+  expect_error("recognize --db db.h5 --cloud c.ply --suggest 2" + kFastFlags, "--suggest");
   // The oracle diagnostic reads a truth the planner of experiments executes against; recognize
   // only suggests grasps, so it is refused rather than ignored.
-  expect_error("recognize --db db.h5 --log log.h5 --suggest 2 --diagnostics.oracle-belief 0.5" + kFast,
+  expect_error("recognize --db db.h5 --log log.h5 --suggest 2 --diagnostics.oracle-belief 0.5" + kFastFlags,
                "--diagnostics.oracle-belief");
 }
 
@@ -937,7 +937,7 @@ TEST_CASE("cli recognize --scene: each chosen step drawn in the world frame, a P
   test::TempDir dir("cli_scene");
   make_db(dir);
   REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 6 --noise ideal --seed 4 --out log.h5").code == 0);
-  const Run a = touchstone(dir, "recognize --db db.h5 --log log.h5 --scene pics --scene-steps 6,3" + kFast);
+  const Run a = touchstone(dir, "recognize --db db.h5 --log log.h5 --scene pics --scene-steps 6,3" + kFastFlags);
   REQUIRE_MESSAGE(a.code == 0, a.err);
   for (const char* f : {"scene_log_step3.png", "scene_log_step6.png", "scene_log_step3.html", "scene_log_step6.html"})
     CHECK_MESSAGE(fs::file_size(dir / "pics" / f) > 2000, f);
@@ -1009,7 +1009,7 @@ TEST_CASE("cli recognize --scene: each chosen step drawn in the world frame, a P
   CHECK(s["free"].size() <= s["free_total"].get<std::size_t>());
 
   // A step outside the log: one error naming the flag, nothing drawn.
-  const Run bad = touchstone(dir, "recognize --db db.h5 --log log.h5 --scene pics2 --scene-steps 9" + kFast);
+  const Run bad = touchstone(dir, "recognize --db db.h5 --log log.h5 --scene pics2 --scene-steps 9" + kFastFlags);
   CHECK(bad.code != 0);
   CHECK(bad.err.find("--scene-steps") != std::string::npos);
   CHECK(bad.err.find("log.h5") != std::string::npos);

@@ -40,7 +40,7 @@ BuiltObject object(const std::string& name, Mesh mesh) {
 std::filesystem::path make_db(const test::TempDir& dir) {
   const auto path = dir / "db.h5";
   std::vector<BuiltObject> objects;
-  objects.push_back(object("ball", test::sphere_mesh(0.05, 2)));
+  objects.push_back(object("ball", test::icosphere_mesh(0.05, 2)));
   objects.push_back(object("brick", test::box_mesh({-0.08, -0.04, -0.03}, {0.08, 0.04, 0.03})));
   std::vector<io::StoredObject> stored;
   for (const auto& o : objects) stored.push_back({&o, 1});

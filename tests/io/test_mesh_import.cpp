@@ -94,7 +94,7 @@ TEST_CASE("mesh import: the keep scale keeps the mesh's size in its units") {
 TEST_CASE("mesh import: inside-out meshes are flipped, quads triangulated, duplicates welded") {
   TempDir dir("mesh");
   const auto inv = dir / "inv.off";
-  ts::test::write_off(inv, ts::test::flipped(ts::test::sphere_mesh(3.0, 2, {1, 1, 1})));
+  ts::test::write_off(inv, ts::test::flipped(ts::test::icosphere_mesh(3.0, 2, {1, 1, 1})));
   const auto m = io::import_mesh(inv);
   CHECK(m.flipped);
   CHECK(m.closed);
@@ -155,7 +155,7 @@ TEST_CASE("mesh import: open and non-manifold meshes are kept with a warning") {
 TEST_CASE("mesh import: from memory equals from file") {
   TempDir dir("mesh");
   const auto p = dir / "s.off";
-  ts::test::write_off(p, ts::test::sphere_mesh(1.0, 1));
+  ts::test::write_off(p, ts::test::icosphere_mesh(1.0, 1));
   const auto bytes = ts::test::read_bytes(p);
   const auto a = io::import_mesh(p);
   const auto b = io::import_mesh_from_memory(bytes, "pkg.tar.gz:data/s.off");

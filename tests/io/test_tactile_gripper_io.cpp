@@ -46,7 +46,7 @@ void check_same(const GripperSpec& a, const GripperSpec& b) {
   }
 }
 
-void expect_error(const std::string& text, const std::string& field) {
+void expect_gripper_error(const std::string& text, const std::string& field) {
   try {
     io::parse_gripper(text, "bad.json");
     FAIL("no error for field " << field);
@@ -90,24 +90,24 @@ TEST_CASE("quaternion mounts and default joint origins are accepted") {
 }
 
 TEST_CASE("gripper files that do not parse or are wrong name the field") {
-  expect_error("{\"name\": \"x\", ", "byte");
-  expect_error("[1, 2]", "");
-  expect_error("{\"name\": \"x\"}", "fingers");
+  expect_gripper_error("{\"name\": \"x\", ", "byte");
+  expect_gripper_error("[1, 2]", "");
+  expect_gripper_error("{\"name\": \"x\"}", "fingers");
   const auto base = nlohmann::json::parse(default_text());
   auto edit = [&](auto&& f) {
     auto j = base;
     f(j);
     return j.dump();
   };
-  expect_error(edit([](auto& j) { j["fingers"][0]["links"][0]["length_m"] = "long"; }),
+  expect_gripper_error(edit([](auto& j) { j["fingers"][0]["links"][0]["length_m"] = "long"; }),
                "fingers[0].links[0].length_m");
-  expect_error(edit([](auto& j) { j["fingers"][0]["links"][0]["length_m"] = -1; }), "fingers[0].links[0]");
-  expect_error(edit([](auto& j) { j["fingers"][0]["links"][0].erase("name"); }), "fingers[0].links[0].name");
-  expect_error(edit([](auto& j) { j["fingers"][1]["links"][1]["joint"]["axis"] = {0, 0}; }),
+  expect_gripper_error(edit([](auto& j) { j["fingers"][0]["links"][0]["length_m"] = -1; }), "fingers[0].links[0]");
+  expect_gripper_error(edit([](auto& j) { j["fingers"][0]["links"][0].erase("name"); }), "fingers[0].links[0].name");
+  expect_gripper_error(edit([](auto& j) { j["fingers"][1]["links"][1]["joint"]["axis"] = {0, 0}; }),
                "fingers[1].links[1].joint.axis");
-  expect_error(edit([](auto& j) { j["single_pad"] = "thumb.distal"; }), "single_pad");
-  expect_error(edit([](auto& j) { j["sensor"]["rows"] = 12.5; }), "sensor.rows");
-  expect_error(edit([](auto& j) { j["sensor"]["response"]["peak"] = 1.5; }), "sensor.response");
-  expect_error(edit([](auto& j) { j["format"] = "urdf"; }), "format");
+  expect_gripper_error(edit([](auto& j) { j["single_pad"] = "thumb.distal"; }), "single_pad");
+  expect_gripper_error(edit([](auto& j) { j["sensor"]["rows"] = 12.5; }), "sensor.rows");
+  expect_gripper_error(edit([](auto& j) { j["sensor"]["response"]["peak"] = 1.5; }), "sensor.response");
+  expect_gripper_error(edit([](auto& j) { j["format"] = "urdf"; }), "format");
   CHECK_THROWS_AS(io::read_gripper("/nonexistent/gripper.json"), Error);
 }
