@@ -78,7 +78,8 @@ struct RecognizerSettings {
   /// object is penalized, duplicate hypotheses are dropped, the best 60 RANSAC candidates are
   /// refined by ICP before the (1-Psi) n_p new ones are chosen, at most 5 of them per object,
   /// and feature pruning keeps the 200 nearest features of every object (not 3000 overall).
-  /// Measured on simulated underwater logs of the 45 objects at step 20: see README.
+  /// Measured on simulated underwater logs of the 45 objects at step 20: see docs/results/
+  /// (bench_recognize; the history in CHANGELOG.md).
   static RecognizerSettings improved();
 };
 

@@ -1,5 +1,5 @@
 // What every `touchstone` subcommand shares: --threads, --seed, --json, the error format and
-// the caller-owned task arena. See ../../README.md "Command line" and the interface contract.
+// the caller-owned task arena. See docs/command-line.md and the interface contract.
 #pragma once
 
 #include <CLI/CLI.hpp>

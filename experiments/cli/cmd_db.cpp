@@ -1,4 +1,4 @@
-// `touchstone db build|add|info|classes|export`: the object database (README "The object database",
+// `touchstone db build|add|info|classes|export`: the object database (docs/database.md,
 // io/FORMAT_DB.md).
 #include "experiments/cli/cli_common.hpp"
 

@@ -1,5 +1,5 @@
-// `touchstone stress`: the stiff and extreme cases study (experiments/runs/stress.hpp, README
-// "Study 10").
+// `touchstone stress`: the stiff and extreme cases study (experiments/runs/stress.hpp,
+// docs/testing.md "Stiff and extreme cases (study 10)").
 #include "experiments/cli/cli_common.hpp"
 #include "experiments/resources.hpp"
 #include "experiments/runs/stress.hpp"

@@ -5,7 +5,7 @@
 //
 // Keys (file sections become dotted prefixes: `[ransac]` + `triplets = 15` is ransac.triplets):
 // every parameter of experiments/params/parameters.cpp, method, simulator and experiment alike
-// (`touchstone params`, and the README's tables): objects, runs, steps, pool, protocol, noise,
+// (`touchstone params`, and the tables of docs/parameters.md): objects, runs, steps, pool, protocol, noise,
 // sensors, seed, ransac.triplets, bricpsf.psi, ...; a method parameter unset means the preset's
 // value. `sweep.<key> = [v1, v2, ...]` (sweepable keys only): one variant per combination
 // (cartesian product, the first listed key varies slowest).

@@ -1,4 +1,4 @@
-// Stiff and extreme cases as a study (`touchstone stress`, README "Study 10"): objects from 1 cm
+// Stiff and extreme cases as a study (`touchstone stress`, docs/testing.md "study 10"): objects from 1 cm
 // to 2 m, dives up to 1 000 km from the world origin, arm noise up to 20 mm, 3 to 5 000 contacts,
 // duplicated and near-collinear contacts, a single flat patch, a 2 m x 1 cm rod. Each case runs
 // the recognizer (the improved or the paper preset) over synthetic tactile patches of known
@@ -110,7 +110,7 @@ StressCaseResult run_stress_case(const StressStudy& study, std::size_t index,
 /// The study's JSON (config, per case the summary and the runs).
 nlohmann::ordered_json stress_json(const StressStudy& study, const std::vector<StressCaseResult>& results);
 
-/// The table README shows: one row per case.
+/// The table the study prints: one row per case.
 std::string stress_table(const std::vector<StressCaseResult>& results);
 
 /// The path of the first number in `j` that is NaN or infinite ("" when none).

@@ -1,5 +1,5 @@
-// Objects far below the usual size with every length scaled: what the stress study (README
-// "Study 10") found. A 1 mm object's distance field needs voxels of about 13 micrometres,
+// Objects far below the usual size with every length scaled: what the stress study (study 10,
+// docs/testing.md; its record in CHANGELOG.md) found. A 1 mm object's distance field needs voxels of about 13 micrometres,
 // which OpenVDB refused to make (ArithmeticError: its transform's scale must exceed 1.44e-5 m).
 #include "engine/geometry/distance_field.hpp"
 #include "engine/geometry/mesh.hpp"

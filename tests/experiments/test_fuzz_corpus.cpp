@@ -59,7 +59,7 @@ TEST_CASE("Fuzz corpora: truncated and corrupted seeds are refused with ts::Erro
   // of 0xFF (sizes and counts declared as huge). A bad input may be read or refused, never
   // crash, throw anything but ts::Error, or allocate from an unchecked size.
   // Not the raw hdf5 target: Debian's libhdf5 1.10.8 itself crashes on some damaged metadata
-  // (H5Aiterate2 on a corrupt attribute table; README, Hardening). The HDF5 readers' own
+  // (H5Aiterate2 on a corrupt attribute table; docs/testing.md, Hardening). The HDF5 readers' own
   // validation is fuzzed through edit scripts (next test case).
   for (const auto& t : ts::fuzz::targets()) {
     if (t.name == "hdf5") continue;

@@ -64,9 +64,9 @@ TEST_CASE("Stress study configuration: cases over a baseline, errors name the fi
 }
 
 TEST_CASE("Every stress study of experiments/studies/stress loads, and the driver runs study 10") {
-  // The README's `touchstone stress --config ...` commands run these files: a key the loader
+  // docs/testing.md's `touchstone stress --config ...` commands run these files: a key the loader
   // renames or a range it narrows must fail here, not at the start of an hour-long study. (What
-  // the cases cover is the study's design, stated in the file and the README, not code.)
+  // the cases cover is the study's design, stated in the file and docs/testing.md, not code.)
   const auto dir = std::filesystem::path(TS_SOURCE_DIR) / "experiments" / "studies" / "stress";
   std::size_t n = 0;
   for (const auto& e : std::filesystem::directory_iterator(dir)) {
@@ -117,7 +117,7 @@ TEST_CASE("Stress study, reduced: far dives answer as at the origin; degenerate 
   // 1 000 km away: the same contacts up to the rounding of their coordinates (1e-10 m). The
   // recognizer works in a frame centred on them (tests/engine/test_stability.cpp checks the
   // prepared query to 1e-9 m), so nothing degrades; but such a change can move a near-tie of
-  // RANSAC, as it does at the origin (README, Study 10: 5 to 7 of 20 runs, errors 0.03 to 7 mm
+  // RANSAC, as it does at the origin (CHANGELOG.md, study 10: 5 to 7 of 20 runs, errors 0.03 to 7 mm
   // apart), so the answers are compared as answers: the same object, errors of the same size.
   // Coordinates held in float anywhere would be off by centimetres here.
   for (int r = 0; r < study.runs; ++r) {

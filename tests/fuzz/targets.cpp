@@ -169,7 +169,7 @@ bool runs(std::span<const std::uint8_t> b) { return edited<read_runs>(b, "box_1_
 bool result(std::span<const std::uint8_t> b) { return edited<read_result>(b, "box_3_steps.h5"); }
 
 /// Raw bytes as an HDF5 file (first byte: which reader): what libhdf5 itself makes of damaged
-/// metadata. Debian's libhdf5 1.10.8 crashes on some (README, Hardening): not in "all".
+/// metadata. Debian's libhdf5 1.10.8 crashes on some (docs/testing.md, Hardening): not in "all".
 bool hdf5(std::span<const std::uint8_t> b) {
   const auto [reader, rest] = choose(b, {"database", "log", "runs", "result"});
   const fs::path p = as_file(rest, "raw.h5");
