@@ -8,8 +8,11 @@
 #include "engine/features/fpfh.hpp"
 #include "engine/geometry/search.hpp"
 #include "engine/recognition/recognizer.hpp"
+#include "fixture_cache.hpp"
 
 #include <cmath>
+#include <cstdio>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <mutex>
@@ -17,6 +20,7 @@
 #include <memory>
 #include <numbers>
 #include <tuple>
+#include <unistd.h>
 
 namespace ts::test {
 
@@ -199,13 +203,112 @@ inline std::shared_ptr<TestSource> build_source(double scale) {
   return src;
 }
 
-/// The same, built once per scale per test process (sources are immutable once built).
+/// A built source's objects as bytes (what TestSource::add computes), for the other processes of
+/// this test binary (fixture_cache.hpp): a copy of every value, so a loaded source equals the
+/// built one bit for bit.
+namespace source_bytes {
+// Vectors of plain values (numbers, Vec3, Eigen::Vector3i, std::array): their bytes as they are.
+template <class T>
+void put(std::ostream& o, const std::vector<T>& v) {
+  const std::uint64_t n = v.size();
+  o.write(reinterpret_cast<const char*>(&n), sizeof n);
+  o.write(reinterpret_cast<const char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T)));
+}
+template <class T>
+bool get(std::istream& in, std::vector<T>& v) {
+  std::uint64_t n = 0;
+  if (!in.read(reinterpret_cast<char*>(&n), sizeof n) || n > (std::uint64_t{1} << 32)) return false;
+  v.resize(n);
+  return static_cast<bool>(in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(n * sizeof(T))));
+}
+template <class T>
+void put_one(std::ostream& o, const T& x) { put(o, std::vector<T>{x}); }
+template <class T>
+bool get_one(std::istream& in, T& x) {
+  std::vector<T> v;
+  if (!get(in, v) || v.size() != 1) return false;
+  x = v[0];
+  return true;
+}
+constexpr std::uint64_t kMagic = 0x7453727543616368ULL;   // format of this file; change it with the layout
+
+inline void save(const TestSource& s, const std::filesystem::path& path) {
+  const auto part = path.string() + ".tmp-" + std::to_string(::getpid());
+  {
+    std::ofstream o(part, std::ios::binary);
+    put_one(o, kMagic);
+    put_one(o, static_cast<std::uint64_t>(s.infos.size()));
+    for (std::size_t i = 0; i < s.infos.size(); ++i) {
+      const ObjectInfo& info = s.infos[i];
+      put(o, std::vector<char>(info.name.begin(), info.name.end()));
+      put_one(o, info.extent);
+      put_one(o, static_cast<std::uint64_t>(info.fine_points));
+      put_one(o, static_cast<std::uint64_t>(info.coarse_points));
+      put_one(o, static_cast<char>(info.closed));
+      put(o, s.feats[i].coarse.points), put(o, s.feats[i].coarse.normals);
+      put_one(o, s.feats[i].features.dim()), put(o, s.feats[i].features.values());
+      put(o, s.fines[i].points), put(o, s.fines[i].normals);
+      put(o, s.meshes[i].vertices), put(o, s.meshes[i].faces);
+      for (const SparseGrid* g : {&s.field_fine[i], &s.field_coarse[i]}) put_one(o, g->voxel), put(o, g->ijk), put(o, g->value);
+    }
+    put_one(o, kMagic);
+    if (!o) return;
+  }
+  std::error_code ec;   // whole or not at all: another process may be reading it
+  std::filesystem::rename(part, path, ec);
+  if (ec) std::filesystem::remove(part, ec);
+}
+
+/// Fills `s` (made with the source's scale) from `path`; false if the file is missing or not whole.
+inline bool load(TestSource& s, const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::uint64_t magic = 0, n = 0;
+  if (!in || !get_one(in, magic) || magic != kMagic || !get_one(in, n) || n > 1000) return false;
+  for (std::uint64_t i = 0; i < n; ++i) {
+    ObjectInfo info;
+    std::vector<char> name;
+    std::uint64_t fine_points = 0, coarse_points = 0;
+    char closed = 0;
+    ObjectFeatures of;
+    int dim = 0;
+    std::vector<float> values;
+    PointCloud fine;
+    Mesh mesh;
+    SparseGrid fine_field, coarse_field;
+    if (!get(in, name) || !get_one(in, info.extent) || !get_one(in, fine_points) ||
+        !get_one(in, coarse_points) || !get_one(in, closed) || !get(in, of.coarse.points) ||
+        !get(in, of.coarse.normals) || !get_one(in, dim) || dim <= 0 || !get(in, values) ||
+        !get(in, fine.points) || !get(in, fine.normals) || !get(in, mesh.vertices) || !get(in, mesh.faces))
+      return false;
+    for (SparseGrid* g : {&fine_field, &coarse_field})
+      if (!get_one(in, g->voxel) || !get(in, g->ijk) || !get(in, g->value)) return false;
+    info.name.assign(name.begin(), name.end());
+    info.fine_points = fine_points, info.coarse_points = coarse_points, info.closed = closed != 0;
+    of.features = FeatureRows(dim);
+    of.features.values() = std::move(values);
+    s.infos.push_back(info), s.feats.push_back(std::move(of)), s.fines.push_back(std::move(fine));
+    s.meshes.push_back(std::move(mesh));
+    s.field_fine.push_back(std::move(fine_field)), s.field_coarse.push_back(std::move(coarse_field));
+  }
+  return get_one(in, magic) && magic == kMagic;
+}
+}  // namespace source_bytes
+
+/// The same, built once per scale per test process (sources are immutable once built), and
+/// once per test binary when the test cache can be written (fixture_cache.hpp).
 inline std::shared_ptr<TestSource> make_source(double scale = 1.0) {
   static std::mutex m;
   static std::map<double, std::shared_ptr<TestSource>> cache;
   std::lock_guard<std::mutex> lock(m);
   auto& s = cache[scale];
-  if (!s) s = build_source(scale);
+  if (s) return s;
+  char key[64];
+  std::snprintf(key, sizeof key, "source-%a", scale);
+  const auto path = fixture_cache(key, ".bin");
+  auto loaded = std::make_shared<TestSource>(scale);
+  if (!path.empty() && source_bytes::load(*loaded, path)) return s = loaded;
+  s = build_source(scale);
+  if (!path.empty()) source_bytes::save(*s, path);
   return s;
 }
 

@@ -3,6 +3,7 @@
 #pragma once
 
 #include "engine/recognition_fixture.hpp"
+#include "fixture_cache.hpp"
 #include "io/db_store.hpp"
 #include "temp_dir.hpp"
 
@@ -15,33 +16,8 @@
 
 namespace ts::test {
 
-/// Where make_db keeps the database it built, for the other test processes of the same test
-/// binary: each ctest test is a process of its own, and building the six objects (scans,
-/// features, distance fields) took 1 s of each CLI test in release and 10-15 s under
-/// AddressSanitizer. The key is the binary's size and modification time, so a rebuilt binary
-/// (engine code changed) never reads what an older one wrote. Empty: no cache.
-inline std::filesystem::path fixture_cache(const std::string& what) {
-  std::error_code ec;
-  const auto exe = std::filesystem::read_symlink("/proc/self/exe", ec);
-  if (ec) return {};
-  const auto size = std::filesystem::file_size(exe, ec);
-  if (ec) return {};
-  const auto mtime = std::filesystem::last_write_time(exe, ec).time_since_epoch().count();
-  if (ec) return {};
-  const auto dir = std::filesystem::path(TS_BINARY_DIR) / "test-cache";
-  std::filesystem::create_directories(dir, ec);
-  if (ec) return {};
-  const std::string binary = exe.filename().string() + "-";
-  const std::string key = binary + std::to_string(size) + "-" + std::to_string(static_cast<unsigned long long>(mtime)) + "-";
-  for (const auto& e : std::filesystem::directory_iterator(dir, ec)) {  // what older binaries left
-    const std::string file = e.path().filename().string();
-    if (file.starts_with(binary) && !file.starts_with(key)) std::filesystem::remove(e.path(), ec);
-  }
-  return dir / (key + what + ".h5");
-}
-
 /// The engine tests' six shapes (less `skip`) as the database file `dir`/`name`: a copy of the
-/// one this test binary built before (fixture_cache), else built and written, then kept.
+/// one this test binary built before (fixture_cache.hpp), else built and written, then kept.
 inline std::filesystem::path make_db(const TempDir& dir, const std::string& name = "db.h5",
                                      std::vector<std::string> skip = {}) {
   const auto path = dir / name;

@@ -1,0 +1,80 @@
+#!/usr/bin/env python3
+"""scripts/results: its checks refuse what they should, on a copy of the tree's registry and pages.
+
+  test_results.py SOURCE_DIR       (ctest: scripts/results_check_refuses)
+Each case edits a fresh copy (registry, README, docs/) and expects `scripts/results check` or
+`--list` to fail naming the file and the field, or to pass when nothing is wrong."""
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+src = Path(sys.argv[1]).resolve()
+script = src / "scripts/results"
+failures = []
+
+
+def tree():
+    d = Path(tempfile.mkdtemp(prefix="ts-results-"))
+    for f in ["README.md", "datasets/dev45.tsv"]:
+        (d / f).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(src / f, d / f)
+    shutil.copytree(src / "experiments/studies", d / "experiments/studies")
+    shutil.copytree(src / "docs", d / "docs")
+    return d
+
+
+def expect(name, edit, args, code, needle):
+    d = tree()
+    try:
+        edit(d)
+        p = subprocess.run([sys.executable, script, "--root", d, *args], capture_output=True, text=True)
+        if p.returncode != code or needle not in p.stderr + p.stdout:
+            failures.append(f"{name}: exit {p.returncode} (want {code}), output:\n{p.stderr}{p.stdout}")
+    finally:
+        shutil.rmtree(d)
+
+
+def append(path, text):
+    return lambda d: (d / path).open("a").write(text)
+
+
+def page(name, files=("README.md", "result.json", "stamp.json")):
+    def make(d):
+        (d / "docs/results" / name).mkdir(parents=True)
+        for f in files:
+            (d / "docs/results" / name / f).write_text(
+                '{"commit": "x", "dirty": false, "machine": "m", "threads": 2, "allocator": "a", "date": "d"}'
+                if f == "stamp.json" else "{}")
+    return make
+
+
+expect("the tree as it is", lambda d: None, ["check"], 0, "")
+expect("a page of no study", page("study99_nothing"), ["check"], 1, "study99_nothing: a page of no study")
+expect("a page without its stamp", page("demo", ("README.md", "result.json")), ["check"], 1, "no stamp.json")
+expect("a link to no study's page", append("docs/testing.md", "\nsee docs/results/study77/README.md\n"),
+       ["check"], 1, "docs/testing.md:")
+expect("a figure the report does not write",
+       lambda d: (d / "experiments/studies/registry.toml").write_text(
+           (d / "experiments/studies/registry.toml").read_text().replace(
+               '"recognition_rate", "position_error_m_median", "time_s_median"]',
+               '"recognition_rate", "position_error_mm", "time_s_median"]', 1)),
+       ["--list"], 1, "position_error_mm is not a per-step key")
+expect("a tier over its budget", append("experiments/studies/registry.toml", '''
+[studies.long_one]
+title = "t"
+tier = "quick"
+kind = "bench"
+database = "dev45"
+program = "bench/x"
+minutes = 30
+'''), ["--list"], 1, "the quick tier expects")
+expect("an unknown study", lambda d: None, ["study99"], 1, "no study 'study99'")
+expect("a study's unknown key", append("experiments/studies/registry.toml", '\n[studies.x]\ntitle = "t"\ncolour = 1\n'),
+       ["--list"], 1, "studies.x: unknown key colour")
+
+for f in failures:
+    print(f"FAIL {f}", file=sys.stderr)
+print(f"{8 - len(failures)} of 8 cases as expected")
+sys.exit(1 if failures else 0)
