@@ -13,8 +13,9 @@
 # ("***Timeout"). The timeouts hold under AddressSanitizer, about 3-5 times slower than release.
 
 # Test names (regular expressions, whole names) in the slow tier: the tests that took 45 s or
-# more each under ASan+UBSan (2026-11-29, 2 cores shared with two builds; 2-6 s each in release),
-# together about 560 s of the sanitizer suite. Each is a whole-experiment test of the run engine
+# more each under ASan+UBSan (2026-11-29: the first eight on 2 cores shared with two builds,
+# the last two in a cold CI profile; 2-6 s each in release), together about 660 s of the
+# sanitizer suite. Each is a whole-experiment test of the run engine
 # or the driver (shards, merge, active touch, diagnostics) or an exhaustive oracle over a
 # distance field, whose code the faster unit and integration tests also run under the
 # sanitizers. Keep this list short: what is here is not run under the sanitizers.
@@ -27,6 +28,8 @@ set(TS_SLOW_TESTS
   "experiments/Recognition engine: consistent records, thread-count and resume independent"
   "experiments/Stress study, reduced: .*"
   "engine/The fine level holds every voxel within the band's half-width, and none beyond"
+  "engine/MeshIndex shell: every lattice point within the radius, with closest\\(\\)'s answer, and none beyond"
+  "engine/Objects of 1 cm and 2 m with scaled parameters are recognized alike"
 )
 
 # COST orders a fresh build's first run (later runs use ctest's own record of the times): the
