@@ -42,6 +42,7 @@ def append(path, text):
 
 def page(name, files=("README.md", "result.json", "stamp.json")):
     def make(d):
+        shutil.rmtree(d / "docs/results" / name, ignore_errors=True)
         (d / "docs/results" / name).mkdir(parents=True)
         for f in files:
             (d / "docs/results" / name / f).write_text(
@@ -70,11 +71,13 @@ database = "dev45"
 program = "bench/x"
 minutes = 30
 '''), ["--list"], 1, "the quick tier expects")
+expect("a commit hash in the README", append("README.md", "\nmeasured at 1103ea2 on a laptop\n"),
+       ["check"], 1, "1103ea2 looks like a commit hash")
 expect("an unknown study", lambda d: None, ["study99"], 1, "no study 'study99'")
 expect("a study's unknown key", append("experiments/studies/registry.toml", '\n[studies.x]\ntitle = "t"\ncolour = 1\n'),
        ["--list"], 1, "studies.x: unknown key colour")
 
 for f in failures:
     print(f"FAIL {f}", file=sys.stderr)
-print(f"{8 - len(failures)} of 8 cases as expected")
+print(f"{9 - len(failures)} of 9 cases as expected")
 sys.exit(1 if failures else 0)
