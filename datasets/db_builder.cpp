@@ -1,4 +1,5 @@
 #include "datasets/db_builder.hpp"
+#include "engine/detail.hpp"
 
 #include "datasets/archive.hpp"
 #include "datasets/manifest.hpp"
@@ -24,8 +25,8 @@ namespace ts::datasets {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+using detail::Clock;
+using detail::seconds_since;
 
 void check_exists(const MeshInput& in) {
   std::error_code ec;

@@ -1,4 +1,5 @@
 #include "datasets/catalogue/csg.hpp"
+#include "engine/detail.hpp"
 
 #include "engine/geometry/eigen_solvers.hpp"
 
@@ -9,7 +10,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <mutex>
 #include <numbers>
 #include <unordered_map>
 
@@ -19,10 +19,7 @@ namespace {
 
 using Grid = openvdb::FloatGrid;
 
-void init_openvdb() {
-  static std::once_flag once;
-  std::call_once(once, [] { openvdb::initialize(); });
-}
+using detail::init_openvdb;
 
 std::shared_ptr<Shape::Node> make_node(Shape::Op op, const Shape& a, const Shape& b) {
   auto n = std::make_shared<Shape::Node>();

@@ -53,7 +53,7 @@ void add_build_parameters(CLI::App* sub, DatabaseSettings& s, int& deflate) {
       ->check(CLI::Range(0.0, 1.0))->capture_default_str();
   sub->add_option("--descriptor", s.descriptor,
                   "Local descriptor of the keypoints (and of every query on this database): fpfh (the "
-                  "paper's choice), pfh, shot or spin (README, study 13)")
+                  "paper's choice), pfh, shot or spin (docs/experiments.md, study 13)")
       ->transform(CLI::CheckedTransformer(std::map<std::string, Descriptor>{{"fpfh", Descriptor::fpfh},
                                                                             {"pfh", Descriptor::pfh},
                                                                             {"shot", Descriptor::shot},

@@ -20,7 +20,7 @@ void register_params(CLI::App& app) {
                 "its flag and the commands taking it, unit, range, the presets' values and the paper's");
   sub->add_option("--preset", o->preset, "Only this preset's values: paper | improved (default: both)")
       ->check(CLI::IsMember({"paper", "improved"}));
-  auto* md = sub->add_flag("--markdown", o->markdown, "The README's parameter table (Markdown)");
+  auto* md = sub->add_flag("--markdown", o->markdown, "The parameter table of docs/parameters.md (Markdown)");
   add_common(sub, o->common);
   md->excludes("--json");
   sub->callback([o] {

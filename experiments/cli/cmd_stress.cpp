@@ -80,7 +80,7 @@ void register_stress(CLI::App& app) {
   auto o = std::make_shared<StressOptions>();
   CLI::App* sub = app.add_subcommand(
       "stress", "Stiff and extreme cases: object size, distance from the origin, arm noise, contact "
-                "counts, duplicated and collinear contacts, a flat patch, a long rod (README: Study 10)");
+                "counts, duplicated and collinear contacts, a flat patch, a long rod (docs/testing.md, study 10)");
   sub->add_option("--config", o->config, "Study configuration (TOML), e.g. "
                                          "experiments/studies/stress/study10_extreme.toml")
       ->required();

@@ -351,7 +351,7 @@ void register_tactile(CLI::App& app) {
                                                   "message, the arm pose and joints nearest in time");
     sub->add_option("recording", opt->recording, "Recording (.mcap)")->required();
     sub->add_option("--map", opt->map, "Which topics hold the arm pose, the joints and the tactile images (TOML; "
-                                        "README, ROS 2 recordings)")->required();
+                                        "docs/logs-and-simulator.md, ROS 2 recordings)")->required();
     sub->add_option("--out", opt->out, "Tactile log to write (HDF5)")->required();
     add_common(sub, opt->common);
     sub->callback([opt] { run_command(opt->common, [opt] { return run_log_import(*opt); }); });

@@ -1,4 +1,5 @@
 #include "experiments/runs/recognition_engine.hpp"
+#include "engine/detail.hpp"
 
 #include "datasets/simulator.hpp"
 #include "engine/features/feature_table.hpp"
@@ -37,10 +38,8 @@ namespace ts::experiments {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
+using detail::Clock;
+using detail::seconds_since;
 
 constexpr std::uint64_t kRecognizerStream = 0x72656367ULL;  // "recg"
 constexpr std::uint64_t kPlannerStream = 0x706c616eULL;     // "plan"

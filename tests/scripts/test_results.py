@@ -13,6 +13,7 @@ from pathlib import Path
 src = Path(sys.argv[1]).resolve()
 script = src / "scripts/results"
 failures = []
+cases = 0
 
 
 def tree():
@@ -26,6 +27,8 @@ def tree():
 
 
 def expect(name, edit, args, code, needle):
+    global cases
+    cases += 1
     d = tree()
     try:
         edit(d)
@@ -79,5 +82,5 @@ expect("a study's unknown key", append("experiments/studies/registry.toml", '\n[
 
 for f in failures:
     print(f"FAIL {f}", file=sys.stderr)
-print(f"{9 - len(failures)} of 9 cases as expected")
+print(f"{cases - len(failures)} of {cases} cases as expected")
 sys.exit(1 if failures else 0)
