@@ -242,8 +242,28 @@ J truth_pose_json(const io::RunStoreHeader& h, const std::vector<const io::RunRe
 }
 
 struct VariantJson {
-  J per_step, per_object, summary, confidence, open_set, truth_pose;
+  J per_step, per_object, summary, confidence, open_set, truth_pose, stages;
 };
+
+/// The store's ran.<stage> values (RecognitionEngine): per stage of the method's pipeline, the
+/// steps that recorded it and the share of them that left it out (their scene did not need it).
+/// Null when the store has no such values (a store written before they were recorded).
+J stages_json(const io::RunStoreHeader& h, const std::vector<const io::RunRecord*>& runs) {
+  J out = J::array();
+  for (std::size_t col = 0; col < h.step_values.size(); ++col) {
+    const std::string& name = h.step_values[col];
+    if (!name.starts_with("ran.")) continue;
+    std::size_t n = 0, skipped = 0;
+    for (const io::RunRecord* r : runs)
+      for (const io::RunStepRecord& s : r->steps) {
+        if (col >= s.values.size() || std::isnan(s.values[col])) continue;   // not in the method
+        ++n;
+        skipped += s.values[col] == 0.0 ? 1 : 0;
+      }
+    if (n > 0) out.push_back({{"stage", name.substr(4)}, {"steps", n}, {"skipped_share", double(skipped) / double(n)}});
+  }
+  return out.empty() ? J(nullptr) : out;
+}
 
 
 J bins_json(const ConfidenceCalibration& c) {
@@ -462,6 +482,7 @@ VariantJson variant_json(const io::RunStoreContents& store, int variant, const R
   v.summary = summary_json(v.per_step, all);
   v.confidence = confidence_json(h, all, settings);
   v.truth_pose = truth_pose_json(h, all, objects.size() > 1);
+  v.stages = stages_json(h, all);
   v.per_object = J::array();
   for (std::size_t o = 0; o < h.objects.size(); ++o) {
     if (by_object[o].empty()) continue;
@@ -554,6 +575,7 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
   out["confidence"] = vj.empty() ? J(nullptr) : vj[0].confidence;
   out["open_set"] = vj.empty() ? J(nullptr) : vj[0].open_set;
   out["truth_pose"] = vj.empty() ? J(nullptr) : vj[0].truth_pose;
+  out["stages"] = vj.empty() ? J(nullptr) : vj[0].stages;
 
   if (variants > 1) {
     J list = J::array();
@@ -567,6 +589,7 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
       item["per_step"] = vj[v].per_step;
       item["per_object"] = vj[v].per_object;
       item["truth_pose"] = vj[v].truth_pose;
+      item["stages"] = vj[v].stages;
       list.push_back(item);
       const J& s = vj[v].summary;
       if (s.is_null() || s["time_s_per_step_mean"].is_null()) continue;
@@ -725,6 +748,13 @@ void print_open_set(const J& report, std::ostream& out) {
   }
 }
 
+void print_stages(const J& rows, const std::string& label, std::ostream& out) {
+  if (!rows.is_array()) return;
+  out << "\nStages left out" << label << " (share of steps whose scene did not need them):";
+  for (const auto& r : rows) out << " " << r["stage"].get<std::string>() << " " << pct(r["skipped_share"]) << " %;";
+  out << "\n";
+}
+
 void print_truth_pose(const J& rows, const std::string& label, std::ostream& out) {
   if (!rows.is_array()) return;
   out << "\nThe true object at its true pose" << label
@@ -824,6 +854,7 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
     print_confidence(report, out);
     print_open_set(report, out);
     print_truth_pose(report.value("truth_pose", J(nullptr)), "", out);
+    print_stages(report.value("stages", J(nullptr)), "", out);
     out << "\nPer object:\n";
     print_objects(report["per_object"], out);
     return;
@@ -861,6 +892,8 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
          "vs time per step\n";
   for (const auto& v : report["variants"])
     print_truth_pose(v.value("truth_pose", J(nullptr)), ", variant " + v["label"].get<std::string>(), out);
+  for (const auto& v : report["variants"])
+    print_stages(v.value("stages", J(nullptr)), ", variant " + v["label"].get<std::string>(), out);
 }
 
 std::filesystem::path plot_script() {

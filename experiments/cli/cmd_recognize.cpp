@@ -445,6 +445,21 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     }
     st["geometry_loads"] = r.geometry_loads;
     st["geometry_resident"] = r.geometry_resident;
+    // The step's pipeline: the stages that ran, the ones its scene did not need (and why), and
+    // the ran ones' times (apart, as every time is: the rest is the same for any --threads).
+    auto ran = nlohmann::ordered_json::array(), skipped = nlohmann::ordered_json::array();
+    auto pipeline_s = nlohmann::ordered_json::object();
+    for (const StageRun& g : r.stages) {
+      if (g.ran) {
+        ran.push_back(g.name);
+        pipeline_s[g.name] = g.seconds;
+      } else {
+        skipped.push_back({{"stage", g.name}, {"reason", g.reason}});
+      }
+    }
+    st["stages_ran"] = std::move(ran);
+    st["stages_skipped"] = std::move(skipped);
+    st["pipeline_s"] = std::move(pipeline_s);
     st["stages_s"] = {{"fusion", run.fusion_time[k]}, {"prepare", r.times.prepare_s},
                       {"prune", r.times.prune_s},     {"register", r.times.register_s},
                       {"shortlist", r.times.shortlist_s},

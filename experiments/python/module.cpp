@@ -262,6 +262,20 @@ py::dict step_dict(const Database& db, const StepResult& r, const std::optional<
   t["evaluate"] = r.times.evaluate_s;
   t["total"] = r.times.total_s;
   o["times_s"] = t;
+  py::list ran, skipped;   // the step's pipeline: stages run (times in times_s) and left out (why)
+  for (const StageRun& g : r.stages) {
+    if (g.ran) {
+      ran.append(g.name);
+      t[py::str("stage." + g.name)] = g.seconds;
+    } else {
+      py::dict d;
+      d["stage"] = g.name;
+      d["reason"] = g.reason;
+      skipped.append(d);
+    }
+  }
+  o["stages_ran"] = ran;
+  o["stages_skipped"] = skipped;
   // Against the truth, when known (a simulated log): as the result files store them.
   const bool known = scored && scored->correct.has_value();
   o["correct"] = known ? py::object(py::bool_(*scored->correct)) : py::none();

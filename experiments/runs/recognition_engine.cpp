@@ -389,6 +389,11 @@ class RecognitionEngine final : public RunEngine {
       s.values = {calibration_ ? calibration_->object_confidence(features) : nan,
                   calibration_ ? calibration_->pose_confidence(features) : nan};
       s.values.insert(s.values.end(), features.begin(), features.end());
+      // Per pipeline stage: 1 ran, 0 left out (its scene did not need it), NaN not in the method.
+      for (const std::string& stage : pipeline_stage_names()) {
+        const auto g = std::find_if(sr.stages.begin(), sr.stages.end(), [&](const StageRun& x) { return x.name == stage; });
+        s.values.push_back(g == sr.stages.end() ? nan : g->ran ? 1.0 : 0.0);
+      }
       if (truth_pose_) {
         const std::optional<Funnel>& f = sr.watched;
         if (f && f->truth_pose_evaluated) {
@@ -398,6 +403,7 @@ class RecognitionEngine final : public RunEngine {
           s.values.insert(s.values.end(), truth_pose_step_values().size(), nan);
         }
       }
+
       const PoseError e = pose_error(s.pose, rec.truth, &model.symmetry);
       s.position_error_m = e.position_m;
       s.orientation_error_rad = e.orientation_deg * std::numbers::pi / 180.0;
@@ -494,6 +500,7 @@ const std::vector<std::string>& recognition_step_values() {
   static const std::vector<std::string> names = [] {
     std::vector<std::string> n{"confidence_object", "confidence_pose"};
     for (const std::string& f : confidence_feature_names()) n.push_back("feature." + f);
+    for (const std::string& stage : pipeline_stage_names()) n.push_back("ran." + stage);
     return n;
   }();
   return names;

@@ -47,7 +47,9 @@ std::unique_ptr<RunEngine> make_recognition_engine(const ExperimentConfig& confi
 
 /// Names of the per-step values the recognition engine records: "confidence_object" and
 /// "confidence_pose" (NaN without a calibration), then "feature.<name>" for every confidence
-/// feature (experiments/analysis/calibration.hpp), which `touchstone calibrate` fits on.
+/// feature (experiments/analysis/calibration.hpp), which `touchstone calibrate` fits on, then
+/// "ran.<stage>" for every stage of the recognizer's pipeline (1 ran, 0 left out, NaN not in
+/// the method; pipeline_stage_names()).
 const std::vector<std::string>& recognition_step_values();
 
 /// The per-step values that follow those when a variant sets diagnostics.truth_pose: the true

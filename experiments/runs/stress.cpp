@@ -3,6 +3,7 @@
 #include "engine/database/database.hpp"
 #include "engine/geometry/mesh.hpp"
 #include "engine/geometry/pose_error.hpp"
+#include "engine/geometry/symmetry.hpp"
 #include "engine/recognition/icp.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "engine/recognition/scene.hpp"
@@ -460,6 +461,7 @@ StressCaseResult run_stress_case(const StressStudy& study, std::size_t index,
   result.config = c;
   result.runs.resize(static_cast<std::size_t>(study.runs));
   const Vec3 direction = Vec3(0.48, -0.6, 0.64).normalized();
+  SymmetryCache symmetries;
   tbb::parallel_for(0, study.runs, [&](int run) {
     StressRun& out = result.runs[run];
     Rng rng(study.seed, 0x57e6, static_cast<std::uint64_t>(run));
@@ -497,9 +499,11 @@ StressCaseResult run_stress_case(const StressStudy& study, std::size_t index,
     out.unobservable_dof = r.unobservable_dof;
     out.correct = r.valid && r.best.object == object;
     if (r.valid) {
-      const PoseError e = pose_error(r.best.pose, T);
+      const PoseError e = pose_error(r.best.pose, T, out.correct ? &symmetries.get(db, object) : nullptr);
       out.position_error_m = e.position_m;
       out.orientation_error_deg = e.orientation_deg;
+      out.symmetric_position_error_m = e.symmetric_position_m;
+      out.symmetric_orientation_error_deg = e.symmetric_orientation_deg;
       SceneSettings ss = rs.scene;
       ss.descriptor = db.settings().descriptor;
       ss.free_clearance = 0.0;
@@ -513,6 +517,7 @@ StressCaseResult run_stress_case(const StressStudy& study, std::size_t index,
       out.condition_raw = sys.condition_raw;
     } else {
       out.position_error_m = out.orientation_error_deg = 0.0;
+      out.symmetric_position_error_m = out.symmetric_orientation_error_deg = 0.0;
       out.condition = out.condition_raw = kIcpSingular;
     }
     if (!out_dir.empty()) {
@@ -654,6 +659,8 @@ json stress_json(const StressStudy& study, const std::vector<StressCaseResult>& 
       runs.push_back({{"object", run.object}, {"valid", run.valid}, {"correct", run.correct},
                       {"position_error_m", run.position_error_m},
                       {"orientation_error_deg", run.orientation_error_deg},
+                      {"symmetric_position_error_m", run.symmetric_position_error_m},
+                      {"symmetric_orientation_error_deg", run.symmetric_orientation_error_deg},
                       {"pose_ambiguous", run.ambiguous}, {"unobservable_dof", run.unobservable_dof},
                       {"icp_condition", run.condition}, {"icp_condition_raw", run.condition_raw},
                       {"contacts", run.contacts}, {"finite", run.finite},

@@ -86,6 +86,8 @@ struct StressRun {
   bool valid = false;              ///< there was an answer
   double position_error_m = 0.0;
   double orientation_error_deg = 0.0;
+  double symmetric_position_error_m = 0.0;     ///< under the object's symmetries (a right answer)
+  double symmetric_orientation_error_deg = 0.0;
   bool ambiguous = true;           ///< StepResult::pose_ambiguous
   int unobservable_dof = 6;
   double condition = 0.0;          ///< icp_system at the answer: unitless condition

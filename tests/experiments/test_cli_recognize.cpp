@@ -72,6 +72,21 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
                             "orientation_error_deg", "symmetric_orientation_error_deg", "time_s"})
       CHECK_MESSAGE(s.contains(key), key);
     CHECK(s["step"] == k + 1);
+    // The step's pipeline: every stage of bricpsf either ran (with a time) or was left out (with
+    // a reason); a 6-object database needs none of the large-database stages.
+    REQUIRE(s["stages_ran"].is_array());
+    REQUIRE(s["stages_skipped"].is_array());
+    CHECK(s["stages_ran"].size() + s["stages_skipped"].size() == 11);
+    for (const auto& name : s["stages_ran"]) CHECK(s["pipeline_s"][name.get<std::string>()].get<double>() >= 0.0);
+    CHECK(s["pipeline_s"].size() == s["stages_ran"].size());
+    std::set<std::string> skipped;
+    for (const auto& g : s["stages_skipped"]) {
+      CHECK_FALSE(g["reason"].get<std::string>().empty());
+      skipped.insert(g["stage"].get<std::string>());
+    }
+    CHECK(skipped.count("shortlist") == 1);
+    CHECK(skipped.count("pose_transfer") == 1);
+    CHECK(skipped.count("survivors") == (k == 0 ? 1u : 0u));
     if (!s["object"].is_null()) {
       CHECK(s["pose"]["t"].size() == 3);
       CHECK(s["pose"]["q"].size() == 4);
@@ -83,6 +98,7 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
     for (auto* j : {&x, &y}) {
       j->erase("time_s");
       j->erase("stages_s");
+      j->erase("pipeline_s");
     }
     CHECK(x == y);
   }
@@ -243,7 +259,7 @@ TEST_CASE("cli recognize: bad input gives one clear error and no output file") {
     REQUIRE_MESSAGE(none.code == 0, none.err);
     auto strip = [](nlohmann::json j) {
       for (auto& st : j["steps"])
-        for (const char* k : {"time_s", "stages_s", "geometry_loads", "geometry_resident"}) st.erase(k);
+        for (const char* k : {"time_s", "stages_s", "pipeline_s", "geometry_loads", "geometry_resident"}) st.erase(k);
       return j;
     };
     const auto js = nlohmann::json::parse(small.out), jn = nlohmann::json::parse(none.out);
@@ -266,6 +282,7 @@ nlohmann::json without_times(nlohmann::json j) {
   for (auto& s : j["steps"]) {
     s.erase("time_s");
     s.erase("stages_s");
+    s.erase("pipeline_s");
   }
   return j;
 }

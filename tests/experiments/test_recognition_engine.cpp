@@ -221,10 +221,13 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
   REQUIRE(runs.size() == 1);
   const std::size_t F = confidence_feature_names().size();
   for (const auto& s : runs[0].steps) {
-    REQUIRE(s.values.size() == 2 + F);
+    REQUIRE(s.values.size() == 2 + F + pipeline_stage_names().size());
     CHECK(std::isnan(s.values[0]));  // no calibration: no confidence
     CHECK(std::isnan(s.values[1]));
-    for (std::size_t i = 2; i < s.values.size(); ++i) CHECK(std::isfinite(s.values[i]));
+    for (std::size_t i = 2; i < 2 + F; ++i) CHECK(std::isfinite(s.values[i]));
+    for (std::size_t i = 2 + F; i < s.values.size(); ++i)   // ran.<stage>: 1, 0, or NaN (not bricpsf's)
+      CHECK((s.values[i] == 1.0 || s.values[i] == 0.0 || std::isnan(s.values[i])));
+    CHECK(s.values[2 + F] == 1.0);   // ran.scene
     CHECK(s.values[2] == doctest::Approx(s.posterior_best));  // feature.posterior_best
   }
 
@@ -248,8 +251,9 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
   REQUIRE(cruns.size() == 1);
   for (std::size_t k = 0; k < cruns[0].steps.size(); ++k) {
     const auto& v = cruns[0].steps[k].values;
-    const std::vector<double> f(v.begin() + 2, v.end());
-    CHECK(f == std::vector<double>(runs[0].steps[k].values.begin() + 2, runs[0].steps[k].values.end()));
+    const auto F_end = static_cast<std::ptrdiff_t>(2 + F);   // the features; ran.<stage> after them
+    const std::vector<double> f(v.begin() + 2, v.begin() + F_end);
+    CHECK(f == std::vector<double>(runs[0].steps[k].values.begin() + 2, runs[0].steps[k].values.begin() + F_end));
     const int step = static_cast<int>(k) + 1;   // each step by its own range's models
     CHECK(v[0] == (step == 1 ? early : late).object.predict(f));
     CHECK(v[0] == cal.object_confidence(step, f));

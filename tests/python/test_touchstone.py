@@ -178,6 +178,11 @@ def test_thread_count_changes_no_answer(db, built):
         ts.set_threads(0)
     assert [(s.object, s.log_weight) for s in one] == [(s.object, s.log_weight) for s in two]
     assert all(np.array_equal(a.pose, b.pose) for a, b in zip(one, two) if a.valid)
+    # The step's pipeline: the same stages for any thread count; the first step has no survivors.
+    assert [(s.stages_ran, s.stages_skipped) for s in one] == [(s.stages_ran, s.stages_skipped) for s in two]
+    assert {"stage": "survivors", "reason": "no hypotheses from an earlier step"} in one[0].stages_skipped
+    assert "survivors" in one[1].stages_ran and "scene" in one[0].stages_ran
+    assert all(s.times_s["stage." + n] >= 0.0 for s in one for n in s.stages_ran)
 
 
 def test_recognizers_in_python_threads(db, built):

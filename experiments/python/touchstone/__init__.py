@@ -74,7 +74,9 @@ class StepResult:
     unobservable_dof: int
     pose_ambiguous: bool
     candidates: int
-    times_s: Dict[str, float]             # per stage and "total"
+    times_s: Dict[str, float]             # per stage and "total"; "stage.NAME" per pipeline stage run
+    stages_ran: List[str] = field(default_factory=list)   # the step's pipeline stages that ran
+    stages_skipped: List[Dict[str, str]] = field(default_factory=list)  # {"stage", "reason"}: left out
     correct: Optional[bool] = None        # the log's object was named (None: truth unknown)
     position_error_m: Optional[float] = None
     orientation_error_deg: Optional[float] = None

@@ -1,0 +1,179 @@
+// The recognizer's step as a pipeline of stages (engine/recognition/pipeline/): each method's
+// composition, what a step leaves out and why, and the errors of a bad composition or a
+// throwing observer.
+#include "engine/recognition/pipeline/compose.hpp"
+#include "engine/recognition/recognizer.hpp"
+#include "recognition_fixture.hpp"
+
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <string>
+
+using namespace ts;
+
+namespace {
+
+const StageRun& stage_of(const StepResult& r, std::string_view name) {
+  const auto it = std::find_if(r.stages.begin(), r.stages.end(), [&](const StageRun& g) { return g.name == name; });
+  REQUIRE(it != r.stages.end());
+  return *it;
+}
+
+std::vector<std::string> stage_names(const StepResult& r) {
+  std::vector<std::string> out;
+  for (const StageRun& g : r.stages) out.push_back(g.name);
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("Pipeline: each method's stages in Algorithm 1's order, and a small database leaves out the large-database stages") {
+  auto src = test::make_source();
+  Database db(src);
+  REQUIRE(db.size() < 48);
+  RecognizerSettings s = test::fast_settings(Method::bricpsf);
+  s.shortlist.objects = 16;            // the large-database extensions, as the improved preset has them
+  s.shortlist.min_database = 48;
+  s.twins.transfer = 2;
+  s.twins.transfer_min_database = 48;
+  s.ransac.prior_draws = 60;
+  s.ransac.object_draws = 100;
+  s.prior_min_database = 48;
+  s.sparse.mode = kSparseNever;
+  Recognizer rec(db, s);
+  const Pose T = test::random_pose(7, Vec3(0.1, 0.0, 0.0));
+  const StepResult r1 = rec.step(test::touch(src->fines[4], T, 1, 5), {});
+  const StepResult r2 = rec.step(test::touch(src->fines[4], T, 2, 5), {});
+  const std::vector<std::string> bricpsf = {"scene",     "shape_prior",       "ransac",        "sparse",
+                                            "shortlist", "survivors",         "sequential_filter",
+                                            "pose_transfer", "posteriors",    "answer_rule",   "state"};
+  CHECK(stage_names(r1) == bricpsf);
+  CHECK(stage_names(r2) == bricpsf);
+  const std::string small = "database of " + std::to_string(db.size()) + " objects";
+  for (const StepResult* r : {&r1, &r2}) {
+    REQUIRE(r->valid);
+    CHECK_FALSE(stage_of(*r, "shape_prior").ran);
+    CHECK(stage_of(*r, "shape_prior").reason.starts_with(small));
+    CHECK_FALSE(stage_of(*r, "shortlist").ran);
+    CHECK(stage_of(*r, "shortlist").reason == small + " (the shortlist acts above 48)");
+    CHECK_FALSE(stage_of(*r, "pose_transfer").ran);
+    CHECK(stage_of(*r, "sparse").reason == "sparse.mode = never");
+    CHECK_FALSE(r->sparse_active);
+    CHECK(r->shortlist.empty());
+    for (const char* always : {"scene", "ransac", "sequential_filter", "posteriors", "answer_rule", "state"}) {
+      CHECK(stage_of(*r, always).ran);
+      CHECK(stage_of(*r, always).reason.empty());
+    }
+    for (const StageRun& g : r->stages) CHECK((g.ran ? g.seconds >= 0.0 : g.seconds == 0.0));
+  }
+  // The survivors: none before the first step, the first step's state in the second.
+  CHECK_FALSE(stage_of(r1, "survivors").ran);
+  CHECK(stage_of(r1, "survivors").reason == "no hypotheses from an earlier step");
+  CHECK(stage_of(r2, "survivors").ran);
+  std::size_t old = 0;
+  for (const Hypothesis& h : r2.hypotheses) old += h.born == 1 ? 1 : 0;
+  CHECK(old > 0);   // the survivors' hypotheses are in the new state
+
+  // The other methods' selections.
+  for (Method m : {Method::batch_ransac, Method::ransac_icp, Method::ransac_icp_fs}) {
+    Recognizer other(db, test::fast_settings(m));
+    const StepResult r = other.step(test::touch(src->fines[4], T, 1, 5), {});
+    const std::vector<std::string> names = stage_names(r);
+    const std::string selection = m == Method::batch_ransac ? "select" : "icp_each";
+    CHECK(std::find(names.begin(), names.end(), selection) != names.end());
+    CHECK(std::find(names.begin(), names.end(), "survivors") == names.end());
+    CHECK(std::find(names.begin(), names.end(), "sequential_filter") == names.end());
+    CHECK(names.size() == bricpsf.size() - 1);
+  }
+}
+
+TEST_CASE("Pipeline: the sparse source runs exactly when its stage says so, the shortlist when the database is large enough") {
+  auto src = test::make_source();
+  Database db(src);
+  const Pose T = test::random_pose(9, Vec3(0.0, 0.1, 0.0));
+  RecognizerSettings s = test::fast_settings(Method::bricpsf);
+  s.sparse.mode = kSparseAlways;
+  s.shortlist.objects = 2;             // keep 2 objects' candidates ...
+  s.shortlist.min_database = 0;        // ... on any database
+  Recognizer rec(db, s);
+  const StepResult r = rec.step(test::touch(src->fines[1], T, 1, 3), {});
+  REQUIRE(r.contacts >= 3);
+  CHECK(stage_of(r, "sparse").ran);
+  CHECK(r.sparse_active);
+  CHECK(stage_of(r, "shortlist").ran);
+  CHECK(r.shortlist.size() <= 2);      // no earlier state holds other objects
+  s.sparse.mode = kSparseAuto;         // pad-like patches: no isolated contacts
+  Recognizer automatic(db, s);
+  const StepResult a = automatic.step(test::touch(src->fines[1], T, 1, 3), {});
+  CHECK_FALSE(stage_of(a, "sparse").ran);
+  CHECK(stage_of(a, "sparse").reason == "too few isolated contacts (sparse.mode = auto)");
+  CHECK_FALSE(a.sparse_active);
+}
+
+TEST_CASE("Pipeline: no contacts leaves every later stage out and keeps the state") {
+  auto src = test::make_source();
+  Database db(src);
+  Recognizer rec(db, test::fast_settings());
+  const Pose T = test::random_pose(3, Vec3::Zero());
+  const StepResult first = rec.step(test::touch(src->fines[2], T, 1, 1), {});
+  REQUIRE(first.valid);
+  const StepResult empty = rec.step(PointCloud{}, {});
+  CHECK(empty.step == 2);
+  CHECK(rec.steps_done() == 2);
+  CHECK_FALSE(empty.valid);
+  REQUIRE(empty.stages.size() == first.stages.size());
+  CHECK(empty.stages.front().ran);     // the scene found nothing to match
+  for (std::size_t k = 1; k < empty.stages.size(); ++k) {
+    CHECK_FALSE(empty.stages[k].ran);
+    CHECK(empty.stages[k].reason == "no contacts");
+  }
+  CHECK(rec.hypotheses().size() == first.hypotheses.size());
+}
+
+TEST_CASE("Pipeline: an unknown stage and a throwing observer are errors naming the stage") {
+  try {
+    (void)pipeline::compose({"scene", "ransac", "magic"});
+    FAIL("an unknown stage was accepted");
+  } catch (const Error& e) {
+    CHECK(e.field() == "pipeline.stages");
+    CHECK(std::string(e.what()).find("unknown stage 'magic'") != std::string::npos);
+    CHECK(std::string(e.what()).find("sequential_filter") != std::string::npos);   // the known ones
+  }
+  for (std::string_view name : pipeline::known_stages())
+    CHECK(pipeline::compose({name}).front()->name() == name);
+  CHECK(pipeline_stage_names().size() == pipeline::known_stages().size());
+
+  struct Throws final : pipeline::StepObserver {
+    void after(std::string_view stage, bool, pipeline::StepContext&) override {
+      if (stage == "ransac") throw std::runtime_error("observer broke");
+    }
+  };
+  auto src = test::make_source();
+  Database db(src);
+  const RecognizerSettings s = test::fast_settings();
+  FeatureSearch search;
+  search.table = FeatureTable::shared(db, {});
+  std::shared_ptr<SparseTables> tables;
+  const std::vector<Hypothesis> previous;
+  const PointCloud contacts = test::touch(src->fines[1], test::random_pose(2, Vec3::Zero()), 1, 2);
+  const std::vector<Vec3> free;
+  const GraspGroups grasps;
+  StepResult res;
+  res.posteriors.assign(db.size(), 0.0);
+  pipeline::StepContext c{.db = db, .s = s, .search = search, .prior = nullptr, .sparse_tables = tables,
+                          .previous = previous, .contacts_world = contacts, .free_world = free,
+                          .grasps = grasps, .step = 1, .res = res};
+  Throws observer;
+  std::vector<pipeline::StepObserver*> observers{&observer};
+  const pipeline::Pipeline stages = pipeline::compose(pipeline::method_stages(Method::bricpsf));
+  try {
+    pipeline::run_pipeline(stages, c, observers);
+    FAIL("the observer's exception was lost");
+  } catch (const Error& e) {
+    CHECK(e.field() == "stage.ransac");
+    CHECK(std::string(e.what()).find("stage 'ransac': an observer after it failed: observer broke") != std::string::npos);
+  }
+  CHECK(res.hypotheses.empty());       // the state stage never ran
+  CHECK(res.stages.size() == 2);       // scene, shape_prior recorded; ransac's record not complete
+}
