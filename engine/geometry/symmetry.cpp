@@ -4,7 +4,6 @@
 #include <array>
 #include <map>
 
-#include "engine/database/database.hpp"
 #include "engine/geometry/kabsch.hpp"
 
 #include <Eigen/Eigenvalues>
@@ -359,20 +358,6 @@ SymmetryGroup find_symmetries(const std::vector<Vec3>& points, const KdTree3& tr
     search_generic(ck, points, g.rotations);
   }
   return g;
-}
-
-SymmetryCache::SymmetryCache(SymmetrySettings settings) : settings_(settings) {}
-SymmetryCache::~SymmetryCache() = default;
-
-const SymmetryGroup& SymmetryCache::get(const Database& db, std::size_t object) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  auto it = groups_.find(object);
-  if (it != groups_.end()) return *it->second;
-  // The fine cloud itself (the database may hold distance fields only).
-  const PointCloud fine = db.load_fine(object);
-  const KdTree3 tree(fine.points);
-  auto g = std::make_unique<SymmetryGroup>(find_symmetries(fine.points, tree, settings_));
-  return *groups_.emplace(object, std::move(g)).first->second;
 }
 
 }  // namespace ts

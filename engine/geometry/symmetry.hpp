@@ -14,13 +14,9 @@
 #include "engine/core.hpp"
 #include "engine/geometry/search.hpp"
 
-#include <map>
-#include <memory>
-#include <mutex>
+#include <vector>
 
 namespace ts {
-
-class Database;
 
 struct SymmetrySettings {
   double tolerance = 0.0;          ///< m; 0: max(tolerance_rel * bbox diagonal, 2.5 * point spacing)
@@ -65,19 +61,5 @@ std::vector<Mat3> extreme_pair_rotations(const std::vector<Vec3>& source, const 
 /// the same points. Deterministic.
 SymmetryGroup find_symmetries(const std::vector<Vec3>& points, const KdTree3& tree,
                               const SymmetrySettings& settings = {});
-
-/// Thread-safe per-object cache over a database (computes from the object's fine cloud on first
-/// use; loads the object's geometry if it is not loaded yet).
-class SymmetryCache {
- public:
-  explicit SymmetryCache(SymmetrySettings settings = {});
-  ~SymmetryCache();
-  const SymmetryGroup& get(const Database& db, std::size_t object);
-
- private:
-  SymmetrySettings settings_;
-  std::mutex mutex_;
-  std::map<std::size_t, std::unique_ptr<SymmetryGroup>> groups_;
-};
 
 }  // namespace ts

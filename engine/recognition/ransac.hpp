@@ -10,7 +10,7 @@
 #pragma once
 
 #include "engine/database/database.hpp"
-#include "engine/features/feature_table.hpp"
+#include "engine/database/feature_table.hpp"
 #include "engine/geometry/search.hpp"
 #include "engine/recognition/evaluate.hpp"
 #include "engine/recognition/scene.hpp"

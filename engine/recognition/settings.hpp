@@ -3,7 +3,7 @@
 #pragma once
 
 #include "engine/database/database.hpp"
-#include "engine/features/shape_prior.hpp"
+#include "engine/recognition/shape_prior.hpp"
 #include "engine/recognition/evaluate.hpp"
 #include "engine/recognition/icp.hpp"
 #include "engine/recognition/ransac.hpp"

@@ -21,8 +21,8 @@
 //
 // Prints the machine, thread counts, parameters and every figure.
 #include "datasets/simulator.hpp"
+#include "engine/database/symmetry_cache.hpp"
 #include "engine/geometry/pose_error.hpp"
-#include "engine/geometry/symmetry.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "engine/touch/fusion.hpp"
 #include "experiments/allocator.hpp"

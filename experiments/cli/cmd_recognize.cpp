@@ -12,7 +12,8 @@
 #include "experiments/runs/log_steps.hpp"
 #include "experiments/runs/recognition_engine.hpp"
 
-#include "engine/features/feature_table.hpp"
+#include "engine/database/feature_table.hpp"
+#include "engine/database/symmetry_cache.hpp"
 #include "engine/geometry/kabsch.hpp"
 #include "engine/geometry/pose_error.hpp"
 #include "engine/geometry/symmetry.hpp"

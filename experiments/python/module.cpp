@@ -16,6 +16,7 @@
 #include "experiments/runs/recognition_engine.hpp"
 
 #include "datasets/simulator.hpp"
+#include "engine/database/symmetry_cache.hpp"
 #include "engine/geometry/symmetry.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "io/db_store.hpp"

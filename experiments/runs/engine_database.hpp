@@ -4,9 +4,9 @@
 #pragma once
 
 #include "engine/database/database.hpp"
-#include "engine/features/feature_table.hpp"
-#include "engine/features/shape_prior.hpp"
+#include "engine/database/feature_table.hpp"
 #include "engine/geometry/search.hpp"
+#include "engine/recognition/shape_prior.hpp"
 #include "engine/recognition/sparse_hypotheses.hpp"
 
 #include <nlohmann/json.hpp>

@@ -2,7 +2,7 @@
 #include "engine/detail.hpp"
 
 #include "datasets/simulator.hpp"
-#include "engine/features/feature_table.hpp"
+#include "engine/database/feature_table.hpp"
 #include "engine/geometry/pose_error.hpp"
 #include "engine/geometry/symmetry.hpp"
 #include "engine/recognition/recognizer.hpp"

@@ -1,9 +1,10 @@
 #include "experiments/runs/stress.hpp"
 
+#include "datasets/shapes.hpp"
 #include "engine/database/database.hpp"
 #include "engine/geometry/mesh.hpp"
 #include "engine/geometry/pose_error.hpp"
-#include "engine/geometry/symmetry.hpp"
+#include "engine/database/symmetry_cache.hpp"
 #include "engine/recognition/icp.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "engine/recognition/scene.hpp"
@@ -30,35 +31,10 @@ namespace {
 using json = nlohmann::ordered_json;
 constexpr double kReference = 0.15;  ///< m, the size the unscaled parameters are made for
 constexpr double kPi = std::numbers::pi;
+using datasets::slanted_prism;
 
 // ---------------------------------------------------------------------------------------------
 // Objects
-
-/// A prism over a star-shaped polygon (vertex i at angle 2 pi i / n, radius radii[i]) of
-/// height h, its top raised by slant . (x, y); recentred on its bounding box.
-Mesh slanted_prism(const std::vector<double>& radii, double h, double slant_x, double slant_y) {
-  const int n = static_cast<int>(radii.size());
-  Mesh m;
-  for (int top = 0; top < 2; ++top)
-    for (int i = 0; i < n; ++i) {
-      const double x = radii[i] * std::cos(2 * kPi * i / n), y = radii[i] * std::sin(2 * kPi * i / n);
-      m.vertices.emplace_back(x, y, top ? h / 2 + slant_x * x + slant_y * y : -h / 2);
-    }
-  m.vertices.emplace_back(0, 0, -h / 2);
-  m.vertices.emplace_back(0, 0, h / 2);
-  const int bottom = 2 * n, top = 2 * n + 1;
-  for (int i = 0; i < n; ++i) {
-    const int j = (i + 1) % n;
-    m.faces.emplace_back(bottom, j, i);
-    m.faces.emplace_back(top, n + i, n + j);
-    m.faces.emplace_back(i, j, n + j);
-    m.faces.emplace_back(i, n + j, n + i);
-  }
-  Eigen::AlignedBox3d box;
-  for (const Vec3& v : m.vertices) box.extend(v);
-  for (Vec3& v : m.vertices) v -= box.center();
-  return m;
-}
 
 /// Scale each axis so that the bounding box becomes `size`.
 Mesh fit_box(Mesh m, const Vec3& size) {

@@ -4,6 +4,7 @@
 // taken from an object placed at a known pose.
 #pragma once
 
+#include "datasets/shapes.hpp"
 #include "engine/database/database.hpp"
 #include "engine/features/fpfh.hpp"
 #include "engine/geometry/search.hpp"
@@ -39,30 +40,18 @@ inline Mesh box_mesh(const Vec3& size) {
   return m;
 }
 
-/// Regular n-gon prism (z axis), circumradius r, height h, optionally with each top vertex
-/// raised by `twist` * i (breaks the symmetry), recentred on its bounding box.
+/// Regular n-gon prism (z axis), circumradius r, height h, recentred on its bounding box;
+/// `skew` breaks the symmetry: vertex 0 at (1 + skew) r and top vertex i raised by skew h i / n
+/// (the top centre by skew h / 2).
 inline Mesh prism_mesh(int n, double r, double h, double skew = 0.0) {
-  Mesh m;
-  for (int z = 0; z < 2; ++z)
-    for (int i = 0; i < n; ++i) {
-      const double rr = r * (1.0 + skew * (i == 0 ? 1.0 : 0.0));
-      m.vertices.emplace_back(rr * std::cos(2 * kPi * i / n), rr * std::sin(2 * kPi * i / n),
-                              z ? h / 2 + skew * h * i / n : -h / 2);
-    }
-  m.vertices.emplace_back(0, 0, -h / 2);
-  m.vertices.emplace_back(0, 0, h / 2 + skew * h / 2);
-  const int cb = 2 * n, ct = 2 * n + 1;
+  std::vector<Vec3> bottom, top;
   for (int i = 0; i < n; ++i) {
-    const int j = (i + 1) % n;
-    m.faces.emplace_back(cb, j, i);
-    m.faces.emplace_back(ct, n + i, n + j);
-    m.faces.emplace_back(i, j, n + j);
-    m.faces.emplace_back(i, n + j, n + i);
+    const double rr = r * (1.0 + skew * (i == 0 ? 1.0 : 0.0));
+    const double x = rr * std::cos(2 * kPi * i / n), y = rr * std::sin(2 * kPi * i / n);
+    bottom.emplace_back(x, y, -h / 2);
+    top.emplace_back(x, y, h / 2 + skew * h * i / n);
   }
-  Eigen::AlignedBox3d box;
-  for (const Vec3& v : m.vertices) box.extend(v);
-  for (Vec3& v : m.vertices) v -= box.center();
-  return m;
+  return datasets::ring_prism(bottom, top, Vec3(0, 0, -h / 2), Vec3(0, 0, h / 2 + skew * h / 2));
 }
 
 /// UV sphere (closed, outward), recentred.

@@ -1,3 +1,4 @@
+#include "engine/database/symmetry_cache.hpp"
 #include "engine/geometry/kabsch.hpp"
 #include "engine/geometry/pose_error.hpp"
 #include "engine/geometry/symmetry.hpp"

@@ -1,5 +1,5 @@
+#include "engine/database/symmetry_cache.hpp"
 #include "engine/geometry/pose_error.hpp"
-#include "engine/geometry/symmetry.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "recognition_fixture.hpp"
 

@@ -3,8 +3,8 @@
 // among shapes that differ in form and in size whatever the pose, it is the same for 1 and 2
 // threads, and feature pruning with prior_draws searches the prior's best objects from every
 // triplet.
-#include "engine/features/shape_prior.hpp"
 #include "engine/recognition/ransac.hpp"
+#include "engine/recognition/shape_prior.hpp"
 
 #include <doctest/doctest.h>
 #include <tbb/task_arena.h>

@@ -2,7 +2,7 @@
 // against brute force, the object shortlist's screening against the true pose, the Database's
 // memory budget (LRU eviction, pinned objects kept, reloads equal), and the recognizer with a
 // shortlist (right object, fewer objects loaded, same result for 1 and 2 threads).
-#include "engine/features/feature_table.hpp"
+#include "engine/database/feature_table.hpp"
 #include "engine/recognition/ransac.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "engine/recognition/shortlist.hpp"

@@ -2,6 +2,7 @@
 // brute force, when the source runs, the true pose among the candidates (asymmetric, symmetric,
 // coplanar, 1 mm quantized contacts), degenerate sets, determinism, and the recognizer with
 // isolated contacts alone.
+#include "engine/database/symmetry_cache.hpp"
 #include "engine/detail.hpp"
 #include "engine/geometry/pose_error.hpp"
 #include "engine/geometry/symmetry.hpp"

@@ -1,4 +1,5 @@
 // Stiff and extreme cases: each must give a flagged or correct answer, never NaN or a crash.
+#include "engine/database/symmetry_cache.hpp"
 #include "engine/geometry/kabsch.hpp"
 #include "engine/geometry/pose_error.hpp"
 #include "engine/geometry/symmetry.hpp"

@@ -1,3 +1,4 @@
+#include "datasets/shapes.hpp"
 #include "engine/geometry/kabsch.hpp"
 #include "engine/geometry/pose_error.hpp"
 #include "engine/geometry/scanner.hpp"
@@ -61,30 +62,6 @@ Mesh sym_box_mesh(const Vec3& size) {
     m.faces.emplace_back(f[0], f[1], f[2]);
     m.faces.emplace_back(f[0], f[2], f[3]);
   }
-  return m;
-}
-
-/// Regular n-gon prism about z, circumradius r, height h, shifted so that its bounding-box
-/// centre is the origin (the centroid is then off the origin, as in the database frame).
-Mesh sym_prism_mesh(int n, double r, double h) {
-  Mesh m;
-  for (int z = 0; z < 2; ++z)
-    for (int i = 0; i < n; ++i)
-      m.vertices.emplace_back(r * std::cos(2 * std::numbers::pi * i / n), r * std::sin(2 * std::numbers::pi * i / n),
-                              z ? h / 2 : -h / 2);
-  m.vertices.emplace_back(0, 0, -h / 2);
-  m.vertices.emplace_back(0, 0, h / 2);
-  const int cb = 2 * n, ct = 2 * n + 1;
-  for (int i = 0; i < n; ++i) {
-    const int j = (i + 1) % n;
-    m.faces.emplace_back(cb, j, i);
-    m.faces.emplace_back(ct, n + i, n + j);
-    m.faces.emplace_back(i, j, n + j);
-    m.faces.emplace_back(i, n + j, n + i);
-  }
-  Eigen::AlignedBox3d box;
-  for (const Vec3& v : m.vertices) box.extend(v);
-  for (Vec3& v : m.vertices) v -= box.center();
   return m;
 }
 
@@ -168,7 +145,9 @@ TEST_CASE("Symmetry: a thin square bar has D4, no near-identity turn about its a
 }
 
 TEST_CASE("Symmetry: a pentagonal prism (nut) has D5 about its centroid, not its box centre") {
-  const Mesh m = sym_prism_mesh(5, 0.08, 0.04);
+  // Regular (equal radii, no slant), recentred on its bounding box: the centroid is then off
+  // the origin, as in the database frame.
+  const Mesh m = datasets::slanted_prism(std::vector<double>(5, 0.08), 0.04, 0.0, 0.0);
   const auto pts = thin(sample_mesh(m, 60000, 3), 0.002);
   const SymmetryGroup g = find(pts);
   CHECK(g.kind == SymmetryGroup::Kind::discrete);

@@ -1,5 +1,5 @@
 // Stage "shape_prior" (extension for large databases): the objects ranked by how well their
-// point-pair statistics fit the contacts' (engine/features/shape_prior.hpp), so that feature
+// point-pair statistics fit the contacts' (engine/recognition/shape_prior.hpp), so that feature
 // pruning searches the likely objects first. Reads ShapePriorSettings (through the recognizer's
 // ShapePrior), ransac.prior_draws, ransac.object_draws, prior_min_database.
 #include "engine/recognition/pipeline/stages.hpp"

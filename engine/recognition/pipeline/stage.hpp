@@ -9,7 +9,7 @@
 // Internal to the recognizer: installed headers name only recognizer.hpp and the types it uses.
 #pragma once
 
-#include "engine/features/shape_prior.hpp"
+#include "engine/recognition/shape_prior.hpp"
 #include "engine/recognition/pipeline/hypotheses.hpp"
 #include "engine/recognition/settings.hpp"
 #include "engine/recognition/shortlist.hpp"

@@ -1,4 +1,4 @@
-#include "engine/features/feature_table.hpp"
+#include "engine/database/feature_table.hpp"
 #include "engine/target_clones.hpp"
 
 #include <tbb/blocked_range.h>

@@ -1,4 +1,4 @@
-#include "engine/features/shape_prior.hpp"
+#include "engine/recognition/shape_prior.hpp"
 
 #include <tbb/parallel_for.h>
 
