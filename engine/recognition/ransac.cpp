@@ -280,34 +280,13 @@ std::vector<std::vector<Neighbour>> FeatureSearch::knn(const FeatureRows& querie
   return out;
 }
 
-std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
-                                         const FeatureSearch& search,
-                                         const std::vector<std::uint8_t>& allowed,
-                                         const RansacSettings& s, std::uint64_t seed,
-                                         std::uint64_t step, RansacStats* stats,
-                                         const std::vector<std::uint32_t>& preferred) {
-  RansacStats st;
-  for (std::uint8_t a : allowed) st.objects_allowed += a;
-  std::vector<Candidate> out;
-  const int N = std::max(0, s.triplets), R = std::max(0, s.registrations);
+namespace {
 
-  // Sampling pools: interior points with a feature first; all points with a feature when no
-  // valid triplet can be drawn from the interior (small or narrow patches).
-  std::vector<std::uint32_t> interior, valid;
-  for (std::uint32_t i = 0; i < scene.contacts.size(); ++i) {
-    if (!scene.feature_valid[i]) continue;
-    valid.push_back(i);
-    if (scene.interior[i]) interior.push_back(i);
-  }
-  if (valid.size() < 3 || N == 0 || R == 0 || search.size() == 0 || st.objects_allowed == 0) {
-    if (stats) *stats = st;
-    return out;
-  }
-  const double spacing = std::min(s.min_spacing > 0.0 ? s.min_spacing : scene.feature_radius,
-                                  0.3 * scene.diameter);
-
-  // Triplet sampling and feature pruning, one slot per triplet.
-  auto t0 = Clock::now();
+/// N triplets (one slot each), from the interior points with a feature first, all points with
+/// a feature when no valid triplet can be drawn from the interior (small or narrow patches).
+std::vector<Triplet> sample_triplets(const Scene& scene, const RansacSettings& s, int N, std::uint64_t seed,
+                                     std::uint64_t step, const std::vector<std::uint32_t>& interior,
+                                     const std::vector<std::uint32_t>& valid, double spacing) {
   std::vector<Triplet> trip(static_cast<std::size_t>(N));
   tbb::parallel_for(tbb::blocked_range<int>(0, N, 1), [&](const tbb::blocked_range<int>& r) {
     for (int i = r.begin(); i != r.end(); ++i) {
@@ -338,55 +317,78 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
       }
     }
   });
-  // Feature-based database pruning: the W nearest database features of every triplet point,
-  // all queries of the step in one batch.
-  FeatureRows queries(scene.features.dim());
-  std::vector<std::vector<std::uint8_t>> masks;  // per-object pruning: the objects searched
-  std::vector<std::uint32_t> allowed_list;
-  for (std::uint32_t o = 0; o < allowed.size(); ++o)
-    if (allowed[o]) allowed_list.push_back(o);
-  const bool draw = s.object_draws > 0 && allowed_list.size() > s.object_draws;
-  // The objects of the draws: consecutive slices of one shuffled order of the database (the
-  // same for every step of a run), each triplet D = object_draws objects on from where the
-  // previous one stopped, each step on from where the previous step stopped: every allowed
-  // object is searched once before any is searched twice.
-  // With a shape prior, the first prior_draws of the draws are the same best objects for every
-  // triplet, and the slices (of the other objects) are that much shorter.
-  std::vector<std::uint8_t> common(draw ? allowed.size() : 0, 0);
-  std::size_t slice = s.object_draws;
-  if (draw && s.prior_draws > 0) {
-    std::size_t taken = 0;
-    for (std::uint32_t o : preferred) {
-      if (taken == std::min(s.prior_draws, s.object_draws)) break;
-      if (o < allowed.size() && allowed[o] && !common[o]) {
-        common[o] = 1;
-        ++taken;
+  return trip;
+}
+
+/// The objects each triplet's pruning searches (object draws). Without draws (or with no more
+/// allowed objects than draws): every allowed object. With them: consecutive slices of one
+/// shuffled order of the database (the same for every step of a run), each triplet D =
+/// object_draws objects on from where the previous one stopped, each step on from where the
+/// previous step stopped: every allowed object is searched once before any is searched twice.
+/// With a shape prior, the first prior_draws of the draws are the same best objects for every
+/// triplet, and the slices (of the other objects) are that much shorter.
+class ObjectDraws {
+ public:
+  ObjectDraws(const std::vector<std::uint8_t>& allowed, const RansacSettings& s, std::uint64_t seed,
+              std::uint64_t step, std::size_t triplets, const std::vector<std::uint32_t>& preferred)
+      : allowed_(allowed), slice_(s.object_draws) {
+    std::size_t n_allowed = 0;
+    for (std::uint8_t a : allowed) n_allowed += a ? 1 : 0;
+    draw_ = s.object_draws > 0 && n_allowed > s.object_draws;
+    if (!draw_) return;
+    common_.assign(allowed.size(), 0);
+    if (s.prior_draws > 0) {
+      std::size_t taken = 0;
+      for (std::uint32_t o : preferred) {
+        if (taken == std::min(s.prior_draws, s.object_draws)) break;
+        if (o < allowed.size() && allowed[o] && !common_[o]) {
+          common_[o] = 1;
+          ++taken;
+        }
       }
+      slice_ -= taken;
     }
-    slice -= taken;
-  }
-  std::vector<std::uint32_t> order;
-  std::size_t offset = 0;
-  if (draw) {
     std::vector<std::uint32_t> all(allowed.size());
     std::iota(all.begin(), all.end(), 0u);
     Rng rng(seed, 0, kTagObjects, 0);
     for (std::size_t k = all.size(); k > 1; --k) std::swap(all[k - 1], all[rng.index(k)]);
     for (std::uint32_t o : all)
-      if (allowed[o] && !common[o]) order.push_back(o);
-    if (!order.empty())
-      offset = (static_cast<std::size_t>(step > 0 ? step - 1 : 0) * trip.size() * slice) % order.size();
+      if (allowed[o] && !common_[o]) order_.push_back(o);
+    if (!order_.empty())
+      offset_ = (static_cast<std::size_t>(step > 0 ? step - 1 : 0) * triplets * slice_) % order_.size();
   }
+
+  /// The objects triplet i searches.
+  std::vector<std::uint8_t> mask(std::size_t i) const {
+    if (!draw_) return allowed_;
+    std::vector<std::uint8_t> m = common_;   // the common objects and this triplet's slice
+    if (!order_.empty())
+      for (std::size_t d = 0; d < std::min(slice_, order_.size()); ++d)
+        m[order_[(offset_ + i * slice_ + d) % order_.size()]] = 1;
+    return m;
+  }
+
+ private:
+  const std::vector<std::uint8_t>& allowed_;
+  bool draw_ = false;
+  std::vector<std::uint8_t> common_;
+  std::size_t slice_;
+  std::vector<std::uint32_t> order_;
+  std::size_t offset_ = 0;
+};
+
+/// Feature-based database pruning: the W nearest database features of every valid triplet's
+/// points (all queries of the step in one batch), then each point's pruned set and the first
+/// features registration may draw (among objects that all three sets reach).
+void prune_triplets(std::vector<Triplet>& trip, const Scene& scene, const Database& db, const FeatureSearch& search,
+                    const std::vector<std::uint8_t>& allowed, const RansacSettings& s, const ObjectDraws& draws,
+                    RansacStats& st) {
+  FeatureRows queries(scene.features.dim());
+  std::vector<std::vector<std::uint8_t>> masks;  // per-object pruning: the objects searched
   for (std::size_t i = 0; i < trip.size(); ++i) {
     const Triplet& t = trip[i];
     if (!t.valid) continue;
-    std::vector<std::uint8_t> mask = allowed;
-    if (draw) {  // the common objects and this triplet's slice
-      mask = common;
-      if (!order.empty())
-        for (std::size_t d = 0; d < std::min(slice, order.size()); ++d)
-          mask[order[(offset + i * slice + d) % order.size()]] = 1;
-    }
+    const std::vector<std::uint8_t> mask = draws.mask(i);
     st.objects_searched += static_cast<std::size_t>(std::count(mask.begin(), mask.end(), 1));
     st.searched.resize(mask.size(), 0);
     for (std::size_t o = 0; o < mask.size(); ++o) st.searched[o] |= mask[o];
@@ -398,27 +400,76 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   const std::size_t blocks = db.size() > s.prune_blocks_min_database ? s.prune_blocks : 0;
   const auto nearest = s.prune_per_object > 0 ? search.knn_per_object(queries, s.prune_per_object, masks, blocks)
                                                : search.knn(queries, s.prune_w);
-  {
-    std::vector<std::array<std::size_t, 2>> jobs;  // (triplet, first query)
-    std::size_t q = 0;
-    for (std::size_t i = 0; i < trip.size(); ++i)
-      if (trip[i].valid) {
-        jobs.push_back({i, q});
-        q += 3;
+  std::vector<std::array<std::size_t, 2>> jobs;  // (triplet, first query)
+  std::size_t q = 0;
+  for (std::size_t i = 0; i < trip.size(); ++i)
+    if (trip[i].valid) {
+      jobs.push_back({i, q});
+      q += 3;
+    }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t k = r.begin(); k != r.end(); ++k) {
+      Triplet& t = trip[jobs[k][0]];
+      for (int j = 0; j < 3; ++j) t.pruned[j] = prune(db, search, nearest[jobs[k][1] + j], allowed);
+      for (const auto& [o, b, e] : t.pruned[0].ranges) {
+        const auto r2 = t.pruned[1].range_of(o), r3 = t.pruned[2].range_of(o);
+        if (r2.second > r2.first && r3.second > r3.first)
+          for (std::uint32_t i = b; i < e; ++i) t.first.push_back(i);
       }
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, jobs.size(), 1), [&](const tbb::blocked_range<std::size_t>& r) {
-      for (std::size_t k = r.begin(); k != r.end(); ++k) {
-        Triplet& t = trip[jobs[k][0]];
-        for (int j = 0; j < 3; ++j) t.pruned[j] = prune(db, search, nearest[jobs[k][1] + j], allowed);
-        // Registration draws its first feature among objects that all three sets reach.
-        for (const auto& [o, b, e] : t.pruned[0].ranges) {
-          const auto r2 = t.pruned[1].range_of(o), r3 = t.pruned[2].range_of(o);
-          if (r2.second > r2.first && r3.second > r3.first)
-            for (std::uint32_t i = b; i < e; ++i) t.first.push_back(i);
-        }
-      }
-    });
+    }
+  });
+}
+
+/// Triplet registration, one slot per (triplet, registration); the valid ones in slot order.
+std::vector<std::optional<Candidate>> register_triplets(const std::vector<Triplet>& trip, const Database& db,
+                                                        const RansacSettings& s, std::size_t R,
+                                                        std::uint64_t seed, std::uint64_t step) {
+  const std::size_t slots = trip.size() * R;
+  std::vector<std::optional<Candidate>> cand(slots);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, slots, 16), [&](const tbb::blocked_range<std::size_t>& r) {
+    std::vector<std::uint32_t> buf2, buf3;
+    std::vector<std::uint8_t> mask;
+    std::vector<std::uint32_t> inside;
+    for (std::size_t k = r.begin(); k != r.end(); ++k) {
+      const std::size_t i = k / R;
+      if (!trip[i].valid) continue;
+      Rng rng(seed, step, kTagRegistration, k);
+      cand[k] = register_once(trip[i], db, s, rng, buf2, buf3, mask, inside);
+      if (cand[k]) cand[k]->slot = static_cast<std::uint32_t>(k);
+    }
+  });
+  return cand;
+}
+
+}  // namespace
+
+std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
+                                         const FeatureSearch& search,
+                                         const std::vector<std::uint8_t>& allowed,
+                                         const RansacSettings& s, std::uint64_t seed,
+                                         std::uint64_t step, RansacStats* stats,
+                                         const std::vector<std::uint32_t>& preferred) {
+  RansacStats st;
+  for (std::uint8_t a : allowed) st.objects_allowed += a;
+  std::vector<Candidate> out;
+  const int N = std::max(0, s.triplets), R = std::max(0, s.registrations);
+  std::vector<std::uint32_t> interior, valid;   // the sampling pools
+  for (std::uint32_t i = 0; i < scene.contacts.size(); ++i) {
+    if (!scene.feature_valid[i]) continue;
+    valid.push_back(i);
+    if (scene.interior[i]) interior.push_back(i);
   }
+  if (valid.size() < 3 || N == 0 || R == 0 || search.size() == 0 || st.objects_allowed == 0) {
+    if (stats) *stats = st;
+    return out;
+  }
+  const double spacing = std::min(s.min_spacing > 0.0 ? s.min_spacing : scene.feature_radius,
+                                  0.3 * scene.diameter);
+
+  auto t0 = Clock::now();
+  std::vector<Triplet> trip = sample_triplets(scene, s, N, seed, step, interior, valid, spacing);
+  const ObjectDraws draws(allowed, s, seed, step, trip.size(), preferred);
+  prune_triplets(trip, scene, db, search, allowed, s, draws, st);
   st.time_prune_s = seconds_since(t0);
   for (const Triplet& t : trip) {
     st.triplets += t.valid;
@@ -427,26 +478,12 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
       for (const PrunedSet& ps : t.pruned) st.pruned += ps.items.size();
   }
 
-  // Triplet registration, one slot per (triplet, registration).
   t0 = Clock::now();
-  const std::size_t slots = static_cast<std::size_t>(N) * static_cast<std::size_t>(R);
-  std::vector<std::optional<Candidate>> cand(slots);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, slots, 16),
-                    [&](const tbb::blocked_range<std::size_t>& r) {
-                      std::vector<std::uint32_t> buf2, buf3;
-                      std::vector<std::uint8_t> mask;
-                      std::vector<std::uint32_t> inside;
-                      for (std::size_t k = r.begin(); k != r.end(); ++k) {
-                        const std::size_t i = k / static_cast<std::size_t>(R);
-                        if (!trip[i].valid) continue;
-                        Rng rng(seed, step, kTagRegistration, k);
-                        cand[k] = register_once(trip[i], db, s, rng, buf2, buf3, mask, inside);
-                        if (cand[k]) cand[k]->slot = static_cast<std::uint32_t>(k);
-                      }
-                    });
+  const std::vector<std::optional<Candidate>> cand =
+      register_triplets(trip, db, s, static_cast<std::size_t>(R), seed, step);
   st.time_register_s = seconds_since(t0);
   std::vector<std::uint8_t> reached(db.size(), 0);
-  for (auto& c : cand) {
+  for (const auto& c : cand) {
     if (!c) continue;
     reached[c->object] = 1;
     out.push_back(*c);

@@ -90,13 +90,14 @@ int unobservable_dof(const std::vector<Vec3>& points, const std::vector<Vec3>& n
   return k;
 }
 
-Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& free_world,
-                    const FpfhSettings& fpfh, const SceneSettings& s, std::uint64_t seed,
-                    std::uint64_t step) {
-  Scene sc;
-  sc.feature_radius = fpfh.feature_radius;
-  // 1. Finite points only; the origin is their centroid, accumulated relative to the first
-  //    point so that coordinates far from the world origin keep their precision.
+namespace {
+
+/// 1. Finite points only (in `in`, with their normals if the cloud has them); the origin is
+///    their centroid, accumulated relative to the first point so that coordinates far from the
+///    world origin keep their precision; the free space in a fixed pseudo-random order, so that
+///    every prefix is a representative subset.
+PointCloud local_points(Scene& sc, const PointCloud& contacts_world, const std::vector<Vec3>& free_world,
+                        std::uint64_t seed, std::uint64_t step) {
   PointCloud in;
   const bool with_normals = contacts_world.has_normals();
   for (std::size_t i = 0; i < contacts_world.size(); ++i) {
@@ -119,14 +120,15 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
   for (Vec3& p : in.points) p -= sc.origin;
   for (const Vec3& q : free_world)
     if (finite(q)) sc.free_space.push_back(q - sc.origin);
-  {
-    // A fixed pseudo-random order, so that every prefix is a representative subset.
-    Rng rng(seed, step, kTagFreeOrder);
-    for (std::size_t i = sc.free_space.size(); i > 1; --i)
-      std::swap(sc.free_space[i - 1], sc.free_space[rng.index(i)]);
-  }
-  if (s.query_voxel > 0.0 && !in.empty()) in = voxel_filter(in, s.query_voxel);
+  Rng rng(seed, step, kTagFreeOrder);
+  for (std::size_t i = sc.free_space.size(); i > 1; --i)
+    std::swap(sc.free_space[i - 1], sc.free_space[rng.index(i)]);
+  return in;
+}
 
+/// The contacts, their evaluation order, tree, diameter and RMS radius; free points closer to
+/// a contact than the clearance dropped.
+void set_contacts(Scene& sc, const PointCloud& in, const SceneSettings& s, std::uint64_t seed, std::uint64_t step) {
   const std::size_t n = in.size();
   sc.contacts.points = in.points;
   sc.contacts.normals.assign(n, Vec3::Zero());
@@ -135,13 +137,11 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
   sc.interior.assign(n, 0);
   sc.order.resize(n);
   std::iota(sc.order.begin(), sc.order.end(), std::uint32_t{0});
-  {
-    Rng rng(seed, step, kTagOrder);
-    for (std::size_t i = n; i > 1; --i) std::swap(sc.order[i - 1], sc.order[rng.index(i)]);
-  }
+  Rng rng(seed, step, kTagOrder);
+  for (std::size_t i = n; i > 1; --i) std::swap(sc.order[i - 1], sc.order[rng.index(i)]);
   sc.ordered.reserve(n);
   for (std::uint32_t i : sc.order) sc.ordered.push_back(sc.contacts.points[i]);
-  if (n == 0) return sc;
+  if (n == 0) return;
   sc.tree = KdTree3(sc.contacts.points);
   sc.diameter = diameter_of(sc.contacts.points);
   if (s.free_clearance > 0.0 && !sc.free_space.empty()) {
@@ -153,18 +153,19 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
     sc.dropped_free = sc.free_space.size() - kept.size();
     sc.free_space = std::move(kept);
   }
-  {
-    double r2 = 0.0;
-    for (const Vec3& p : sc.contacts.points) r2 += p.squaredNorm();  // centroid is the origin
-    sc.rms_radius = std::sqrt(r2 / static_cast<double>(n));
-  }
-  if (n < 3 || !(sc.diameter > 0.0)) return sc;
+  double r2 = 0.0;
+  for (const Vec3& p : sc.contacts.points) r2 += p.squaredNorm();  // centroid is the origin
+  sc.rms_radius = std::sqrt(r2 / static_cast<double>(n));
+}
 
-  // 2. PCA normals (Section 4.3.1: normal radius of the database), oriented.
+/// 2. PCA normals (Section 4.3.1: normal radius of the database), oriented like the input's
+///    normals when it has them, else away from the contacts' centroid; the observability.
+void set_normals(Scene& sc, const PointCloud& in, const FpfhSettings& fpfh, const SceneSettings& s) {
   NormalSettings ns;
   ns.radius = fpfh.normal_radius;
-  std::vector<Vec3> normals = estimate_normals(sc.contacts.points, ns);
-  for (std::size_t i = 0; i < n; ++i) {
+  const std::vector<Vec3> normals = estimate_normals(sc.contacts.points, ns);
+  const bool with_normals = in.has_normals();
+  for (std::size_t i = 0; i < sc.contacts.size(); ++i) {
     Vec3 nv = normals[i];
     if (!finite(nv) || nv.squaredNorm() < 0.5) continue;
     nv.normalize();
@@ -172,39 +173,41 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
     if (nv.dot(ref) < 0.0) nv = -nv;
     sc.contacts.normals[i] = nv;
   }
-  sc.unobservable_dof = unobservable_dof(sc.contacts.points, sc.contacts.normals,
-                                         s.observability_eps);
+  sc.unobservable_dof = unobservable_dof(sc.contacts.points, sc.contacts.normals, s.observability_eps);
+}
 
-  // 3. The descriptor (FPFH by default) on the points with normals (neighbourhoods from those
-  //    points only).
+/// 3. The descriptor (FPFH by default) on the points with normals (neighbourhoods from those
+///    points only).
+void set_descriptors(Scene& sc, const FpfhSettings& fpfh, const SceneSettings& s) {
   std::vector<std::uint32_t> with;
-  for (std::size_t i = 0; i < n; ++i)
+  for (std::size_t i = 0; i < sc.contacts.size(); ++i)
     if (sc.contacts.normals[i].squaredNorm() > 0.5) with.push_back(static_cast<std::uint32_t>(i));
-  if (with.size() >= 3) {
-    PointCloud surf;
-    surf.points.reserve(with.size());
-    surf.normals.reserve(with.size());
-    for (std::uint32_t i : with) {
-      surf.points.push_back(sc.contacts.points[i]);
-      surf.normals.push_back(sc.contacts.normals[i]);
-    }
-    const KdTree3 surf_tree(surf.points);
-    DescriptorSettings ds;
-    ds.feature_radius = fpfh.feature_radius;
-    const Descriptors fr = compute_descriptors(s.descriptor, surf.points, surf.normals, surf, surf_tree, ds);
-    for (std::size_t k = 0; k < with.size(); ++k) {
-      bool ok = fr.valid[k];
-      for (float v : fr.row(k)) ok = ok && std::isfinite(v);
-      if (!ok) continue;
-      std::copy(fr.row(k).begin(), fr.row(k).end(), sc.features.row(with[k]));
-      sc.feature_valid[with[k]] = 1;
-    }
+  if (with.size() < 3) return;
+  PointCloud surf;
+  surf.points.reserve(with.size());
+  surf.normals.reserve(with.size());
+  for (std::uint32_t i : with) {
+    surf.points.push_back(sc.contacts.points[i]);
+    surf.normals.push_back(sc.contacts.normals[i]);
   }
+  const KdTree3 surf_tree(surf.points);
+  DescriptorSettings ds;
+  ds.feature_radius = fpfh.feature_radius;
+  const Descriptors fr = compute_descriptors(s.descriptor, surf.points, surf.normals, surf, surf_tree, ds);
+  for (std::size_t k = 0; k < with.size(); ++k) {
+    bool ok = fr.valid[k];
+    for (float v : fr.row(k)) ok = ok && std::isfinite(v);
+    if (!ok) continue;
+    std::copy(fr.row(k).begin(), fr.row(k).end(), sc.features.row(with[k]));
+    sc.feature_valid[with[k]] = 1;
+  }
+}
 
-  // 4. Interior points: a full neighbourhood within the feature radius, i.e. the neighbours'
-  //    centroid does not shift tangentially (a patch boundary shifts it by ~0.4 radius).
+/// 4. Interior points: a full neighbourhood within the feature radius, i.e. the neighbours'
+///    centroid does not shift tangentially (a patch boundary shifts it by ~0.4 radius).
+void set_interior(Scene& sc, const FpfhSettings& fpfh, const SceneSettings& s) {
   const double r = fpfh.feature_radius;
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::size_t i = 0; i < sc.contacts.size(); ++i) {
     if (!sc.feature_valid[i]) continue;
     const auto nb = sc.tree.radius(sc.contacts.points[i], r);
     if (static_cast<int>(nb.size()) < s.min_neighbours) continue;
@@ -216,6 +219,22 @@ Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& f
     shift -= shift.dot(nv) * nv;
     if (shift.norm() <= s.boundary_shift * r) sc.interior[i] = 1;
   }
+}
+
+}  // namespace
+
+Scene prepare_scene(const PointCloud& contacts_world, const std::vector<Vec3>& free_world,
+                    const FpfhSettings& fpfh, const SceneSettings& s, std::uint64_t seed,
+                    std::uint64_t step) {
+  Scene sc;
+  sc.feature_radius = fpfh.feature_radius;
+  PointCloud in = local_points(sc, contacts_world, free_world, seed, step);
+  if (s.query_voxel > 0.0 && !in.empty()) in = voxel_filter(in, s.query_voxel);
+  set_contacts(sc, in, s, seed, step);
+  if (in.size() < 3 || !(sc.diameter > 0.0)) return sc;
+  set_normals(sc, in, fpfh, s);
+  set_descriptors(sc, fpfh, s);
+  set_interior(sc, fpfh, s);
   return sc;
 }
 

@@ -78,6 +78,89 @@ struct TwinFit {
   double v = std::numeric_limits<double>::infinity();
 };
 
+// The fit's constants: inverse variances, caps and the contacts' gate (fit_all).
+struct TwinTerms {
+  TwinTerms(const TwinSettings& s, bool rotate)
+      : inv_c(1.0 / (s.contact_sigma * s.contact_sigma)),
+        inv_t(1.0 / (s.offset_sigma * s.offset_sigma)),
+        sigma_r(s.rotation_sigma * std::numbers::pi / 180.0),
+        inv_r(rotate ? 1.0 / (sigma_r * sigma_r) : 0.0),
+        inv_f(s.free_sigma > 0.0 ? 1.0 / (s.free_sigma * s.free_sigma) : 0.0),
+        max_t(3.0 * s.offset_sigma),
+        max_w(3.0 * sigma_r),
+        gate(max_t + 3.0 * s.contact_sigma),
+        cap_c2(9.0 * s.contact_sigma * s.contact_sigma),
+        cap_f(3.0 * s.free_sigma),
+        dof(rotate ? 6 : 3) {}
+  double inv_c, inv_t, sigma_r, inv_r, inv_f, max_t, max_w, gate, cap_c2, cap_f;
+  int dof;
+};
+
+// Scratch of fit_all's grasps (reused between them).
+struct TwinScratch {
+  std::vector<Vec3> sub, q, g;
+  std::vector<double> d;
+};
+
+// One grasp's offset (contacts p[0..n), its hand samples `free`, pivot c): Gauss-Newton in
+// units of the contact noise: residuals d / contact_sigma, so the priors and the free samples
+// weigh (contact_sigma / their sigma)^2.
+GraspOffset fit_grasp(const Vec3* p, std::size_t n, const std::vector<Vec3>& free, const Vec3& c,
+                      const DistanceField& field, const Pose& T_os, const Eigen::Matrix3d& R_so, const Model& m,
+                      const TwinSettings& s, const TwinTerms& k, TwinScratch& w) {
+  using Mat6 = Eigen::Matrix<double, 6, 6>;
+  using Vec6 = Eigen::Matrix<double, 6, 1>;
+  const std::size_t ns = std::min(n, std::max<std::size_t>(s.fit_points, 3));
+  w.sub.resize(ns);
+  for (std::size_t j = 0; j < ns; ++j) w.sub[j] = p[j * n / ns];
+  GraspOffset o;
+  for (int it = 0; it < s.iterations; ++it) {
+    Mat6 H = Mat6::Zero();
+    Vec6 b = Vec6::Zero();
+    auto add = [&](const Vec3& qi, const Vec3& grad, double di, double weight) {
+      const double gn = grad.norm();
+      if (!(gn > 0.5)) return;
+      const Vec3 nrm = R_so * (grad / gn);
+      Vec6 J;
+      J.head<3>() = (qi - c - o.t).cross(nrm);   // the rotation turns R (p - c)
+      J.tail<3>() = nrm;
+      H.noalias() += weight * J * J.transpose();
+      b.noalias() -= weight * J * di;
+    };
+    const std::size_t total = ns + free.size();
+    w.q.resize(total);
+    w.g.resize(total);
+    w.d.resize(total);
+    for (std::size_t j = 0; j < ns; ++j) w.q[j] = o.apply(w.sub[j], c);
+    for (std::size_t j = 0; j < free.size(); ++j) w.q[ns + j] = o.apply(free[j], c);
+    field.distances_gradients(w.q.data(), total, T_os, w.d.data(), w.g.data());
+    for (std::size_t j = 0; j < ns; ++j)
+      if (std::abs(w.d[j]) < k.gate) add(w.q[j], w.g[j], w.d[j], 1.0);
+    for (std::size_t j = ns; j < total; ++j)   // one-sided: only samples inside pull
+      if (w.d[j] < 0.0 && w.d[j] > -k.cap_f) add(w.q[j], w.g[j], w.d[j], s.contact_sigma * s.contact_sigma * k.inv_f);
+    const double rho_r = s.contact_sigma * s.contact_sigma * k.inv_r;
+    const double rho_t = s.contact_sigma * s.contact_sigma * k.inv_t;
+    H.topLeftCorner<3, 3>() += (m.rotate ? rho_r : 1.0) * Eigen::Matrix3d::Identity();
+    H.bottomRightCorner<3, 3>() += rho_t * Eigen::Matrix3d::Identity();
+    b.head<3>() -= rho_r * o.w;
+    b.tail<3>() -= rho_t * o.t;
+    Vec6 step = Vec6::Zero();
+    if (k.dof == 6) {
+      step = H.ldlt().solve(b);
+    } else {
+      step.tail<3>() = H.bottomRightCorner<3, 3>().ldlt().solve(b.tail<3>());
+    }
+    if (!step.allFinite()) break;
+    o.w += step.head<3>();
+    o.t += step.tail<3>();
+    if (o.w.norm() > k.max_w) o.w *= k.max_w / o.w.norm();
+    if (o.t.norm() > k.max_t) o.t *= k.max_t / o.t.norm();
+    o.R = rotation_of(o.w);
+    if (step.tail<3>().norm() + step.head<3>().norm() * 0.1 < 1e-3 * s.contact_sigma) break;
+  }
+  return o;
+}
+
 // Every grasp's offset at object pose T_so, and V. Legacy: fit_grasp_offsets (translations,
 // contacts only). Otherwise Gauss-Newton on each grasp's 3 or 6 offset parameters over its
 // contacts within the gate, its hand samples inside the object (one-sided), and the priors.
@@ -85,8 +168,6 @@ TwinFit fit_all(const Scene& scene, const DistanceField& field, const Pose& T_so
                 const TwinSettings& s) {
   TwinFit out;
   const GraspGroups& G = scene.grasps;
-  const double inv_c = 1.0 / (s.contact_sigma * s.contact_sigma);
-  const double inv_t = 1.0 / (s.offset_sigma * s.offset_sigma);
   if (m.legacy) {
     const GraspFit fit = fit_grasp_offsets(scene, field, T_so, fit_settings_of(s));
     double prior = 0.0;
@@ -99,87 +180,29 @@ TwinFit fit_all(const Scene& scene, const DistanceField& field, const Pose& T_so
     out.v = prior / (s.offset_sigma * s.offset_sigma) + fit.clamped_sq_sum / (s.contact_sigma * s.contact_sigma);
     return out;
   }
-  using Mat6 = Eigen::Matrix<double, 6, 6>;
-  using Vec6 = Eigen::Matrix<double, 6, 1>;
+  const TwinTerms k(s, m.rotate);
   const Pose T_os = T_so.inverse();
   const Eigen::Matrix3d R_so = T_so.linear();
-  const double sigma_r = s.rotation_sigma * std::numbers::pi / 180.0;
-  const double inv_r = m.rotate ? 1.0 / (sigma_r * sigma_r) : 0.0;
-  const double inv_f = s.free_sigma > 0.0 ? 1.0 / (s.free_sigma * s.free_sigma) : 0.0;
-  const double max_t = 3.0 * s.offset_sigma, max_w = 3.0 * sigma_r;
-  const double gate = max_t + 3.0 * s.contact_sigma;
-  const double cap_c2 = 9.0 * s.contact_sigma * s.contact_sigma, cap_f = 3.0 * s.free_sigma;
-  const int dof = m.rotate ? 6 : 3;
-  std::vector<Vec3> sub, q, g;
-  std::vector<double> d;
+  TwinScratch w;
   double v = 0.0;
   out.offsets.resize(G.grasps());
-  for (std::size_t k = 0; k < G.grasps(); ++k) {
-    const Vec3* p = G.points.data() + G.first[k];
-    const std::size_t n = G.first[k + 1] - G.first[k];
-    const std::vector<Vec3>& free = m.free[k];
-    const Vec3& c = m.pivot[k];
-    const std::size_t ns = std::min(n, std::max<std::size_t>(s.fit_points, 3));
-    sub.resize(ns);
-    for (std::size_t j = 0; j < ns; ++j) sub[j] = p[j * n / ns];
-    GraspOffset o;
-    // Gauss-Newton in units of the contact noise: residuals d / contact_sigma, so the priors
-    // and the free samples weigh (contact_sigma / their sigma)^2.
-    for (int it = 0; it < s.iterations; ++it) {
-      Mat6 H = Mat6::Zero();
-      Vec6 b = Vec6::Zero();
-      auto add = [&](const Vec3& qi, const Vec3& grad, double di, double weight) {
-        const double gn = grad.norm();
-        if (!(gn > 0.5)) return;
-        const Vec3 nrm = R_so * (grad / gn);
-        Vec6 J;
-        J.head<3>() = (qi - c - o.t).cross(nrm);   // the rotation turns R (p - c)
-        J.tail<3>() = nrm;
-        H.noalias() += weight * J * J.transpose();
-        b.noalias() -= weight * J * di;
-      };
-      const std::size_t total = ns + free.size();
-      q.resize(total);
-      g.resize(total);
-      d.resize(total);
-      for (std::size_t j = 0; j < ns; ++j) q[j] = o.apply(sub[j], c);
-      for (std::size_t j = 0; j < free.size(); ++j) q[ns + j] = o.apply(free[j], c);
-      field.distances_gradients(q.data(), total, T_os, d.data(), g.data());
-      for (std::size_t j = 0; j < ns; ++j)
-        if (std::abs(d[j]) < gate) add(q[j], g[j], d[j], 1.0);
-      for (std::size_t j = ns; j < total; ++j)   // one-sided: only samples inside pull
-        if (d[j] < 0.0 && d[j] > -cap_f) add(q[j], g[j], d[j], s.contact_sigma * s.contact_sigma * inv_f);
-      const double rho_r = s.contact_sigma * s.contact_sigma * inv_r;
-      const double rho_t = s.contact_sigma * s.contact_sigma * inv_t;
-      H.topLeftCorner<3, 3>() += (m.rotate ? rho_r : 1.0) * Eigen::Matrix3d::Identity();
-      H.bottomRightCorner<3, 3>() += rho_t * Eigen::Matrix3d::Identity();
-      b.head<3>() -= rho_r * o.w;
-      b.tail<3>() -= rho_t * o.t;
-      Vec6 step = Vec6::Zero();
-      if (dof == 6) {
-        step = H.ldlt().solve(b);
-      } else {
-        step.tail<3>() = H.bottomRightCorner<3, 3>().ldlt().solve(b.tail<3>());
-      }
-      if (!step.allFinite()) break;
-      o.w += step.head<3>();
-      o.t += step.tail<3>();
-      if (o.w.norm() > max_w) o.w *= max_w / o.w.norm();
-      if (o.t.norm() > max_t) o.t *= max_t / o.t.norm();
-      o.R = rotation_of(o.w);
-      if (step.tail<3>().norm() + step.head<3>().norm() * 0.1 < 1e-3 * s.contact_sigma) break;
-    }
+  for (std::size_t g = 0; g < G.grasps(); ++g) {
+    const Vec3* p = G.points.data() + G.first[g];
+    const std::size_t n = G.first[g + 1] - G.first[g];
+    const std::vector<Vec3>& free = m.free[g];
+    const Vec3& c = m.pivot[g];
+    const GraspOffset o = fit_grasp(p, n, free, c, field, T_os, R_so, m, s, k, w);
     // V's terms of this grasp: its prior, every contact (clamped), every kept hand sample.
-    q.resize(n + free.size());
-    d.resize(n + free.size());
-    for (std::size_t j = 0; j < n; ++j) q[j] = o.apply(p[j], c);
-    for (std::size_t j = 0; j < free.size(); ++j) q[n + j] = o.apply(free[j], c);
-    field.distances(q.data(), q.size(), T_os, d.data());
-    v += o.t.squaredNorm() * inv_t + o.w.squaredNorm() * inv_r;
-    for (std::size_t j = 0; j < n; ++j) v += std::min(d[j] * d[j], cap_c2) * inv_c;
-    for (std::size_t j = n; j < q.size(); ++j)
-      if (d[j] < 0.0) v += std::pow(std::min(-d[j], cap_f), 2) * inv_f;
-    out.offsets[k] = o;
+    w.q.resize(n + free.size());
+    w.d.resize(n + free.size());
+    for (std::size_t j = 0; j < n; ++j) w.q[j] = o.apply(p[j], c);
+    for (std::size_t j = 0; j < free.size(); ++j) w.q[n + j] = o.apply(free[j], c);
+    field.distances(w.q.data(), w.q.size(), T_os, w.d.data());
+    v += o.t.squaredNorm() * k.inv_t + o.w.squaredNorm() * k.inv_r;
+    for (std::size_t j = 0; j < n; ++j) v += std::min(w.d[j] * w.d[j], k.cap_c2) * k.inv_c;
+    for (std::size_t j = n; j < w.q.size(); ++j)
+      if (w.d[j] < 0.0) v += std::pow(std::min(-w.d[j], k.cap_f), 2) * k.inv_f;
+    out.offsets[g] = o;
   }
   out.v = v;
   return out;

@@ -51,29 +51,29 @@ struct StepContext {
   std::uint64_t step_u() const { return static_cast<std::uint64_t>(step); }
 
   // ---- the scene (stage "scene")
-  Scene scene;
-  EvaluateSettings ev;                      ///< the evaluation of refined hypotheses
-  EvaluateSettings ev_raw;                  ///< of raw candidates: no per-grasp offsets
+  Scene scene{};
+  EvaluateSettings ev{};                    ///< the evaluation of refined hypotheses
+  EvaluateSettings ev_raw{};                ///< of raw candidates: no per-grasp offsets
   bool grasp_fit = false;                   ///< per-grasp offsets re-score hypotheses
-  std::vector<std::uint8_t> allowed;        ///< objects that can span the contacts (and --only)
+  std::vector<std::uint8_t> allowed{};      ///< objects that can span the contacts (and --only)
 
   // ---- candidate sources and screening
-  std::vector<std::uint32_t> preferred;     ///< objects best first by the shape prior
+  std::vector<std::uint32_t> preferred{};   ///< objects best first by the shape prior
   double prior_s = 0.0;                     ///< s, the shape prior's ranking
-  std::vector<Candidate> cands;             ///< the sources' candidates, screened
-  RansacStats rs;
-  std::optional<Shortlist> shortlist;       ///< when the shortlist ran
+  std::vector<Candidate> cands{};           ///< the sources' candidates, screened
+  RansacStats rs{};
+  std::optional<Shortlist> shortlist{};     ///< when the shortlist ran
 
   // ---- selection and the answer
-  std::vector<Working> old;                 ///< the previous state's survivors, evolved
-  std::vector<Working> next;                ///< the new state, sorted by `better`
-  std::vector<std::uint32_t> transfer_ranked;  ///< pose transfer's screened objects, best first
+  std::vector<Working> old{};               ///< the previous state's survivors, evolved
+  std::vector<Working> next{};              ///< the new state, sorted by `better`
+  std::vector<std::uint32_t> transfer_ranked{};  ///< pose transfer's screened objects, best first
   std::size_t transfer_kept = 0;            ///< ... of which the first this many were tried
-  AnswerRule rule;
+  AnswerRule rule{};
 
   /// Set by a stage when the rest of the step has nothing to work on (e.g. no contacts): the
   /// remaining stages are left out with this reason and the recognizer's state is kept.
-  std::optional<std::string> finished;
+  std::optional<std::string> finished{};
 };
 
 /// One stage: a candidate source, a screening, a refinement, an evaluation or a selection.
