@@ -564,7 +564,7 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
     bool any = false;
     for (const auto& r : store.runs) any = any || r.variant == static_cast<int>(v);
     if (!any) {
-      vj.push_back({J::array(), J::array(), nullptr, nullptr, nullptr, nullptr});
+      vj.push_back({J::array(), J::array(), nullptr, nullptr, nullptr, nullptr, nullptr});
       continue;
     }
     vj.push_back(variant_json(store, static_cast<int>(v), settings));
