@@ -53,6 +53,10 @@ int run_touchstone(int argc, char** argv, const char* version) {
   register_catalogue(app);
   register_stress(app);
   register_params(app);
+  if (argc == 2 && std::string(argv[1]) == "--help-reference") {   // not in --help: a tool's input
+    print_reference(app);
+    return 0;
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -38,6 +38,10 @@ void register_catalogue(CLI::App& app);   // catalogue
 void register_stress(CLI::App& app);      // stress
 void register_params(CLI::App& app);      // params
 
+/// `touchstone --help-reference`: every subcommand, its positionals and flags as one JSON object
+/// on stdout (cli_reference.cpp; scripts/command_reference.py writes docs/command-line.md from it).
+void print_reference(const CLI::App& app);
+
 /// The whole `touchstone` command line: registers every command, parses `argv`, runs the chosen
 /// command and returns its exit code (0 done, 1 error, 2 usage). main() is this; the CLI tests
 /// call it in process (tests/cli_run.hpp). `version` follows "touchstone " in --version.
