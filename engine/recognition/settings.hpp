@@ -37,6 +37,15 @@ struct RecognizerSettings {
   double dedupe_distance = 0.002;   ///< m
   double icp_top = 0.0;             ///< ransac-icp(-fs): ICP only the best share of candidates
                                     ///< by pre-ICP score (0: all, as in the paper)
+  bool early_stop = false;          ///< extension (bricpsf): when the previous state's leading
+                                    ///< hypothesis, evolved on this step's contacts, explains
+                                    ///< them all within noise and no other object's does, the
+                                    ///< step proposes no new hypotheses (the sources are left out)
+  double early_stop_rms_sigma = 1.0;  ///< "within noise": no contact beyond 3
+                                      ///< evaluate.grasp_contact_sigma, their RMS (each clamped
+                                      ///< there) within this many sigmas, and at most
+                                      ///< early_stop_free_conflict of Eq. 8's error per free point
+  double early_stop_free_conflict = 0.02;
   std::uint64_t seed = 1;           ///< every random draw derives from (seed, step, task)
   std::vector<std::uint8_t> objects;  ///< objects the recognizer may answer (1 = yes), by
                                       ///< database index; empty: all

@@ -199,6 +199,17 @@ std::vector<Parameter> declaration() {
                       {"--new-per-object", "new_per_object"}, TS_FIELD(recognizer.new_per_object)));
   d.push_back(boolean("bricpsf.dedupe", "Extension: drop hypotheses that duplicate a better one (2 mm, 2 degrees)",
                       {"--dedupe", "dedupe"}, TS_FIELD(recognizer.dedupe)));
+  d.push_back(boolean("early_stop.enabled",
+                      "Extension: a step whose contacts the leading survivor alone explains within noise proposes "
+                      "no new hypotheses (bricpsf)",
+                      {"--early-stop"}, TS_FIELD(recognizer.early_stop)));
+  d.push_back(real("early_stop.rms_sigma", "", 0, 3, "",
+                   "Early stop: the contacts' RMS distance (each clamped at 3 sigma) within this many "
+                   "evaluate.grasp_contact_sigma, and none beyond 3",
+                   {}, TS_FIELD(recognizer.early_stop_rms_sigma)));
+  d.push_back(real("early_stop.free_conflict", "", 0, 1, "",
+                   "Early stop: at most this Eq. 8 error per free point",
+                   {}, TS_FIELD(recognizer.early_stop_free_conflict)));
   // ICP.
   d.push_back(integer("icp.iterations", 0, 100000, "", "ICP iteration cap",
                       {"--icp-iterations", "icp_iterations"}, TS_FIELD(recognizer.icp.max_iterations)));

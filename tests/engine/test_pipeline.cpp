@@ -45,9 +45,9 @@ TEST_CASE("Pipeline: each method's stages in Algorithm 1's order, and a small da
   const Pose T = test::random_pose(7, Vec3(0.1, 0.0, 0.0));
   const StepResult r1 = rec.step(test::touch(src->fines[4], T, 1, 5), {});
   const StepResult r2 = rec.step(test::touch(src->fines[4], T, 2, 5), {});
-  const std::vector<std::string> bricpsf = {"scene",     "shape_prior",       "ransac",        "sparse",
-                                            "shortlist", "survivors",         "sequential_filter",
-                                            "pose_transfer", "posteriors",    "answer_rule",   "state"};
+  const std::vector<std::string> bricpsf = {"scene",     "shape_prior",   "survivors",         "early_stop",
+                                            "ransac",    "sparse",        "shortlist",         "sequential_filter",
+                                            "pose_transfer", "posteriors", "answer_rule",      "state"};
   CHECK(stage_names(r1) == bricpsf);
   CHECK(stage_names(r2) == bricpsf);
   const std::string small = "database of " + std::to_string(db.size()) + " objects";
@@ -59,6 +59,7 @@ TEST_CASE("Pipeline: each method's stages in Algorithm 1's order, and a small da
     CHECK(stage_of(*r, "shortlist").reason == small + " (the shortlist acts above 48)");
     CHECK_FALSE(stage_of(*r, "pose_transfer").ran);
     CHECK(stage_of(*r, "sparse").reason == "sparse.mode = never");
+    CHECK(stage_of(*r, "early_stop").reason == "early_stop off");
     CHECK_FALSE(r->sparse_active);
     CHECK(r->shortlist.empty());
     for (const char* always : {"scene", "ransac", "sequential_filter", "posteriors", "answer_rule", "state"}) {
@@ -84,8 +85,53 @@ TEST_CASE("Pipeline: each method's stages in Algorithm 1's order, and a small da
     CHECK(std::find(names.begin(), names.end(), selection) != names.end());
     CHECK(std::find(names.begin(), names.end(), "survivors") == names.end());
     CHECK(std::find(names.begin(), names.end(), "sequential_filter") == names.end());
-    CHECK(names.size() == bricpsf.size() - 1);
+    CHECK(std::find(names.begin(), names.end(), "early_stop") == names.end());
+    CHECK(names.size() == bricpsf.size() - 2);
   }
+}
+
+TEST_CASE("Pipeline: early stop leaves out the sources while the leading survivor alone explains every contact") {
+  auto src = test::make_source();
+  Database db(src);
+  const Pose T = test::random_pose(7, Vec3(0.1, 0.0, 0.0));
+  RecognizerSettings s = test::fast_settings(Method::bricpsf);
+  s.sparse.mode = kSparseAlways;
+  s.early_stop = true;
+  Recognizer rec(db, s);
+  const StepResult r1 = rec.step(test::touch(src->fines[4], T, 4, 5), {});
+  REQUIRE(r1.valid);
+  REQUIRE(r1.best.object == 4);   // the premise: the first step found the object
+  CHECK(stage_of(r1, "early_stop").reason == "no hypotheses from an earlier step");
+  CHECK(stage_of(r1, "ransac").ran);
+
+  // More contacts on the same object: the evolved leader explains them all, no other object does.
+  const PointCloud more = test::touch(src->fines[4], T, 6, 5);
+  const StepResult r2 = rec.step(more, {});
+  REQUIRE(r2.valid);
+  CHECK(stage_of(r2, "early_stop").ran);
+  for (const char* left_out : {"ransac", "sparse", "shortlist"}) {
+    CAPTURE(left_out);
+    CHECK_FALSE(stage_of(r2, left_out).ran);
+    CHECK(stage_of(r2, left_out).reason.starts_with("early stop: the leading survivor explains every contact"));
+  }
+  CHECK(r2.candidates == 0);
+  CHECK(r2.sparse_candidates == 0);
+  CHECK(stage_of(r2, "sequential_filter").ran);
+  CHECK(r2.best.object == 4);
+  CHECK(r2.hypotheses.size() == r1.hypotheses.size());   // the survivors, all kept
+  for (const Hypothesis& h : r2.hypotheses) CHECK(h.born == 1);
+
+  // A contact 3 cm beyond the object's bounding box: the leader no longer explains the step, the
+  // sources run.
+  Eigen::AlignedBox3d box;
+  for (const Vec3& p : src->fines[4].points) box.extend(p);
+  PointCloud off = more;
+  off.points.push_back(T * Vec3(box.max().x() + 0.03, box.center().y(), box.center().z()));
+  if (off.has_normals()) off.normals.push_back(Vec3::UnitZ());
+  const StepResult r3 = rec.step(off, {});
+  CHECK(stage_of(r3, "early_stop").ran);
+  CHECK(stage_of(r3, "ransac").ran);
+  CHECK(stage_of(r3, "ransac").reason.empty());
 }
 
 TEST_CASE("Pipeline: the sparse source runs exactly when its stage says so, the shortlist when the database is large enough") {
@@ -175,5 +221,6 @@ TEST_CASE("Pipeline: an unknown stage and a throwing observer are errors naming 
     CHECK(std::string(e.what()).find("stage 'ransac': an observer after it failed: observer broke") != std::string::npos);
   }
   CHECK(res.hypotheses.empty());       // the state stage never ran
-  CHECK(res.stages.size() == 2);       // scene, shape_prior recorded; ransac's record not complete
+  CHECK(res.stages.size() == 4);       // scene, shape_prior, survivors, early_stop recorded (the last
+                                       // two left out: no earlier step); ransac's not complete
 }

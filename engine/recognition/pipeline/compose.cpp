@@ -15,10 +15,11 @@ const std::vector<std::pair<std::string_view, Factory>>& stage_factories() {
   static const std::vector<std::pair<std::string_view, Factory>> all = {
       {"scene", scene_stage},
       {"shape_prior", shape_prior_stage},
+      {"survivors", survivors_source},
+      {"early_stop", early_stop_stage},
       {"ransac", ransac_source},
       {"sparse", sparse_source},
       {"shortlist", shortlist_stage},
-      {"survivors", survivors_source},
       {"select", select_batch},
       {"icp_each", icp_each},
       {"sequential_filter", sequential_filter},
@@ -34,8 +35,13 @@ const std::vector<std::pair<std::string_view, Factory>>& stage_factories() {
 
 std::vector<std::string_view> method_stages(Method m) {
   // Every method: the scene, then the sources (the shape prior orders RANSAC's objects on large
-  // databases; the feature-free triplets join RANSAC's candidates), then the shortlist.
-  std::vector<std::string_view> s = {"scene", "shape_prior", "ransac", "sparse", "shortlist"};
+  // databases; the feature-free triplets join RANSAC's candidates), then the shortlist. BRICPSF
+  // evolves the previous state first (Algorithm 1, lines 3-7), which may explain the step
+  // without new hypotheses (early_stop); it takes no draw, so the sources' candidates are the
+  // same either way.
+  std::vector<std::string_view> s = {"scene", "shape_prior"};
+  if (m == Method::bricpsf) s.insert(s.end(), {"survivors", "early_stop"});
+  s.insert(s.end(), {"ransac", "sparse", "shortlist"});
   switch (m) {
     case Method::batch_ransac:    // Section 4.3.2: the best candidates by Eq. 5
       s.push_back("select");
@@ -44,8 +50,7 @@ std::vector<std::string_view> method_stages(Method m) {
     case Method::ransac_icp_fs:   // ... Eq. 6 (the scene stage turns the free-space term on)
       s.push_back("icp_each");
       break;
-    case Method::bricpsf:         // Algorithm 1: lines 3-7, then lines 8-9
-      s.push_back("survivors");
+    case Method::bricpsf:         // Algorithm 1: lines 8-9
       s.push_back("sequential_filter");
       break;
   }

@@ -11,6 +11,8 @@ class RansacSource final : public Stage {
  public:
   std::string_view name() const override { return "ransac"; }
 
+  std::string skip_reason(const StepContext& c) const override { return c.stop_early; }
+
   void run(StepContext& c) const override {
     c.cands = ransac_candidates(c.scene, c.db, c.search, c.allowed, c.s.ransac, c.s.seed, c.step_u(), &c.rs,
                                 c.preferred);

@@ -14,6 +14,7 @@ class ShortlistStage final : public Stage {
   std::string_view name() const override { return "shortlist"; }
 
   std::string skip_reason(const StepContext& c) const override {
+    if (!c.stop_early.empty()) return c.stop_early;
     if (c.s.shortlist.objects == 0) return "shortlist.objects = 0";
     if (c.db.size() <= c.s.shortlist.min_database) return small_database(c.db, "the shortlist", c.s.shortlist.min_database);
     return {};

@@ -25,6 +25,7 @@ class SparseSource final : public Stage {
 
   std::string skip_reason(const StepContext& c) const override {
     const SparseSettings& s = c.s.sparse;
+    if (!c.stop_early.empty()) return c.stop_early;
     if (s.mode == kSparseNever) return "sparse.mode = never";
     const std::vector<std::uint8_t> mask = sparse_objects(c);
     if (std::find(mask.begin(), mask.end(), 1) == mask.end()) return "no object to match";

@@ -70,6 +70,9 @@ struct StepContext {
   std::vector<std::uint32_t> transfer_ranked{};  ///< pose transfer's screened objects, best first
   std::size_t transfer_kept = 0;            ///< ... of which the first this many were tried
   AnswerRule rule{};
+  /// Set by stage "early_stop" when the survivors explain the step (why); the candidate sources
+  /// and their screening are then left out with this reason.
+  std::string stop_early{};
 
   /// Set by a stage when the rest of the step has nothing to work on (e.g. no contacts): the
   /// remaining stages are left out with this reason and the recognizer's state is kept.

@@ -21,6 +21,8 @@ std::unique_ptr<const Stage> survivors_source();     ///< "survivors": S_{t-1} r
                                                      ///< evaluated (Algorithm 1, lines 3-7)
 std::unique_ptr<const Stage> pose_transfer_source(); ///< "pose_transfer": the leader's pose on the
                                                      ///< objects that fit there (TwinSettings)
+std::unique_ptr<const Stage> early_stop_stage();     ///< "early_stop": the survivors explain the
+                                                     ///< step; no new hypotheses (early_stop_*)
 // ---- screening
 std::unique_ptr<const Stage> shortlist_stage();      ///< "shortlist": objects whose candidates go
                                                      ///< on (ShortlistSettings)
