@@ -46,6 +46,8 @@ struct RecognizerSettings {
                                       ///< there) within this many sigmas, and at most
                                       ///< early_stop_free_conflict of Eq. 8's error per free point
   double early_stop_free_conflict = 0.02;
+  std::size_t early_stop_max_database = 0;  ///< early stop acts on databases of at most this
+                                            ///< many objects (0: any)
   std::uint64_t seed = 1;           ///< every random draw derives from (seed, step, task)
   std::vector<std::uint8_t> objects;  ///< objects the recognizer may answer (1 = yes), by
                                       ///< database index; empty: all

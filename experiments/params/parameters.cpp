@@ -210,6 +210,9 @@ std::vector<Parameter> declaration() {
   d.push_back(real("early_stop.free_conflict", "", 0, 1, "",
                    "Early stop: at most this Eq. 8 error per free point",
                    {}, TS_FIELD(recognizer.early_stop_free_conflict)));
+  d.push_back(integer("early_stop.max_database", 0, kLarge, "",
+                      "Early stop: acts on databases of at most this many objects (0: any)",
+                      {}, TS_FIELD(recognizer.early_stop_max_database)));
   // ICP.
   d.push_back(integer("icp.iterations", 0, 100000, "", "ICP iteration cap",
                       {"--icp-iterations", "icp_iterations"}, TS_FIELD(recognizer.icp.max_iterations)));

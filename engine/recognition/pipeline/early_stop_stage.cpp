@@ -12,6 +12,7 @@
 
 #include <cmath>
 #include <set>
+#include <string>
 
 namespace ts::pipeline {
 
@@ -34,6 +35,9 @@ class EarlyStop final : public Stage {
 
   std::string skip_reason(const StepContext& c) const override {
     if (!c.s.early_stop) return "early_stop off";
+    const std::size_t most = c.s.early_stop_max_database;
+    if (most > 0 && c.db.size() > most)
+      return "database of " + std::to_string(c.db.size()) + " objects (early stop acts up to " + std::to_string(most) + ")";
     if (c.old.empty()) return "no hypotheses from an earlier step";
     return {};
   }
