@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""docs/ci/fuzzing.md from scripts/fuzz's record (build-fuzz/record.tsv): every target's runs,
-newest first, each stamped with its date, commit, tree state and machine, and the schedule's
-check: whether each target has had a run of at least 1800 s without a finding on the newest
-commit fuzzed.
+"""docs/ci/fuzzing.md from scripts/fuzz's record (build-fuzz/record.tsv, this machine's runs)
+and the record kept beside the page (docs/ci/fuzz-record.tsv, every machine's, which this
+rewrites with the union): every target's runs, newest first, each stamped with the time it
+finished, its commit, tree state and machine, and each target's longest clean run.
 
     scripts/fuzz_report.py RECORD.tsv PAGE.md        (scripts/fuzz --report)
 """
@@ -20,23 +20,30 @@ def main(argv):
         print(__doc__, file=sys.stderr)
         return 2
     record, page = Path(argv[1]), Path(argv[2])
-    if not record.exists():
-        print(f"fuzz_report: no record {record} (scripts/fuzz TARGET SECONDS writes it)", file=sys.stderr)
+    kept = page.with_name("fuzz-record.tsv")
+    lines = []
+    for source in (kept, record):
+        if not source.exists():
+            continue
+        for n, line in enumerate(source.read_text().splitlines(), 1):
+            if len(line.split("\t")) != len(FIELDS):
+                print(f"fuzz_report: {source}, line {n}: {len(line.split(chr(9)))} fields, not {len(FIELDS)}",
+                      file=sys.stderr)
+                return 1
+            if line not in lines:
+                lines.append(line)
+    if not lines:
+        print(f"fuzz_report: no runs in {record} or {kept} (scripts/fuzz TARGET SECONDS records them)", file=sys.stderr)
         return 1
-    rows = []
-    for n, line in enumerate(record.read_text().splitlines(), 1):
-        cells = line.split("\t")
-        if len(cells) != len(FIELDS):
-            print(f"fuzz_report: {record}, line {n}: {len(cells)} fields, not {len(FIELDS)}", file=sys.stderr)
-            return 1
-        rows.append(dict(zip(FIELDS, cells)))
+    lines.sort(key=lambda line: line.split("\t")[0])
+    rows = [dict(zip(FIELDS, line.split("\t"))) for line in lines]
     rows.sort(key=lambda r: r["date"], reverse=True)
     out = ["# Fuzzing record", "",
            "Written by `scripts/fuzz --report` from the runs `scripts/fuzz` recorded; not by hand. The",
            f"schedule ([testing](../testing.md#hardening-fuzzed-readers)): before a release, every target for {SCHEDULE_S} s",
            "(`scripts/fuzz all 1800`, six hours of one core), each finding kept as a corpus file and a test.", "",
            "## Every target's longest clean run", "",
-           "| target | longest run without a finding | inputs | date | commit |", "|---|---|---|---|---|"]
+           "| target | longest run without a finding | inputs | finished | commit |", "|---|---|---|---|---|"]
     for t in TARGETS:
         clean = [r for r in rows if r["target"] == t and r["findings"] == "0" and r["exit"] == "0"]
         if not clean:
@@ -47,14 +54,15 @@ def main(argv):
         out.append(f"| `{t}` | {best['seconds']} s{mark} | {best['inputs']} | {best['date'][:10]} | "
                    f"`{best['commit']}`{'' if best['tree'] == 'clean' else ' (tree not clean)'} |")
     out += ["", "## Every run, newest first", "",
-            "| date (UTC) | commit | tree | machine | target | seconds | inputs | findings |",
+            "| finished (UTC) | commit | tree | machine | target | seconds | inputs | findings |",
             "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         out.append(f"| {r['date']} | `{r['commit']}` | {r['tree']} | {r['machine']} | `{r['target']}` | "
                    f"{r['seconds']} | {r['inputs']} | {r['findings']} |")
-    tmp = page.with_suffix(".md.tmp")
-    tmp.write_text("\n".join(out) + "\n")
-    tmp.replace(page)
+    for path, text in ((kept, "\n".join(lines) + "\n"), (page, "\n".join(out) + "\n")):
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(text)
+        tmp.replace(path)
     print(f"fuzz_report: {page}: {len(rows)} runs")
     return 0
 
