@@ -44,6 +44,8 @@ GraspPlanner::GraspPlanner(Gripper gripper, ActiveSettings s) : gripper_(std::mo
   require(s_.leaders >= 1, "the planner needs at least one hypothesis to aim at", "active.leaders");
   require(s_.sigma > 0 && std::isfinite(s_.sigma), "the outcome noise must be positive", "active.sigma_m");
   require(s_.cap > 0 && std::isfinite(s_.cap), "the distance cap must be positive", "active.cap_m");
+  require(s_.offset_sigma >= 0 && std::isfinite(s_.offset_sigma), "the arm offset sigma must be >= 0",
+          "active.offset_sigma_m");
   require(s_.collision_weight >= 0 && std::isfinite(s_.collision_weight), "the collision weight must be >= 0",
           "active.collision_weight");
   require(s_.temperature > 0 && std::isfinite(s_.temperature), "the temperature must be positive",
@@ -212,15 +214,20 @@ PlannedGrasp GraspPlanner::score(const GraspCommand& c, const Selected& sel, con
   }
   // Pairwise Bhattacharyya lower bound on I(H; Y), and its part about the object.
   const double inv = 1.0 / (8.0 * s_.sigma * s_.sigma);
+  // The common offset's share of the squared pad-distance sum (0: off, the plain distance).
+  const double s2 = s_.offset_sigma * s_.offset_sigma;
+  const double common = s2 > 0.0 ? s2 / (s_.sigma * s_.sigma + static_cast<double>(P) * s2) : 0.0;
   double info = 0.0, object_info = 0.0;
   for (std::size_t i = 0; i < K; ++i) {
     double inner = 0.0, same = 0.0;
     for (std::size_t j = 0; j < K; ++j) {
-      double d2 = 0.0;
+      double d2 = 0.0, sum = 0.0;
       for (std::size_t e = 0; e < D; ++e) {
         const double diff = y[i * D + e] - y[j * D + e];
         d2 += diff * diff;
+        if (e < P) sum += diff;
       }
+      if (common > 0.0) d2 = std::max(0.0, d2 - common * sum * sum);
       const double term = sel.w[j] * std::exp(-d2 * inv);
       inner += term;
       if (sel.h[j]->object == sel.h[i]->object) same += term;

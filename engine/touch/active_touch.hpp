@@ -23,6 +23,10 @@
 // observed with isotropic Gaussian noise `sigma`), estimated by the pairwise Bhattacharyya lower
 // bound of Kolchinsky and Tracey (2017):
 //     I >= - sum_i w_i ln sum_j w_j exp(-|y_i - y_j|^2 / (8 sigma^2))     (nats, <= H(w))
+// With the arm's per-grasp offset marginalized (`offset_sigma` = s > 0), the P pad distances
+// share an offset: covariance S = sigma^2 I + s^2 1 1^T, and |y_i - y_j|^2 / sigma^2 becomes the
+// Mahalanobis form  (|D|^2 - s^2 (sum D)^2 / (sigma^2 + P s^2)) / sigma^2  over the pad part D
+// (Sherman-Morrison); the blocked flag keeps its own term.
 // Weights are the hypotheses' weights tempered by `temperature` and renormalized over the K.
 // The same estimator splits I(H; Y) = I(O; Y) + I(H; Y | O) into what the outcome tells about
 // the object O and what it tells about the pose among one object's hypotheses (the within-object
@@ -61,6 +65,13 @@ struct ActiveSettings {
   std::size_t hypotheses = 16;      ///< K, hypotheses the outcomes are predicted under
   std::size_t leaders = 8;          ///< hypotheses whose models the candidates aim at
   double sigma = 0.004;             ///< m, noise of a predicted pad distance (arm pose, foam)
+  /// m, the arm's per-grasp error along the pad's normal, common to the whole patch (0: off, the
+  /// arm's error is left in `sigma`). When > 0 the outcomes' pad distances are compared with the
+  /// offset marginalized: covariance sigma^2 I + offset_sigma^2 1 1^T, so two hypotheses whose
+  /// predicted patches differ by a constant (parallel faces a few mm apart) are told apart only
+  /// as far as the offset allows, and a patch spanning both surfaces of a distinguishing feature
+  /// (a raised face and the flange face) measures their difference free of the offset.
+  double offset_sigma = 0.0;
   double cap = 0.02;                ///< m, predicted distances clamped to +-cap
   double collision_weight = 1.0;    ///< nats per unit of blocked hypothesis weight
   double temperature = 1.0;         ///< ln wt divided by this before normalizing (> 0)

@@ -100,6 +100,23 @@ const StepModels& Calibration::at(int step) const {
   return ranges[k];
 }
 
+const ConformalScores& AnswerSetCalibration::at(int step) const {
+  if (steps.empty()) throw Error("the calibration has no answer-set scores", {}, "answer_sets.steps");
+  return steps[static_cast<std::size_t>(calibrated_step(step) - 1)];
+}
+
+int AnswerSetCalibration::calibrated_step(int step) const {
+  return std::clamp(step, 1, static_cast<int>(steps.size()));
+}
+
+nlohmann::ordered_json simulation_of(const nlohmann::ordered_json& config) {
+  nlohmann::ordered_json s = nlohmann::ordered_json::object();
+  if (!config.is_object()) return s;
+  for (const auto& [key, value] : config.items())
+    if (key == "noise" || key.starts_with("noise.") || key == "sensing" || key == "sensors") s[key] = value;
+  return s;
+}
+
 namespace {
 /// A term standardized by its mean and scale, clamped to [-clamp, clamp] when clamp > 0.
 inline double standardized(double v, double mean, double scale, double clamp) {
@@ -394,6 +411,44 @@ LogisticModel model_from(const nlohmann::ordered_json& j, const std::string& key
 
 }  // namespace
 
+namespace {
+/// The answer sets' part of a calibration file, every count and number checked.
+AnswerSetCalibration read_answer_sets(const nlohmann::ordered_json& s, const std::string& file) {
+  if (!s.is_object()) throw Error("expected an object or null", file, "answer_sets");
+  AnswerSetCalibration a;
+  if (!s.contains("alpha") || !s["alpha"].is_number() || !(s["alpha"].get<double>() > 0.0 && s["alpha"].get<double>() < 1.0))
+    throw Error("alpha must be a number in (0, 1)", file, "answer_sets.alpha");
+  a.alpha = s["alpha"].get<double>();
+  a.simulation = s.contains("simulation") && s["simulation"].is_object() ? s["simulation"] : nlohmann::ordered_json::object();
+  if (!s.contains("steps") || !s["steps"].is_array() || s["steps"].empty())
+    throw Error("missing the scores per step (a non-empty array)", file, "answer_sets.steps");
+  for (std::size_t k = 0; k < s["steps"].size(); ++k) {
+    const auto& r = s["steps"][k];
+    const std::string where = "answer_sets.steps[" + std::to_string(k) + "]";
+    if (!r.is_object()) throw Error("expected an object", file, where);
+    if (!r.contains("step") || !r["step"].is_number_integer() || r["step"].get<long long>() != static_cast<long long>(k + 1))
+      throw Error("steps must be 1, 2, ... in order", file, where + ".step");
+    if (!r.contains("gaps") || !r["gaps"].is_array()) throw Error("expected an array of gaps", file, where + ".gaps");
+    if (!r.contains("infinite") || !r["infinite"].is_number_unsigned())
+      throw Error("expected a count of runs without a hypothesis of their class", file, where + ".infinite");
+    const std::size_t infinite = r["infinite"].get<std::size_t>();
+    if (!r.contains("runs") || !r["runs"].is_number_unsigned() || r["runs"].get<std::size_t>() != r["gaps"].size() + infinite ||
+        infinite > r["runs"].get<std::size_t>())
+      throw Error("runs must be the number of gaps plus the infinite ones", file, where + ".runs");
+    if (r["runs"].get<std::size_t>() == 0) throw Error("a step without runs", file, where + ".runs");
+    std::vector<double> gaps;
+    gaps.reserve(r["gaps"].size());
+    for (const auto& g : r["gaps"]) {
+      if (!g.is_number() || !std::isfinite(g.get<double>()) || g.get<double>() < 0.0)
+        throw Error("gaps must be finite numbers >= 0", file, where + ".gaps");
+      gaps.push_back(g.get<double>());
+    }
+    a.steps.emplace_back(std::move(gaps), infinite);
+  }
+  return a;
+}
+}  // namespace
+
 nlohmann::ordered_json to_json(const Calibration& c) {
   nlohmann::ordered_json j;
   j["format"] = kFormat;
@@ -411,6 +466,20 @@ nlohmann::ordered_json to_json(const Calibration& c) {
     j["steps"].push_back(r);
   }
   j["open_set_threshold"] = c.open_set_threshold ? nlohmann::ordered_json(*c.open_set_threshold) : nullptr;
+  if (c.answer_sets) {
+    const AnswerSetCalibration& a = *c.answer_sets;
+    nlohmann::ordered_json s;
+    s["alpha"] = a.alpha;
+    s["score"] = "log-weight gap of the true class of congruent objects (engine/recognition/answer_set.hpp)";
+    s["simulation"] = a.simulation;
+    s["steps"] = nlohmann::ordered_json::array();
+    for (std::size_t k = 0; k < a.steps.size(); ++k)
+      s["steps"].push_back({{"step", k + 1}, {"runs", a.steps[k].size()}, {"infinite", a.steps[k].infinite()},
+                            {"gaps", a.steps[k].finite()}});
+    j["answer_sets"] = s;
+  } else {
+    j["answer_sets"] = nullptr;
+  }
   j["provenance"] = c.provenance.is_null() ? nlohmann::ordered_json::object() : c.provenance;
   return j;
 }
@@ -486,6 +555,7 @@ Calibration read_calibration(const std::filesystem::path& path, const std::strin
                     "steps[" + std::to_string(k) + "].in_database");
     c.open_set_threshold = t.get<double>();
   }
+  if (j.contains("answer_sets") && !j["answer_sets"].is_null()) c.answer_sets = read_answer_sets(j["answer_sets"], file);
   c.provenance = j.contains("provenance") ? j["provenance"] : nlohmann::ordered_json::object();
   return c;
 }

@@ -14,6 +14,7 @@
 // when right) and of the paper preset (0.85-0.98) are not probabilities; this is.
 #pragma once
 
+#include "engine/recognition/answer_set.hpp"
 #include "engine/recognition/recognizer.hpp"
 
 #include <nlohmann/json.hpp>
@@ -80,11 +81,28 @@ struct StepModels {
   std::array<double, 3> l2{};
 };
 
-/// The calibration file (JSON, "format": "touchstone-calibration", version 3; version 2, whose
-/// models are all linear, is read as well): one set of models per range of steps (how far an
-/// exploration is changes what the features mean).
+/// Set answers (engine/recognition/answer_set.hpp): the true class's log-weight gap on each
+/// calibration run at each step, and what the runs were simulated with (the guarantee holds for
+/// runs drawn alike).
+struct AnswerSetCalibration {
+  double alpha = 0.05;                     ///< the level sets are answered at by default
+  nlohmann::ordered_json simulation;       ///< noise profile, its overrides, sensing, sensors
+  std::vector<ConformalScores> steps;      ///< step k at [k - 1]
+  /// The scores of a step (1-based); steps past the last calibrated one use the last.
+  const ConformalScores& at(int step) const;
+  /// The step whose scores at(step) uses.
+  int calibrated_step(int step) const;
+};
+
+/// The simulation settings an answer-set calibration records, from an experiment configuration's
+/// JSON (touchstone's config_json): noise, noise.*, sensing, sensors.
+nlohmann::ordered_json simulation_of(const nlohmann::ordered_json& config);
+
+/// The calibration file (JSON, "format": "touchstone-calibration", version 4; versions 2 (all
+/// models linear) and 3 (no answer sets) are read as well): one set of models per range of steps
+/// (how far an exploration is changes what the features mean), and the answer sets' scores.
 struct Calibration {
-  static constexpr int kVersion = 3;
+  static constexpr int kVersion = 4;
   static constexpr int kOldestVersion = 2;
   std::string database_fingerprint;   ///< of the database the runs explored
   std::vector<std::string> features;  ///< confidence_feature_names() when fitted
@@ -93,6 +111,8 @@ struct Calibration {
   /// (unset: every answer names an object). Chosen on calibration runs by
   /// choose_open_set_threshold; needs in_database in every range.
   std::optional<double> open_set_threshold;
+  /// Set answers (unset: a calibration fitted without them, or before version 4).
+  std::optional<AnswerSetCalibration> answer_sets;
   nlohmann::ordered_json provenance;  ///< what it was fitted on (stores, runs, steps, seeds)
 
   /// The range of a step (1-based; steps past the last range's first use the last).

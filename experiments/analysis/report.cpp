@@ -78,8 +78,19 @@ void put_error(J& j, const std::string& prefix, const ErrorSummary& e, double sc
 J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunRecord*>& runs, int steps,
                 const ErrorBounds& bounds, const ClassMap& classes, bool clustered) {
   const std::vector<std::string>& stages = h.stages;
+  // Set answers (a calibration's answer sets in the run): the set's size, whether it held the
+  // truth, whether it was informative.
+  auto column = [&](const char* name) {
+    const auto it = std::find(h.step_values.begin(), h.step_values.end(), name);
+    return it == h.step_values.end() ? std::size_t(-1) : static_cast<std::size_t>(it - h.step_values.begin());
+  };
+  const std::size_t size_col = column("answer_set.size"), covers_col = column("answer_set.covers"),
+                    informative_col = column("answer_set.informative");
   J rows = J::array();
   for (int k = 0; k < steps; ++k) {
+    std::map<int, ClusterCounts> covered_by_object;
+    std::vector<double> set_sizes;
+    std::size_t covered = 0, informative = 0;
     std::map<int, ClusterCounts> strict_by_object, class_by_object;
     std::vector<StepSample> samples;
     std::vector<std::vector<double>> stage_times(stages.size());
@@ -98,6 +109,16 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
         stage_times[i].push_back(s.stage_times_s[i]);
       posterior.push_back(s.posterior_true);
       contacts.push_back(s.contacts);
+      if (covers_col < s.values.size() && size_col < s.values.size() && informative_col < s.values.size() &&
+          !std::isnan(s.values[covers_col])) {
+        const bool c = s.values[covers_col] == 1.0;
+        set_sizes.push_back(s.values[size_col]);
+        covered += c ? 1 : 0;
+        informative += s.values[informative_col] == 1.0 ? 1 : 0;
+        ClusterCounts& by = covered_by_object[r->object];
+        ++by.trials;
+        by.successes += c ? 1 : 0;
+      }
     }
     const StepSummary m = summarize_step(k + 1, samples, bounds);
     J row;
@@ -122,6 +143,24 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
     row["recognition_rate_class_ci95"] =
         J::array({m.recognition_rate_class_ci95.lo, m.recognition_rate_class_ci95.hi});
     row["recognition_rate_class_cluster_ci95"] = bootstrap(class_by_object);
+    // Set answers: the share of runs whose set held the true class (Wilson: runs independent;
+    // the bootstrap: objects independent), the sets' sizes in classes (an uninformative set
+    // counts as every class), the share of informative sets. Null without answer sets.
+    if (!set_sizes.empty()) {
+      const std::size_t n = set_sizes.size();
+      const Interval w = wilson_interval(covered, n);
+      row["set_coverage"] = double(covered) / double(n);
+      row["set_coverage_ci95"] = J::array({w.lo, w.hi});
+      row["set_coverage_cluster_ci95"] = bootstrap(covered_by_object);
+      row["set_size_median"] = opt(median(set_sizes));
+      row["set_size_mean"] = mean_t_interval(set_sizes).mean;
+      row["set_size_p90"] = opt(quantile(set_sizes, 0.9));
+      row["set_informative_share"] = double(informative) / double(n);
+    } else {
+      for (const char* key : {"set_coverage", "set_coverage_ci95", "set_coverage_cluster_ci95", "set_size_median",
+                              "set_size_mean", "set_size_p90", "set_informative_share"})
+        row[key] = nullptr;
+    }
     // The interface's keys first, then the rest.
     row["position_error_m_median"] = opt(m.position_m.median);
     row["orientation_error_deg_median"] = opt(m.orientation_rad.median, kDeg);
@@ -175,6 +214,9 @@ J summary_json(const J& per_step, const std::vector<const io::RunRecord*>& runs)
   s["position_error_m_median_final"] = last["position_error_m_median"];
   s["orientation_error_deg_median_final"] = last["orientation_error_deg_median"];
   s["symmetric_orientation_error_deg_median_final"] = last["symmetric_orientation_error_deg_median"];
+  s["set_coverage_step20"] = per_step[k20]["set_coverage"];
+  s["set_coverage_step20_cluster_ci95"] = per_step[k20]["set_coverage_cluster_ci95"];
+  s["set_size_median_step20"] = per_step[k20]["set_size_median"];
   s["steps_to_90_percent"] = steps_to_rate(per_step, 0.9);
   std::vector<double> times;
   for (const io::RunRecord* r : runs)
@@ -755,6 +797,26 @@ void print_stages(const J& rows, const std::string& label, std::ostream& out) {
   out << "\n";
 }
 
+void print_answer_sets(const J& rows, const std::string& label, std::ostream& out) {
+  if (!rows.is_array() || rows.empty() || rows[0].value("set_coverage", J(nullptr)).is_null()) return;
+  out << "\nSet answers" << label
+      << " (the calibration's conformal sets of classes): the share of runs whose set held the truth, and "
+         "the sets' sizes (an uninformative set counts as every class)\n"
+         "  step  runs  right (%)  coverage (%)  Wilson (%)  obj-boot (%)  size median  mean   p90  informative (%)\n";
+  auto range = [](const J& v) { return v.is_array() ? pct(v[0]) + "-" + pct(v[1]) : std::string("-"); };
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const J& r = rows[i];
+    const int step = r["step"].get<int>();
+    if (!(step == 1 || step == 5 || step % 10 == 0 || i + 1 == rows.size())) continue;
+    out << "  " << std::setw(4) << step << "  " << std::setw(4) << r["runs"].get<std::size_t>() << "  " << std::setw(9)
+        << fmt(r["recognition_rate"], 100, 1) << "  " << std::setw(12) << fmt(r["set_coverage"], 100, 1) << "  "
+        << std::setw(10) << range(r["set_coverage_ci95"]) << "  " << std::setw(12)
+        << range(r["set_coverage_cluster_ci95"]) << "  " << std::setw(11) << fmt(r["set_size_median"], 1, 1) << "  "
+        << std::setw(5) << fmt(r["set_size_mean"], 1, 1) << "  " << std::setw(4) << fmt(r["set_size_p90"], 1, 0)
+        << "  " << std::setw(15) << fmt(r["set_informative_share"], 100, 1) << "\n";
+  }
+}
+
 void print_truth_pose(const J& rows, const std::string& label, std::ostream& out) {
   if (!rows.is_array()) return;
   out << "\nThe true object at its true pose" << label
@@ -853,6 +915,7 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
     print_intervals(report, out);
     print_confidence(report, out);
     print_open_set(report, out);
+    print_answer_sets(report["per_step"], "", out);
     print_truth_pose(report.value("truth_pose", J(nullptr)), "", out);
     print_stages(report.value("stages", J(nullptr)), "", out);
     out << "\nPer object:\n";
@@ -890,6 +953,8 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
   }
   out << "  pareto: R = on the front of recognition rate vs time per step, E = of position error "
          "vs time per step\n";
+  for (const auto& v : report["variants"])
+    print_answer_sets(v.value("per_step", J(nullptr)), ", variant " + v["label"].get<std::string>(), out);
   for (const auto& v : report["variants"])
     print_truth_pose(v.value("truth_pose", J(nullptr)), ", variant " + v["label"].get<std::string>(), out);
   for (const auto& v : report["variants"])

@@ -62,6 +62,7 @@ struct CalibrateOptions {
   double open_set_confidence = 0.9;   ///< ... in this share of resamples of the explored objects
   int open_set_step = 20;        ///< at this step (the last when the runs are shorter)
   std::string step_ranges;       ///< first steps of the ranges, "1,2,3,..." ("": the default)
+  std::optional<double> alpha;   ///< --alpha: the answer sets' level (unset: 0.05 when the stores allow)
 };
 
 /// --step-ranges: first steps, ascending from 1.
@@ -457,6 +458,12 @@ int run_calibrate(const CalibrateOptions& o) {
   auto object_group = [&](const std::string& name) { return groups.emplace(name, static_cast<int>(groups.size())).first->second; };
   std::vector<std::string> database_order;
   std::string fingerprint;
+  // Set answers: per step, the true class's log-weight gap of every run of a known object, and
+  // the simulation the runs share (the guarantee is for runs simulated alike).
+  std::vector<std::vector<double>> set_gaps;
+  std::size_t shortest_run = std::numeric_limits<std::size_t>::max();
+  std::optional<nlohmann::ordered_json> set_simulation;
+  std::string no_set_reason;
   nlohmann::ordered_json sources = nlohmann::ordered_json::array();
   const RunRange range = parse_runs(o.runs);
   for (const std::string& path : o.stores) {
@@ -479,6 +486,33 @@ int run_calibrate(const CalibrateOptions& o) {
     }
     const std::set<int> hidden = experiments::hidden_explored_objects(c.header);
     const experiments::ClassMap classes = experiments::class_map(c.header);
+    const auto gap_column = std::find(c.header.step_values.begin(), c.header.step_values.end(), "set.truth_gap");
+    const auto config_json = nlohmann::ordered_json::parse(c.header.config_json, nullptr, false);
+    if (gap_column == c.header.step_values.end()) {
+      if (no_set_reason.empty()) no_set_reason = path + " has no per-step 'set.truth_gap' (written before set answers)";
+    } else {
+      const auto sim = experiments::simulation_of(config_json);
+      if (c.header.variant_labels.size() > 1)
+        throw Error("a run store of " + std::to_string(c.header.variant_labels.size()) +
+                    " variants: answer sets are calibrated on runs of one configuration", path, "/header/variant_labels");
+      if (set_simulation && *set_simulation != sim)
+        throw Error("the run store simulated " + sim.dump() + ", " + o.stores.front() + " " + set_simulation->dump() +
+                    ": answer sets are calibrated on runs simulated alike", path, "/header/config");
+      set_simulation = sim;
+      const auto col = static_cast<std::size_t>(gap_column - c.header.step_values.begin());
+      for (const io::RunRecord& r : c.runs) {
+        if (hidden.count(r.object)) continue;
+        shortest_run = std::min(shortest_run, r.steps.size());
+        if (set_gaps.size() < r.steps.size()) set_gaps.resize(r.steps.size());
+        for (std::size_t k = 0; k < r.steps.size(); ++k) {
+          const double g = r.steps[k].values.at(col);
+          if (std::isnan(g) || g < 0.0)
+            throw Error("run " + std::to_string(r.run) + " of '" + c.header.objects.at(static_cast<std::size_t>(r.object)) +
+                        "' has a gap that is not a number >= 0 at step " + std::to_string(k + 1), path, "/steps/values");
+          set_gaps[k].push_back(g);
+        }
+      }
+    }
     std::size_t steps = 0, hidden_runs = 0;
     for (const io::RunRecord& r : c.runs) {
       hidden_runs += hidden.count(r.object) ? 1 : 0;
@@ -564,6 +598,25 @@ int run_calibrate(const CalibrateOptions& o) {
   } else {
     cal.provenance["open_set"] = nullptr;   // no hidden runs: no open-set score
   }
+  // Set answers: the gaps of steps every run of a known object reached (a store without them, or
+  // of hidden objects only, gives none; --alpha then is an error).
+  if (!no_set_reason.empty()) set_gaps.clear();
+  if (set_gaps.empty() && no_set_reason.empty()) no_set_reason = "no runs of known objects";
+  if (!set_gaps.empty()) {
+    set_gaps.resize(std::min(set_gaps.size(), shortest_run));
+    experiments::AnswerSetCalibration a;
+    a.alpha = o.alpha.value_or(0.05);
+    a.simulation = *set_simulation;
+    for (auto& g : set_gaps) a.steps.emplace_back(std::move(g));
+    cal.answer_sets = std::move(a);
+    cal.provenance["answer_sets"] = {{"runs_per_step", cal.answer_sets->steps.front().size()},
+                                     {"steps", cal.answer_sets->steps.size()},
+                                     {"assumes", "a run is drawn as the calibration runs were (its object, pose and "
+                                                 "grasps alike); runs of one object are not independent, so the "
+                                                 "coverage is marginal over objects: check it on held-out runs"}};
+  } else if (o.alpha) {
+    throw Error("answer sets need the true class's gap at every step: " + no_set_reason, o.stores.front(), "--alpha");
+  }
   cal.provenance["fitted_on"] = sources;
   cal.provenance["step_answers"] = rows.size();
   experiments::write_calibration(o.out, cal);
@@ -595,6 +648,14 @@ int run_calibrate(const CalibrateOptions& o) {
                 << " % of resamples of the explored objects)" << std::setprecision(3);
     else
       std::cout << "; no open-set score (no runs of hidden objects)";
+    if (cal.answer_sets) {
+      const auto& a = *cal.answer_sets;
+      std::cout << "; answer sets at alpha " << std::setprecision(2) << a.alpha << " over " << a.steps.size()
+                << " steps of " << a.steps.front().size() << " runs (the gap admitted at step " << a.steps.size() << ": "
+                << std::setprecision(3) << a.steps.back().threshold(a.alpha) << ")";
+    } else {
+      std::cout << "; no answer sets (" << no_set_reason << ")";
+    }
     std::cout << "; judge it on other runs: touchstone report STORE --calibration " << o.out << "\n";
   }
   return 0;
@@ -673,6 +734,10 @@ void register_experiment(CLI::App& app) {
   cb->add_option("--step-ranges", co->step_ranges,
                  "First steps of the ranges of steps with their own models, ascending from 1 "
                  "(default 1,2,3,5,7,9,12,16)");
+  cb->add_option("--alpha", co->alpha,
+                 "Set answers: the level their coverage guarantee is for (the set holds the truth with "
+                 "probability at least 1 - alpha; default 0.05; recognize --alpha overrides it)")
+      ->check(CLI::Range(1e-9, 1.0 - 1e-9));
   cb->add_option("--open-set-step", co->open_set_step,
                  "Open set: ... at this step (default 20; the last when runs are shorter)")
       ->check(CLI::PositiveNumber);

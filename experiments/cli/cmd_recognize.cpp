@@ -17,6 +17,7 @@
 #include "engine/geometry/kabsch.hpp"
 #include "engine/geometry/pose_error.hpp"
 #include "engine/geometry/symmetry.hpp"
+#include "engine/recognition/answer_set.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "engine/touch/active_touch.hpp"
 #include "engine/touch/fusion.hpp"
@@ -58,6 +59,7 @@ struct RecognizeOptions {
   std::string db, out, ground_truth, object;
   std::string calibration;           ///< --calibration: the confidence model (touchstone calibrate)
   std::optional<double> open_set_threshold;  ///< --open-set-threshold (unset: the calibration's)
+  std::optional<double> alpha;               ///< --alpha: the answer sets' level (unset: the calibration's)
   std::vector<std::string> logs, clouds;  ///< --log files; --cloud files or folders
   std::string free;                  ///< --free: the free-space cloud of a single --cloud
   std::vector<std::string> only;     ///< --only: the objects the answer may name (empty: all)
@@ -156,6 +158,8 @@ struct Context {
   SymmetryCache& symmetries;     ///< thread-safe
   const io::CongruenceRecord* congruence = nullptr;   ///< the database's classes (null: not known)
   const experiments::Calibration* calibration = nullptr;  ///< --calibration (null: none)
+  std::vector<std::uint32_t> class_of = {};  ///< object -> class of congruent objects (answer sets)
+  std::size_t classes = 0;
 };
 
 /// The names of object i's congruent class (itself alone when in none, or when none are known).
@@ -164,6 +168,30 @@ nlohmann::ordered_json class_json(const Context& c, std::size_t i) {
   for (std::size_t k : c.congruence ? c.congruence->class_of(i) : std::vector<std::size_t>{i})
     names.push_back(c.db.info(k).name);
   return names;
+}
+
+/// The step's set answer (the calibration's answer sets, at --alpha or the calibration's level):
+/// the classes of congruent objects that hold the truth with probability at least 1 - alpha, each
+/// with its conformal p-value (it stays in the set for every alpha below it) and its log-weight gap
+/// to the leader, or "informative": false when no class can be excluded.
+nlohmann::ordered_json answer_set_json(const Context& c, const StepResult& r) {
+  const experiments::AnswerSetCalibration& a = *c.calibration->answer_sets;
+  const double alpha = c.o.alpha.value_or(a.alpha);
+  const AnswerSet set = conformal_set(class_log_weight_gaps(r.hypotheses, c.class_of, c.classes), a.at(r.step), alpha);
+  std::vector<std::vector<std::size_t>> members(c.classes);
+  for (std::size_t i = 0; i < c.class_of.size(); ++i) members[c.class_of[i]].push_back(i);
+  nlohmann::ordered_json j;
+  j["alpha"] = alpha;
+  j["informative"] = set.informative;
+  j["size"] = set.size;
+  j["calibrated_step"] = a.calibrated_step(r.step);
+  j["members"] = nlohmann::ordered_json::array();
+  for (const AnswerSetMember& m : set.members) {
+    nlohmann::ordered_json names = nlohmann::ordered_json::array();
+    for (std::size_t i : members[m.cls]) names.push_back(c.db.info(i).name);
+    j["members"].push_back({{"objects", names}, {"p_value", m.p_value}, {"log_weight_gap", m.gap}});
+  }
+  return j;
 }
 
 /// One input's outcome.
@@ -386,6 +414,7 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     } else {
       st["confidence"] = nullptr;
     }
+    st["answer_set"] = c.calibration && c.calibration->answer_sets ? answer_set_json(c, r) : nullptr;
     st["reason"] = refused ? nlohmann::ordered_json("not_in_database") : nullptr;
     st["best_guess"] = refused ? st["object"] : nullptr;
     if (refused) st["object"] = nullptr;
@@ -722,7 +751,14 @@ int run_recognize(const RecognizeOptions& o) {
   if (calibration && o.open_set_threshold && !calibration->in_database(1, std::vector<double>(calibration->features.size(), 0.0)))
     throw Error("the calibration has no open-set (in-database) model: fit it with leave-one-out runs too",
                 o.calibration, "steps[0].in_database");
-  const Context c{o, rs, db, largest, symmetries, source->congruence(), calibration ? &*calibration : nullptr};
+  if (o.alpha && (!calibration || !calibration->answer_sets))
+    throw Error(calibration ? "the calibration has no answer sets: fit it with `touchstone calibrate` on run stores "
+                              "of this version"
+                            : "set answers need a calibration (--calibration)",
+                calibration ? o.calibration : std::string(), calibration ? "answer_sets" : "--alpha");
+  Context c{o, rs, db, largest, symmetries, source->congruence(), calibration ? &*calibration : nullptr};
+  c.class_of = class_indices(db.size(), source->congruence() ? source->congruence()->classes()
+                                                             : std::vector<std::vector<std::size_t>>{}, c.classes);
   if (many) return recognize_many(c, inputs, outs);
 
   const InputRun run = recognize_one(c, inputs.front(), o.out, stderr_is_terminal() && !o.common.json);
@@ -785,6 +821,10 @@ void register_recognize(CLI::App& app) {
                   "gets \"confidence\" {object, pose, in_database}; below its open-set threshold the "
                   "in-database score makes the answer "
                   "\"object\": null, \"reason\": \"not_in_database\"");
+  sub->add_option("--alpha", o->alpha,
+                  "Set answers (a calibration with answer sets): each step's \"answer_set\" holds the true "
+                  "object's class with probability at least 1 - alpha (default: the calibration's, 0.05)")
+      ->check(CLI::Range(1e-9, 1.0 - 1e-9));
   sub->add_option("--open-set-threshold", o->open_set_threshold,
                   "In-database score below which the answer is \"not in the database\" (default: the "
                   "calibration file's, chosen on its calibration runs; 0: always name an object)")

@@ -308,6 +308,10 @@ std::vector<Parameter> declaration() {
                       {"active_attempts"}, TS_FIELD(active.attempts)));
   d.push_back(real("active.sigma_m", "m", 1e-5, 1, "", "Active touch: noise of a predicted pad distance",
                    {"active_sigma"}, TS_FIELD(active.sigma)));
+  d.push_back(real("active.offset_sigma_m", "m", 0, 1, "",
+                   "Active touch: the arm's per-grasp error along the pad normal, common to the patch, "
+                   "marginalized when outcomes are compared (0: off, left in active.sigma_m)",
+                   {}, TS_FIELD(active.offset_sigma)));
   d.push_back(real("active.collision_weight", "", 0, 1e6, "",
                    "Active touch: score penalty (nats) per unit of hypothesis weight that blocks the hand",
                    {"active_collision_weight"}, TS_FIELD(active.collision_weight)));

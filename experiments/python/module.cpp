@@ -5,6 +5,7 @@
 // Python part (touchstone/__init__.py) wraps this extension, `touchstone._touchstone`; the type
 // stubs are touchstone/__init__.pyi.
 #include "experiments/allocator.hpp"
+#include "experiments/analysis/calibration.hpp"
 #include "experiments/analysis/report.hpp"
 #include "experiments/params/config.hpp"
 #include "experiments/params/parameters.hpp"
@@ -18,6 +19,7 @@
 #include "datasets/simulator.hpp"
 #include "engine/database/symmetry_cache.hpp"
 #include "engine/geometry/symmetry.hpp"
+#include "engine/recognition/answer_set.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "io/db_store.hpp"
 #include "io/log_store.hpp"
@@ -290,8 +292,23 @@ py::dict step_dict(const Database& db, const StepResult& r, const std::optional<
 class PyRecognizer {
  public:
   PyRecognizer(std::shared_ptr<PyDatabase> d, const std::string& preset, const std::string& method,
-               std::uint64_t seed, const py::dict& params, const std::optional<std::vector<std::string>>& only)
+               std::uint64_t seed, const py::dict& params, const std::optional<std::vector<std::string>>& only,
+               const std::optional<std::string>& calibration, const std::optional<double>& alpha)
       : d_(std::move(d)), m_(method_settings(preset, params)) {
+    // Set answers (as `recognize --calibration FILE --alpha A`): the calibration's answer sets.
+    if (calibration) {
+      calibration_ = experiments::read_calibration(*calibration, experiments::file_fingerprint(*d_->reader));
+      if (!calibration_->answer_sets)
+        throw Error("the calibration has no answer sets: fit it with `touchstone calibrate` on run stores of this "
+                    "version", *calibration, "answer_sets");
+    } else if (alpha) {
+      throw Error("set answers need a calibration", {}, "alpha");
+    }
+    if (alpha && !(*alpha > 0.0 && *alpha < 1.0)) throw Error("alpha must lie in (0, 1)", {}, "alpha");
+    alpha_ = alpha;
+    const io::CongruenceRecord* congruence = d_->reader->congruence();
+    class_of_ = class_indices(d_->db->size(), congruence ? congruence->classes() : std::vector<std::vector<std::size_t>>{},
+                              classes_);
     const auto parsed = parse_method(method);
     if (!parsed) throw Error("unknown method '" + method + "' (bricpsf, batch-ransac, ransac-icp, ransac-icp-fs)", {}, "method");
     m_.recognizer.method = *parsed;
@@ -318,7 +335,35 @@ class PyRecognizer {
       py::gil_scoped_release release;
       r = rec_->step(c, f, g);
     }
-    return step_dict(*d_->db, r, std::nullopt);
+    py::dict o = step_dict(*d_->db, r, std::nullopt);
+    o["answer_set"] = answer_set(r);
+    return o;
+  }
+
+  /// The step's set answer (None without a calibration), as `recognize --json` gives it.
+  py::object answer_set(const StepResult& r) const {
+    if (!calibration_) return py::none();
+    const experiments::AnswerSetCalibration& a = *calibration_->answer_sets;
+    const double alpha = alpha_.value_or(a.alpha);
+    const AnswerSet set = conformal_set(class_log_weight_gaps(r.hypotheses, class_of_, classes_), a.at(r.step), alpha);
+    py::dict o;
+    o["alpha"] = alpha;
+    o["informative"] = set.informative;
+    o["size"] = set.size;
+    o["calibrated_step"] = a.calibrated_step(r.step);
+    py::list members;
+    for (const AnswerSetMember& m : set.members) {
+      py::list names;
+      for (std::size_t i = 0; i < class_of_.size(); ++i)
+        if (class_of_[i] == m.cls) names.append(d_->db->info(i).name);
+      py::dict x;
+      x["objects"] = names;
+      x["p_value"] = m.p_value;
+      x["log_weight_gap"] = m.gap;
+      members.append(x);
+    }
+    o["members"] = members;
+    return o;
   }
 
   /// Every step of a log, as `touchstone recognize --log` takes them (the same settings, fusion
@@ -349,7 +394,11 @@ class PyRecognizer {
       }
     }
     py::list out;
-    for (std::size_t k = 0; k < results.size(); ++k) out.append(step_dict(*d_->db, results[k], scored[k]));
+    for (std::size_t k = 0; k < results.size(); ++k) {
+      py::dict o = step_dict(*d_->db, results[k], scored[k]);
+      o["answer_set"] = answer_set(results[k]);
+      out.append(o);
+    }
     return out;
   }
 
@@ -373,6 +422,10 @@ class PyRecognizer {
   bool inside_margin_given_ = false;
   std::unique_ptr<Recognizer> rec_;
   SymmetryCache symmetries_;
+  std::optional<experiments::Calibration> calibration_;   ///< with answer sets (null: none)
+  std::optional<double> alpha_;
+  std::vector<std::uint32_t> class_of_;
+  std::size_t classes_ = 0;
 };
 
 /// The fused clouds of a log, step by step (the recognizer's inputs), on a database's box.
@@ -658,9 +711,11 @@ PYBIND11_MODULE(_touchstone, m) {
 
   py::class_<PyRecognizer>(m, "Recognizer", "The C++ recognizer (touchstone.Recognizer wraps it).")
       .def(py::init<std::shared_ptr<PyDatabase>, const std::string&, const std::string&, std::uint64_t,
-                    const py::dict&, const std::optional<std::vector<std::string>>&>(),
+                    const py::dict&, const std::optional<std::vector<std::string>>&, const std::optional<std::string>&,
+                    const std::optional<double>&>(),
            py::arg("db"), py::arg("preset") = "improved", py::arg("method") = "bricpsf", py::arg("seed") = 1,
-           py::arg("params") = py::dict(), py::arg("only") = py::none())
+           py::arg("params") = py::dict(), py::arg("only") = py::none(), py::arg("calibration") = py::none(),
+           py::arg("alpha") = py::none())
       .def("step", &PyRecognizer::step, py::arg("contacts"), py::arg("free") = py::none(),
            py::arg("grasps") = py::none())
       .def("recognize_log", &PyRecognizer::recognize_log, py::arg("log"), py::arg("steps") = 0)

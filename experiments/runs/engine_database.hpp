@@ -68,6 +68,10 @@ struct DatabaseGroup {
   std::vector<std::int32_t> to_file;           ///< recognizer index -> file index
   std::map<std::size_t, std::uint32_t> to_local;  ///< file index -> recognizer index
   std::unique_ptr<Database> database;
+  /// Classes of congruent objects (recognizer index -> class, engine/recognition/answer_set.hpp):
+  /// the database's recorded classes restricted to the group, each other object its own.
+  std::vector<std::uint32_t> class_of;
+  std::size_t classes = 0;
   /// FLANN indices, one per index setting its variants search with (built in prepare() where a
   /// variant needs one: the paper's preset); index_for() gives a variant's.
   std::vector<std::pair<FeatureIndexSettings, std::shared_ptr<const FeatureIndex>>> indices;

@@ -5,6 +5,7 @@
 #include "engine/database/feature_table.hpp"
 #include "engine/geometry/pose_error.hpp"
 #include "engine/geometry/symmetry.hpp"
+#include "engine/recognition/answer_set.hpp"
 #include "engine/recognition/recognizer.hpp"
 #include "engine/touch/active_touch.hpp"
 #include "engine/touch/fusion.hpp"
@@ -112,6 +113,19 @@ class RecognitionEngine final : public RunEngine {
           source = reader_;
         else
           source = std::make_shared<SubsetSource>(reader_, objects);
+        {  // classes of congruent objects among the group's, by the database's recorded classes
+          std::vector<std::vector<std::size_t>> members;
+          if (db_.description.is_object() && db_.description.contains("congruent_classes"))
+            for (const auto& names_of_class : db_.description["congruent_classes"]) {
+              std::vector<std::size_t> m;
+              for (const auto& n : names_of_class) {
+                const auto local = g.to_local.find(index_of(names, n.get<std::string>()));
+                if (local != g.to_local.end()) m.push_back(local->second);
+              }
+              members.push_back(std::move(m));
+            }
+          g.class_of = class_indices(objects.size(), members, g.classes);
+        }
         g.database = std::make_unique<Database>(source);
         g.database->set_surface(surface);
         experiments::set_memory_budget(*g.database, config.memory_budget_mb, db_label, "memory_budget_mb");
@@ -148,8 +162,18 @@ class RecognitionEngine final : public RunEngine {
     if (!db.is_object() || !db.contains("fingerprint")) db["fingerprint"] = source_fingerprint(*reader_);
     // The confidence model, fitted for this database (checked: another database's or version's
     // file is an error naming the file and the key).
-    if (!config.calibration.empty())
+    if (!config.calibration.empty()) {
       calibration_ = read_calibration(config.calibration, db["fingerprint"].get<std::string>());
+      // Set answers hold for runs simulated as the calibration runs were.
+      if (calibration_->answer_sets)
+        for (std::size_t k = 0; k < variants_.size(); ++k) {
+          const auto sim = simulation_of(nlohmann::ordered_json::parse(configs_[k]));
+          if (sim != calibration_->answer_sets->simulation)
+            throw Error("the calibration's answer sets were calibrated on runs simulated with " +
+                        calibration_->answer_sets->simulation.dump() + ", variant '" + labels_[k] + "' simulates " +
+                        sim.dump() + ": calibrate on runs like these", config.calibration, "answer_sets.simulation");
+        }
+    }
     header_.database_json = db.dump();
     nlohmann::ordered_json ver;
     ver["touchstone"] = TS_VERSION;
@@ -394,6 +418,20 @@ class RecognitionEngine final : public RunEngine {
         const auto g = std::find_if(sr.stages.begin(), sr.stages.end(), [&](const StageRun& x) { return x.name == stage; });
         s.values.push_back(g == sr.stages.end() ? nan : g->ran ? 1.0 : 0.0);
       }
+      // Set answers: the true class's log-weight gap (what `calibrate` fits on; NaN for a hidden
+      // object), and with a calibration's answer sets the set's size and whether it holds the truth.
+      const std::vector<double> gaps = class_log_weight_gaps(sr.hypotheses, group.class_of, group.classes);
+      s.values.push_back(hidden ? nan : gaps.at(group.class_of.at(local_true)));
+      if (calibration_ && calibration_->answer_sets) {
+        const AnswerSetCalibration& a = *calibration_->answer_sets;
+        const AnswerSet set = conformal_set(gaps, a.at(k), a.alpha);
+        const bool covers = set.informative ? std::any_of(set.members.begin(), set.members.end(), [&](const AnswerSetMember& m) {
+          return !hidden && m.cls == group.class_of.at(local_true);
+        }) : !hidden;
+        s.values.insert(s.values.end(), {static_cast<double>(set.size), covers ? 1.0 : 0.0, set.informative ? 1.0 : 0.0});
+      } else {
+        s.values.insert(s.values.end(), {nan, nan, nan});
+      }
       if (truth_pose_) {
         const std::optional<Funnel>& f = sr.watched;
         if (f && f->truth_pose_evaluated) {
@@ -501,6 +539,7 @@ const std::vector<std::string>& recognition_step_values() {
     std::vector<std::string> n{"confidence_object", "confidence_pose"};
     for (const std::string& f : confidence_feature_names()) n.push_back("feature." + f);
     for (const std::string& stage : pipeline_stage_names()) n.push_back("ran." + stage);
+    n.insert(n.end(), {"set.truth_gap", "answer_set.size", "answer_set.covers", "answer_set.informative"});
     return n;
   }();
   return names;

@@ -323,3 +323,51 @@ TEST_CASE("active touch: with_leader puts a hypothesis first with the share aske
   CHECK_THROWS_WITH_AS(with_leader(scene.hyps, 0, scene.world, 1.0, 1.0), doctest::Contains("share"), Error);
   CHECK_THROWS_WITH_AS(with_leader(scene.hyps, 0, scene.world, 0.5, 0.0), doctest::Contains("temperature"), Error);
 }
+
+TEST_CASE("active touch: with the arm's offset marginalized, a constant difference tells nothing and a patch's shape still does") {
+  // A 4 x 20 x 20 cm slab and one 2 mm thicker sharing its -x face: a pad (5.5 x 2.5 cm) on the
+  // middle of the +x face predicts the same patch 2 mm apart under the two, a difference the
+  // arm's per-grasp error (3 mm) could make alone; a pad reaching over the +x edges sees the
+  // thicker slab's extra strip change the patch's shape, which no common offset makes.
+  TwoBoxes scene;
+  scene.size_a = Vec3(0.04, 0.2, 0.2);
+  scene.size_b = Vec3(0.042, 0.2, 0.2);
+  scene.field_a = DistanceField::build(test::box_mesh(scene.size_a), true, DistanceFieldSettings{});
+  scene.field_b = DistanceField::build(test::box_mesh(scene.size_b), true, DistanceFieldSettings{});
+  scene.surf_a = box_surface(scene.size_a, 0.005);
+  scene.surf_b = box_surface(scene.size_b, 0.005);
+  scene.hyps[1].pose = scene.world * Pose(Eigen::Translation3d(0.001, 0.0, 0.0));
+  ActiveSettings plain;
+  plain.candidates = 400;
+  plain.sigma = 0.001;
+  plain.aim_radius = 0.0;   // aims anywhere on the models
+  ActiveSettings marginal = plain;
+  marginal.offset_sigma = 0.003;
+  const GraspPlanner p(Gripper(), plain), m(Gripper(), marginal);
+  std::vector<GraspCommand> commands;
+  for (const auto& g : p.plan(scene.hyps, scene.objects(), 3, plain.candidates)) commands.push_back(g.command);
+  const auto a = p.evaluate(commands, scene.hyps, scene.objects(), {});
+  const auto b = m.evaluate(commands, scene.hyps, scene.objects(), {});
+  REQUIRE(a.size() == b.size());
+  int face = 0;
+  double best_marginal = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const Vec3 t = scene.local(a[i].command.target);
+    CHECK(b[i].information <= a[i].information + 1e-12);   // marginalizing never adds information
+    best_marginal = std::max(best_marginal, b[i].information);
+    // Aimed at the +x face (either slab's), the pad (reaching 2.75 cm from the aim) well within it,
+    // the hand blocked under both hypotheses or neither (the flag tells nothing).
+    const bool same_flag = a[i].blocked_weight == 0.0 || a[i].blocked_weight == 1.0;
+    if (t.x() > 0.019 && std::max(std::abs(t.y()), std::abs(t.z())) < 0.06 && same_flag) {
+      ++face;
+      INFO("target " << t.transpose() << ": " << a[i].information << " nats plain, " << b[i].information << " marginal");
+      CHECK(a[i].information > 0.5);    // 2 mm at 1 mm noise: told apart
+      CHECK(b[i].information < 0.05);   // but a 3 mm offset explains it
+    }
+  }
+  CHECK(face > 0);
+  CHECK(best_marginal > 0.3);   // some grasp's patch shape still tells them apart
+  ActiveSettings bad = marginal;
+  bad.offset_sigma = -0.001;
+  CHECK_THROWS_AS(GraspPlanner(Gripper(), bad), Error);
+}

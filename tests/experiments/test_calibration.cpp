@@ -8,9 +8,25 @@
 
 #include <cmath>
 #include <fstream>
+#include <limits>
 
 using namespace ts;
 using namespace ts::experiments;
+
+namespace {
+/// A calibration for database `fingerprint` with one range of steps whose models give 0.5.
+Calibration flat_calibration(const std::string& fingerprint) {
+  Calibration c;
+  c.database_fingerprint = fingerprint;
+  c.features = confidence_feature_names();
+  const std::size_t f = c.features.size();
+  StepModels m;
+  m.object = {std::vector<double>(f, 0.0), std::vector<double>(f, 1.0), std::vector<double>(f + 1, 0.0)};
+  m.pose = m.object;
+  c.ranges = {m};
+  return c;
+}
+}  // namespace
 
 TEST_CASE("Logistic fit recovers the model that drew the labels") {
   // y ~ Bernoulli(sigmoid(1 + 2 x0 - 1 x1)), x ~ N(0, 1): standardized features are ~ x, so the
@@ -176,7 +192,7 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   CHECK(qback.object_confidence(1, x) == back.object_confidence(1, x));
   CHECK_THROWS_AS(q.predict(std::vector<double>(2 * f, 0.0)), Error);   // terms given as features
   auto qj = to_json(qc);
-  CHECK(qj["version"] == 3);
+  CHECK(qj["version"] == 4);
   CHECK(qj["steps"][1]["object"]["terms"] == "quadratic");
   auto short_q = qj;   // quadratic, but the coefficients of a linear model
   short_q["steps"][1]["object"]["coef"] = j["steps"][1]["object"]["coef"];
@@ -195,8 +211,13 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   const Calibration v2 = read_calibration(dir / "v2.json", "abc123");
   CHECK_FALSE(v2.ranges[1].object.quadratic);
   CHECK(v2.object_confidence(9, x) == back.object_confidence(9, x));
+  auto v3 = qj;   // version 3: no answer sets
+  v3["version"] = 3;
+  v3.erase("answer_sets");
+  std::ofstream(dir / "v3.json") << v3.dump();
+  CHECK_FALSE(read_calibration(dir / "v3.json", "abc123").answer_sets);
   auto newer = qj;
-  newer["version"] = 4;
+  newer["version"] = 5;
   CHECK(error_of(newer.dump(), "abc123") == "version");
   // The clamp of standardized terms: written, read back, applied (the pose model, mean 0 and
   // scale 1: z = -0.5 - 0.5 * sum(clamp(t)), t = 10 clamped to 4 in every term).
@@ -497,18 +518,12 @@ TEST_CASE("Open-set threshold: the most confidence refused while at most the all
   CHECK_THROWS_AS(choose_open_set_threshold(right, 100, -0.1), Error);
 
   test::TempDir dir("calibration");
-  Calibration c;
-  c.database_fingerprint = "f";
-  c.features = confidence_feature_names();
+  Calibration c = flat_calibration("f");
   const std::size_t f = c.features.size();
-  StepModels m;
-  m.object = {std::vector<double>(f, 0.0), std::vector<double>(f, 1.0), std::vector<double>(f + 1, 0.0)};
-  m.pose = m.object;
-  c.ranges = {m};
   write_calibration(dir / "none.json", c);
   CHECK_FALSE(read_calibration(dir / "none.json", "f").open_set_threshold);
   CHECK_FALSE(read_calibration(dir / "none.json", "f").in_database(3, std::vector<double>(f, 0.0)));
-  c.ranges[0].in_database = m.object;
+  c.ranges[0].in_database = c.ranges[0].object;
   c.open_set_threshold = 0.25;
   write_calibration(dir / "t.json", c);
   CHECK(read_calibration(dir / "t.json", "f").open_set_threshold == 0.25);
@@ -522,4 +537,96 @@ TEST_CASE("Open-set threshold: the most confidence refused while at most the all
     CHECK(e.field() == "open_set_threshold");
     CHECK(e.file() == (dir / "bad.json").string());
   }
+}
+
+TEST_CASE("Calibration files: answer sets round trip, and every bad count or number is one error naming its key") {
+  test::TempDir dir("calibration_sets");
+  Calibration c = flat_calibration("f");
+  AnswerSetCalibration a;
+  a.alpha = 0.1;
+  a.simulation = {{"noise", "underwater"}, {"sensors", 1}};
+  const double inf = std::numeric_limits<double>::infinity();
+  a.steps.emplace_back(std::vector<double>{inf, 0.5, 0.0, inf});
+  a.steps.emplace_back(std::vector<double>{0.25, 0.0, 0.0, 0.125});
+  c.answer_sets = a;
+  write_calibration(dir / "sets.json", c);
+  const Calibration back = read_calibration(dir / "sets.json", "f");
+  REQUIRE(back.answer_sets);
+  CHECK(back.answer_sets->alpha == 0.1);
+  CHECK(back.answer_sets->simulation == a.simulation);
+  REQUIRE(back.answer_sets->steps.size() == 2);
+  CHECK(back.answer_sets->steps[0].infinite() == 2);
+  CHECK(back.answer_sets->steps[0].finite() == std::vector<double>{0.0, 0.5});
+  CHECK(back.answer_sets->steps[1].finite() == std::vector<double>{0.0, 0.0, 0.125, 0.25});
+  // Steps past the last calibrated one use the last.
+  CHECK(back.answer_sets->calibrated_step(1) == 1);
+  CHECK(back.answer_sets->calibrated_step(9) == 2);
+  CHECK(back.answer_sets->at(9).finite() == back.answer_sets->steps[1].finite());
+  CHECK(back.answer_sets->at(1).p_value(0.5) == doctest::Approx(4.0 / 5.0));   // 0.5 and two infinite
+
+  auto error_of = [&](const nlohmann::ordered_json& j) {
+    const auto p = dir / "bad.json";
+    std::ofstream(p) << j.dump();
+    try {
+      read_calibration(p, "f");
+    } catch (const Error& e) {
+      CHECK(e.file() == p.string());
+      return e.field();
+    }
+    FAIL("no error for " << j.dump());
+    return std::string();
+  };
+  const auto j = to_json(c);
+  for (double alpha : {0.0, 1.0, -0.2, 3.0}) {
+    auto bad = j;
+    bad["answer_sets"]["alpha"] = alpha;
+    CHECK(error_of(bad) == "answer_sets.alpha");
+  }
+  auto runs = j;   // a count that disagrees with the gaps
+  runs["answer_sets"]["steps"][1]["runs"] = 40000000000ULL;
+  CHECK(error_of(runs) == "answer_sets.steps[1].runs");
+  auto infinite = j;
+  infinite["answer_sets"]["steps"][0]["infinite"] = -1;
+  CHECK(error_of(infinite) == "answer_sets.steps[0].infinite");
+  // A huge count that agrees with itself is read without allocating by it.
+  auto huge = j;
+  huge["answer_sets"]["steps"][0]["gaps"] = nlohmann::ordered_json::array();
+  huge["answer_sets"]["steps"][0]["infinite"] = 1ULL << 62;
+  huge["answer_sets"]["steps"][0]["runs"] = 1ULL << 62;
+  {
+    std::ofstream(dir / "huge.json") << huge.dump();
+    const Calibration h = read_calibration(dir / "huge.json", "f");
+    CHECK(h.answer_sets->steps[0].size() == (1ULL << 62));
+    CHECK(h.answer_sets->steps[0].threshold(0.05) == inf);
+  }
+  auto negative = j;
+  negative["answer_sets"]["steps"][1]["gaps"][0] = -0.5;
+  CHECK(error_of(negative) == "answer_sets.steps[1].gaps");
+  auto text = j;
+  text["answer_sets"]["steps"][1]["gaps"][0] = "x";
+  CHECK(error_of(text) == "answer_sets.steps[1].gaps");
+  auto order = j;
+  order["answer_sets"]["steps"][1]["step"] = 3;
+  CHECK(error_of(order) == "answer_sets.steps[1].step");
+  auto empty = j;
+  empty["answer_sets"]["steps"] = nlohmann::ordered_json::array();
+  CHECK(error_of(empty) == "answer_sets.steps");
+  auto none = j;
+  none["answer_sets"]["steps"][0]["gaps"] = nlohmann::ordered_json::array();
+  none["answer_sets"]["steps"][0]["infinite"] = 0;
+  none["answer_sets"]["steps"][0]["runs"] = 0;
+  CHECK(error_of(none) == "answer_sets.steps[0].runs");
+  auto kind = j;
+  kind["answer_sets"] = 5;
+  CHECK(error_of(kind) == "answer_sets");
+}
+
+TEST_CASE("The simulation an answer-set calibration holds for: noise, its overrides, sensing and sensors alone") {
+  const auto config = nlohmann::ordered_json::parse(
+      R"({"seed": 3, "runs": 4, "noise": "deep_sea", "noise.arm_position_sigma_m": 0.002, "sensing": "pads",
+          "sensors": 2, "method": "bricpsf", "calibration": "x.json"})");
+  const auto sim = simulation_of(config);
+  CHECK(sim == nlohmann::ordered_json::parse(
+                   R"({"noise": "deep_sea", "noise.arm_position_sigma_m": 0.002, "sensing": "pads", "sensors": 2})"));
+  CHECK(simulation_of(nlohmann::ordered_json("text")).empty());
 }

@@ -10,6 +10,7 @@
 #include "io/db_store.hpp"
 #include "io/log_store.hpp"
 #include "io/result_store.hpp"
+#include "io/run_store.hpp"
 #include "cli_run.hpp"
 #include "db_fixture.hpp"
 #include "temp_dir.hpp"
@@ -1070,4 +1071,103 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
   CHECK(jab["open_set_threshold"] == jba["open_set_threshold"]);
   CHECK(jab["open_set_threshold"].is_number());
   CHECK(jab["provenance"]["step_answers"] == 2 * 4 * 3 * 2);
+  // Set answers: the true class's gap at each of the 3 steps on the 8 runs of known objects (the
+  // hidden store's runs have no true class in the database), whatever the order of the stores.
+  REQUIRE(jab["answer_sets"].is_object());
+  CHECK(jab["answer_sets"] == jba["answer_sets"]);
+  CHECK(jab["answer_sets"]["alpha"] == 0.05);
+  REQUIRE(jab["answer_sets"]["steps"].size() == 3);
+  for (const auto& st : jab["answer_sets"]["steps"]) CHECK(st["runs"] == 8);
+  CHECK(jab["answer_sets"]["simulation"]["noise"] == "underwater");
+  const Run bad_alpha = touchstone(dir, "calibrate known.h5 --step-ranges 1,3 --alpha 1.5 --out bad.json");
+  CHECK(bad_alpha.code != 0);
+  CHECK(bad_alpha.err.find("--alpha") != std::string::npos);
+  CHECK_FALSE(fs::exists(dir / "bad.json"));
+  const Run half = touchstone(dir, "calibrate known.h5 --step-ranges 1,3 --alpha 0.5 --out half.json");
+  REQUIRE_MESSAGE(half.code == 0, half.err);
+
+  // recognize --calibration: each step's set. 8 runs cannot exclude any class at alpha 0.05
+  // (ceil(9 * 0.95) = 9 > 8): "any object", said so. At 0.5 the set holds the leader first.
+  REQUIRE(touchstone(dir, "simulate --db db.h5 --object wedge --grasps 3 --noise ideal --out log.h5").code == 0);
+  const Run any = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --calibration ab.json" + kFastFlags);
+  REQUIRE_MESSAGE(any.code == 0, any.err);
+  const auto ja = nlohmann::json::parse(any.out);
+  const std::size_t objects = io::DbReader(dir / "db.h5").size();
+  for (const auto& st : ja["steps"]) {
+    CHECK(st["answer_set"]["informative"] == false);
+    CHECK(st["answer_set"]["size"] == objects);
+    CHECK(st["answer_set"]["members"].empty());
+  }
+  const Run set = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --calibration half.json" + kFastFlags);
+  REQUIRE_MESSAGE(set.code == 0, set.err);
+  const auto js = nlohmann::json::parse(set.out);
+  REQUIRE(js["steps"].size() == 3);
+  for (const auto& st : js["steps"]) {
+    const auto& a = st["answer_set"];
+    CHECK(a["alpha"] == 0.5);
+    CHECK(a["calibrated_step"] == st["step"]);
+    if (!a["informative"].get<bool>()) continue;
+    REQUIRE(a["members"].size() == a["size"].get<std::size_t>());
+    CHECK(a["members"][0]["log_weight_gap"] == 0.0);   // the leader
+    CHECK(a["members"][0]["p_value"] == 1.0);
+    double last = 0.0;
+    for (const auto& m : a["members"]) {
+      CHECK(m["p_value"].get<double>() > 0.5);
+      CHECK(m["log_weight_gap"].get<double>() >= last);
+      last = m["log_weight_gap"].get<double>();
+    }
+  }
+  // --alpha overrides the file's; it needs a calibration with answer sets, within (0, 1).
+  const Run tenth = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --calibration half.json --alpha 0.9" + kFastFlags);
+  REQUIRE_MESSAGE(tenth.code == 0, tenth.err);
+  for (const auto& st : nlohmann::json::parse(tenth.out)["steps"]) {
+    CHECK(st["answer_set"]["alpha"] == 0.9);
+    CHECK(st["answer_set"]["size"].get<std::size_t>() <= objects);
+  }
+  for (const char* flags : {" --alpha 0.1", " --calibration half.json --alpha 0", " --calibration half.json --alpha 1"}) {
+    const Run r = touchstone(dir, std::string("recognize --db db.h5 --log log.h5") + flags);
+    CHECK(r.code != 0);
+    CHECK(r.err.find("--alpha") != std::string::npos);
+  }
+
+  // An experiment with the calibration: the report's coverage and set sizes per step; runs
+  // simulated otherwise than the calibration's are refused, naming the key.
+  const Run ex = touchstone(dir, "experiment --db db.h5 --objects box,nut,ball,wedge --seed 5 --out sets.h5"
+                                 " --set calibration=half.json" + fast);
+  REQUIRE_MESSAGE(ex.code == 0, ex.err);
+  const Run rep = touchstone(dir, "report sets.h5 --json");
+  REQUIRE_MESSAGE(rep.code == 0, rep.err);
+  const auto jr = nlohmann::json::parse(rep.out);
+  for (const auto& row : jr["per_step"]) {
+    const double coverage = row["set_coverage"].get<double>();
+    CHECK(coverage >= 0.0);
+    CHECK(coverage <= 1.0);
+    CHECK(coverage * 8 == doctest::Approx(std::round(coverage * 8)));   // a share of the 8 runs
+    CHECK(row["set_size_median"].get<double>() >= 1.0);
+    CHECK(row["set_size_median"].get<double>() <= double(objects));
+    if (row["set_informative_share"] == 0.0) CHECK(coverage == 1.0);   // "any object" holds the truth
+  }
+  {  // Each informative set holds the truth exactly when the truth's gap has a p-value above alpha.
+    const experiments::Calibration cal = experiments::read_calibration(dir / "half.json", "");
+    const io::RunStoreContents store = io::RunStore::read(dir / "sets.h5");
+    const auto& v = store.header.step_values;
+    auto col = [&](const char* name) { return static_cast<std::size_t>(std::find(v.begin(), v.end(), name) - v.begin()); };
+    const std::size_t gap = col("set.truth_gap"), covers = col("answer_set.covers"), informative = col("answer_set.informative");
+    REQUIRE(informative < v.size());
+    std::size_t checked = 0;
+    for (const auto& r : store.runs)
+      for (std::size_t k = 0; k < r.steps.size(); ++k) {
+        const auto& x = r.steps[k].values;
+        if (x[informative] != 1.0) continue;
+        CHECK((x[covers] == 1.0) == (cal.answer_sets->at(int(k) + 1).p_value(x[gap]) > 0.5));
+        ++checked;
+      }
+    CHECK(checked > 0);
+  }
+  CHECK(touchstone(dir, "report sets.h5").out.find("Set answers") != std::string::npos);
+  const Run other = touchstone(dir, "experiment --db db.h5 --objects box --noise ideal --out other.h5"
+                                    " --set calibration=half.json" + fast);
+  CHECK(other.code != 0);
+  CHECK(other.err.find("answer_sets.simulation") != std::string::npos);
+  CHECK(other.err.find("half.json") != std::string::npos);
 }

@@ -220,15 +220,19 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
   const auto runs = run_all(*plain, c, dir / "plain.h5", 1, true);
   REQUIRE(runs.size() == 1);
   const std::size_t F = confidence_feature_names().size();
+  const std::size_t G = 2 + F + pipeline_stage_names().size();   // set.truth_gap, then answer_set.*
   for (const auto& s : runs[0].steps) {
-    REQUIRE(s.values.size() == 2 + F + pipeline_stage_names().size());
+    REQUIRE(s.values.size() == G + 4);
     CHECK(std::isnan(s.values[0]));  // no calibration: no confidence
     CHECK(std::isnan(s.values[1]));
     for (std::size_t i = 2; i < 2 + F; ++i) CHECK(std::isfinite(s.values[i]));
-    for (std::size_t i = 2 + F; i < s.values.size(); ++i)   // ran.<stage>: 1, 0, or NaN (not bricpsf's)
+    for (std::size_t i = 2 + F; i < G; ++i)   // ran.<stage>: 1, 0, or NaN (not bricpsf's)
       CHECK((s.values[i] == 1.0 || s.values[i] == 0.0 || std::isnan(s.values[i])));
     CHECK(s.values[2 + F] == 1.0);   // ran.scene
     CHECK(s.values[2] == doctest::Approx(s.posterior_best));  // feature.posterior_best
+    // The true class's gap: >= 0 (+inf without a hypothesis of it).
+    CHECK(s.values[G] >= 0.0);
+    for (std::size_t i = G + 1; i < G + 4; ++i) CHECK(std::isnan(s.values[i]));   // no answer sets
   }
 
   // A calibration of this database: the recorded confidences are its predictions on the

@@ -273,6 +273,30 @@ def test_experiment_and_its_run_store(built, tmp_path):
     assert e.value.field == "runs"
 
 
+def test_set_answers_are_the_commands(built, db, tmp_path):
+    """A calibration with answer sets: the Recognizer's answer_set is the command's, step by step."""
+    root, names = built
+    store = tmp_path / "cal.h5"
+    ts.run_experiment(str(root / "db.h5"), str(store),
+                      set={"objects": names, "runs": 3, "steps": 3, "seed": 6}, threads=2)
+    run("calibrate", store, "--step-ranges", "1,3", "--alpha", "0.4", "--out", tmp_path / "cal.json")
+    log = ts.simulate(db, names[2], grasps=3, seed=8)
+    path = tmp_path / "log.h5"
+    log.write(str(path))
+    cli = json.loads(run("recognize", "--db", root / "db.h5", "--log", path, "--json", "--seed", 2,
+                         "--calibration", tmp_path / "cal.json"))
+    steps = ts.Recognizer(db, seed=2, calibration=str(tmp_path / "cal.json")).recognize_log(ts.read_log(str(path)))
+    assert [s.answer_set for s in steps] == [c["answer_set"] for c in cli["steps"]]
+    assert all(s.answer_set["alpha"] == 0.4 for s in steps)
+    assert ts.Recognizer(db, seed=2).recognize_log(ts.read_log(str(path)))[0].answer_set is None
+    with pytest.raises(ts.Error) as e:   # alpha without a calibration
+        ts.Recognizer(db, alpha=0.1)
+    assert e.value.field == "alpha"
+    with pytest.raises(ts.Error) as e:
+        ts.Recognizer(db, calibration=str(tmp_path / "cal.json"), alpha=1.5)
+    assert e.value.field == "alpha"
+
+
 def test_every_public_name_has_a_stub():
     tree = ast.parse(STUB.read_text())
     stubbed = {n.name for n in tree.body if isinstance(n, (ast.ClassDef, ast.FunctionDef))}

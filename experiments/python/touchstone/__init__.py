@@ -81,6 +81,9 @@ class StepResult:
     position_error_m: Optional[float] = None
     orientation_error_deg: Optional[float] = None
     symmetric_orientation_error_deg: Optional[float] = None
+    # The set answer with a calibration (Recognizer(calibration=...)): {"alpha", "informative",
+    # "size", "calibrated_step", "members": [{"objects", "p_value", "log_weight_gap"}]}
+    answer_set: Optional[Dict[str, Any]] = None
     _raw: Dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @staticmethod
@@ -96,13 +99,17 @@ class Recognizer:
     ``"paper"``; ``params`` sets method parameters by their keys (``touchstone.parameters()``,
     the names of ``touchstone params``), e.g. ``{"ransac.object_draws": 60}``; ``only`` limits
     the answer to these object names. Same database, settings and seed: the same answers as
-    ``touchstone recognize`` for any thread count.
+    ``touchstone recognize`` for any thread count. ``calibration``: a file of ``touchstone
+    calibrate`` with answer sets, so that each step's ``answer_set`` holds the touched object's
+    class with probability at least 1 - ``alpha`` (default: the file's).
     """
 
     def __init__(self, db: Database, preset: str = "improved", method: str = "bricpsf", seed: int = 1,
-                 params: Optional[Mapping[str, Any]] = None, only: Optional[Sequence[str]] = None) -> None:
+                 params: Optional[Mapping[str, Any]] = None, only: Optional[Sequence[str]] = None,
+                 calibration: Optional[str] = None, alpha: Optional[float] = None) -> None:
         self._impl = _ts.Recognizer(db, preset, method, seed, dict(params or {}),
-                                    None if only is None else list(only))
+                                    None if only is None else list(only),
+                                    None if calibration is None else str(calibration), alpha)
 
     def step(self, contacts: Any, free: Any = None, grasps: Optional[Sequence[Any]] = None) -> StepResult:
         """One exploration step with the cumulative contacts (N x 3, world frame, metres), the

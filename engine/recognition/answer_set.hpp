@@ -1,0 +1,85 @@
+// Set answers with a coverage guarantee (issue 56): split-conformal sets over the database's
+// classes of congruent objects.
+//
+// The nonconformity score of a class at a step is its log-weight gap: ln w of the state's best
+// hypothesis minus the best ln w among the class's own hypotheses (Eq. 5-6; 0 for the leading
+// class, +inf for a class without hypotheses in the state). Calibration runs (simulated runs of
+// the database, experiments/analysis/calibration.hpp) give the gaps of the true class at each
+// step; a class's conformal p-value is (1 + #{calibration gaps >= its gap}) / (n + 1), and the
+// set at level alpha is the classes whose p-value exceeds alpha. When the run is drawn as the
+// calibration runs were (exchangeable with them: the same database, noise and sensing, the
+// object and its pose drawn alike), the set holds the true class with probability at least
+// 1 - alpha (Vovk et al. 2005; Angelopoulos & Bates 2021, Section 1). Runs of one object share
+// its shape, so calibration runs are not independent of each other; the guarantee is marginal
+// over objects and is checked on held-out runs (experiments report set_coverage).
+#pragma once
+
+#include "engine/recognition/step_result.hpp"
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace ts {
+
+/// Per class (class_of[object] < classes): ln w of the state's best hypothesis minus the best
+/// ln w of the class's hypotheses (>= 0; +inf: the class has none). An empty state gives +inf
+/// for every class. Throws ts::Error when a hypothesis names an object outside class_of or a
+/// class_of entry is not below `classes`.
+std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, std::span<const std::uint32_t> class_of,
+                                          std::size_t classes);
+
+/// Classes of a database's objects as class_of indices: `members` (each class's objects, e.g. a
+/// congruence record's classes) numbered in order, every object not in one its own class after
+/// them. Returns the class of each of `objects` objects and sets `classes` to their count.
+/// Throws ts::Error for an object index >= objects or an object in two classes.
+std::vector<std::uint32_t> class_indices(std::size_t objects, const std::vector<std::vector<std::size_t>>& members,
+                                         std::size_t& classes);
+
+/// The calibration scores of one step: the true class's gap on each of n calibration runs.
+class ConformalScores {
+ public:
+  ConformalScores() = default;
+  /// Throws ts::Error for a NaN or negative gap (an infinite one is a run whose true class had
+  /// no hypothesis).
+  explicit ConformalScores(std::vector<double> gaps);
+  /// The same from the finite gaps and a count of infinite ones (a count read from a file is
+  /// never materialized).
+  ConformalScores(std::vector<double> finite_gaps, std::size_t infinite);
+  std::size_t size() const { return finite_.size() + infinite_; }
+  const std::vector<double>& finite() const { return finite_; }   ///< ascending
+  std::size_t infinite() const { return infinite_; }
+  /// (1 + #{calibration gaps >= gap}) / (n + 1).
+  double p_value(double gap) const;
+  /// The largest gap a set at level alpha admits: the ceil((n + 1)(1 - alpha))-th smallest
+  /// calibration gap, +inf when that rank exceeds n or falls on an infinite gap. Throws
+  /// ts::Error for alpha outside (0, 1).
+  double threshold(double alpha) const;
+
+ private:
+  std::vector<double> finite_;
+  std::size_t infinite_ = 0;
+};
+
+struct AnswerSetMember {
+  std::uint32_t cls = 0;   ///< class index (class_indices)
+  double gap = 0.0;        ///< its log-weight gap (0: the leading class)
+  double p_value = 1.0;    ///< its conformal p-value: the set at level a holds it for a < p_value
+};
+
+struct AnswerSet {
+  double alpha = 0.05;
+  /// false: no class can be excluded at this alpha (the calibration's gaps at this step reach
+  /// +inf within the 1 - alpha quantile, or the state is empty): the answer is "any object",
+  /// `members` is empty and `size` the number of classes.
+  bool informative = true;
+  std::size_t size = 0;
+  std::vector<AnswerSetMember> members;   ///< by gap ascending, then class (the leading class first)
+};
+
+/// The classes whose p-value exceeds alpha. Throws ts::Error for alpha outside (0, 1) (key
+/// "answer_set.alpha") or calibration scores without runs.
+AnswerSet conformal_set(std::span<const double> gaps, const ConformalScores& scores, double alpha);
+
+}  // namespace ts
