@@ -7,8 +7,10 @@
 #include <string>
 
 namespace ts {
+inline namespace database {
 class Database;
 }
+}  // namespace ts
 
 namespace ts::experiments {
 

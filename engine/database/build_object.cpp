@@ -9,6 +9,7 @@
 #include <chrono>
 
 namespace ts {
+inline namespace database {
 
 namespace {
 
@@ -78,4 +79,5 @@ BuiltObject build_object(const Mesh& object_frame_mesh, ObjectInfo info,
   return out;
 }
 
+}  // namespace database
 }  // namespace ts

@@ -9,6 +9,7 @@
 #endif
 
 namespace ts {
+inline namespace database {
 
 namespace {
 template <class Db>
@@ -215,4 +216,5 @@ void GeometryPins::load(const Database& db, const std::vector<std::uint32_t>& ob
   tbb::parallel_for(std::size_t{0}, missing.size(), [&](std::size_t k) { refs_[missing[k]] = db.geometry(missing[k]); });
 }
 
+}  // namespace database
 }  // namespace ts

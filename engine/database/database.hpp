@@ -17,6 +17,7 @@
 #include <mutex>
 
 namespace ts {
+inline namespace database {
 
 /// How a mesh's size becomes the object's: `fit` scales every mesh so that its largest
 /// bounding-box side is max_extent (the paper's evaluation: shape alone tells objects apart);
@@ -216,4 +217,5 @@ std::size_t memory_bytes(const ObjectGeometry& g);
 BuiltObject build_object(const Mesh& object_frame_mesh, ObjectInfo info,
                          const DatabaseSettings& settings, std::uint64_t seed);
 
+}  // namespace database
 }  // namespace ts

@@ -14,6 +14,7 @@
 #include <mutex>
 
 namespace ts {
+inline namespace database {
 
 namespace {
 
@@ -440,4 +441,5 @@ std::shared_ptr<const FeatureTable> FeatureTable::shared(const Database& db,
   return t;
 }
 
+}  // namespace database
 }  // namespace ts

@@ -12,6 +12,7 @@
 #include <memory>
 
 namespace ts {
+inline namespace database {
 
 class FeatureTable {
  public:
@@ -62,4 +63,5 @@ class FeatureTable {
   std::unique_ptr<Impl> impl_;
 };
 
+}  // namespace database
 }  // namespace ts

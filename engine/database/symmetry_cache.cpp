@@ -1,6 +1,7 @@
 #include "engine/database/symmetry_cache.hpp"
 
 namespace ts {
+inline namespace database {
 
 SymmetryCache::SymmetryCache(SymmetrySettings settings) : settings_(settings) {}
 SymmetryCache::~SymmetryCache() = default;
@@ -16,4 +17,5 @@ const SymmetryGroup& SymmetryCache::get(const Database& db, std::size_t object) 
   return *groups_.emplace(object, std::move(g)).first->second;
 }
 
+}  // namespace database
 }  // namespace ts

@@ -10,6 +10,7 @@
 #include <mutex>
 
 namespace ts {
+inline namespace database {
 
 /// Thread-safe per-object cache over a database (computes from the object's fine cloud on first
 /// use; loads the object's geometry if it is not loaded yet).
@@ -25,4 +26,5 @@ class SymmetryCache {
   std::map<std::size_t, std::unique_ptr<SymmetryGroup>> groups_;
 };
 
+}  // namespace database
 }  // namespace ts

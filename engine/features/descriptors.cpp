@@ -19,6 +19,7 @@
 #include <cstring>
 
 namespace ts {
+inline namespace features {
 
 namespace {
 
@@ -415,4 +416,5 @@ Descriptors compute_descriptors(Descriptor d, const std::vector<Vec3>& keypoints
   return out;
 }
 
+}  // namespace features
 }  // namespace ts

@@ -11,6 +11,7 @@
 #include <string_view>
 
 namespace ts {
+inline namespace features {
 
 enum class Descriptor {
   fpfh,   ///< Fast Point Feature Histograms (Rusu, Blodow & Beetz 2009), 3 x 11 = 33 bins
@@ -77,4 +78,5 @@ Descriptors compute_descriptors(Descriptor d, const std::vector<Vec3>& keypoints
                                 const std::vector<Vec3>& keypoint_normals, const PointCloud& surface,
                                 const KdTree3& surface_tree, const DescriptorSettings& settings);
 
+}  // namespace features
 }  // namespace ts

@@ -28,6 +28,7 @@
 #include <memory>
 
 namespace ts {
+inline namespace features {
 
 namespace {
 
@@ -376,4 +377,5 @@ FpfhResult compute_fpfh(const std::vector<Vec3>& keypoints, const std::vector<Ve
   return out;
 }
 
+}  // namespace features
 }  // namespace ts

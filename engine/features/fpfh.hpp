@@ -5,6 +5,7 @@
 #include "engine/geometry/search.hpp"
 
 namespace ts {
+inline namespace features {
 
 struct FpfhSettings {
   double normal_radius = 0.007;   ///< m, PCA normal radius (paper: 7 mm); not used by compute_fpfh
@@ -29,4 +30,5 @@ FpfhResult compute_fpfh(const std::vector<Vec3>& keypoints, const std::vector<Ve
                         const PointCloud& surface, const KdTree3& surface_tree,
                         const FpfhSettings& settings);
 
+}  // namespace features
 }  // namespace ts

@@ -10,6 +10,7 @@
 #include <limits>
 
 namespace ts {
+inline namespace geometry {
 
 namespace {
 
@@ -238,4 +239,5 @@ PointCloud transformed(const PointCloud& cloud, const Pose& T) {
   return out;
 }
 
+}  // namespace geometry
 }  // namespace ts

@@ -4,6 +4,7 @@
 #include "engine/core.hpp"
 
 namespace ts {
+inline namespace geometry {
 
 /// Voxel-grid filter (Section 4.1.2): one point per occupied voxel of size `voxel`, the
 /// centroid of the points in it (normals averaged and renormalized when present). The output
@@ -34,4 +35,5 @@ Vec3 centroid(const std::vector<Vec3>& points);
 /// Apply a rigid transform to points (and normals).
 PointCloud transformed(const PointCloud& cloud, const Pose& T);
 
+}  // namespace geometry
 }  // namespace ts

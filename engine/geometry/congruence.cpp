@@ -16,6 +16,7 @@
 #include <numeric>
 
 namespace ts {
+inline namespace geometry {
 
 namespace {
 
@@ -469,4 +470,5 @@ std::vector<std::vector<std::size_t>> congruence_classes(std::size_t n, const st
   return out;   // each root is its class's smallest member, so classes come by first member
 }
 
+}  // namespace geometry
 }  // namespace ts

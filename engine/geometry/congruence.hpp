@@ -37,6 +37,7 @@
 #include <vector>
 
 namespace ts {
+inline namespace geometry {
 
 struct CongruenceSettings {
   /// Largest surface distance allowed, as a fraction of the larger object's size (the size: twice
@@ -138,4 +139,5 @@ std::vector<CongruentPair> find_congruent_pairs(const std::vector<ShapeSignature
 /// class with at least two members, members ascending, classes ordered by their first member.
 std::vector<std::vector<std::size_t>> congruence_classes(std::size_t n, const std::vector<CongruentPair>& pairs);
 
+}  // namespace geometry
 }  // namespace ts

@@ -47,6 +47,7 @@
 #include <optional>
 
 namespace ts {
+inline namespace geometry {
 
 namespace {
 
@@ -629,4 +630,5 @@ void DistanceField::distances_gradients(const Vec3* pts, std::size_t n, const Po
   for (std::size_t i = 0; i < n; ++i) out[i] = impl_->query_gradient(T_object_query * pts[i], grad[i]);
 }
 
+}  // namespace geometry
 }  // namespace ts

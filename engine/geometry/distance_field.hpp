@@ -19,6 +19,7 @@
 #include <memory>
 
 namespace ts {
+inline namespace geometry {
 
 struct DistanceFieldSettings {
   double fine_voxel = 0.002;     ///< m, voxel of the narrow band
@@ -105,4 +106,5 @@ class DistanceField {
   std::unique_ptr<Impl> impl_;
 };
 
+}  // namespace geometry
 }  // namespace ts

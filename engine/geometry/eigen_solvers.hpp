@@ -5,6 +5,7 @@
 #include "engine/core.hpp"
 
 namespace ts {
+inline namespace geometry {
 
 /// Eigen::Quaterniond::FromTwoVectors(from, to): a rotation taking direction `from` to
 /// direction `to` (not normalized: Eigen's result as it is).
@@ -14,4 +15,5 @@ Eigen::Quaterniond quaternion_from_two_vectors(const Vec3& from, const Vec3& to)
 /// with Eigen::EigenvaluesOnly; only the lower triangle is read).
 Eigen::Matrix<double, 6, 1> symmetric_eigenvalues(const Eigen::Matrix<double, 6, 6>& A);
 
+}  // namespace geometry
 }  // namespace ts

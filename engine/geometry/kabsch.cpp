@@ -7,6 +7,7 @@
 #include <numbers>
 
 namespace ts {
+inline namespace geometry {
 
 namespace {
 
@@ -115,4 +116,5 @@ double rotation_angle(const Mat3& R) {
   return 2.0 * std::atan2(v, std::abs(q.w()));
 }
 
+}  // namespace geometry
 }  // namespace ts

@@ -10,6 +10,7 @@
 #include <span>
 
 namespace ts {
+inline namespace geometry {
 
 struct KabschSettings {
   double min_sv_ratio = 1e-3;   ///< sigma2/sigma1 of either centred set below this: degenerate
@@ -50,4 +51,5 @@ bool triangle_well_conditioned(const Vec3& a, const Vec3& b, const Vec3& c, doub
 /// (from the quaternion rather than arccos of the trace).
 double rotation_angle(const Mat3& R);
 
+}  // namespace geometry
 }  // namespace ts

@@ -17,6 +17,7 @@
 #endif
 
 namespace ts {
+inline namespace geometry {
 
 // ---------------------------------------------------------------------------------------------
 // Measurements
@@ -964,4 +965,5 @@ std::vector<ShellVoxel> MeshIndex::shell(double voxel, double radius) const {
   return out;
 }
 
+}  // namespace geometry
 }  // namespace ts

@@ -10,6 +10,7 @@
 #include <optional>
 
 namespace ts {
+inline namespace geometry {
 
 /// Mesh measurements used by import checks and reports.
 double mesh_area(const Mesh& mesh);
@@ -92,4 +93,5 @@ class MeshIndex {
   std::unique_ptr<Impl> impl_;
 };
 
+}  // namespace geometry
 }  // namespace ts

@@ -10,6 +10,7 @@
 #include <numbers>
 
 namespace ts {
+inline namespace geometry {
 
 namespace {
 
@@ -71,4 +72,5 @@ PoseError pose_error(const Pose& estimate, const Pose& truth, const SymmetryGrou
   return e;
 }
 
+}  // namespace geometry
 }  // namespace ts

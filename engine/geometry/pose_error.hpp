@@ -8,6 +8,7 @@
 #include "engine/geometry/symmetry.hpp"
 
 namespace ts {
+inline namespace geometry {
 
 struct PoseError {
   double position_m = 0.0;                 ///< |t_est - t_true| (Section 5.2)
@@ -25,4 +26,5 @@ PoseError pose_error(const Pose& estimate, const Pose& truth,
 /// Eq. 10 literally: arccos((tr(R) - 1) / 2), clamped to [0, pi] (for tests and reference).
 double rotation_angle_eq10(const Mat3& R);
 
+}  // namespace geometry
 }  // namespace ts

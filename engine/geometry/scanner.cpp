@@ -16,6 +16,7 @@
 #include <optional>
 
 namespace ts {
+inline namespace geometry {
 
 namespace {
 
@@ -435,4 +436,5 @@ ScanResult scan_mesh(const MeshIndex& index, const ScanSettings& settings, std::
   return result;
 }
 
+}  // namespace geometry
 }  // namespace ts

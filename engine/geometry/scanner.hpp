@@ -5,6 +5,7 @@
 #include "engine/geometry/mesh.hpp"
 
 namespace ts {
+inline namespace geometry {
 
 /// The simulated laser scanner. Each view is an orthographic raster of parallel rays (a laser
 /// line scanner swept across the object) covering the object's projection; the first hits are
@@ -56,4 +57,5 @@ PointCloud scan_view(const MeshIndex& mesh, const Vec3& direction, double pitch)
 double surface_coverage(const MeshIndex& mesh, const std::vector<Vec3>& points, double radius,
                         std::uint64_t seed, int samples = 20000);
 
+}  // namespace geometry
 }  // namespace ts

@@ -18,6 +18,7 @@
 #include <queue>
 
 namespace ts {
+inline namespace geometry {
 
 namespace {
 
@@ -519,4 +520,5 @@ std::vector<Neighbour> FeatureIndex::knn(const float* query, std::size_t w) cons
   return impl_->forest->knn(query, k, impl_->settings.checks);
 }
 
+}  // namespace geometry
 }  // namespace ts

@@ -9,6 +9,7 @@
 #include <span>
 
 namespace ts {
+inline namespace geometry {
 
 struct Neighbour {
   std::uint32_t index = 0;
@@ -91,4 +92,5 @@ class FeatureIndex {
   std::unique_ptr<Impl> impl_;
 };
 
+}  // namespace geometry
 }  // namespace ts

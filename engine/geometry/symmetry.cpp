@@ -13,6 +13,7 @@
 #include <numbers>
 
 namespace ts {
+inline namespace geometry {
 
 namespace {
 
@@ -360,4 +361,5 @@ SymmetryGroup find_symmetries(const std::vector<Vec3>& points, const KdTree3& tr
   return g;
 }
 
+}  // namespace geometry
 }  // namespace ts

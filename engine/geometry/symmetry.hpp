@@ -17,6 +17,7 @@
 #include <vector>
 
 namespace ts {
+inline namespace geometry {
 
 struct SymmetrySettings {
   double tolerance = 0.0;          ///< m; 0: max(tolerance_rel * bbox diagonal, 2.5 * point spacing)
@@ -62,4 +63,5 @@ std::vector<Mat3> extreme_pair_rotations(const std::vector<Vec3>& source, const 
 SymmetryGroup find_symmetries(const std::vector<Vec3>& points, const KdTree3& tree,
                               const SymmetrySettings& settings = {});
 
+}  // namespace geometry
 }  // namespace ts

@@ -7,6 +7,7 @@
 #include <utility>
 
 namespace ts {
+inline namespace recognition {
 
 namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -115,4 +116,5 @@ AnswerSet conformal_set(std::span<const double> gaps, const ConformalScores& sco
   return out;
 }
 
+}  // namespace recognition
 }  // namespace ts

@@ -22,6 +22,7 @@
 #include <vector>
 
 namespace ts {
+inline namespace recognition {
 
 /// Per class (class_of[object] < classes): ln w of the state's best hypothesis minus the best
 /// ln w of the class's hypotheses (>= 0; +inf: the class has none). An empty state gives +inf
@@ -82,4 +83,5 @@ struct AnswerSet {
 /// "answer_set.alpha") or calibration scores without runs.
 AnswerSet conformal_set(std::span<const double> gaps, const ConformalScores& scores, double alpha);
 
+}  // namespace recognition
 }  // namespace ts

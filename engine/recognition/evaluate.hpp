@@ -30,6 +30,7 @@
 #include <limits>
 
 namespace ts {
+inline namespace recognition {
 
 struct EvaluateSettings {
   double d_outlier = 0.20;            ///< m, outlier distance of Eq. 4 (paper: 20 cm)
@@ -162,7 +163,7 @@ std::vector<Evaluation> evaluate_all(const Scene& scene, const Database& db,
 
 // ---- implementation of the template -------------------------------------------------------
 
-namespace detail {
+namespace eq {   // Eq. 4 and Eq. 8 per point
 inline double contact_error(double d, double d_outlier) {  // Eq. 4
   d = std::abs(d);
   if (!(d < d_outlier)) return 1.0;
@@ -175,7 +176,7 @@ inline double free_error(double d, double d_thresh, bool inside_penalty, double 
   if (!(d <= d_thresh)) return 0.0;
   return (d_thresh * d_thresh - d * d) / (d_thresh * d_thresh);
 }
-}  // namespace detail
+}  // namespace eq
 
 template <class BatchFn>
 Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const Vec3& half_extent,
@@ -200,7 +201,7 @@ Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const 
   while (nc < c_limit) {
     const std::size_t m = std::min(chunk, c_limit - nc);
     distances(scene.ordered.data() + nc, m, T_object_scene, buf);
-    for (std::size_t j = 0; j < m; ++j) sum += detail::contact_error(buf[j], s.d_outlier);
+    for (std::size_t j = 0; j < m; ++j) sum += eq::contact_error(buf[j], s.d_outlier);
     nc += m;
     if (!bound_only && nc < C && -sum * invC < reject_below) {
       ev.contacts = static_cast<std::uint32_t>(nc);
@@ -229,7 +230,7 @@ Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const 
     auto flush = [&] {
       distances(near, k, I, buf);
       for (std::size_t j = 0; j < k; ++j)
-        fsum += detail::free_error(buf[j], d_thresh, s.free_inside_penalty, s.free_inside_margin);
+        fsum += eq::free_error(buf[j], d_thresh, s.free_inside_penalty, s.free_inside_margin);
       count += static_cast<std::uint32_t>(k);
       k = 0;
     };
@@ -267,4 +268,5 @@ Evaluation evaluate_with(const Scene& scene, const DistanceFn& distance, const V
   return evaluate_batched(scene, batch, half_extent, T_scene_object, s, reject_below);
 }
 
+}  // namespace recognition
 }  // namespace ts

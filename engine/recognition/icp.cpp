@@ -12,6 +12,7 @@
 #include <numeric>
 
 namespace ts {
+inline namespace recognition {
 
 namespace {
 
@@ -288,4 +289,5 @@ IcpSystem icp_system(const Scene& scene, const ObjectGeometry& geo, const Pose& 
   return out;
 }
 
+}  // namespace recognition
 }  // namespace ts

@@ -10,6 +10,7 @@
 #include "engine/recognition/scene.hpp"
 
 namespace ts {
+inline namespace recognition {
 
 enum class IcpMetric {
   point_to_point,   ///< nearest fine-cloud point (k-d tree), Kabsch: the paper's ICP
@@ -69,4 +70,5 @@ struct IcpSystem {
 IcpSystem icp_system(const Scene& scene, const ObjectGeometry& geometry,
                      const Pose& T_scene_object, const IcpSettings& settings);
 
+}  // namespace recognition
 }  // namespace ts

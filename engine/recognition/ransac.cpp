@@ -15,6 +15,7 @@
 #include <optional>
 
 namespace ts {
+inline namespace recognition {
 
 namespace {
 using detail::seconds_since;
@@ -494,4 +495,5 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
   return out;
 }
 
+}  // namespace recognition
 }  // namespace ts

@@ -16,6 +16,7 @@
 #include "engine/recognition/scene.hpp"
 
 namespace ts {
+inline namespace recognition {
 
 struct RansacSettings {
   int triplets = 15;                  ///< N, triplets sampled from the input (paper: 15)
@@ -108,4 +109,5 @@ std::vector<Candidate> ransac_candidates(const Scene& scene, const Database& db,
                                          std::uint64_t step, RansacStats* stats = nullptr,
                                          const std::vector<std::uint32_t>& preferred = {});
 
+}  // namespace recognition
 }  // namespace ts

@@ -7,6 +7,7 @@
 #include <algorithm>
 
 namespace ts {
+inline namespace recognition {
 
 const std::vector<std::string>& pipeline_stage_names() {
   static const std::vector<std::string> names = [] {
@@ -187,4 +188,5 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   return res;
 }
 
+}  // namespace recognition
 }  // namespace ts

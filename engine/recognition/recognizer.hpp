@@ -22,6 +22,7 @@
 #include <vector>
 
 namespace ts {
+inline namespace recognition {
 
 namespace pipeline {
 class Stage;
@@ -81,4 +82,5 @@ class Recognizer {
   std::shared_ptr<const std::vector<std::unique_ptr<const pipeline::Stage>>> stages_;
 };
 
+}  // namespace recognition
 }  // namespace ts

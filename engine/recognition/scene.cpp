@@ -9,6 +9,7 @@
 #include <numeric>
 
 namespace ts {
+inline namespace recognition {
 
 namespace {
 
@@ -256,4 +257,5 @@ void set_grasps(Scene& scene, const GraspGroups& in) {
   }
 }
 
+}  // namespace recognition
 }  // namespace ts

@@ -11,6 +11,7 @@
 #include "engine/geometry/search.hpp"
 
 namespace ts {
+inline namespace recognition {
 
 struct SceneSettings {
   double query_voxel = 0.0;          ///< m, voxel filter applied to the contacts first (0: none)
@@ -68,4 +69,5 @@ void set_grasps(Scene& scene, const GraspGroups& grasps_world);
 /// point-to-plane information matrix below eps * largest; rotations scaled by the RMS radius).
 int unobservable_dof(const std::vector<Vec3>& points, const std::vector<Vec3>& normals, double eps);
 
+}  // namespace recognition
 }  // namespace ts

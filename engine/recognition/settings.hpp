@@ -16,6 +16,7 @@
 #include <string_view>
 
 namespace ts {
+inline namespace recognition {
 
 enum class Method { batch_ransac, ransac_icp, ransac_icp_fs, bricpsf };
 std::string_view method_name(Method m);                  ///< "bricpsf", "batch-ransac", ...
@@ -85,4 +86,5 @@ struct RecognizerSettings {
 /// margin); when not, Database::set_surface(false) loads the distance fields alone.
 bool needs_surface(const RecognizerSettings& s, const DatabaseSettings& database);
 
+}  // namespace recognition
 }  // namespace ts

@@ -11,6 +11,7 @@
 #include <tuple>
 
 namespace ts {
+inline namespace recognition {
 
 namespace {
 
@@ -197,4 +198,5 @@ std::vector<std::uint32_t> rank_by_prior(const std::vector<double>& score) {
   return order;
 }
 
+}  // namespace recognition
 }  // namespace ts

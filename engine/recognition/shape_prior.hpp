@@ -26,6 +26,7 @@
 #include <vector>
 
 namespace ts {
+inline namespace recognition {
 
 struct ShapePriorSettings {
   double distance_bin = 0.01;         ///< m, pair-distance bin
@@ -67,4 +68,5 @@ class ShapePrior {
 /// Objects with a finite score, best first (ties: smaller index).
 std::vector<std::uint32_t> rank_by_prior(const std::vector<double>& score);
 
+}  // namespace recognition
 }  // namespace ts

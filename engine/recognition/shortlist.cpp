@@ -11,6 +11,7 @@
 #include <set>
 
 namespace ts {
+inline namespace recognition {
 
 namespace {
 
@@ -149,4 +150,5 @@ Shortlist shortlist_objects(const Scene& scene, const Database& db, const std::v
   return out;
 }
 
+}  // namespace recognition
 }  // namespace ts

@@ -23,6 +23,7 @@
 #include <vector>
 
 namespace ts {
+inline namespace recognition {
 
 struct ShortlistSettings {
   std::size_t objects = 0;          ///< objects whose candidates go on (0: off, all of them)
@@ -65,4 +66,5 @@ Shortlist shortlist_objects(const Scene& scene, const Database& db,
                             const std::vector<std::uint32_t>& always,
                             const ShortlistSettings& settings);
 
+}  // namespace recognition
 }  // namespace ts

@@ -17,6 +17,7 @@
 #include <numbers>
 
 namespace ts {
+inline namespace recognition {
 
 namespace {
 
@@ -526,4 +527,5 @@ double mean_contact_distance(const ObjectGeometry& geometry, const Pose& T_world
   return sum / static_cast<double>(contacts_world.size());
 }
 
+}  // namespace recognition
 }  // namespace ts

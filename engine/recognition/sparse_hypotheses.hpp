@@ -50,6 +50,7 @@
 #include <mutex>
 
 namespace ts {
+inline namespace recognition {
 
 constexpr int kSparseAuto = 0;        ///< SparseSettings::mode: when the contacts are isolated
 constexpr int kSparseAlways = 1;      ///< on every scene of at least 3 contacts (pads too)
@@ -176,4 +177,5 @@ std::vector<Vec3> sparse_contact_normals(const Scene& scene, const PointCloud& c
 double mean_contact_distance(const ObjectGeometry& geometry, const Pose& T_world_object,
                              const std::vector<Vec3>& contacts_world);
 
+}  // namespace recognition
 }  // namespace ts

@@ -12,6 +12,7 @@
 #include <vector>
 
 namespace ts {
+inline namespace recognition {
 
 /// Slots of hypotheses made by pose transfer (TwinSettings::transfer): kTransferSlot + object,
 /// apart from RANSAC's triplet * R + r.
@@ -136,4 +137,5 @@ struct StepResult {
   std::vector<StageRun> stages;     ///< the step's pipeline, in order: ran or left out, and why
 };
 
+}  // namespace recognition
 }  // namespace ts

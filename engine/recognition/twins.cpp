@@ -8,6 +8,7 @@
 #include <numbers>
 
 namespace ts {
+inline namespace recognition {
 
 namespace {
 
@@ -293,4 +294,5 @@ double twin_score(const Scene& scene, const ObjectGeometry& geo, const Pose& T_s
   return fit.v;
 }
 
+}  // namespace recognition
 }  // namespace ts

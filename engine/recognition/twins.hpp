@@ -28,6 +28,7 @@
 #include <vector>
 
 namespace ts {
+inline namespace recognition {
 
 struct TwinSettings {
   std::size_t rivals = 0;           ///< leading objects compared (0: off; needs grasp groups)
@@ -67,4 +68,5 @@ struct TwinSettings {
 double twin_score(const Scene& scene, const ObjectGeometry& geometry, const Pose& T_scene_object,
                   const TwinSettings& settings);
 
+}  // namespace recognition
 }  // namespace ts

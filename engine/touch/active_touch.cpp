@@ -13,6 +13,7 @@
 #include <numbers>
 
 namespace ts {
+inline namespace touch {
 
 namespace {
 using detail::kRadPerDeg;
@@ -363,4 +364,5 @@ PlanObjects database_plan_objects(const Database& db) {
   };
 }
 
+}  // namespace touch
 }  // namespace ts

@@ -59,6 +59,7 @@
 #include <vector>
 
 namespace ts {
+inline namespace touch {
 
 struct ActiveSettings {
   std::size_t candidates = 48;      ///< candidate grasps scored per step
@@ -175,4 +176,5 @@ class GraspPlanner {
 /// need; the returned function keeps them alive.
 PlanObjects database_plan_objects(const Database& db);
 
+}  // namespace touch
 }  // namespace ts

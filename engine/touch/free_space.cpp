@@ -16,6 +16,8 @@ void detail::init_openvdb() {
   std::call_once(once, [] { openvdb::initialize(); });
 }
 
+inline namespace touch {
+
 namespace {
 using detail::init_openvdb;
 constexpr std::int32_t kFree = 1;
@@ -408,4 +410,5 @@ Eigen::AlignedBox3d free_space_box(const std::vector<Vec3>& contacts, double s_o
   return Eigen::AlignedBox3d(c - half, c + half);
 }
 
+}  // namespace touch
 }  // namespace ts

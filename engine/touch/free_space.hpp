@@ -20,6 +20,7 @@
 #include <memory>
 
 namespace ts {
+inline namespace touch {
 
 struct FreeSpaceSettings {
   double voxel = 0.004;      ///< m, occupancy voxel size
@@ -99,4 +100,5 @@ std::vector<Vec3> hand_surface_samples(const Gripper& gripper, const Pose& T_wor
 /// bounding-box size + 2 s_obj_max. Empty box when there are no contacts.
 Eigen::AlignedBox3d free_space_box(const std::vector<Vec3>& contacts, double s_obj_max);
 
+}  // namespace touch
 }  // namespace ts

@@ -7,6 +7,7 @@
 #include <set>
 
 namespace ts {
+inline namespace touch {
 
 namespace {
 using detail::require;
@@ -238,4 +239,5 @@ ExplorationClouds exploration_clouds(const TactileLog& log, std::size_t k,
   return out;
 }
 
+}  // namespace touch
 }  // namespace ts

@@ -28,6 +28,7 @@
 #include <optional>
 
 namespace ts {
+inline namespace touch {
 
 /// How a log senses touch: `pads`, the gripper's tactile arrays (the default, every log written
 /// before the probe), or `probe`, a rigid probe with a ball tip that records one contact per
@@ -169,4 +170,5 @@ class Exploration {
 ExplorationClouds exploration_clouds(const TactileLog& log, std::size_t k,
                                      const ExplorationSettings& settings = {});
 
+}  // namespace touch
 }  // namespace ts

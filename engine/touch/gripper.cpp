@@ -5,6 +5,7 @@
 #include <numbers>
 
 namespace ts {
+inline namespace touch {
 
 namespace {
 using detail::require;
@@ -219,4 +220,5 @@ Pose rolled_frame(const Vec3& z, double roll) {
   return T;
 }
 
+}  // namespace touch
 }  // namespace ts

@@ -27,6 +27,7 @@
 #include <vector>
 
 namespace ts {
+inline namespace touch {
 
 struct LinkSpec {
   std::string name;
@@ -132,4 +133,5 @@ Pose rolled_frame(const Vec3& z, double roll);
 /// Rotation of `angle` rad about unit `axis` (joint rotations).
 Pose joint_rotation(const Vec3& axis, double angle);
 
+}  // namespace touch
 }  // namespace ts

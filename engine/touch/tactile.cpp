@@ -5,6 +5,7 @@
 #include <cmath>
 
 namespace ts {
+inline namespace touch {
 
 namespace {
 using detail::require;
@@ -108,4 +109,5 @@ SenselReading invert_sensel(const SensorSettings& s, double gain, double signal,
   return out;
 }
 
+}  // namespace touch
 }  // namespace ts

@@ -36,6 +36,7 @@
 #include <cstdint>
 
 namespace ts {
+inline namespace touch {
 
 /// Geometry and response of one tactile pad (all pads of a gripper share it).
 struct SensorSettings {
@@ -104,4 +105,5 @@ inline Vec3 sensel_contact(const SensorSettings& s, int j, const SenselReading& 
   return p;
 }
 
+}  // namespace touch
 }  // namespace ts

@@ -7,7 +7,7 @@
 
 #include "engine/detail.hpp"
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 AnswerRule decide_answer(const Scene& scene, const Database& db, const std::vector<Working>& next,
                          const TwinSettings& twins) {
@@ -50,4 +50,4 @@ class AnswerRuleStage final : public Stage {
 
 std::unique_ptr<const Stage> answer_rule_stage() { return std::make_unique<AnswerRuleStage>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

@@ -4,7 +4,7 @@
 
 #include <utility>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -81,4 +81,4 @@ Pipeline compose(const std::vector<std::string_view>& names) {
   return out;
 }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

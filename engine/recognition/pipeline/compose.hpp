@@ -9,7 +9,7 @@
 #include <string_view>
 #include <vector>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 /// The stage names of a method, in order.
 std::vector<std::string_view> method_stages(Method m);
@@ -21,4 +21,4 @@ std::vector<std::string_view> known_stages();
 /// "pipeline.stages").
 Pipeline compose(const std::vector<std::string_view>& names);
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

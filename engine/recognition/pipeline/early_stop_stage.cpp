@@ -14,7 +14,7 @@
 #include <set>
 #include <string>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -60,4 +60,4 @@ class EarlyStop final : public Stage {
 
 std::unique_ptr<const Stage> early_stop_stage() { return std::make_unique<EarlyStop>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

@@ -5,7 +5,7 @@
 
 #include <numbers>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 bool better(const Working& a, const Working& b) {
   if (a.eval.log_weight != b.eval.log_weight) return a.eval.log_weight > b.eval.log_weight;
@@ -72,4 +72,4 @@ std::vector<Working> from_scored(const std::vector<Candidate>& cands,
   return w;
 }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

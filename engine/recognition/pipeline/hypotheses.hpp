@@ -12,7 +12,7 @@
 #include <cstdint>
 #include <vector>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 /// A hypothesis while a step works on it (scene frame).
 struct Working {
@@ -51,4 +51,4 @@ void take(std::vector<Working>& into, const std::vector<Working>& from, std::siz
 std::vector<Working> from_scored(const std::vector<Candidate>& cands,
                                  const std::vector<ScoredCandidate>& top, int born);
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

@@ -9,7 +9,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -50,4 +50,4 @@ class IcpEach final : public Stage {
 
 std::unique_ptr<const Stage> icp_each() { return std::make_unique<IcpEach>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

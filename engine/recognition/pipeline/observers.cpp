@@ -5,7 +5,7 @@
 
 #include <algorithm>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 void FunnelObserver::before(std::string_view stage, bool runs, StepContext& c) {
   if (stage == "shortlist") {
@@ -96,4 +96,4 @@ void FunnelObserver::at_true_pose(StepContext& c) const {
   f.diagnostic_s += detail::seconds_since(t0);
 }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

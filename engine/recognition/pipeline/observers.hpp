@@ -6,7 +6,7 @@
 
 #include <optional>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 /// Where one watched object stands in the step's search (Funnel): searched by the pruning,
 /// candidates, the shortlist's screening, the shape prior's and pose transfer's ranks, its
@@ -29,4 +29,4 @@ class FunnelObserver final : public StepObserver {
   std::vector<Candidate> unscreened_;   ///< the candidates before the shortlist (one step)
 };
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

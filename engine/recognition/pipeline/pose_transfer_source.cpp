@@ -9,7 +9,7 @@
 
 #include <algorithm>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -79,4 +79,4 @@ class PoseTransfer final : public Stage {
 
 std::unique_ptr<const Stage> pose_transfer_source() { return std::make_unique<PoseTransfer>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <limits>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -33,4 +33,4 @@ class PosteriorsStage final : public Stage {
 
 std::unique_ptr<const Stage> posteriors_stage() { return std::make_unique<PosteriorsStage>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

@@ -3,7 +3,7 @@
 // when it ranked them). Reads RansacSettings (lengths in m, angles in degrees).
 #include "engine/recognition/pipeline/stages.hpp"
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -31,4 +31,4 @@ class RansacSource final : public Stage {
 
 std::unique_ptr<const Stage> ransac_source() { return std::make_unique<RansacSource>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

@@ -5,7 +5,7 @@
 
 #include "engine/detail.hpp"
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -50,4 +50,4 @@ class SceneStage final : public Stage {
 
 std::unique_ptr<const Stage> scene_stage() { return std::make_unique<SceneStage>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

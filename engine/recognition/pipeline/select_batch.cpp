@@ -5,7 +5,7 @@
 
 #include <algorithm>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -24,4 +24,4 @@ class SelectBatch final : public Stage {
 
 std::unique_ptr<const Stage> select_batch() { return std::make_unique<SelectBatch>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

@@ -11,7 +11,7 @@
 #include <cmath>
 #include <map>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -65,4 +65,4 @@ class SequentialFilter final : public Stage {
 
 std::unique_ptr<const Stage> sequential_filter() { return std::make_unique<SequentialFilter>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

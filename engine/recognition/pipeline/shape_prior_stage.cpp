@@ -6,7 +6,7 @@
 
 #include "engine/detail.hpp"
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -32,4 +32,4 @@ class ShapePriorStage final : public Stage {
 
 std::unique_ptr<const Stage> shape_prior_stage() { return std::make_unique<ShapePriorStage>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

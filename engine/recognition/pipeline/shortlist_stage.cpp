@@ -5,7 +5,7 @@
 
 #include "engine/detail.hpp"
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -39,4 +39,4 @@ class ShortlistStage final : public Stage {
 
 std::unique_ptr<const Stage> shortlist_stage() { return std::make_unique<ShortlistStage>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

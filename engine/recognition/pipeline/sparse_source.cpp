@@ -5,7 +5,7 @@
 
 #include <algorithm>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -51,4 +51,4 @@ class SparseSource final : public Stage {
 
 std::unique_ptr<const Stage> sparse_source() { return std::make_unique<SparseSource>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

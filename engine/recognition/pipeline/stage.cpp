@@ -4,7 +4,7 @@
 
 #include <exception>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -77,4 +77,4 @@ std::string small_database(const Database& db, std::string_view what, std::size_
          std::to_string(above) + ")";
 }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

@@ -23,7 +23,7 @@
 #include <string_view>
 #include <vector>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 /// The answer rule's outcome (answer.hpp): the chosen hypothesis (index into `next`), and when
 /// the near-twin verification re-decided a near tie, the leaders it compared and their V.
@@ -118,4 +118,4 @@ std::string small_database(const Database& db, std::string_view what, std::size_
 /// comes out as an Error naming the stage (field "stage.NAME").
 void run_pipeline(const Pipeline& stages, StepContext& c, std::span<StepObserver* const> observers);
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

@@ -6,7 +6,7 @@
 
 #include <memory>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 // ---- the query
 std::unique_ptr<const Stage> scene_stage();          ///< "scene": the local frame, normals,
@@ -44,4 +44,4 @@ std::unique_ptr<const Stage> state_stage();          ///< "state": S_t in world 
 AnswerRule decide_answer(const Scene& scene, const Database& db, const std::vector<Working>& next,
                          const TwinSettings& twins);
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

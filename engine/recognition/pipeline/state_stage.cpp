@@ -7,7 +7,7 @@
 #include <cmath>
 #include <numbers>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -75,4 +75,4 @@ class StateStage final : public Stage {
 
 std::unique_ptr<const Stage> state_stage() { return std::make_unique<StateStage>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline

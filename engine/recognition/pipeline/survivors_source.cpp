@@ -5,7 +5,7 @@
 
 #include <algorithm>
 
-namespace ts::pipeline {
+namespace ts::inline recognition::pipeline {
 
 namespace {
 
@@ -35,4 +35,4 @@ class SurvivorsSource final : public Stage {
 
 std::unique_ptr<const Stage> survivors_source() { return std::make_unique<SurvivorsSource>(); }
 
-}  // namespace ts::pipeline
+}  // namespace ts::recognition::pipeline
