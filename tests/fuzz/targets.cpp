@@ -5,6 +5,8 @@
 #include "datasets/archive.hpp"
 #include "datasets/manifest.hpp"
 #include "engine/core.hpp"
+#include "engine/recognition/answer_set.hpp"
+#include "experiments/analysis/calibration.hpp"
 #include "experiments/params/config.hpp"
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
@@ -19,6 +21,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
 
 namespace ts::fuzz {
 namespace {
@@ -137,6 +140,24 @@ bool config(std::span<const std::uint8_t> b) {
   });
 }
 
+/// A calibration file (confidence models, open-set threshold, answer sets), read for no
+/// particular database, then used: a confidence and a set answer at a few steps.
+bool calibration(std::span<const std::uint8_t> b) {
+  const auto p = as_file(b, "in.json");
+  return refusal_ok([&] {
+    const experiments::Calibration c = experiments::read_calibration(p, "");
+    const std::vector<double> features(c.features.size(), 0.5);
+    for (int step : {1, 7, 1000}) {
+      (void)c.object_confidence(step, features);
+      (void)c.in_database(step, features);
+      if (c.answer_sets) {
+        const std::vector<double> gaps{0.0, 1e-5, 0.01, std::numeric_limits<double>::infinity()};
+        (void)conformal_set(gaps, c.answer_sets->at(step), c.answer_sets->alpha);
+      }
+    }
+  });
+}
+
 /// The HDF5 readers. Each takes a file path.
 void read_database(const fs::path& p) {
   io::DbReader db(p);
@@ -193,6 +214,7 @@ const std::vector<Target>& targets() {
       {"manifest", "mesh manifest (TSV)", manifest},
       {"gripper", "gripper description (JSON)", gripper},
       {"config", "study configuration (first byte: TOML or INI), validated", config},
+      {"calibration", "calibration file (JSON: confidence models, answer sets), read and used", calibration},
       {"database", "object database (HDF5 edit script on a database: summary, first objects' data)", database},
       {"log", "tactile log (HDF5 edit script on a log)", log},
       {"runs", "experiment run store (HDF5 edit script on a store)", runs},
