@@ -86,10 +86,11 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
   };
   const std::size_t size_col = column("answer_set.size"), covers_col = column("answer_set.covers"),
                     informative_col = column("answer_set.informative");
+  const std::size_t expected_col = column("plan.expected_object_information"), drop_col = column("plan.entropy_drop");
   J rows = J::array();
   for (int k = 0; k < steps; ++k) {
     std::map<int, ClusterCounts> covered_by_object;
-    std::vector<double> set_sizes;
+    std::vector<double> set_sizes, expected, drop_planned, drop_all;
     std::size_t covered = 0, informative = 0;
     std::map<int, ClusterCounts> strict_by_object, class_by_object;
     std::vector<StepSample> samples;
@@ -118,6 +119,14 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
         ClusterCounts& by = covered_by_object[r->object];
         ++by.trials;
         by.successes += c ? 1 : 0;
+      }
+      // Active touch: the planner's expectation of the chosen grasp and the step's entropy drop.
+      if (drop_col < s.values.size() && !std::isnan(s.values[drop_col])) {
+        drop_all.push_back(s.values[drop_col]);
+        if (expected_col < s.values.size() && !std::isnan(s.values[expected_col])) {
+          expected.push_back(s.values[expected_col]);
+          drop_planned.push_back(s.values[drop_col]);
+        }
       }
     }
     const StepSummary m = summarize_step(k + 1, samples, bounds);
@@ -161,6 +170,12 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
                               "set_size_mean", "set_size_p90", "set_informative_share"})
         row[key] = nullptr;
     }
+    // Active touch, per step: the expected information about the object of the grasps the
+    // planner chose (nats, median), what those steps gave (the drop of the posterior's entropy
+    // over objects, median), and the drop over every run of the step (random runs included).
+    row["plan_expected_object_information_median"] = opt(median(expected));
+    row["plan_entropy_drop_median"] = opt(median(drop_planned));
+    row["entropy_drop_median"] = opt(median(drop_all));
     // The interface's keys first, then the rest.
     row["position_error_m_median"] = opt(m.position_m.median);
     row["orientation_error_deg_median"] = opt(m.orientation_rad.median, kDeg);
@@ -817,6 +832,23 @@ void print_answer_sets(const J& rows, const std::string& label, std::ostream& ou
   }
 }
 
+void print_planner(const J& rows, const std::string& label, std::ostream& out) {
+  if (!rows.is_array() ||
+      std::none_of(rows.begin(), rows.end(), [](const J& r) { return r.value("plan_expected_object_information_median", J(nullptr)).is_number(); }))
+    return;
+  out << "\nActive touch" << label
+      << ": the information about the object the planner expected of the grasps it chose, and the drop of "
+         "the posterior's entropy over objects those steps gave (nats, medians)\n"
+         "  step  expected  realized\n";
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const J& r = rows[i];
+    const int step = r["step"].get<int>();
+    if (!(step == 2 || step == 5 || step % 10 == 0 || i + 1 == rows.size())) continue;
+    out << "  " << std::setw(4) << step << "  " << std::setw(8) << fmt(r["plan_expected_object_information_median"], 1, 3)
+        << "  " << std::setw(8) << fmt(r["plan_entropy_drop_median"], 1, 3) << "\n";
+  }
+}
+
 void print_truth_pose(const J& rows, const std::string& label, std::ostream& out) {
   if (!rows.is_array()) return;
   out << "\nThe true object at its true pose" << label
@@ -916,6 +948,7 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
     print_confidence(report, out);
     print_open_set(report, out);
     print_answer_sets(report["per_step"], "", out);
+    print_planner(report["per_step"], "", out);
     print_truth_pose(report.value("truth_pose", J(nullptr)), "", out);
     print_stages(report.value("stages", J(nullptr)), "", out);
     out << "\nPer object:\n";
@@ -955,6 +988,8 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
          "vs time per step\n";
   for (const auto& v : report["variants"])
     print_answer_sets(v.value("per_step", J(nullptr)), ", variant " + v["label"].get<std::string>(), out);
+  for (const auto& v : report["variants"])
+    print_planner(v.value("per_step", J(nullptr)), ", variant " + v["label"].get<std::string>(), out);
   for (const auto& v : report["variants"])
     print_truth_pose(v.value("truth_pose", J(nullptr)), ", variant " + v["label"].get<std::string>(), out);
   for (const auto& v : report["variants"])

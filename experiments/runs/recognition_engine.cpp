@@ -329,9 +329,12 @@ class RecognitionEngine final : public RunEngine {
     Exploration exploration(log, es);
     const auto run_start = Clock::now();
     std::vector<Vec3> contacts_so_far;   // active: the contact cloud of the previous step
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    double previous_entropy = nan;       // of the posterior over objects after the previous step
     for (int k = 1; k <= v.config.steps; ++k) {
       if (stop && stop->load()) return std::nullopt;
       double plan_s = 0.0;
+      double expected_information = nan, expected_object_information = nan;   // the chosen grasp's
       if (v.active && k > 1) {
         // The operator's aims at the pool's grasps not yet executed (as many as
         // active.candidates, a seeded choice when more remain), ranked by the planner on the
@@ -363,6 +366,8 @@ class RecognitionEngine final : public RunEngine {
             for (std::size_t i = 1; i < scored.size(); ++i)
               if (scored[i].score > scored[best].score) best = i;
             g = unused.at(best);
+            expected_information = scored[best].information;
+            expected_object_information = scored[best].object_information;
           } else {
             g = unused.front();   // the drawn grasp was executed already: the first unused one
           }
@@ -407,9 +412,10 @@ class RecognitionEngine final : public RunEngine {
         }
       }
       s.posterior_entropy = posterior_entropy(sr.posteriors);
+      const double entropy_drop = previous_entropy - s.posterior_entropy;   // NaN at step 1
+      previous_entropy = s.posterior_entropy;
       // The confidences (NaN without a calibration) and the features they come from.
       const std::vector<double> features = confidence_features(sr);
-      const double nan = std::numeric_limits<double>::quiet_NaN();
       s.values = {calibration_ ? calibration_->object_confidence(features) : nan,
                   calibration_ ? calibration_->pose_confidence(features) : nan};
       s.values.insert(s.values.end(), features.begin(), features.end());
@@ -432,6 +438,9 @@ class RecognitionEngine final : public RunEngine {
       } else {
         s.values.insert(s.values.end(), {nan, nan, nan});
       }
+      // Active touch: what the planner expected of the grasp it chose (nats; NaN when it did not
+      // choose) and what the step gave: the drop of the posterior's entropy over objects.
+      s.values.insert(s.values.end(), {expected_information, expected_object_information, entropy_drop});
       if (truth_pose_) {
         const std::optional<Funnel>& f = sr.watched;
         if (f && f->truth_pose_evaluated) {
@@ -539,7 +548,8 @@ const std::vector<std::string>& recognition_step_values() {
     std::vector<std::string> n{"confidence_object", "confidence_pose"};
     for (const std::string& f : confidence_feature_names()) n.push_back("feature." + f);
     for (const std::string& stage : pipeline_stage_names()) n.push_back("ran." + stage);
-    n.insert(n.end(), {"set.truth_gap", "answer_set.size", "answer_set.covers", "answer_set.informative"});
+    n.insert(n.end(), {"set.truth_gap", "answer_set.size", "answer_set.covers", "answer_set.informative",
+                       "plan.expected_information", "plan.expected_object_information", "plan.entropy_drop"});
     return n;
   }();
   return names;

@@ -222,7 +222,7 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
   const std::size_t F = confidence_feature_names().size();
   const std::size_t G = 2 + F + pipeline_stage_names().size();   // set.truth_gap, then answer_set.*
   for (const auto& s : runs[0].steps) {
-    REQUIRE(s.values.size() == G + 4);
+    REQUIRE(s.values.size() == G + 7);
     CHECK(std::isnan(s.values[0]));  // no calibration: no confidence
     CHECK(std::isnan(s.values[1]));
     for (std::size_t i = 2; i < 2 + F; ++i) CHECK(std::isfinite(s.values[i]));
@@ -233,7 +233,14 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
     // The true class's gap: >= 0 (+inf without a hypothesis of it).
     CHECK(s.values[G] >= 0.0);
     for (std::size_t i = G + 1; i < G + 4; ++i) CHECK(std::isnan(s.values[i]));   // no answer sets
+    CHECK(std::isnan(s.values[G + 4]));   // random grasps: nothing planned
+    CHECK(std::isnan(s.values[G + 5]));
   }
+  // The entropy drop: the previous step's posterior entropy minus this one's (none at step 1).
+  const auto& st = runs[0].steps;
+  CHECK(std::isnan(st[0].values[G + 6]));
+  for (std::size_t k = 1; k < st.size(); ++k)
+    CHECK(st[k].values[G + 6] == st[k - 1].posterior_entropy - st[k].posterior_entropy);
 
   // A calibration of this database: the recorded confidences are its predictions on the
   // recorded features.
@@ -385,13 +392,24 @@ TEST_CASE("Recognition engine: active exploration plans each grasp after the fir
     CHECK(*distinct.begin() >= 0);
     CHECK(*distinct.rbegin() < 5);
     CHECK(r.steps[0].contacts == twin->steps[0].contacts);   // the first grasp is the drawn one
+    const auto& names = recognition_step_values();
+    const auto col = [&](const char* n) { return static_cast<std::size_t>(std::find(names.begin(), names.end(), n) - names.begin()); };
+    const std::size_t info = col("plan.expected_information"), object_info = col("plan.expected_object_information");
+    REQUIRE(object_info < names.size());
     for (std::size_t k = 0; k < r.steps.size(); ++k) {
       const double t = r.steps[k].stage_times_s.at(plan);
+      const auto& v = r.steps[k].values;
       // Planned after a step that left hypotheses; otherwise (and in random runs) the drawn grasp.
-      if (!active || k == 0 || r.steps[k - 1].hypotheses == 0)
+      if (!active || k == 0 || r.steps[k - 1].hypotheses == 0) {
         CHECK(t == 0.0);
-      else
+        CHECK(std::isnan(v.at(info)));   // nothing expected of a grasp nobody chose
+      } else {
         CHECK(t > 0.0);
+        // The chosen grasp's expectation: 0 <= I(O; Y) <= I(H; Y) <= ln K (K <= 16 hypotheses).
+        CHECK(v.at(object_info) >= 0.0);
+        CHECK(v.at(object_info) <= v.at(info) + 1e-12);
+        CHECK(v.at(info) <= std::log(16.0) + 1e-9);
+      }
     }
     if (active) differing += r.grasps != twin->grasps;
   }
