@@ -1120,7 +1120,8 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
   // --alpha overrides the file's; it needs a calibration with answer sets, within (0, 1).
   const Run tenth = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --calibration half.json --alpha 0.9" + kFastFlags);
   REQUIRE_MESSAGE(tenth.code == 0, tenth.err);
-  for (const auto& st : nlohmann::json::parse(tenth.out)["steps"]) {
+  const auto jt = nlohmann::json::parse(tenth.out);   // named: a range-for over a temporary's member dangles
+  for (const auto& st : jt["steps"]) {
     CHECK(st["answer_set"]["alpha"] == 0.9);
     CHECK(st["answer_set"]["size"].get<std::size_t>() <= objects);
   }
