@@ -5,6 +5,7 @@
 #include "io/atomic_file.hpp"
 #include "io/h5.hpp"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <limits>
@@ -19,6 +20,89 @@ void push_pose(std::vector<double>& t, std::vector<double>& q, const Pose& T) {
   const auto row = canonical_pose_row(T);
   t.insert(t.end(), row.begin(), row.begin() + 3);
   q.insert(q.end(), row.begin() + 3, row.end());
+}
+
+/// The optional /answer_sets group: present exactly when the header has a level, every step then
+/// with an answer set over every object.
+void write_answer_sets(h5::Group& root, const ResultHeader& h, const std::vector<ResultStep>& steps,
+                       const std::string& file) {
+  const bool any = std::any_of(steps.begin(), steps.end(), [](const ResultStep& s) { return s.answer_set.has_value(); });
+  if (!h.answer_set_alpha) {
+    if (any) throw Error("steps carry answer sets but the header no level", file, "/answer_sets/alpha");
+    return;
+  }
+  const double alpha = *h.answer_set_alpha;
+  if (!(alpha > 0.0 && alpha < 1.0)) throw Error("alpha must lie in (0, 1)", file, "/answer_sets/alpha");
+  const std::size_t K = steps.size(), n_obj = h.objects.size();
+  std::vector<std::uint8_t> informative, in_set;
+  std::vector<std::uint64_t> size;
+  std::vector<std::int32_t> calibrated;
+  std::vector<double> p, gap;
+  for (const ResultStep& s : steps) {
+    if (!s.answer_set) throw Error("step " + std::to_string(s.step) + " has no answer set", file, "/answer_sets");
+    const ResultAnswerSet& a = *s.answer_set;
+    if (a.p_value.size() != n_obj || a.log_weight_gap.size() != n_obj || a.in_set.size() != n_obj)
+      throw Error("step " + std::to_string(s.step) + "'s answer set does not cover the " + std::to_string(n_obj) +
+                  " objects", file, "/answer_sets");
+    informative.push_back(a.informative ? 1 : 0);
+    size.push_back(a.size);
+    calibrated.push_back(a.calibrated_step);
+    p.insert(p.end(), a.p_value.begin(), a.p_value.end());
+    gap.insert(gap.end(), a.log_weight_gap.begin(), a.log_weight_gap.end());
+    in_set.insert(in_set.end(), a.in_set.begin(), a.in_set.end());
+  }
+  auto g = root.create_group("answer_sets");
+  g.set_attribute("alpha", alpha);
+  g.set_attribute("calibration", h.calibration);
+  g.write("informative", informative);
+  g.write("size", size);
+  g.write("calibrated_step", calibrated);
+  g.write("p_value", p.data(), {K, n_obj});
+  g.write("log_weight_gap", gap.data(), {K, n_obj});
+  g.write("in_set", in_set.data(), {K, n_obj});
+}
+
+/// Reads and checks /answer_sets into the header and the steps (already read).
+void read_answer_sets(const h5::Group& root, ResultData& d, const std::string& file) {
+  if (!root.has_group("answer_sets")) return;
+  const auto g = root.open_group("answer_sets");
+  const double alpha = g.double_attribute("alpha");
+  if (!(alpha > 0.0 && alpha < 1.0)) throw Error("alpha must lie in (0, 1)", file, "/answer_sets/alpha");
+  d.header.answer_set_alpha = alpha;
+  d.header.calibration = g.string_attribute("calibration");
+  const auto K = static_cast<std::int64_t>(d.steps.size());
+  const auto n_obj = static_cast<std::int64_t>(d.header.objects.size());
+  const auto informative = g.read<std::uint8_t>("informative", {K});
+  const auto size = g.read<std::uint64_t>("size", {K});
+  const auto calibrated = g.read<std::int32_t>("calibrated_step", {K});
+  const auto p = g.read<double>("p_value", {K, n_obj});
+  const auto gap = g.read<double>("log_weight_gap", {K, n_obj});
+  const auto in_set = g.read<std::uint8_t>("in_set", {K, n_obj});
+  for (std::int64_t k = 0; k < K; ++k) {
+    ResultAnswerSet a;
+    if (informative[k] > 1) throw Error("informative must be 0 or 1", file, "/answer_sets/informative");
+    a.informative = informative[k] == 1;
+    if (size[k] > static_cast<std::uint64_t>(n_obj) || (n_obj > 0 && size[k] == 0))
+      throw Error("a set of " + std::to_string(size[k]) + " classes among " + std::to_string(n_obj) + " objects", file,
+                  "/answer_sets/size");
+    a.size = size[k];
+    if (calibrated[k] < 1) throw Error("calibrated steps start at 1", file, "/answer_sets/calibrated_step");
+    a.calibrated_step = calibrated[k];
+    std::size_t members = 0;
+    for (std::int64_t i = k * n_obj; i < (k + 1) * n_obj; ++i) {
+      if (!(p[i] > 0.0 && p[i] <= 1.0)) throw Error("p-values must lie in (0, 1]", file, "/answer_sets/p_value");
+      if (!(gap[i] >= 0.0)) throw Error("gaps must be >= 0 (or +inf)", file, "/answer_sets/log_weight_gap");
+      if (in_set[i] > 1 || (!a.informative && in_set[i] != 1))
+        throw Error("membership must be 0 or 1, and 1 for every object of an uninformative set", file,
+                    "/answer_sets/in_set");
+      members += in_set[i];
+      a.p_value.push_back(p[i]);
+      a.log_weight_gap.push_back(gap[i]);
+      a.in_set.push_back(in_set[i]);
+    }
+    if (members < a.size) throw Error("fewer objects in the set than its classes", file, "/answer_sets/in_set");
+    d.steps[static_cast<std::size_t>(k)].answer_set = std::move(a);
+  }
 }
 
 }  // namespace
@@ -154,6 +238,7 @@ void write_result(const std::filesystem::path& path, const ResultHeader& h,
     hy.write("slot", hslot);
     hy.write("icp_iterations", hi);
     hy.write("icp_converged", hconv);
+    write_answer_sets(root, h, steps, path.string());
     f.close();
   }
   out.commit();
@@ -260,6 +345,7 @@ ResultData read_result(const std::filesystem::path& path) {
     }
     d.steps.push_back(std::move(s));
   }
+  read_answer_sets(root, d, file);
   return d;
 }
 

@@ -28,6 +28,21 @@ struct ResultHeader {
   std::string truth_object;               ///< "" when unknown
   std::optional<Pose> truth_pose;         ///< T_world_object, when known
   std::vector<std::pair<std::string, double>> params;  ///< method parameters (name, value)
+  /// Set answers (`recognize --calibration` with answer sets): their level; then every step
+  /// carries its `answer_set`, else none does.
+  std::optional<double> answer_set_alpha;
+  std::string calibration;                ///< the calibration file as given ("" : none)
+};
+
+/// A step's set answer (engine/recognition/answer_set.hpp), per database object: its class of
+/// congruent objects' conformal p-value and log-weight gap, and whether that class is in the set.
+struct ResultAnswerSet {
+  bool informative = true;                ///< false: no class could be excluded (every object is in)
+  std::size_t size = 0;                   ///< classes in the set (all of them when not informative)
+  int calibrated_step = 0;                ///< the calibration step whose scores were used
+  std::vector<double> p_value;            ///< per object, in (0, 1]
+  std::vector<double> log_weight_gap;     ///< per object, >= 0 (+inf: its class has no hypothesis)
+  std::vector<std::uint8_t> in_set;       ///< per object, 1 when its class is in the set
 };
 
 /// One step as stored.
@@ -43,6 +58,7 @@ struct ResultStep {
   std::optional<PoseError> error;         ///< when the truth pose is known (also for a wrong object)
   std::optional<bool> correct;            ///< best_object is the truth object (when known)
   std::vector<Hypothesis> hypotheses;     ///< the state S_t, best first
+  std::optional<ResultAnswerSet> answer_set;  ///< with a calibration's answer sets (ResultHeader)
 };
 
 /// Convert an engine step; with `truth_object` (a database index) and `truth_pose` known, the

@@ -119,6 +119,8 @@ struct StepResult {
   std::size_t contacts = 0, free_points = 0;
   int unobservable_dof = 6;         ///< pose DOF the contacts leave unconstrained (flat: 3)
   bool pose_ambiguous = true;       ///< unobservable_dof > 0: do not trust the pose
+  bool observability_from_model = false;  ///< unobservable_dof judged on the answer's surface (the
+                                          ///< contacts carried too few normals: stage "observability")
   std::size_t candidates = 0;       ///< RANSAC registrations this step
   std::size_t evaluated_full = 0;   ///< candidates evaluated completely
   std::size_t rejected_early = 0;   ///< candidates rejected by the exact bound

@@ -174,17 +174,30 @@ nlohmann::ordered_json class_json(const Context& c, std::size_t i) {
 /// the classes of congruent objects that hold the truth with probability at least 1 - alpha, each
 /// with its conformal p-value (it stays in the set for every alpha below it) and its log-weight gap
 /// to the leader, or "informative": false when no class can be excluded.
-nlohmann::ordered_json answer_set_json(const Context& c, const StepResult& r) {
+struct StepSet {
+  std::vector<double> gaps;          ///< per class
+  const ConformalScores* scores;     ///< the calibration step's
+  int calibrated_step;
+  AnswerSet set;
+};
+
+StepSet step_set(const Context& c, const StepResult& r) {
   const experiments::AnswerSetCalibration& a = *c.calibration->answer_sets;
-  const double alpha = c.o.alpha.value_or(a.alpha);
-  const AnswerSet set = conformal_set(class_log_weight_gaps(r.hypotheses, c.class_of, c.classes), a.at(r.step), alpha);
+  StepSet s{class_log_weight_gaps(r.hypotheses, c.class_of, c.classes), &a.at(r.step), a.calibrated_step(r.step), {}};
+  s.set = conformal_set(s.gaps, *s.scores, c.o.alpha.value_or(a.alpha));
+  return s;
+}
+
+nlohmann::ordered_json answer_set_json(const Context& c, const StepResult& r) {
+  const StepSet s = step_set(c, r);
+  const AnswerSet& set = s.set;
   std::vector<std::vector<std::size_t>> members(c.classes);
   for (std::size_t i = 0; i < c.class_of.size(); ++i) members[c.class_of[i]].push_back(i);
   nlohmann::ordered_json j;
-  j["alpha"] = alpha;
+  j["alpha"] = set.alpha;
   j["informative"] = set.informative;
   j["size"] = set.size;
-  j["calibrated_step"] = a.calibrated_step(r.step);
+  j["calibrated_step"] = s.calibrated_step;
   j["members"] = nlohmann::ordered_json::array();
   for (const AnswerSetMember& m : set.members) {
     nlohmann::ordered_json names = nlohmann::ordered_json::array();
@@ -192,6 +205,23 @@ nlohmann::ordered_json answer_set_json(const Context& c, const StepResult& r) {
     j["members"].push_back({{"objects", names}, {"p_value", m.p_value}, {"log_weight_gap", m.gap}});
   }
   return j;
+}
+
+/// The same set for the result file: per object its class's p-value, gap and membership.
+io::ResultAnswerSet stored_answer_set(const Context& c, const StepResult& r) {
+  const StepSet s = step_set(c, r);
+  std::vector<std::uint8_t> member(c.classes, s.set.informative ? 0 : 1);
+  for (const AnswerSetMember& m : s.set.members) member[m.cls] = 1;
+  io::ResultAnswerSet out;
+  out.informative = s.set.informative;
+  out.size = s.set.size;
+  out.calibrated_step = s.calibrated_step;
+  for (const std::uint32_t k : c.class_of) {
+    out.p_value.push_back(s.scores->p_value(s.gaps[k]));
+    out.log_weight_gap.push_back(s.gaps[k]);
+    out.in_set.push_back(member[k]);
+  }
+  return out;
 }
 
 /// One input's outcome.
@@ -314,6 +344,7 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
                                                    stem + ", step " + std::to_string(k)));
     run.stored.push_back(io::to_result_step(r, truth_object, run.truth_pose, sym));
     if (run.truth_outside) run.stored.back().correct = !r.valid;
+    if (c.calibration && c.calibration->answer_sets) run.stored.back().answer_set = stored_answer_set(c, r);
     run.results.push_back(std::move(r));
     if (progress) std::fprintf(stderr, "\rstep %d/%d", k, K);
   }
@@ -383,6 +414,10 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
     h.truth_object = run.truth_name;
     h.truth_pose = run.truth_pose;
     h.params = params_of(c.rs, o);
+    if (c.calibration && c.calibration->answer_sets) {
+      h.answer_set_alpha = o.alpha.value_or(c.calibration->answer_sets->alpha);
+      h.calibration = o.calibration;
+    }
     io::write_result(out, h, run.stored);
     run.written = out;
   }
@@ -447,6 +482,8 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     st["free_points"] = r.free_points;
     st["unobservable_dof"] = r.unobservable_dof;
     st["pose_ambiguous"] = r.pose_ambiguous;
+    // Judged by the contacts' own normals, or (too few of them) on the answer's surface.
+    st["observability"] = r.observability_from_model ? "answer_surface" : "contact_normals";
     // Mean |distance| of the step's contacts to the answer's surface at its pose (Vezzani et al.)
     st["contact_model_distance_m"] = number_or_null(
         std::isfinite(run.contact_distance[k]) ? std::optional(run.contact_distance[k]) : std::nullopt);
@@ -564,9 +601,15 @@ void print_table(const Context& c, const InputRun& run) {
       std::cout << '\n';
     }
   }
-  if (!run.results.empty() && run.results.back().pose_ambiguous)
-    std::cout << "? the contacts leave " << run.results.back().unobservable_dof
-              << " pose DOF unobservable (e.g. a single flat patch): the pose is not reliable\n";
+  if (!run.results.empty() && run.results.back().pose_ambiguous) {
+    const StepResult& last = run.results.back();
+    if (last.observability_from_model)
+      std::cout << "? on " << c.db.info(last.best.object).name << "'s surface the contacts leave " << last.unobservable_dof
+                << " pose DOF free (e.g. a turn about a cylinder's axis): that part of the pose is not determined\n";
+    else
+      std::cout << "? the contacts leave " << last.unobservable_dof
+                << " pose DOF unobservable (e.g. a single flat patch): the pose is not reliable\n";
+  }
   if (!run.written.empty()) std::cout << "wrote " << run.written << '\n';
 }
 
@@ -823,7 +866,8 @@ void register_recognize(CLI::App& app) {
                   "\"object\": null, \"reason\": \"not_in_database\"");
   sub->add_option("--alpha", o->alpha,
                   "Set answers (a calibration with answer sets): each step's \"answer_set\" holds the true "
-                  "object's class with probability at least 1 - alpha (default: the calibration's, 0.05)")
+                  "object's class with probability at least 1 - alpha (default: the calibration's, 0.05); --out "
+                  "stores them (/answer_sets)")
       ->check(CLI::Range(1e-9, 1.0 - 1e-9));
   sub->add_option("--open-set-threshold", o->open_set_threshold,
                   "In-database score below which the answer is \"not in the database\" (default: the "

@@ -255,6 +255,7 @@ py::dict step_dict(const Database& db, const StepResult& r, const std::optional<
   o["free_points"] = r.free_points;
   o["unobservable_dof"] = r.unobservable_dof;
   o["pose_ambiguous"] = r.pose_ambiguous;
+  o["observability"] = r.observability_from_model ? "answer_surface" : "contact_normals";
   o["candidates"] = r.candidates;
   py::dict t;
   t["prepare"] = r.times.prepare_s;

@@ -47,7 +47,8 @@ TEST_CASE("Pipeline: each method's stages in Algorithm 1's order, and a small da
   const StepResult r2 = rec.step(test::touch(src->fines[4], T, 2, 5), {});
   const std::vector<std::string> bricpsf = {"scene",     "shape_prior",   "survivors",         "early_stop",
                                             "ransac",    "sparse",        "shortlist",         "sequential_filter",
-                                            "pose_transfer", "posteriors", "answer_rule",      "state"};
+                                            "pose_transfer", "posteriors", "answer_rule",      "state",
+                                            "observability"};
   CHECK(stage_names(r1) == bricpsf);
   CHECK(stage_names(r2) == bricpsf);
   const std::string small = "database of " + std::to_string(db.size()) + " objects";
@@ -223,4 +224,71 @@ TEST_CASE("Pipeline: an unknown stage and a throwing observer are errors naming 
   CHECK(res.hypotheses.empty());       // the state stage never ran
   CHECK(res.stages.size() == 4);       // scene, shape_prior, survivors, early_stop recorded (the last
                                        // two left out: no earlier step); ransac's not complete
+}
+
+namespace {
+
+/// `n` points of the object's fine cloud at least `spacing` apart (isolated: no normals can be
+/// estimated from them), placed at T, without normals.
+PointCloud isolated_points(const PointCloud& fine, const Pose& T, std::size_t n, double spacing, std::uint64_t seed) {
+  Rng rng(seed);
+  std::vector<Vec3> kept;
+  for (int tries = 0; tries < 20000 && kept.size() < n; ++tries) {
+    const Vec3& p = fine.points[rng.index(fine.size())];
+    bool far = true;
+    for (const Vec3& q : kept) far = far && (p - q).norm() >= spacing;
+    if (far) kept.push_back(p);
+  }
+  PointCloud out;
+  for (const Vec3& p : kept) out.points.push_back(T * p);
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("Pipeline: contacts without normals have their free pose DOF judged on the answer's surface") {
+  auto src = test::make_source();
+  Database db(src);
+  const Pose T = test::random_pose(11, Vec3(0.2, -0.1, 0.05));
+  const double spacing = 1.5 * db.settings().fpfh.normal_radius + 0.01;
+  // Each object alone (a known-object localization), the feature-free source on.
+  struct Case {
+    std::size_t object;
+    int free_dof;   // on its surface, with points all over it
+  };
+  // The surfaces resident (point-to-plane ICP) or not (the default field ICP: the stage reads
+  // the answer's surface itself).
+  for (const bool resident : {true, false})
+  for (const Case& k : {Case{0, 0}, Case{2, 3}, Case{1, 0}}) {   // box, ball (its 3 turns), nut
+    CAPTURE(src->infos[k.object].name);
+    CAPTURE(resident);
+    RecognizerSettings s = test::fast_settings(Method::bricpsf);
+    s.sparse.mode = kSparseAlways;
+    s.objects.assign(db.size(), 0);
+    s.objects[k.object] = 1;
+    Recognizer rec(db, s);
+    db.set_surface(resident);
+    const PointCloud pts = isolated_points(src->fines[k.object], T, 30, spacing, 5 + k.object);
+    REQUIRE(pts.size() == 30);
+    const StepResult r = rec.step(pts, {});
+    REQUIRE(r.valid);
+    CHECK(stage_of(r, "scene").ran);
+    CHECK(stage_of(r, "observability").ran);   // no normals: the scene could not judge
+    CHECK(r.observability_from_model);
+    CHECK(r.unobservable_dof == k.free_dof);
+    CHECK(r.pose_ambiguous == (k.free_dof > 0));
+  }
+  // Tactile patches carry normals: the contacts judge, the stage is left out and says why.
+  RecognizerSettings s = test::fast_settings(Method::bricpsf);
+  Recognizer rec(db, s);
+  const StepResult r = rec.step(test::touch(src->fines[0], T, 4, 3), {});
+  REQUIRE(r.valid);
+  CHECK_FALSE(stage_of(r, "observability").ran);
+  CHECK(stage_of(r, "observability").reason == "the contacts' normals judge it");
+  CHECK_FALSE(r.observability_from_model);
+  // No contacts: nothing to judge on.
+  Recognizer empty(db, s);
+  const StepResult none = empty.step(PointCloud{}, {});
+  CHECK_FALSE(stage_of(none, "observability").ran);
+  CHECK(stage_of(none, "observability").reason == "no contacts");
 }

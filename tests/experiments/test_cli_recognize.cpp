@@ -73,11 +73,12 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
                             "orientation_error_deg", "symmetric_orientation_error_deg", "time_s"})
       CHECK_MESSAGE(s.contains(key), key);
     CHECK(s["step"] == k + 1);
+    CHECK(s["observability"] == "contact_normals");   // tactile patches carry their normals
     // The step's pipeline: every stage of bricpsf either ran (with a time) or was left out (with
     // a reason); a 6-object database needs none of the large-database stages.
     REQUIRE(s["stages_ran"].is_array());
     REQUIRE(s["stages_skipped"].is_array());
-    CHECK(s["stages_ran"].size() + s["stages_skipped"].size() == 12);
+    CHECK(s["stages_ran"].size() + s["stages_skipped"].size() == 13);
     for (const auto& name : s["stages_ran"]) CHECK(s["pipeline_s"][name.get<std::string>()].get<double>() >= 0.0);
     CHECK(s["pipeline_s"].size() == s["stages_ran"].size());
     std::set<std::string> skipped;
@@ -1117,6 +1118,44 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
       last = m["log_weight_gap"].get<double>();
     }
   }
+  // The result file carries the same sets: per object its class's p-value and membership.
+  const Run stored = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --calibration half.json --out rs.h5" + kFastFlags);
+  REQUIRE_MESSAGE(stored.code == 0, stored.err);
+  const io::ResultData rd = io::read_result(dir / "rs.h5");
+  REQUIRE(rd.header.answer_set_alpha);
+  CHECK(*rd.header.answer_set_alpha == 0.5);
+  CHECK(rd.header.calibration == "half.json");
+  REQUIRE(rd.steps.size() == js["steps"].size());
+  for (std::size_t k = 0; k < rd.steps.size(); ++k) {
+    const auto& a = js["steps"][k]["answer_set"];
+    REQUIRE(rd.steps[k].answer_set);
+    const io::ResultAnswerSet& b = *rd.steps[k].answer_set;
+    CHECK(b.informative == a["informative"].get<bool>());
+    CHECK(b.size == a["size"].get<std::size_t>());
+    CHECK(b.calibrated_step == a["calibrated_step"].get<int>());
+    std::set<std::string> in_json, in_file;
+    for (const auto& m : a["members"])
+      for (const auto& name : m["objects"]) {
+        in_json.insert(name.get<std::string>());
+        const auto i = static_cast<std::size_t>(
+            std::find(rd.header.objects.begin(), rd.header.objects.end(), name.get<std::string>()) - rd.header.objects.begin());
+        REQUIRE(i < rd.header.objects.size());
+        CHECK(b.p_value[i] == m["p_value"].get<double>());
+        CHECK(b.log_weight_gap[i] == m["log_weight_gap"].get<double>());
+      }
+    for (std::size_t i = 0; i < b.in_set.size(); ++i) {
+      if (b.in_set[i]) in_file.insert(rd.header.objects[i]);
+      else CHECK(b.p_value[i] <= 0.5);   // left out: its p-value does not exceed alpha
+    }
+    if (b.informative) CHECK(in_file == in_json);
+    else CHECK(in_file.size() == objects);
+  }
+  // Without a calibration the file has none.
+  REQUIRE(touchstone(dir, "recognize --db db.h5 --log log.h5 --out plain.h5" + kFastFlags).code == 0);
+  const io::ResultData plain = io::read_result(dir / "plain.h5");
+  CHECK_FALSE(plain.header.answer_set_alpha);
+  for (const auto& st : plain.steps) CHECK_FALSE(st.answer_set);
+
   // --alpha overrides the file's; it needs a calibration with answer sets, within (0, 1).
   const Run tenth = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --calibration half.json --alpha 0.9" + kFastFlags);
   REQUIRE_MESSAGE(tenth.code == 0, tenth.err);

@@ -4,6 +4,8 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <limits>
+#include <string>
 
 using namespace ts;
 using ts::test::TempDir;
@@ -120,4 +122,83 @@ TEST_CASE("result store: identical bytes for identical content; bad files give c
   bad[0].posterior.pop_back();
   CHECK_THROWS_AS(io::write_result(dir / "bad.h5", header(), bad), Error);
   CHECK_FALSE(std::filesystem::exists(dir / "bad.h5"));
+}
+
+TEST_CASE("result store: answer sets round trip, and a file's bad sets are refused naming the field") {
+  TempDir dir("result");
+  io::ResultHeader h = header();
+  h.answer_set_alpha = 0.1;
+  h.calibration = "cal.json";
+  auto s = steps();
+  const double inf = std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k < s.size(); ++k) {
+    io::ResultAnswerSet a;
+    a.informative = k > 0;
+    a.size = k > 0 ? 2 : 3;
+    a.calibrated_step = static_cast<int>(k) + 1;
+    a.p_value = {1.0, 0.45, 1.0 / 11.0};
+    a.log_weight_gap = {0.0, 0.25, inf};
+    a.in_set = k > 0 ? std::vector<std::uint8_t>{1, 1, 0} : std::vector<std::uint8_t>{1, 1, 1};
+    s[k].answer_set = a;
+  }
+  io::write_result(dir / "s.h5", h, s);
+  const io::ResultData d = io::read_result(dir / "s.h5");
+  REQUIRE(d.header.answer_set_alpha);
+  CHECK(*d.header.answer_set_alpha == 0.1);
+  CHECK(d.header.calibration == "cal.json");
+  for (std::size_t k = 0; k < s.size(); ++k) {
+    REQUIRE(d.steps[k].answer_set);
+    const auto &a = *s[k].answer_set, &b = *d.steps[k].answer_set;
+    CHECK(a.informative == b.informative);
+    CHECK(a.size == b.size);
+    CHECK(a.calibrated_step == b.calibrated_step);
+    CHECK(a.p_value == b.p_value);
+    CHECK(a.log_weight_gap == b.log_weight_gap);   // +inf survives
+    CHECK(a.in_set == b.in_set);
+  }
+  // Without a level no step may carry a set; with one every step must, over every object.
+  io::ResultHeader none = header();
+  CHECK_THROWS_AS(io::write_result(dir / "n.h5", none, s), Error);
+  auto missing = s;
+  missing[1].answer_set.reset();
+  CHECK_THROWS_AS(io::write_result(dir / "m.h5", h, missing), Error);
+  auto short_set = s;
+  short_set[2].answer_set->in_set.pop_back();
+  CHECK_THROWS_AS(io::write_result(dir / "t.h5", h, short_set), Error);
+  for (const char* f : {"n.h5", "m.h5", "t.h5"}) CHECK_FALSE(std::filesystem::exists(dir / f));
+
+  // Bad values in a file: one error naming /answer_sets/<field>.
+  struct Bad {
+    const char* field;
+    void (*edit)(std::vector<io::ResultStep>&, io::ResultHeader&);
+  };
+  const Bad bad[] = {
+      {"/answer_sets/p_value", [](auto& st, auto&) { st[1].answer_set->p_value[0] = 0.0; }},
+      {"/answer_sets/p_value", [](auto& st, auto&) { st[1].answer_set->p_value[2] = std::nan(""); }},
+      {"/answer_sets/log_weight_gap", [](auto& st, auto&) { st[2].answer_set->log_weight_gap[1] = -0.5; }},
+      {"/answer_sets/in_set", [](auto& st, auto&) { st[1].answer_set->in_set[2] = 2; }},
+      {"/answer_sets/in_set", [](auto& st, auto&) { st[0].answer_set->in_set[0] = 0; }},   // uninformative: all in
+      {"/answer_sets/in_set", [](auto& st, auto&) { st[1].answer_set->in_set[1] = 0; }},   // 1 object, 2 classes
+      {"/answer_sets/size", [](auto& st, auto&) { st[1].answer_set->size = 4; }},
+      {"/answer_sets/calibrated_step", [](auto& st, auto&) { st[1].answer_set->calibrated_step = 0; }},
+  };
+  for (const Bad& b : bad) {
+    CAPTURE(b.field);
+    auto st = s;
+    io::ResultHeader hh = h;
+    b.edit(st, hh);
+    const auto p = dir / "bad.h5";
+    io::write_result(p, hh, st);   // the writer checks shapes; values are the reader's to refuse
+    try {
+      (void)io::read_result(p);
+      FAIL("accepted");
+    } catch (const Error& e) {
+      CHECK(e.field() == b.field);
+      CHECK(e.file() == p.string());
+    }
+  }
+  io::ResultHeader bad_alpha = h;
+  bad_alpha.answer_set_alpha = 1.0;
+  CHECK_THROWS_AS(io::write_result(dir / "a.h5", bad_alpha, s), Error);
+  CHECK_FALSE(std::filesystem::exists(dir / "a.h5"));
 }

@@ -27,6 +27,7 @@ const std::vector<std::pair<std::string_view, Factory>>& stage_factories() {
       {"posteriors", posteriors_stage},
       {"answer_rule", answer_rule_stage},
       {"state", state_stage},
+      {"observability", observability_stage},
   };
   return all;
 }
@@ -54,8 +55,9 @@ std::vector<std::string_view> method_stages(Method m) {
       s.push_back("sequential_filter");
       break;
   }
-  // Large databases: the leader's pose tried on the objects that fit there. Then the answer.
-  for (std::string_view n : {"pose_transfer", "posteriors", "answer_rule", "state"}) s.push_back(n);
+  // Large databases: the leader's pose tried on the objects that fit there. Then the answer, and
+  // (contacts without normals) the pose DOF it leaves free.
+  for (std::string_view n : {"pose_transfer", "posteriors", "answer_rule", "state", "observability"}) s.push_back(n);
   return s;
 }
 

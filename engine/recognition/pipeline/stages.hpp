@@ -38,6 +38,8 @@ std::unique_ptr<const Stage> answer_rule_stage();    ///< "answer_rule": the bes
                                                      ///< ties re-decided by near-twin verification
 std::unique_ptr<const Stage> state_stage();          ///< "state": S_t in world poses, the answer
                                                      ///< and its fit
+std::unique_ptr<const Stage> observability_stage();  ///< "observability": the free pose DOF on the
+                                                     ///< answer's surface (contacts without normals)
 
 /// The answer rule (answer_rule.cpp): the best hypothesis of `next` (sorted by `better`), unless
 /// the near-twin verification of the leading objects' best hypotheses re-decides a near tie.

@@ -77,6 +77,8 @@ class StepResult:
     times_s: Dict[str, float]             # per stage and "total"; "stage.NAME" per pipeline stage run
     stages_ran: List[str] = field(default_factory=list)   # the step's pipeline stages that ran
     stages_skipped: List[Dict[str, str]] = field(default_factory=list)  # {"stage", "reason"}: left out
+    # unobservable_dof judged by the contacts' normals, or on the answer's surface (too few normals)
+    observability: str = "contact_normals"
     correct: Optional[bool] = None        # the log's object was named (None: truth unknown)
     position_error_m: Optional[float] = None
     orientation_error_deg: Optional[float] = None
