@@ -187,7 +187,11 @@ bool edited(std::span<const std::uint8_t> script, const char* base) {
 bool database(std::span<const std::uint8_t> b) { return edited<read_database>(b, "box_db.h5"); }
 bool log(std::span<const std::uint8_t> b) { return edited<read_log>(b, "box_3_grasps.h5"); }
 bool runs(std::span<const std::uint8_t> b) { return edited<read_runs>(b, "box_1_run.h5"); }
-bool result(std::span<const std::uint8_t> b) { return edited<read_result>(b, "box_3_steps.h5"); }
+// Each script edits a result without and one with set answers (/answer_sets).
+bool result(std::span<const std::uint8_t> b) {
+  const bool plain = edited<read_result>(b, "box_3_steps.h5");
+  return edited<read_result>(b, "box_3_steps_sets.h5") && plain;
+}
 
 /// Raw bytes as an HDF5 file (first byte: which reader): what libhdf5 itself makes of damaged
 /// metadata. Debian's libhdf5 1.10.8 crashes on some (docs/testing.md, Hardening): not in "all".
