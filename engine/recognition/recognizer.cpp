@@ -176,6 +176,7 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   pipeline::run_pipeline(*stages_, c, observers);
   step_ = res.step;   // a stage or an observer that throws leaves the recognizer as it was
   if (c.finished) {   // e.g. no contacts: the state waits for data
+    res.stopped = *c.finished;
     res.geometry_loads = db_.geometry_loads();
     res.times.total_s = detail::seconds_since(t_start);
     return res;

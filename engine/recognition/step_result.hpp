@@ -137,6 +137,8 @@ struct StepResult {
   AnswerFit fit;                    ///< of the answer (best)
   StageTimes times;
   std::vector<StageRun> stages;     ///< the step's pipeline, in order: ran or left out, and why
+  std::string stopped;              ///< why the step stopped before any matching ("no contacts",
+                                    ///< "fewer than 3 distinct contacts (2)"; "" : it did not)
 };
 
 }  // namespace recognition

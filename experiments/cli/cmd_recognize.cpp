@@ -450,7 +450,12 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
       st["confidence"] = nullptr;
     }
     st["answer_set"] = c.calibration && c.calibration->answer_sets ? answer_set_json(c, r) : nullptr;
-    st["reason"] = refused ? nlohmann::ordered_json("not_in_database") : nullptr;
+    // Why there is no object: "not_in_database" (the open-set score), "not_enough_contacts" (the
+    // step stopped before matching: none, or fewer than 3 distinct), "no_hypothesis" (nothing fit).
+    st["reason"] = refused ? nlohmann::ordered_json("not_in_database")
+                   : r.valid ? nlohmann::ordered_json(nullptr)
+                   : nlohmann::ordered_json(r.stopped.empty() ? "no_hypothesis" : "not_enough_contacts");
+    st["reason_detail"] = !r.valid && !r.stopped.empty() ? nlohmann::ordered_json(r.stopped) : nullptr;
     st["best_guess"] = refused ? st["object"] : nullptr;
     if (refused) st["object"] = nullptr;
     st["pose"] = r.valid ? pose_json(r.best.pose) : nullptr;
@@ -601,7 +606,13 @@ void print_table(const Context& c, const InputRun& run) {
       std::cout << '\n';
     }
   }
-  if (!run.results.empty() && run.results.back().pose_ambiguous) {
+  if (!run.results.empty() && !run.results.back().valid) {
+    const StepResult& last = run.results.back();
+    std::cout << "no answer: "
+              << (last.stopped.empty() ? std::string("no hypothesis fits the contacts")
+                                       : last.stopped + "; a pose needs at least 3")
+              << '\n';
+  } else if (!run.results.empty() && run.results.back().pose_ambiguous) {
     const StepResult& last = run.results.back();
     if (last.observability_from_model)
       std::cout << "? on " << c.db.info(last.best.object).name << "'s surface the contacts leave " << last.unobservable_dof

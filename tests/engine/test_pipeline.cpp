@@ -286,9 +286,24 @@ TEST_CASE("Pipeline: contacts without normals have their free pose DOF judged on
   CHECK_FALSE(stage_of(r, "observability").ran);
   CHECK(stage_of(r, "observability").reason == "the contacts' normals judge it");
   CHECK_FALSE(r.observability_from_model);
+  // Fewer than 3 distinct contacts: the step stops before matching and says why; a third point
+  // lets it go on.
+  PointCloud two;
+  two.points = {Vec3(0.3, 0.0, 0.0), Vec3(0.32, 0.0, 0.0), Vec3(0.3, 0.0, 0.0)};
+  Recognizer few(db, s);
+  const StepResult rf = few.step(two, {});
+  CHECK_FALSE(rf.valid);
+  CHECK(rf.stopped == "fewer than 3 distinct contacts (2)");
+  CHECK(stage_of(rf, "scene").ran);
+  CHECK(stage_of(rf, "ransac").reason == rf.stopped);
+  two.points.push_back(Vec3(0.3, 0.02, 0.0));
+  const StepResult r3 = few.step(two, {});
+  CHECK(r3.stopped.empty());
+  CHECK(stage_of(r3, "ransac").reason != "fewer than 3 distinct contacts (3)");
   // No contacts: nothing to judge on.
   Recognizer empty(db, s);
   const StepResult none = empty.step(PointCloud{}, {});
   CHECK_FALSE(stage_of(none, "observability").ran);
   CHECK(stage_of(none, "observability").reason == "no contacts");
+  CHECK(none.stopped == "no contacts");
 }

@@ -182,6 +182,23 @@ TEST_CASE("cli recognize --cloud: one step, ground truth from a 4x4 file, nulls 
   CHECK(jb["steps"][0]["orientation_error_deg"].is_null());
   CHECK(jb["steps"][0]["symmetric_orientation_error_deg"].is_null());
   CHECK(jb["steps"][0]["free_points"] == 0);
+  CHECK(jb["steps"][0]["reason"].is_null());   // an object was named
+
+  // Fewer than 3 distinct points (four readings of two spots): no answer, and why, exit 0.
+  PointCloud two;
+  two.points = {Vec3(0.1, 0.2, 0.3), Vec3(0.12, 0.2, 0.3), Vec3(0.1, 0.2, 0.3), Vec3(0.12, 0.2, 0.3)};
+  io::write_cloud(dir / "two.ply", two);
+  const Run t = touchstone(dir, "recognize --db db.h5 --cloud two.ply --json" + kFastFlags);
+  REQUIRE_MESSAGE(t.code == 0, t.err);
+  const auto jt = nlohmann::json::parse(t.out);
+  CHECK(jt["steps"][0]["object"].is_null());
+  CHECK(jt["steps"][0]["reason"] == "not_enough_contacts");
+  CHECK(jt["steps"][0]["reason_detail"] == "fewer than 3 distinct contacts (2)");
+  const Run tt = touchstone(dir, "recognize --db db.h5 --cloud two.ply" + kFastFlags);
+  REQUIRE_MESSAGE(tt.code == 0, tt.err);
+  CHECK_MESSAGE(tt.out.find("no answer: fewer than 3 distinct contacts (2); a pose needs at least 3") != std::string::npos,
+                tt.out);
+  CHECK(tt.out.find("unobservable") == std::string::npos);   // not the pose's ambiguity: there is no pose
 }
 
 TEST_CASE("cli recognize: bad input gives one clear error and no output file") {

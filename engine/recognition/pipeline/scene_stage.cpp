@@ -5,9 +5,22 @@
 
 #include "engine/detail.hpp"
 
+#include <algorithm>
+#include <string>
+
 namespace ts::inline recognition::pipeline {
 
 namespace {
+
+/// Distinct points, up to 3 (exact coordinates: the scene's points are as given, less the origin).
+std::size_t distinct_points(const std::vector<Vec3>& p) {
+  std::vector<Vec3> seen;
+  for (const Vec3& q : p) {
+    if (std::find(seen.begin(), seen.end(), q) == seen.end()) seen.push_back(q);
+    if (seen.size() >= 3) break;
+  }
+  return seen.size();
+}
 
 class SceneStage final : public Stage {
  public:
@@ -30,6 +43,12 @@ class SceneStage final : public Stage {
     res.pose_ambiguous = c.scene.unobservable_dof > 0;
     if (c.scene.contacts.empty()) {   // nothing to match: the state waits for data
       c.finished = "no contacts";
+      return;
+    }
+    // A pose needs three points off one spot: fewer distinct contacts (repeats of one reading,
+    // a cloud of two points) neither pose a triplet nor tell the state anything.
+    if (const std::size_t n = distinct_points(c.scene.contacts.points); n < 3) {
+      c.finished = "fewer than 3 distinct contacts (" + std::to_string(n) + ")";
       return;
     }
     const bool with_free = s.method == Method::ransac_icp_fs || s.method == Method::bricpsf;
