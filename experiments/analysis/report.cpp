@@ -685,18 +685,23 @@ std::string fmt(const J& v, double scale, int precision, const char* missing = "
 
 std::string pct(const J& v) { return fmt(v, 100.0, 0); }
 
+/// An interval [lo, hi] of shares as "lo-hi" percent ("-" when absent).
+std::string pct_range(const J& ci) { return ci.is_array() ? pct(ci[0]) + "-" + pct(ci[1]) : std::string("-"); }
+
+/// The steps the per-step tables print: `first`, 5, every tenth and the last row.
+bool table_step(const J& rows, std::size_t i, int first = 1) {
+  const int step = rows[i]["step"].get<int>();
+  return step == first || step == 5 || step % 10 == 0 || i + 1 == rows.size();
+}
+
 void print_steps(const J& per_step, std::ostream& out) {
   out << "  step   rate  Wilson   obj-boot  class  pos med  pos p95  ori med  sym-ori  time med  time p95\n"
          "         (%)   (%)      (%)       (%)    (mm)     (mm)     (deg)    med(deg) (s)       (s)\n";
-  auto range = [](const J& ci) {
-    if (!ci.is_array()) return std::string("-");
-    return pct(ci[0]) + "-" + pct(ci[1]);
-  };
   for (const auto& r : per_step) {
     out << "  " << std::setw(4) << r["step"].get<int>() << "  " << std::setw(5)
         << pct(r["recognition_rate"]) << "  " << std::left << std::setw(7)
-        << range(r["recognition_rate_ci95"]) << "  " << std::setw(8)
-        << range(r.value("recognition_rate_cluster_ci95", J(nullptr)))
+        << pct_range(r["recognition_rate_ci95"]) << "  " << std::setw(8)
+        << pct_range(r.value("recognition_rate_cluster_ci95", J(nullptr)))
         << std::right << "  " << std::setw(5) << pct(r.value("recognition_rate_class", J(nullptr)))
         << "  " << std::setw(7) << fmt(r["position_error_m_median"], 1000, 1)
         << "  " << std::setw(7) << fmt(r["position_error_m_p95"], 1000, 1) << "  "
@@ -790,14 +795,9 @@ void print_open_set(const J& report, std::ostream& out) {
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const J& r = rows[i];
     const int step = r["step"].get<int>();
-    if (!(step == 1 || step == 5 || step % 10 == 0 || i + 1 == rows.size())) continue;
-    std::ostringstream ci;
-    if (r["false_accept_rate_ci95"].is_array())
-      ci << pct(r["false_accept_rate_ci95"][0]) << "-" << pct(r["false_accept_rate_ci95"][1]);
-    else
-      ci << "-";
+    if (!table_step(rows, i)) continue;
     out << "  " << std::setw(4) << step << "  " << std::setw(6) << r["hidden_runs"].get<std::size_t>() << "  "
-        << std::setw(17) << fmt(r["false_accept_rate"], 100, 1) << "  " << std::setw(10) << ci.str() << "  "
+        << std::setw(17) << fmt(r["false_accept_rate"], 100, 1) << "  " << std::setw(10) << pct_range(r["false_accept_rate_ci95"]) << "  "
         << std::setw(15) << fmt(r.value("false_accept_rate_class", J(nullptr)), 100, 1) << "  "
         << std::setw(5) << r["known_runs"].get<std::size_t>() << "  " << std::setw(10)
         << fmt(r["known_rate_closed"], 100, 1) << "  " << std::setw(8) << fmt(r["known_rate_open"], 100, 1)
@@ -818,15 +818,14 @@ void print_answer_sets(const J& rows, const std::string& label, std::ostream& ou
       << " (the calibration's conformal sets of classes): the share of runs whose set held the truth, and "
          "the sets' sizes (an uninformative set counts as every class)\n"
          "  step  runs  right (%)  coverage (%)  Wilson (%)  obj-boot (%)  size median  mean   p90  informative (%)\n";
-  auto range = [](const J& v) { return v.is_array() ? pct(v[0]) + "-" + pct(v[1]) : std::string("-"); };
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const J& r = rows[i];
     const int step = r["step"].get<int>();
-    if (!(step == 1 || step == 5 || step % 10 == 0 || i + 1 == rows.size())) continue;
+    if (!table_step(rows, i)) continue;
     out << "  " << std::setw(4) << step << "  " << std::setw(4) << r["runs"].get<std::size_t>() << "  " << std::setw(9)
         << fmt(r["recognition_rate"], 100, 1) << "  " << std::setw(12) << fmt(r["set_coverage"], 100, 1) << "  "
-        << std::setw(10) << range(r["set_coverage_ci95"]) << "  " << std::setw(12)
-        << range(r["set_coverage_cluster_ci95"]) << "  " << std::setw(11) << fmt(r["set_size_median"], 1, 1) << "  "
+        << std::setw(10) << pct_range(r["set_coverage_ci95"]) << "  " << std::setw(12)
+        << pct_range(r["set_coverage_cluster_ci95"]) << "  " << std::setw(11) << fmt(r["set_size_median"], 1, 1) << "  "
         << std::setw(5) << fmt(r["set_size_mean"], 1, 1) << "  " << std::setw(4) << fmt(r["set_size_p90"], 1, 0)
         << "  " << std::setw(15) << fmt(r["set_informative_share"], 100, 1) << "\n";
   }
@@ -843,7 +842,7 @@ void print_planner(const J& rows, const std::string& label, std::ostream& out) {
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const J& r = rows[i];
     const int step = r["step"].get<int>();
-    if (!(step == 2 || step == 5 || step % 10 == 0 || i + 1 == rows.size())) continue;
+    if (!table_step(rows, i, 2)) continue;
     out << "  " << std::setw(4) << step << "  " << std::setw(8) << fmt(r["plan_expected_object_information_median"], 1, 3)
         << "  " << std::setw(8) << fmt(r["plan_entropy_drop_median"], 1, 3) << "\n";
   }
@@ -859,15 +858,12 @@ void print_truth_pose(const J& rows, const std::string& label, std::ostream& out
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const J& r = rows[i];
     const int step = r["step"].get<int>();
-    if (!(step == 1 || step == 5 || step % 10 == 0 || i + 1 == rows.size())) continue;
+    if (!table_step(rows, i)) continue;
     const std::size_t n = r["runs"].get<std::size_t>();
-    auto range = [](const J& v) {
-      return v.is_array() ? pct(v[0]) + "-" + pct(v[1]) : std::string("-");
-    };
     out << "  " << std::setw(4) << step << "  " << std::setw(4) << n << "  " << std::setw(9)
         << (n ? fmt(J(r["correct"].get<double>() / double(n)), 100, 1) : std::string("-")) << "  "
         << std::setw(19) << fmt(r["truth_pose_rate"], 100, 1) << "  " << std::setw(10)
-        << range(r["truth_pose_rate_ci95"]) << "  " << std::setw(12) << range(r["truth_pose_rate_cluster_ci95"])
+        << pct_range(r["truth_pose_rate_ci95"]) << "  " << std::setw(12) << pct_range(r["truth_pose_rate_cluster_ci95"])
         << "  " << std::setw(14) << r["misses_lost_by_search"].get<std::size_t>() << "  " << std::setw(8)
         << r["misses_lost_by_evidence"].get<std::size_t>() << "\n";
   }
@@ -886,7 +882,7 @@ void print_confidence(const J& report, std::ostream& out) {
   const J& rows = c["per_step"];
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const int step = rows[i]["step"].get<int>();
-    if (!(step == 1 || step == 5 || step == 10 || step == 20 || step % 10 == 0 || i + 1 == rows.size())) continue;
+    if (!table_step(rows, i)) continue;
     const J& r = rows[i];
     std::ostringstream noise;
     noise << fmt(r["object_ece_noise_mean"], 1, 3) << ", " << fmt(r["object_ece_noise_p95"], 1, 3);

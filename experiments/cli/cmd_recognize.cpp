@@ -170,10 +170,8 @@ nlohmann::ordered_json class_json(const Context& c, std::size_t i) {
   return names;
 }
 
-/// The step's set answer (the calibration's answer sets, at --alpha or the calibration's level):
-/// the classes of congruent objects that hold the truth with probability at least 1 - alpha, each
-/// with its conformal p-value (it stays in the set for every alpha below it) and its log-weight gap
-/// to the leader, or "informative": false when no class can be excluded.
+/// A step's set answer (the calibration's answer sets, at --alpha or the calibration's level), once
+/// per step for the JSON and the result file.
 struct StepSet {
   std::vector<double> gaps;          ///< per class
   const ConformalScores* scores;     ///< the calibration step's
@@ -188,8 +186,11 @@ StepSet step_set(const Context& c, const StepResult& r) {
   return s;
 }
 
-nlohmann::ordered_json answer_set_json(const Context& c, const StepResult& r) {
-  const StepSet s = step_set(c, r);
+/// The step's set answer (the calibration's answer sets, at --alpha or the calibration's level):
+/// the classes of congruent objects that hold the truth with probability at least 1 - alpha, each
+/// with its conformal p-value (it stays in the set for every alpha below it) and its log-weight gap
+/// to the leader, or "informative": false when no class can be excluded.
+nlohmann::ordered_json answer_set_json(const Context& c, const StepSet& s) {
   const AnswerSet& set = s.set;
   std::vector<std::vector<std::size_t>> members(c.classes);
   for (std::size_t i = 0; i < c.class_of.size(); ++i) members[c.class_of[i]].push_back(i);
@@ -208,8 +209,7 @@ nlohmann::ordered_json answer_set_json(const Context& c, const StepResult& r) {
 }
 
 /// The same set for the result file: per object its class's p-value, gap and membership.
-io::ResultAnswerSet stored_answer_set(const Context& c, const StepResult& r) {
-  const StepSet s = step_set(c, r);
+io::ResultAnswerSet stored_answer_set(const Context& c, const StepSet& s) {
   std::vector<std::uint8_t> member(c.classes, s.set.informative ? 0 : 1);
   for (const AnswerSetMember& m : s.set.members) member[m.cls] = 1;
   io::ResultAnswerSet out;
@@ -231,6 +231,7 @@ struct InputRun {
   std::optional<Pose> truth_pose;
   std::vector<StepResult> results;
   std::vector<io::ResultStep> stored;
+  std::vector<StepSet> sets;     ///< per step, with a calibration's answer sets (else empty)
   std::vector<double> fusion_time;
   std::vector<double> contact_distance;  ///< m, mean contact-to-model distance at each answer
   std::string written;           ///< the result file written ("" : none)
@@ -344,7 +345,10 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
                                                    stem + ", step " + std::to_string(k)));
     run.stored.push_back(io::to_result_step(r, truth_object, run.truth_pose, sym));
     if (run.truth_outside) run.stored.back().correct = !r.valid;
-    if (c.calibration && c.calibration->answer_sets) run.stored.back().answer_set = stored_answer_set(c, r);
+    if (c.calibration && c.calibration->answer_sets) {
+      run.sets.push_back(step_set(c, r));
+      run.stored.back().answer_set = stored_answer_set(c, run.sets.back());
+    }
     run.results.push_back(std::move(r));
     if (progress) std::fprintf(stderr, "\rstep %d/%d", k, K);
   }
@@ -449,7 +453,7 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     } else {
       st["confidence"] = nullptr;
     }
-    st["answer_set"] = c.calibration && c.calibration->answer_sets ? answer_set_json(c, r) : nullptr;
+    st["answer_set"] = k < run.sets.size() ? answer_set_json(c, run.sets[k]) : nullptr;
     // Why there is no object: "not_in_database" (the open-set score), "not_enough_contacts" (the
     // step stopped before matching: none, or fewer than 3 distinct), "no_hypothesis" (nothing fit).
     st["reason"] = refused ? nlohmann::ordered_json("not_in_database")
