@@ -241,8 +241,9 @@ struct Simulator::Impl {
     return best;
   }
 
-  // Close finger f from the open hand (proximal joint first). Returns touching links.
-  int close_finger(const Pose& T_obj_eef, int f, std::vector<double>& q, Rng& rng) const {
+  // Close finger f from the open hand (proximal joint first). Returns touching links; sets
+  // *tip when the finger's distal link touched.
+  int close_finger(const Pose& T_obj_eef, int f, std::vector<double>& q, Rng& rng, bool* tip = nullptr) const {
     const GraspSettings& gs = settings.grasp;
     const int nlinks = static_cast<int>(gripper.spec().fingers[f].links.size());
     int touching = 0;
@@ -256,6 +257,7 @@ struct Simulator::Impl {
         continue;
       }
       ++touching;
+      if (tip && hit->link == nlinks - 1) *tip = true;
       auto back_off = [&](const Hit& h) {
         return std::max(l.open, h.angle - gs.clearance / std::max(h.radius, 1e-3));
       };
@@ -304,6 +306,10 @@ Simulator::Simulator(Mesh object_mesh, std::string object_name, Gripper gripper,
   if (!(ps.max_tilt_deg >= 0 && ps.max_tilt_deg < 90) || !(ps.contact_sigma >= 0) || !(ps.quantization >= 0) ||
       !std::isfinite(ps.contact_sigma) || !std::isfinite(ps.quantization) || ps.max_attempts < 1)
     throw Error("probe: need a tilt in [0, 90) degrees, a finite noise and quantization >= 0", {}, "probe");
+  const FingertipSettings& ft = settings.fingertips;
+  if (!(ft.quantization >= 0) || !std::isfinite(ft.quantization) || !std::isfinite(ft.normal_sigma_deg) ||
+      ft.normal_sigma_deg >= 90)
+    throw Error("fingertips: need a finite quantization >= 0 and a normal noise below 90 degrees", {}, "fingertips");
   const auto& n = settings.noise;
   for (double v : {n.arm_position_sigma, n.arm_rotation_sigma_deg, n.joint_sigma_deg, n.signal_noise,
                    n.force_noise, n.lateral_sigma})
@@ -550,7 +556,12 @@ Simulator::Grasp Simulator::finish(const Pose& T_obj_eef, double travel, int att
   Grasp out;
   out.diagnostics.approach_travel = travel;
   out.diagnostics.attempts = attempts;
-  for (int f = 0; f < G.finger_count(); ++f) out.diagnostics.touching_links += m.close_finger(T_obj_eef, f, q, rng);
+  std::vector<char> tip(static_cast<std::size_t>(G.finger_count()), 0);
+  for (int f = 0; f < G.finger_count(); ++f) {
+    bool t = false;
+    out.diagnostics.touching_links += m.close_finger(T_obj_eef, f, q, rng, &t);
+    tip[static_cast<std::size_t>(f)] = t;
+  }
 
   // 5. What the robot records.
   Rng noise(m.settings.seed, kStreamNoise, g);
@@ -568,6 +579,10 @@ Simulator::Grasp Simulator::finish(const Pose& T_obj_eef, double travel, int att
   }
   rec.joints = q;
   for (double& v : rec.joints) v += ns.joint_sigma_deg * kDeg * noise.normal();
+  if (m.settings.sensing == Sensing::fingertips) {
+    record_fingertips(T_obj_eef, q, tip, noise, out);
+    return out;
+  }
 
   const int S = sensor.sensels();
   const double fold_detect = ns.fold_detect >= 0 ? ns.fold_detect : 2.0 * ns.signal_noise;
@@ -601,6 +616,53 @@ Simulator::Grasp Simulator::finish(const Pose& T_obj_eef, double travel, int att
   return out;
 }
 
+void Simulator::record_fingertips(const Pose& T_obj_eef, const std::vector<double>& q, const std::vector<char>& tip,
+                                  Rng& noise, Grasp& out) const {
+  const Impl& m = *impl_;
+  const Gripper& G = m.gripper;
+  const FingertipSettings& fs = m.settings.fingertips;
+  GraspRecord& rec = out.measured;
+  const std::vector<Pose> true_links = G.link_poses(q);
+  const std::vector<Pose> measured_links = G.link_poses(rec.joints);
+  const auto F = static_cast<std::size_t>(G.finger_count());
+  rec.fingertip_touched.assign(F, 0);
+  rec.fingertip_points.assign(F, Vec3::Zero());
+  if (fs.normal_sigma_deg >= 0) rec.fingertip_normals.assign(F, Vec3::UnitZ());
+  for (std::size_t f = 0; f < F; ++f) {
+    const int fi = static_cast<int>(f);
+    const int j = G.joint_index(fi, static_cast<int>(G.spec().fingers[f].links.size()) - 1);
+    const Vec3 dn(noise.normal(), noise.normal(), noise.normal());   // drawn for every finger
+    if (!tip[f]) continue;
+    // The point of contact: the surface point nearest the fingertip's inner face, tip face and
+    // foam at the final joint angles.
+    const Pose T_obj_link = T_obj_eef * true_links[static_cast<std::size_t>(j)];
+    const LinkGeometry& L = m.links[static_cast<std::size_t>(j)];
+    ClosestPoint best;
+    best.distance = 1e300;
+    for (const auto* samples : {&L.rigid, &L.foam})
+      for (const Vec3& x : *samples) {
+        const ClosestPoint c = m.mesh.closest(T_obj_link * x);
+        if (c.distance < best.distance) best = c;
+      }
+    if (!(best.distance < 1e299)) continue;
+    // As the robot reports it: the point fixed on its fingertip, placed by the measured arm pose
+    // and joint readings, then rounded.
+    const Vec3 on_link = T_obj_link.inverse() * best.point;
+    const Pose T_world_link_measured = rec.arm_pose * measured_links[static_cast<std::size_t>(j)];
+    Vec3 p = T_world_link_measured * on_link;
+    if (fs.quantization > 0.0)
+      for (int i = 0; i < 3; ++i) p[i] = fs.quantization * std::round(p[i] / fs.quantization);
+    rec.fingertip_touched[f] = 1;
+    rec.fingertip_points[f] = p;
+    ++out.diagnostics.contact_sensels;
+    if (fs.normal_sigma_deg >= 0) {
+      const Vec3 n_link = T_obj_link.linear().transpose() * (m.normal_sign * best.normal);
+      rec.fingertip_normals[f] =
+          (small_rotation(fs.normal_sigma_deg * kDeg * dn) * (T_world_link_measured.linear() * n_link)).normalized();
+    }
+  }
+}
+
 SimulationResult Simulator::run() const {
   const Impl& m = *impl_;
   const std::size_t G = m.settings.grasps;
@@ -617,7 +679,8 @@ SimulationResult Simulator::run() const {
   const bool probe = m.settings.sensing == Sensing::probe;
   log.sensing = m.settings.sensing;
   log.probe = m.settings.probe.spec;
-  if (!probe) {
+  log.fingertip_normals = m.settings.sensing == Sensing::fingertips && m.settings.fingertips.normal_sigma_deg >= 0;
+  if (m.settings.sensing == Sensing::pads) {
     log.pads = m.pads;
     const std::size_t S = static_cast<std::size_t>(m.gripper.sensor().sensels());
     for (int pad : m.pads)

@@ -83,10 +83,24 @@ struct ProbeSettings {
   int max_attempts = 24;             ///< aims redrawn when the start lies inside the object
 };
 
+/// The hand of `sensing = fingertips`: grasps as for the pads (the same aim, approach and
+/// closing), but the robot reports one contact point per finger whose distal link (its
+/// fingertip) touched the object: the surface point nearest that link at the final joint
+/// angles, placed as the robot places it (its measured arm pose and joint readings, so the
+/// point carries the arm's error) and rounded to `quantization`. A normal is reported only when
+/// `normal_sigma_deg` >= 0: the true outward normal seen through the same kinematics, tilted by
+/// that much more per axis.
+struct FingertipSettings {
+  double quantization = 0.0;         ///< m, reported coordinates rounded to this grid (0: none)
+  double normal_sigma_deg = -1.0;    ///< deg, normal noise per axis; < 0: no normals
+};
+
 struct SimulatorSettings {
   std::size_t grasps = 40;           ///< grasps, or probe touches
-  Sensing sensing = Sensing::pads;   ///< pads: the gripper's tactile arrays; probe: ProbeSettings
+  Sensing sensing = Sensing::pads;   ///< pads: the gripper's tactile arrays; probe: ProbeSettings;
+                                     ///< fingertips: FingertipSettings
   ProbeSettings probe;
+  FingertipSettings fingertips;
   int sensors = 1;                   ///< 1: the gripper's single_pad; 6 (or all): every pad
   NoiseSettings noise;
   GraspSettings grasp;
@@ -103,7 +117,8 @@ struct GraspDiagnostics {
   double approach_travel = 0.0;      ///< m moved in from the start
   int attempts = 0;                  ///< aims drawn (1: the first was reachable)
   int touching_links = 0;            ///< links that stopped on the object (any part)
-  int contact_sensels = 0;           ///< logged sensels above threshold (true compression)
+  int contact_sensels = 0;           ///< logged sensels above threshold (true compression);
+                                     ///< probe and fingertips: contacts reported
   int past_peak_sensels = 0;         ///< logged sensels compressed beyond the peak
   double max_compression = 0.0;      ///< m, over logged sensels
 };
@@ -148,6 +163,10 @@ class Simulator {
   Grasp grasp_or_aim(std::size_t g, GraspCommand* aim_only) const;
   /// Closing the fingers at T_obj_eef and recording (grasp g's noise stream).
   Grasp finish(const Pose& T_obj_eef, double travel, int attempts, std::size_t g, Rng& rng) const;
+  /// The fingertip contacts of a grasp closed at true joints `q` (`tip`: per finger, its distal
+  /// link touched), after `out.measured` has its arm pose and joint readings.
+  void record_fingertips(const Pose& T_obj_eef, const std::vector<double>& q, const std::vector<char>& tip,
+                         Rng& noise, Grasp& out) const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

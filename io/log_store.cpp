@@ -45,12 +45,14 @@ struct Dims {
 };
 Dims dims_of(const LogHeader& h) {
   if (h.sensing == Sensing::probe) return {0, 0, 0, 0};
+  if (h.sensing == Sensing::fingertips) return {0, 0, 0, static_cast<std::uint64_t>(h.gripper.joint_count())};
   return {h.pads.size(), static_cast<std::uint64_t>(h.gripper.sensor().rows),
           static_cast<std::uint64_t>(h.gripper.sensor().cols),
           static_cast<std::uint64_t>(h.gripper.joint_count())};
 }
 
 bool probe_log(const LogHeader& h) { return h.sensing == Sensing::probe; }
+bool fingertip_log(const LogHeader& h) { return h.sensing == Sensing::fingertips; }
 
 // Header: root attributes, /gripper, /sensors and (structure of) /ground_truth.
 LogHeader read_header(const h5::File& file) {
@@ -84,6 +86,13 @@ LogHeader read_header(const h5::File& file) {
       if (!probe.has_attribute(a)) throw Error("missing attribute", name, std::string("/probe/") + a);
     h.probe.ball_radius = probe.double_attribute("ball_radius");
     h.probe.shaft_radius = probe.double_attribute("shaft_radius");
+  } else if (fingertip_log(h)) {
+    if (version < 3) throw Error("a fingertip log needs format_version 3", name, "/format_version");
+    const h5::Group tips = file.group("fingertips");
+    if (!tips.has_attribute("normals")) throw Error("missing attribute", name, "/fingertips/normals");
+    const std::int64_t normals = tips.int_attribute("normals");
+    if (normals != 0 && normals != 1) throw Error("must be 0 or 1", name, "/fingertips/normals");
+    h.fingertip_normals = normals == 1;
   } else {
     const SensorSettings& s = h.gripper.sensor();
     const h5::Group sensors = file.group("sensors");
@@ -113,6 +122,7 @@ void copy_header(const From& from, To& to) {
   to.gains = from.gains;
   to.sensing = from.sensing;
   to.probe = from.probe;
+  to.fingertip_normals = from.fingertip_normals;
 }
 
 TactileLog log_of(const LogHeader& h) {
@@ -166,7 +176,8 @@ LogWriter LogWriter::create(const std::filesystem::path& path, const LogHeader& 
   std::lock_guard lock(h5::mutex());
   h5::Group root = m.file.root();
   root.set_attribute("format", kLogFormat);
-  root.set_attribute("format_version", static_cast<std::int64_t>(probe_log(header) ? 2 : 1));
+  root.set_attribute("format_version",
+                     static_cast<std::int64_t>(fingertip_log(header) ? 3 : probe_log(header) ? 2 : 1));
   root.set_attribute("object", header.object);
   root.set_attribute("noise", header.noise);
   root.set_attribute("seed", seed_to_attr(header.seed));
@@ -190,19 +201,33 @@ LogWriter LogWriter::create(const std::filesystem::path& path, const LogHeader& 
     }
     return w;
   }
-  h5::Group sensors = root.create_group("sensors");
-  std::vector<std::int32_t> pads(header.pads.begin(), header.pads.end());
-  sensors.write("pad_index", pads);
-  std::vector<std::string> names;
-  for (int p : header.pads) names.push_back(header.gripper.pads()[p].name);
-  sensors.write_strings("pad_name", names);
-  sensors.write("gain", header.gains.data(), {d.pads, d.rows, d.cols});
+  // Pads and fingertips: the hand's arm pose and joints per grasp, then what it sensed.
+  const bool tips = fingertip_log(header);
+  if (tips) {
+    root.set_attribute("sensing", to_string(header.sensing));
+    root.create_group("fingertips").set_attribute("normals", static_cast<std::int64_t>(header.fingertip_normals));
+  } else {
+    h5::Group sensors = root.create_group("sensors");
+    std::vector<std::int32_t> pads(header.pads.begin(), header.pads.end());
+    sensors.write("pad_index", pads);
+    std::vector<std::string> names;
+    for (int p : header.pads) names.push_back(header.gripper.pads()[p].name);
+    sensors.write_strings("pad_name", names);
+    sensors.write("gain", header.gains.data(), {d.pads, d.rows, d.cols});
+  }
   h5::Group grasps = root.create_group("grasps");
   grasps.create_extendible<double>("time", {}, chunks(256));
   grasps.create_extendible<double>("arm_pose", {7}, chunks(256));
   grasps.create_extendible<double>("joints", {d.joints}, chunks(256));
-  grasps.create_extendible<float>("tactile", {d.pads, d.rows, d.cols}, chunks(32, 4));
-  grasps.create_extendible<std::uint8_t>("past_peak", {d.pads, d.rows, d.cols}, chunks(32, 4));
+  if (tips) {
+    const auto F = static_cast<std::uint64_t>(header.gripper.finger_count());
+    grasps.create_extendible<std::uint8_t>("fingertip_touched", {F}, chunks(256));
+    grasps.create_extendible<double>("fingertip_point", {F, 3}, chunks(256));
+    if (header.fingertip_normals) grasps.create_extendible<double>("fingertip_normal", {F, 3}, chunks(256));
+  } else {
+    grasps.create_extendible<float>("tactile", {d.pads, d.rows, d.cols}, chunks(32, 4));
+    grasps.create_extendible<std::uint8_t>("past_peak", {d.pads, d.rows, d.cols}, chunks(32, 4));
+  }
   if (header.true_object_pose) {
     h5::Group truth = root.create_group("ground_truth");
     const auto row = pose_row(*header.true_object_pose);
@@ -223,8 +248,12 @@ LogWriter LogWriter::append_to(const std::filesystem::path& path) {
   m.shape = log_of(m.header);
   const h5::Group grasps = m.file.group("grasps");
   m.grasps = grasps.shape("time").at(0);
-  const auto row_sets = probe_log(m.header) ? std::vector<const char*>{"arm_pose", "probe_travel", "probe_touched"}
-                                            : std::vector<const char*>{"arm_pose", "joints", "tactile", "past_peak"};
+  std::vector<const char*> row_sets{"arm_pose", "joints", "tactile", "past_peak"};
+  if (probe_log(m.header)) row_sets = {"arm_pose", "probe_travel", "probe_touched"};
+  if (fingertip_log(m.header)) {
+    row_sets = {"arm_pose", "joints", "fingertip_touched", "fingertip_point"};
+    if (m.header.fingertip_normals) row_sets.push_back("fingertip_normal");
+  }
   for (const char* name : row_sets)
     if (grasps.shape(name).at(0) != m.grasps)
       throw Error("dataset has " + std::to_string(grasps.shape(name).at(0)) + " rows but /grasps/time has " +
@@ -272,10 +301,21 @@ void LogWriter::append(const GraspRecord& grasp, const Pose* truth_arm_pose,
     return;
   }
   g.append("joints", grasp.joints.data(), 1);
-  g.append("tactile", grasp.tactile.data(), 1);
-  std::vector<std::uint8_t> hints = grasp.past_peak;
-  hints.resize(grasp.tactile.size(), 0);
-  g.append("past_peak", hints.data(), 1);
+  if (fingertip_log(m.header)) {
+    g.append("fingertip_touched", grasp.fingertip_touched.data(), 1);
+    auto flat = [](const std::vector<Vec3>& v) {
+      std::vector<double> out;
+      for (const Vec3& x : v) out.insert(out.end(), {x.x(), x.y(), x.z()});
+      return out;
+    };
+    g.append("fingertip_point", flat(grasp.fingertip_points).data(), 1);
+    if (m.header.fingertip_normals) g.append("fingertip_normal", flat(grasp.fingertip_normals).data(), 1);
+  } else {
+    g.append("tactile", grasp.tactile.data(), 1);
+    std::vector<std::uint8_t> hints = grasp.past_peak;
+    hints.resize(grasp.tactile.size(), 0);
+    g.append("past_peak", hints.data(), 1);
+  }
   if (truth_arm_pose) {
     h5::Group t = root.open_group("ground_truth");
     const auto row = pose_row(*truth_arm_pose);
@@ -342,24 +382,44 @@ TactileLog read_log(const std::filesystem::path& path) {
       r.probe_touched = touched[k] == 1;
     }
   } else {
+    // Pads and fingertips: the hand's joints, then what it sensed.
     const auto joints = g.read<double>("joints", {kAny, J}, &s);
     rows_of("joints", s);
-    const auto tactile = g.read<float>("tactile", {kAny, P, R, C}, &s);
-    rows_of("tactile", s);
-    std::vector<std::uint8_t> hints;
-    if (g.has_dataset("past_peak")) {
-      hints = g.read<std::uint8_t>("past_peak", {kAny, P, R, C}, &s);
-      rows_of("past_peak", s);
+    const bool tips = fingertip_log(h);
+    const auto F = static_cast<std::int64_t>(h.gripper.finger_count());
+    std::vector<float> tactile;
+    std::vector<std::uint8_t> hints, touched;
+    std::vector<double> points, normals;
+    auto rows = [&](const char* ds, auto& out, const h5::ShapeSpec& shape) {
+      out = g.read<typename std::decay_t<decltype(out)>::value_type>(ds, shape, &s);
+      rows_of(ds, s);
+    };
+    if (tips) {
+      rows("fingertip_touched", touched, {kAny, F});
+      rows("fingertip_point", points, {kAny, F, 3});
+      if (h.fingertip_normals) rows("fingertip_normal", normals, {kAny, F, 3});
+    } else {
+      rows("tactile", tactile, {kAny, P, R, C});
+      if (g.has_dataset("past_peak")) rows("past_peak", hints, {kAny, P, R, C});
     }
-    const std::size_t image = d.pads * d.rows * d.cols;
+    const std::size_t image = d.pads * d.rows * d.cols, nf = static_cast<std::size_t>(F);
     log.grasps.resize(G);
     for (std::size_t k = 0; k < G; ++k) {
       GraspRecord& r = log.grasps[k];
       r.time = time[k];
       r.arm_pose = checked_pose_from_row(&pose[7 * k], name, indexed("/grasps/arm_pose", k));
       r.joints.assign(joints.begin() + k * d.joints, joints.begin() + (k + 1) * d.joints);
-      r.tactile.assign(tactile.begin() + k * image, tactile.begin() + (k + 1) * image);
-      if (!hints.empty()) r.past_peak.assign(hints.begin() + k * image, hints.begin() + (k + 1) * image);
+      if (!tips) {
+        r.tactile.assign(tactile.begin() + k * image, tactile.begin() + (k + 1) * image);
+        if (!hints.empty()) r.past_peak.assign(hints.begin() + k * image, hints.begin() + (k + 1) * image);
+        continue;
+      }
+      r.fingertip_touched.assign(touched.begin() + k * nf, touched.begin() + (k + 1) * nf);
+      for (std::size_t f = 0; f < nf; ++f) {
+        const std::size_t i = 3 * (k * nf + f);
+        r.fingertip_points.emplace_back(points[i], points[i + 1], points[i + 2]);
+        if (!normals.empty()) r.fingertip_normals.emplace_back(normals[i], normals[i + 1], normals[i + 2]);
+      }
     }
   }
   if (h.true_object_pose) {

@@ -23,7 +23,7 @@
 namespace ts::io {
 
 constexpr const char* kLogFormat = "touchstone-tactile-log";
-constexpr int kLogFormatVersion = 2;   ///< read: 1 and 2; written: 1 (pads), 2 (probe)
+constexpr int kLogFormatVersion = 3;   ///< read: 1 to 3; written: 1 (pads), 2 (probe), 3 (fingertips)
 
 /// Everything of a log except its grasps (what a writer needs before the first grasp).
 struct LogHeader {
@@ -35,8 +35,10 @@ struct LogHeader {
   std::vector<float> gains;
   std::optional<Pose> true_object_pose;  ///< set: the log carries a /ground_truth group
   std::string source;                    ///< free text: who wrote it ("touchstone simulate ...")
-  Sensing sensing = Sensing::pads;       ///< probe: no /sensors, no joints or images
+  Sensing sensing = Sensing::pads;       ///< probe: no /sensors, no joints or images;
+                                         ///< fingertips: no /sensors or images, fingertip points
   ProbeSpec probe;
+  bool fingertip_normals = false;        ///< fingertips: the grasps carry normals
 };
 
 LogHeader header_of(const TactileLog& log);

@@ -20,12 +20,20 @@ bool rigid_pose(const Pose& T) {
 }
 }  // namespace
 
-const char* to_string(Sensing s) { return s == Sensing::probe ? "probe" : "pads"; }
+const char* to_string(Sensing s) {
+  switch (s) {
+    case Sensing::probe: return "probe";
+    case Sensing::fingertips: return "fingertips";
+    case Sensing::pads: break;
+  }
+  return "pads";
+}
 
 Sensing parse_sensing(const std::string& word, const std::string& file, const std::string& field) {
   if (word == "pads") return Sensing::pads;
   if (word == "probe") return Sensing::probe;
-  throw Error("unknown sensing '" + word + "' (pads, probe)", file, field);
+  if (word == "fingertips") return Sensing::fingertips;
+  throw Error("unknown sensing '" + word + "' (pads, probe, fingertips)", file, field);
 }
 
 void validate_grasp(const TactileLog& log, const GraspRecord& r, std::size_t k, const std::string& file) {
@@ -50,6 +58,35 @@ void validate_grasp(const TactileLog& log, const GraspRecord& r, std::size_t k, 
               std::to_string(r.joints.size()),
           file, "/grasps/joints" + at);
   for (double q : r.joints) require(std::isfinite(q), "joint angle is not finite", file, "/grasps/joints" + at);
+  if (log.sensing == Sensing::fingertips) {
+    const auto F = static_cast<std::size_t>(g.finger_count());
+    require(r.tactile.empty() && r.past_peak.empty(), "a fingertip grasp has no tactile images", file,
+            "/grasps/tactile" + at);
+    require(r.fingertip_touched.size() == F,
+            "expected one entry per finger of the gripper (" + std::to_string(F) + "), got " +
+                std::to_string(r.fingertip_touched.size()),
+            file, "/grasps/fingertip_touched" + at);
+    require(r.fingertip_points.size() == F,
+            "expected one point per finger of the gripper (" + std::to_string(F) + "), got " +
+                std::to_string(r.fingertip_points.size()),
+            file, "/grasps/fingertip_point" + at);
+    require(r.fingertip_normals.size() == (log.fingertip_normals ? F : 0),
+            log.fingertip_normals ? "expected one normal per finger of the gripper (" + std::to_string(F) + ")"
+                                  : std::string("this log records no fingertip normals"),
+            file, "/grasps/fingertip_normal" + at);
+    for (std::size_t f = 0; f < F; ++f) {
+      const std::string where = at + "[" + std::to_string(f) + "]";
+      require(r.fingertip_touched[f] <= 1, "fingertip_touched must be 0 or 1", file, "/grasps/fingertip_touched" + where);
+      if (!r.fingertip_touched[f]) continue;
+      require(r.fingertip_points[f].allFinite(), "fingertip point is not finite", file, "/grasps/fingertip_point" + where);
+      if (log.fingertip_normals)
+        require(r.fingertip_normals[f].allFinite() && std::abs(r.fingertip_normals[f].norm() - 1.0) < 1e-3,
+                "fingertip normal is not a unit vector", file, "/grasps/fingertip_normal" + where);
+    }
+    return;
+  }
+  require(r.fingertip_touched.empty() && r.fingertip_points.empty() && r.fingertip_normals.empty(),
+          "only a fingertip log records fingertip contacts", file, "/grasps/fingertip_point" + at);
   require(r.tactile.size() == image,
           "tactile image size " + std::to_string(r.tactile.size()) + " does not match " +
               std::to_string(log.pads.size()) + " pads x " + std::to_string(n) + " sensels",
@@ -80,6 +117,10 @@ void validate(const TactileLog& log, const std::string& file) {
             "probe shaft radius must be in [0, ball_radius] m", file, "/probe/shaft_radius");
     require(log.pads.empty() && log.gains.empty(), "a probe log records no tactile pad", file,
             "/sensors");
+  } else if (log.sensing == Sensing::fingertips) {
+    require(log.pads.empty() && log.gains.empty(), "a fingertip log records no tactile pad", file, "/sensors");
+    require(log.gripper.finger_count() > 0, "a fingertip log needs a gripper with fingers", file,
+            "/gripper/description");
   } else {
     require(!log.pads.empty(), "log records no tactile pad", file, "/sensors/pad_index");
   }
@@ -124,6 +165,14 @@ GraspContacts grasp_contacts(const TactileLog& log, std::size_t g, const Contact
       out.points.push_back(r.arm_pose * Vec3(0.0, 0.0, log.probe.ball_radius));
       out.pad_slot.push_back(0);
     }
+    return out;
+  }
+  if (log.sensing == Sensing::fingertips) {
+    for (std::size_t f = 0; f < r.fingertip_touched.size(); ++f)
+      if (r.fingertip_touched[f]) {
+        out.points.push_back(r.fingertip_points[f]);
+        out.pad_slot.push_back(static_cast<int>(f));
+      }
     return out;
   }
   const SensorSettings& sensor = log.gripper.sensor();
@@ -172,6 +221,8 @@ void Exploration::advance_to(std::size_t k) {
       for (std::size_t i = 0; i < c.points.size(); ++i) raw_normals_.push_back(-r.arm_pose.linear().col(2));
     } else {
       mark_swept_volume(grid_, log_.gripper, r.arm_pose, r.joints, settings_.free);
+      if (log_.sensing == Sensing::fingertips && log_.fingertip_normals)
+        for (int f : c.pad_slot) raw_normals_.push_back(r.fingertip_normals[static_cast<std::size_t>(f)]);
     }
     for (const Vec3& p : c.points) grid_.mark_occupied(p);
     raw_.insert(raw_.end(), c.points.begin(), c.points.end());
@@ -201,11 +252,11 @@ std::vector<Vec3> Exploration::voxel_filtered(const std::vector<Vec3>& world) co
 
 PointCloud Exploration::contact_cloud() const {
   PointCloud out;
-  if (log_.sensing != Sensing::probe) {
+  if (raw_normals_.size() != raw_.size() || raw_.empty()) {
     out.points = voxel_filtered(raw_);
     return out;
   }
-  // Probe contacts with their normals (minus the approach), voxel-filtered together.
+  // Contacts with their normals (a probe's: minus the approach), voxel-filtered together.
   PointCloud local;
   for (std::size_t i = 0; i < raw_.size(); ++i) {
     local.points.push_back(raw_[i] - origin_);

@@ -31,10 +31,12 @@ namespace ts {
 inline namespace touch {
 
 /// How a log senses touch: `pads`, the gripper's tactile arrays (the default, every log written
-/// before the probe), or `probe`, a rigid probe with a ball tip that records one contact per
-/// touch (a touch probe on an ROV arm, a fingertip contact sensor).
-enum class Sensing { pads, probe };
-const char* to_string(Sensing s);                              ///< "pads" / "probe"
+/// before the probe); `probe`, a rigid probe with a ball tip that records one contact per
+/// touch (a touch probe on an ROV arm); or `fingertips`, a hand that reports one contact point
+/// per fingertip that touched (iCub, Allegro or Shadow fingertip sensors, force-torque sensing in
+/// an ROV gripper's jaws), usually without a normal.
+enum class Sensing { pads, probe, fingertips };
+const char* to_string(Sensing s);                              ///< "pads" / "probe" / "fingertips"
 /// Throws ts::Error naming `file` and `field` on another word.
 Sensing parse_sensing(const std::string& word, const std::string& file = {}, const std::string& field = {});
 
@@ -57,6 +59,11 @@ struct GraspRecord {
   double probe_travel = 0.0;            ///< m the ball centre moved along z (probe logs)
   bool probe_touched = false;           ///< the probe stopped on contact (false: it went the
                                         ///< whole way free; the touch adds free space only)
+  // Fingertip logs (joints as for pads, no tactile images): one slot per finger of the gripper.
+  std::vector<std::uint8_t> fingertip_touched;  ///< 1: finger f's tip reported a contact
+  std::vector<Vec3> fingertip_points;   ///< world frame, as the robot reports it (its arm pose
+                                        ///< and kinematics, its rounding); unused where not touched
+  std::vector<Vec3> fingertip_normals;  ///< outward surface normals (world) or empty: none
 };
 
 /// Evaluation-only truth (simulated logs): never used to compute contacts or free space.
@@ -75,8 +82,9 @@ struct TactileLog {
   std::vector<float> gains;             ///< calibration gain, pads.size() x sensels
   std::vector<GraspRecord> grasps;
   std::optional<LogGroundTruth> truth;
-  Sensing sensing = Sensing::pads;      ///< probe: pads and gains are empty, `probe` describes it
-  ProbeSpec probe;
+  Sensing sensing = Sensing::pads;      ///< probe, fingertips: pads and gains are empty
+  ProbeSpec probe;                      ///< the probe of a probe log
+  bool fingertip_normals = false;       ///< fingertip logs: every grasp carries normals
 
   std::size_t sensels() const { return static_cast<std::size_t>(gripper.sensor().sensels()); }
   float gain(std::size_t pad_slot, std::size_t sensel) const { return gains[pad_slot * sensels() + sensel]; }
@@ -105,7 +113,8 @@ struct GraspContacts {
 
 /// Eq. 1 then Eq. 2 for every sensel of every logged pad of grasp `g`. A probe log gives the
 /// touch's one contact, the ball centre moved by the ball radius along the approach (the
-/// contact assumed straight ahead of the ball), or none when the probe touched nothing.
+/// contact assumed straight ahead of the ball), or none when the probe touched nothing. A
+/// fingertip log gives the reported point of each finger that touched (pad_slot: the finger).
 GraspContacts grasp_contacts(const TactileLog& log, std::size_t g, const ContactSettings& s = {});
 
 struct ExplorationSettings {
@@ -142,7 +151,8 @@ class Exploration {
   const std::vector<std::size_t>& contacts_per_grasp() const { return per_grasp_; }
   const OccupancyGrid& grid() const { return grid_; }
   PointCloud contact_cloud() const;   ///< voxel-filtered PC_cum^cont; a probe log's contacts
-                                      ///< carry normals: minus the approach directions
+                                      ///< carry normals (minus the approach directions), a
+                                      ///< fingertip log's those it reports, if any
   PointCloud free_cloud() const;      ///< PC^free in B around the current contacts: centres of
                                       ///< the res_free cubes that are entirely free
                                       ///< (OccupancyGrid::full_free_cloud); a probe log adds
@@ -158,7 +168,8 @@ class Exploration {
   OccupancyGrid grid_;
   std::size_t steps_ = 0;
   std::vector<Vec3> raw_;
-  std::vector<Vec3> raw_normals_;      ///< probe logs: per raw contact, minus the approach
+  std::vector<Vec3> raw_normals_;      ///< per raw contact: probe logs minus the approach,
+                                       ///< fingertip logs with normals the reported ones
   std::vector<Vec3> probe_free_;       ///< probe logs: samples of the ball-centre paths
   std::vector<std::size_t> per_grasp_;
   GraspGroups groups_;

@@ -87,10 +87,11 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
   const std::size_t size_col = column("answer_set.size"), covers_col = column("answer_set.covers"),
                     informative_col = column("answer_set.informative");
   const std::size_t expected_col = column("plan.expected_object_information"), drop_col = column("plan.entropy_drop");
+  const std::size_t fit_col = column("fit.contact_distance_m");
   J rows = J::array();
   for (int k = 0; k < steps; ++k) {
     std::map<int, ClusterCounts> covered_by_object;
-    std::vector<double> set_sizes, expected, drop_planned, drop_all;
+    std::vector<double> set_sizes, expected, drop_planned, drop_all, fit;
     std::size_t covered = 0, informative = 0;
     std::map<int, ClusterCounts> strict_by_object, class_by_object;
     std::vector<StepSample> samples;
@@ -120,6 +121,7 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
         ++by.trials;
         by.successes += c ? 1 : 0;
       }
+      if (fit_col < s.values.size() && !std::isnan(s.values[fit_col])) fit.push_back(s.values[fit_col]);
       // Active touch: the planner's expectation of the chosen grasp and the step's entropy drop.
       if (drop_col < s.values.size() && !std::isnan(s.values[drop_col])) {
         drop_all.push_back(s.values[drop_col]);
@@ -176,6 +178,9 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
     row["plan_expected_object_information_median"] = opt(median(expected));
     row["plan_entropy_drop_median"] = opt(median(drop_planned));
     row["entropy_drop_median"] = opt(median(drop_all));
+    // The mean contact-to-model distance of the answer at its pose, median over the runs that
+    // answered (right or not): what real data without a truth can check.
+    row["contact_distance_m_median"] = opt(median(fit));
     // The interface's keys first, then the rest.
     row["position_error_m_median"] = opt(m.position_m.median);
     row["orientation_error_deg_median"] = opt(m.orientation_rad.median, kDeg);

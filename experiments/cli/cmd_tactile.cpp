@@ -71,7 +71,7 @@ int run_simulate(const SimulateOptions& o) {
   std::ostringstream source;
   source << "touchstone simulate --object " << o.object << " --grasps " << o.grasps << " --noise " << c.noise
          << " --sensors " << c.sensors << " --seed " << o.common.seed;
-  if (s.sensing == Sensing::probe) source << " --sensing probe";
+  if (s.sensing != Sensing::pads) source << " --sensing " << to_string(s.sensing);
   // The other simulator parameters given (the noise and probe overrides), as given, so that the
   // source reproduces the log.
   for (const experiments::Parameter& p : experiments::parameters()) {
@@ -107,7 +107,8 @@ int run_simulate(const SimulateOptions& o) {
     std::cout << "simulated " << result.log.grasps.size()
               << (s.sensing == Sensing::probe ? " probe touches" : " grasps") << " on '" << result.log.object << "' ("
               << s.noise.name << ", "
-              << (s.sensing == Sensing::probe ? std::string("probe")
+              << (s.sensing == Sensing::probe        ? std::string("probe")
+                  : s.sensing == Sensing::fingertips ? std::string("fingertips")
                   : std::to_string(result.log.pads.size()) + (result.log.pads.size() == 1 ? " pad" : " pads"))
               << "): " << result.grasps_with_contact << " with contact, " << contacts << " contact points -> "
               << o.out << " (" << std::fixed << std::setprecision(2) << seconds << " s)\n";
@@ -145,6 +146,7 @@ int run_log_info(const LogInfoOptions& o) {
     j["sensing"] = to_string(log.sensing);
     if (log.sensing == Sensing::probe)
       j["probe"] = {{"ball_radius_m", log.probe.ball_radius}, {"shaft_radius_m", log.probe.shaft_radius}};
+    if (log.sensing == Sensing::fingertips) j["fingertip_normals"] = log.fingertip_normals;
     j["gripper"] = log.gripper.spec().name;
     j["seed"] = log.seed;
     j["duration_s"] = duration;
@@ -159,6 +161,9 @@ int run_log_info(const LogInfoOptions& o) {
             << "  noise         " << log.noise << "\n";
   if (log.sensing == Sensing::probe) {
     std::cout << "  sensing       probe, ball radius " << log.probe.ball_radius << " m";
+  } else if (log.sensing == Sensing::fingertips) {
+    std::cout << "  sensing       fingertips of " << log.gripper.spec().name << " (" << log.gripper.finger_count()
+              << " fingers), " << (log.fingertip_normals ? "with normals" : "no normals");
   } else {
     std::cout << "  gripper       " << log.gripper.spec().name << ", pads logged:";
     for (const auto& p : pads) std::cout << ' ' << p;

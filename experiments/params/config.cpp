@@ -196,7 +196,11 @@ ResolvedObjects resolve_objects(const ExperimentConfig& c,
   r.explored = c.objects.empty() ? names : c.objects;
   for (const auto& n : r.explored)
     if (!known.count(n)) throw Error("unknown object '" + n + "' (not in the database)", {}, "objects");
-  std::vector<std::string> pool = c.database.empty() ? names : c.database;
+  // Known-object localization: each run's recognizer may name only its explored object.
+  r.known_each = c.database.size() == 1 && c.database.front() == "each";
+  if (r.known_each && !c.hidden.empty())
+    throw Error("database = \"each\" (localize each object) cannot be combined with hidden objects", {}, "hidden");
+  std::vector<std::string> pool = r.known_each ? r.explored : c.database.empty() ? names : c.database;
   for (const auto& n : pool)
     if (!known.count(n)) throw Error("unknown object '" + n + "' (not in the database)", {}, "database");
   // Open set: hidden objects leave the recognizer's database (they may still be explored).

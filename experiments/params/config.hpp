@@ -41,6 +41,13 @@ struct ProbeOverrides {
   std::optional<double> quantization_m;          ///< m, recorded positions rounded to this
 };
 
+/// Overrides of the simulated fingertip hand (sensing = "fingertips"; unset: the simulator's
+/// default).
+struct FingertipOverrides {
+  std::optional<double> quantization_m;          ///< m, reported coordinates rounded to this
+  std::optional<double> normals_deg;             ///< deg, normal noise; unset: no normals
+};
+
 struct SweepAxis {
   std::string key;                              ///< a scalar key, e.g. "ransac.samples"
   std::vector<std::vector<std::string>> values; ///< one entry per variant value (a key's inputs)
@@ -65,8 +72,10 @@ struct ExperimentConfig {
   std::string noise = "underwater";
   NoiseOverrides noise_params;
   ProbeOverrides probe_params;
+  FingertipOverrides fingertip_params;
   int sensors = 1;
-  std::string sensing = "pads";         ///< pads | probe (datasets::ProbeSettings)
+  std::string sensing = "pads";         ///< pads | probe (datasets::ProbeSettings) | fingertips
+                                        ///< (datasets::FingertipSettings)
   std::uint64_t seed = 1;
   /// Method parameters set explicitly (key of experiments/params/parameters.hpp -> value; unset: the
   /// preset's)
@@ -113,6 +122,8 @@ struct ResolvedObjects {
                                        ///< (hidden objects excluded)
   std::vector<std::string> hidden;     ///< explored objects the recognizer does not know
   bool hide_each = false;              ///< hidden = "each": each explored object from its runs
+  bool known_each = false;             ///< database = "each": each run may name only its object
+                                       ///< (known-object localization, `recognize --only`)
 };
 ResolvedObjects resolve_objects(const ExperimentConfig& config,
                                 const std::vector<std::string>& database_names);

@@ -470,7 +470,8 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
   d.push_back(names(setting("objects", E, Type::names, "", 0, 0, "", "Explored objects: all, or names of the database"),
                     TS_CONFIG(objects), true));
   d.push_back(names(setting("database", E, Type::names, "", 0, 0, "",
-                            "Objects the recognizer may answer: all, or names of the database"),
+                            "Objects the recognizer may answer: all, names of the database, or each: only the "
+                            "explored object in its own runs (known-object localization, recognize --only)"),
                     TS_CONFIG(database), true));
   d.push_back(number(setting("database_size", E, Type::integer, "", 1, kLarge, "",
                              "The recognizer's database cut to this many objects, the explored ones first (unset: all)"),
@@ -540,8 +541,9 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
   }
   d.push_back(named(setting("sensing", S, Type::choice, "", 0, 0, "pads",
                             "pads: the gripper's tactile arrays; probe: a ball-tipped probe, one contact per step "
-                            "(noise.contact_sigma_m is then the probe's own noise)"),
-                    {"pads", "probe"}, TS_CONFIG(sensing)));
+                            "(noise.contact_sigma_m is then the probe's own noise); fingertips: one contact point "
+                            "per fingertip that touched, no normals unless fingertips.normals_deg"),
+                    {"pads", "probe", "fingertips"}, TS_CONFIG(sensing)));
   d.back().sweepable = false;
   d.back().simulate = true;
   auto probe_setting = [&](std::string key, std::string unit, double lo, double hi, std::string help,
@@ -560,6 +562,13 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
   probe_setting("probe.quantization_m", "m", 0, 0.1,
                 "Probe positions recorded rounded to this (unset, 0: none; sensing = probe)", "--quantization",
                 TS_CONFIG(probe_params.quantization_m));
+  probe_setting("fingertips.quantization_m", "m", 0, 0.1,
+                "Fingertip contacts reported rounded to this (unset, 0: none; sensing = fingertips)",
+                "--tip-quantization", TS_CONFIG(fingertip_params.quantization_m));
+  probe_setting("fingertips.normals_deg", "deg", -1, 89,
+                "Fingertips report surface normals with this noise per axis (unset or -1: no normals; sensing = "
+                "fingertips)",
+                "--tip-normals", TS_CONFIG(fingertip_params.normals_deg));
   {
     Parameter p = setting("seed", E, Type::integer, "", 0, kInf, "", "Seed of every random draw (unsigned integer)");
     p.set_config = [](ExperimentConfig& c, const Inputs& in, const std::string& file, const std::string& name) {
@@ -865,7 +874,7 @@ void apply_flags(const ParameterFlags& flags, MethodSettings& m) {
 
 bool bench_run_parameter(const Parameter& p) {
   return p.key == "method" || p.key == "preset" ||
-         (p.simulate && p.key != "sensing" && !p.key.starts_with("probe."));
+         (p.simulate && p.key != "sensing" && !p.key.starts_with("probe.") && !p.key.starts_with("fingertips."));
 }
 
 void apply_flags(const ParameterFlags& flags, ExperimentConfig& c) {

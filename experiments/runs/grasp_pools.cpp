@@ -37,6 +37,9 @@ datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
   s.probe.spec.shaft_radius = std::min(s.probe.spec.shaft_radius, s.probe.spec.ball_radius);
   if (p.tilt_deg) s.probe.max_tilt_deg = *p.tilt_deg;
   if (p.quantization_m) s.probe.quantization = *p.quantization_m;
+  const FingertipOverrides& t = c.fingertip_params;
+  if (t.quantization_m) s.fingertips.quantization = *t.quantization_m;
+  if (t.normals_deg) s.fingertips.normal_sigma_deg = *t.normals_deg;
   s.grasps = static_cast<std::size_t>(c.pool);
   return s;
 }
@@ -49,6 +52,8 @@ std::string pool_key(const datasets::SimulatorSettings& s) {
     << '|' << s.noise.lateral_sigma << '|' << s.noise.fold_detect << '|' << s.sensors << '|'
     << s.grasps << '|' << to_string(s.sensing) << '|' << s.probe.contact_sigma << '|' << s.probe.spec.ball_radius
     << '|' << s.probe.spec.shaft_radius << '|' << s.probe.max_tilt_deg << '|' << s.probe.quantization;
+  if (s.sensing == Sensing::fingertips)   // (pads and probe keys as before: their cached pools stay valid)
+    k << '|' << s.fingertips.quantization << '|' << s.fingertips.normal_sigma_deg;
   return k.str();
 }
 

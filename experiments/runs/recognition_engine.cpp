@@ -52,6 +52,8 @@ struct VariantData {
   bool shared_pool = false;                    ///< protocol "shared_pool": one pool per object
   bool hide_each = false;                      ///< hidden = "each": the explored object masked
                                                ///< out of the recognizer in its own runs
+  bool known_each = false;                     ///< database = "each": the explored object alone
+                                               ///< unmasked in its own runs
   datasets::SimulatorSettings simulation;      ///< without grasps count and seed
   RecognizerSettings recognizer;
   double contact_voxel = 0.002;                ///< m, voxel filter of the cumulative contacts
@@ -138,6 +140,7 @@ class RecognitionEngine final : public RunEngine {
       d.pool_key = pool_key(d.simulation);
       d.shared_pool = v.config.protocol == "shared_pool";
       d.hide_each = r.hide_each;
+      d.known_each = r.known_each;
       d.recognizer = rs;
       d.contact_voxel = ms.contact_voxel;
       d.active = ms.exploration == 1;
@@ -315,6 +318,10 @@ class RecognitionEngine final : public RunEngine {
     }
 
     RecognizerSettings rs = v.recognizer;
+    if (v.known_each) {
+      rs.objects.assign(group.objects.size(), 0);
+      rs.objects.at(local_true) = 1;
+    }
     if (v.hide_each) {
       rs.objects.assign(group.objects.size(), 1);
       rs.objects.at(local_true) = 0;
@@ -441,6 +448,19 @@ class RecognitionEngine final : public RunEngine {
       // Active touch: what the planner expected of the grasp it chose (nats; NaN when it did not
       // choose) and what the step gave: the drop of the posterior's entropy over objects.
       s.values.insert(s.values.end(), {expected_information, expected_object_information, entropy_drop});
+      // How well the answer explains the contacts, as on real data without a truth: the mean
+      // distance of the step's contacts to the answer's surface at its pose (its distance field).
+      double contact_distance = nan;
+      if (sr.valid && !contacts.empty()) {
+        const GeometryRef geo = group.database->geometry(sr.best.object);
+        if (geo && !geo->field.empty()) {
+          const Pose to_object = sr.best.pose.inverse();
+          double sum = 0.0;
+          for (const Vec3& p : contacts.points) sum += std::abs(geo->field.distance(to_object * p));
+          contact_distance = sum / static_cast<double>(contacts.size());
+        }
+      }
+      s.values.push_back(contact_distance);
       if (truth_pose_) {
         const std::optional<Funnel>& f = sr.watched;
         if (f && f->truth_pose_evaluated) {
@@ -549,7 +569,8 @@ const std::vector<std::string>& recognition_step_values() {
     for (const std::string& f : confidence_feature_names()) n.push_back("feature." + f);
     for (const std::string& stage : pipeline_stage_names()) n.push_back("ran." + stage);
     n.insert(n.end(), {"set.truth_gap", "answer_set.size", "answer_set.covers", "answer_set.informative",
-                       "plan.expected_information", "plan.expected_object_information", "plan.entropy_drop"});
+                       "plan.expected_information", "plan.expected_object_information", "plan.entropy_drop",
+                       "fit.contact_distance_m"});
     return n;
   }();
   return names;

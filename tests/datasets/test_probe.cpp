@@ -6,10 +6,10 @@
 #include "engine/touch/fusion.hpp"
 #include "io/h5.hpp"
 #include "io/log_store.hpp"
+#include "simulated_log.hpp"
 #include "temp_dir.hpp"
 
 #include <doctest/doctest.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -104,15 +104,8 @@ TEST_CASE("probe noise: arm error and 1 mm quantization in the record, the truth
 TEST_CASE("probe logs: written and read back (format_version 2), same bytes for 1 and 2 threads") {
   test::TempDir dir;
   const Mesh m = box_mesh(Vec3(0.05, 0.03, 0.02));
-  auto write = [&](int threads, const std::string& name) {
-    tbb::task_arena arena(threads);
-    datasets::SimulationResult r;
-    arena.execute([&] { r = datasets::Simulator(m, "plate", Gripper(), probe_settings(12, "underwater", 5)).run(); });
-    io::write_log(dir.path() / name, r.log);
-    return r.log;
-  };
-  const TactileLog log = write(1, "a.h5");
-  write(2, "b.h5");
+  const TactileLog log = test::simulate_and_write(m, "plate", probe_settings(12, "underwater", 5), 1, dir.path() / "a.h5");
+  test::simulate_and_write(m, "plate", probe_settings(12, "underwater", 5), 2, dir.path() / "b.h5");
   CHECK(test::read_bytes(dir.path() / "a.h5") == test::read_bytes(dir.path() / "b.h5"));
   const TactileLog back = io::read_log(dir.path() / "a.h5");
   CHECK(back.sensing == Sensing::probe);

@@ -630,6 +630,64 @@ TEST_CASE("cli probe: simulate --sensing probe, recognize the log, --only, --clo
   CHECK_FALSE(fs::exists(dir / "x.h5"));
 }
 
+TEST_CASE("cli fingertips: simulate --sensing fingertips, recognize the log and its points-only cloud, --only") {
+  test::TempDir dir("cli_tips");
+  make_db(dir);
+  const Run sim = touchstone(dir, "simulate --db db.h5 --object wedge --grasps 20 --sensing fingertips --noise ideal "
+                                  "--fingertips.quantization-m 0.001 --seed 3 --out tips.h5 --json");
+  REQUIRE_MESSAGE(sim.code == 0, sim.err);
+  CHECK(nlohmann::json::parse(sim.out)["sensing"] == "fingertips");
+  const Run info = touchstone(dir, "log info tips.h5 --json");
+  REQUIRE(info.code == 0);
+  const auto ji = nlohmann::json::parse(info.out);
+  CHECK(ji["sensing"] == "fingertips");
+  CHECK(ji["fingertip_normals"] == false);
+  int contacts = 0;
+  for (const auto& n : ji["contacts_per_grasp"]) {
+    CHECK(n.get<int>() <= 3);   // one per fingertip of the three-finger hand
+    contacts += n.get<int>();
+  }
+  CHECK(contacts >= 20);
+  for (const std::string only : {"", " --only wedge"}) {
+    INFO(only);
+    // (The default sampling: kFastFlags' finds a flipped wedge that fits these contacts within
+    // 0.7 mm, 5 mm off.)
+    const Run r = touchstone(dir, "recognize --db db.h5 --log tips.h5 --json" + only);
+    REQUIRE_MESSAGE(r.code == 0, r.err);
+    const auto j = nlohmann::json::parse(r.out);
+    const auto& last = j["steps"].back();
+    CHECK(last["object"] == "wedge");
+    // 1 mm rounding, no other noise: the contacts lie within a millimetre of the surface.
+    REQUIRE(last["contact_model_distance_m"].is_number());
+    CHECK(last["contact_model_distance_m"].get<double>() < 0.001);
+    CHECK(last["position_error_m"].get<double>() < 0.002);
+  }
+  // The same contacts as a cloud of points without normals (a recording's points): an answer
+  // and a pose.
+  REQUIRE(touchstone(dir, "log export tips.h5 --out points.ply").code == 0);
+  const Run c = touchstone(dir, "recognize --db db.h5 --cloud points.ply --json");
+  REQUIRE_MESSAGE(c.code == 0, c.err);
+  const auto jc = nlohmann::json::parse(c.out);
+  CHECK(jc["steps"][0]["object"] == "wedge");
+  CHECK(jc["steps"][0]["contact_model_distance_m"].get<double>() < 0.001);
+  // An experiment on fingertips, each run localizing its own object (database = each), under
+  // the shared pool (the pool stays a fingertip log).
+  const Run e = touchstone(dir, "experiment --db db.h5 --objects wedge,nut --runs 1 --steps 6 --pool 6 --set sensing=fingertips "
+                                "--set database=each --set protocol=shared_pool --json --out each.h5");
+  REQUIRE_MESSAGE(e.code == 0, e.err);
+  const Run rep = touchstone(dir, "report each.h5 --json");
+  REQUIRE_MESSAGE(rep.code == 0, rep.err);
+  const auto per_step = nlohmann::json::parse(rep.out)["per_step"];
+  REQUIRE(per_step.size() == 6);
+  CHECK(per_step.back()["contact_distance_m_median"].get<double>() < 0.003);
+  for (const auto& run : io::RunStore::read(dir / "each.h5").runs)
+    for (const auto& st : run.steps)
+      if (st.best_object >= 0) CHECK(st.correct);   // it may name nothing else
+  CHECK(touchstone(dir, "experiment --db db.h5 --objects wedge --runs 1 --steps 2 --pool 2 --set database=each "
+                        "--set hidden=nut --out bad.h5").code == 1);
+  CHECK_FALSE(fs::exists(dir / "bad.h5"));
+}
+
 TEST_CASE("cli probe experiment: sensing = probe under both protocols (the shared pool stays a probe log)") {
   test::TempDir dir("cli_probe_exp");
   make_db(dir);
@@ -755,6 +813,8 @@ TEST_CASE("cli params --json: every method parameter is a recognize flag (and ea
       {"probe.ball_radius_m", {"0.002", {{"probe.ball_radius_m", 0.002}}}},
       {"probe.tilt_deg", {"30", {{"probe.tilt_deg", 30.0}}}},
       {"probe.quantization_m", {"0.001", {{"probe.quantization_m", 0.001}}}},
+      {"fingertips.quantization_m", {"0.001", {{"fingertips.quantization_m", 0.001}}}},
+      {"fingertips.normals_deg", {"5", {{"fingertips.normals_deg", 5.0}}}},
       {"seed", {"7", {{"seed", 7}}}},
       {"ransac.samples", {"3x20", {{"ransac.triplets", 3}, {"ransac.registrations", 20}}}},
       {"memory_budget_mb", {"64", {{"memory_budget_mb", 64.0}}}},

@@ -222,7 +222,7 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
   const std::size_t F = confidence_feature_names().size();
   const std::size_t G = 2 + F + pipeline_stage_names().size();   // set.truth_gap, then answer_set.*
   for (const auto& s : runs[0].steps) {
-    REQUIRE(s.values.size() == G + 7);
+    REQUIRE(s.values.size() == G + 8);
     CHECK(std::isnan(s.values[0]));  // no calibration: no confidence
     CHECK(std::isnan(s.values[1]));
     for (std::size_t i = 2; i < 2 + F; ++i) CHECK(std::isfinite(s.values[i]));
@@ -235,6 +235,11 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
     for (std::size_t i = G + 1; i < G + 4; ++i) CHECK(std::isnan(s.values[i]));   // no answer sets
     CHECK(std::isnan(s.values[G + 4]));   // random grasps: nothing planned
     CHECK(std::isnan(s.values[G + 5]));
+    // fit.contact_distance_m: the contacts' mean distance to the answer at its pose; none
+    // without an answer. A right answer sits on its contacts within the noise.
+    if (s.best_object < 0) CHECK(std::isnan(s.values[G + 7]));
+    if (s.best_object >= 0) CHECK(s.values[G + 7] >= 0.0);
+    if (s.correct) CHECK(s.values[G + 7] < 0.004);
   }
   // The entropy drop: the previous step's posterior entropy minus this one's (none at step 1).
   const auto& st = runs[0].steps;

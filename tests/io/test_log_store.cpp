@@ -245,3 +245,76 @@ TEST_CASE("bad logs: one clear error naming the file and the field") {
   CHECK_THROWS_AS(io::read_log(dir / "text.h5"), Error);
   CHECK_THROWS_AS(io::read_log(dir / "missing.h5"), Error);
 }
+
+namespace {
+// A fingertip log (format_version 3) written by hand after FORMAT_LOG.md, as a recording's
+// contact points would be converted. `defect` breaks one thing.
+void write_fingertips_by_hand(const std::filesystem::path& path, const std::string& defect = {}) {
+  namespace h5 = io::h5;
+  const Gripper g;
+  const std::uint64_t G = 2, F = defect == "finger count" ? 2 : 3, J = 6;
+  h5::File f = h5::File::create(path);
+  h5::Group root = f.root();
+  root.set_attribute("format", "touchstone-tactile-log");
+  root.set_attribute("format_version", std::int64_t{defect == "version 2" ? 2 : 3});
+  root.set_attribute("sensing", "fingertips");
+  root.create_group("gripper").write_strings("description", {io::gripper_to_json(g.spec())});
+  if (defect != "no fingertips group")
+    root.create_group("fingertips").set_attribute("normals", std::int64_t{0});
+  h5::Group gr = root.create_group("grasps");
+  gr.write("time", std::vector<double>{0.0, 30.0});
+  std::vector<double> pose;
+  for (std::uint64_t k = 0; k < G; ++k)
+    for (double v : {1.0 + 0.01 * static_cast<double>(k), 2.0, -30.0, 1.0, 0.0, 0.0, 0.0}) pose.push_back(v);
+  gr.write("arm_pose", pose.data(), {G, 7});
+  std::vector<double> joints(G * J, 0.4);
+  gr.write("joints", joints.data(), {G, J});
+  std::vector<std::uint8_t> touched{1, 1, 0, 0, 1, 1};
+  if (defect == "touched 2") touched[4] = 2;
+  touched.resize(G * F);
+  gr.write("fingertip_touched", touched.data(), {G, F});
+  std::vector<double> points(G * F * 3, std::numeric_limits<double>::quiet_NaN());   // untouched: unread
+  const double xyz[6][3] = {{1.05, 2.0, -29.9}, {1.03, 2.02, -29.9}, {0, 0, 0},
+                            {0, 0, 0}, {1.06, 1.99, -29.91}, {1.04, 2.01, -29.92}};
+  for (std::uint64_t i = 0; i < G * F; ++i)
+    if (touched[i])
+      for (int c = 0; c < 3; ++c) points[3 * i + c] = xyz[i][c];
+  if (defect == "nan point") points[3 * 4 + 1] = std::numeric_limits<double>::quiet_NaN();
+  gr.write("fingertip_point", points.data(), {G, F, 3});
+  f.close();
+}
+}  // namespace
+
+TEST_CASE("a fingertip log written by hand after FORMAT_LOG.md reads back; bad ones are named") {
+  test::TempDir dir("log");
+  write_fingertips_by_hand(dir / "hand.h5");
+  const TactileLog log = io::read_log(dir / "hand.h5");
+  REQUIRE(log.sensing == Sensing::fingertips);
+  CHECK_FALSE(log.fingertip_normals);
+  REQUIRE(log.grasps.size() == 2);
+  const GraspContacts c0 = grasp_contacts(log, 0), c1 = grasp_contacts(log, 1);
+  REQUIRE(c0.points.size() == 2);
+  REQUIRE(c1.points.size() == 2);
+  CHECK(c0.points[1] == Vec3(1.03, 2.02, -29.9));
+  CHECK(c1.pad_slot == std::vector<int>{1, 2});   // the fingers that touched
+  CHECK(c1.points[0] == Vec3(1.06, 1.99, -29.91));
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"finger count", "/grasps/fingertip_touched"},
+      {"version 2", "/format_version"},
+      {"no fingertips group", "fingertips"},
+      {"touched 2", "/grasps/fingertip_touched[1][1]"},
+      {"nan point", "/grasps/fingertip_point[1][1]"}};
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    const auto& [defect, field] = cases[i];
+    CAPTURE(defect);
+    const auto path = dir / ("bad-" + std::to_string(i) + ".h5");
+    write_fingertips_by_hand(path, defect);
+    try {
+      (void)io::read_log(path);
+      FAIL("no error");
+    } catch (const Error& e) {
+      CHECK(e.file() == path.string());
+      CHECK_MESSAGE(e.field().find(field) != std::string::npos, e.field());
+    }
+  }
+}
