@@ -185,7 +185,11 @@ bool edited(std::span<const std::uint8_t> script, const char* base) {
 }
 
 bool database(std::span<const std::uint8_t> b) { return edited<read_database>(b, "box_db.h5"); }
-bool log(std::span<const std::uint8_t> b) { return edited<read_log>(b, "box_3_grasps.h5"); }
+// Each script edits a pad log and a fingertip log (format_version 3, with normals).
+bool log(std::span<const std::uint8_t> b) {
+  const bool pads = edited<read_log>(b, "box_3_grasps.h5");
+  return edited<read_log>(b, "box_3_fingertips.h5") && pads;
+}
 bool runs(std::span<const std::uint8_t> b) { return edited<read_runs>(b, "box_1_run.h5"); }
 // Each script edits a result without and one with set answers (/answer_sets).
 bool result(std::span<const std::uint8_t> b) {
