@@ -1,6 +1,7 @@
 // Stage "observability": which pose DOF the contacts leave free, judged on the answer's surface
 // when the contacts carry too few normals to judge it themselves (isolated points: fingertips, a
-// probe, a points-only cloud; scene.cpp's unobservable_dof needs three contacts with normals).
+// probe, a points-only cloud; scene.cpp's unobservable_dof needs three contacts with normals,
+// and is trusted only when at least half the contacts have one).
 // Each contact within evaluate.d_outlier of the answer's model constrains the pose along the
 // model's normal there: the same point-to-plane information, with the model's normals. A sphere
 // leaves 3 DOF, a cylinder's side 1 (its axis' rotation; the translation along it too without
@@ -18,7 +19,11 @@ class ObservabilityStage final : public Stage {
 
   std::string skip_reason(const StepContext& c) const override {
     if (!c.res.valid) return "no answer";
-    if (c.scene.unobservable_dof < 6) return "the contacts' normals judge it";
+    // The scene's normals judge it when most contacts have one (patches); a few normals of
+    // chance neighbours among isolated points (fingertips across grasps) do not.
+    std::size_t with = 0;
+    for (const Vec3& n : c.scene.contacts.normals) with += n.squaredNorm() > 0.5;
+    if (c.scene.unobservable_dof < 6 && 2 * with >= c.scene.contacts.size()) return "the contacts' normals judge it";
     return {};
   }
 
