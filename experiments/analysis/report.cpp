@@ -304,8 +304,50 @@ J truth_pose_json(const io::RunStoreHeader& h, const std::vector<const io::RunRe
 }
 
 struct VariantJson {
-  J per_step, per_object, summary, confidence, open_set, truth_pose, stages;
+  J per_step, per_object, summary, confidence, open_set, truth_pose, stages, confusions;
 };
+
+/// What the misses named instead, at the last step: per (explored object, named object) the runs,
+/// most frequent first; "named": null where the step named nothing. `congruent`: the two are in
+/// one congruent class (the class-aware rate counts such a miss as right). Hidden objects' runs
+/// are left out (open_set judges them).
+J confusions_json(const io::RunStoreHeader& h, const std::vector<const io::RunRecord*>& runs, const ClassMap& classes) {
+  std::map<std::pair<int, int>, std::size_t> counts;   // (explored, named or -1) -> runs
+  std::map<int, std::size_t> misses_of;
+  std::size_t misses = 0;
+  const auto last = static_cast<std::size_t>(std::max(0, h.steps - 1));
+  for (const io::RunRecord* r : runs) {
+    if (r->steps.size() <= last || r->steps[last].correct) continue;
+    const io::RunStepRecord& s = r->steps[last];
+    const bool named = s.best_object >= 0 && static_cast<std::size_t>(s.best_object) < h.database_objects.size();
+    ++counts[{r->object, named ? s.best_object : -1}];
+    ++misses_of[r->object];
+    ++misses;
+  }
+  std::vector<std::pair<std::pair<int, int>, std::size_t>> rows(counts.begin(), counts.end());
+  std::stable_sort(rows.begin(), rows.end(), [](const auto& a, const auto& b) { return a.second > b.second; });
+  J pairs = J::array();
+  for (const auto& [key, n] : rows) {
+    const std::string& object = h.objects.at(static_cast<std::size_t>(key.first));
+    J row;
+    row["object"] = object;
+    row["named"] = key.second < 0 ? J(nullptr) : J(h.database_objects[static_cast<std::size_t>(key.second)]);
+    row["runs"] = n;
+    row["share_of_object_misses"] = double(n) / double(misses_of[key.first]);
+    bool congruent = false;
+    if (key.second >= 0) {
+      const auto a = classes.find(object), b = classes.find(h.database_objects[static_cast<std::size_t>(key.second)]);
+      congruent = a != classes.end() && b != classes.end() && a->second == b->second;
+    }
+    row["congruent"] = congruent;
+    pairs.push_back(row);
+  }
+  J out;
+  out["step"] = h.steps;
+  out["misses"] = misses;
+  out["pairs"] = pairs;
+  return out;
+}
 
 /// The store's ran.<stage> values (RecognitionEngine): per stage of the method's pipeline, the
 /// steps that recorded it and the share of them that left it out (their scene did not need it).
@@ -545,6 +587,7 @@ VariantJson variant_json(const io::RunStoreContents& store, int variant, const R
   v.confidence = confidence_json(h, all, settings);
   v.truth_pose = truth_pose_json(h, all, objects.size() > 1);
   v.stages = stages_json(h, all);
+  v.confusions = confusions_json(h, all, classes);
   v.per_object = J::array();
   for (std::size_t o = 0; o < h.objects.size(); ++o) {
     if (by_object[o].empty()) continue;
@@ -553,6 +596,7 @@ VariantJson variant_json(const io::RunStoreContents& store, int variant, const R
     obj["runs"] = by_object[o].size();
     obj["per_step"] = per_step_json(h, by_object[o], h.steps, bounds, classes, false);
     obj["summary"] = summary_json(obj["per_step"], by_object[o]);
+    obj["confusions"] = confusions_json(h, by_object[o], classes);
     v.per_object.push_back(obj);
   }
   return v;
@@ -626,7 +670,7 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
     bool any = false;
     for (const auto& r : store.runs) any = any || r.variant == static_cast<int>(v);
     if (!any) {
-      vj.push_back({J::array(), J::array(), nullptr, nullptr, nullptr, nullptr, nullptr});
+      vj.push_back({J::array(), J::array(), nullptr, nullptr, nullptr, nullptr, nullptr, nullptr});
       continue;
     }
     vj.push_back(variant_json(store, static_cast<int>(v), settings));
@@ -638,6 +682,7 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
   out["open_set"] = vj.empty() ? J(nullptr) : vj[0].open_set;
   out["truth_pose"] = vj.empty() ? J(nullptr) : vj[0].truth_pose;
   out["stages"] = vj.empty() ? J(nullptr) : vj[0].stages;
+  out["confusions"] = vj.empty() ? J(nullptr) : vj[0].confusions;
 
   if (variants > 1) {
     J list = J::array();
@@ -652,6 +697,7 @@ nlohmann::ordered_json report_json(const io::RunStoreContents& store, const Repo
       item["per_object"] = vj[v].per_object;
       item["truth_pose"] = vj[v].truth_pose;
       item["stages"] = vj[v].stages;
+      item["confusions"] = vj[v].confusions;
       list.push_back(item);
       const J& s = vj[v].summary;
       if (s.is_null() || s["time_s_per_step_mean"].is_null()) continue;
@@ -714,6 +760,27 @@ void print_steps(const J& per_step, std::ostream& out) {
         << fmt(r["symmetric_orientation_error_deg_median"], 1, 1) << "  " << std::setw(8)
         << fmt(r["time_s_median"], 1, 3) << "  " << std::setw(8) << fmt(r["time_s_p95"], 1, 3)
         << "\n";
+  }
+}
+
+/// The misses' answers at the last step, most frequent first (at most `most` rows).
+void print_confusions(const J& c, const std::string& label, std::ostream& out, std::size_t most = 10) {
+  if (c.is_null() || c["misses"].get<std::size_t>() == 0) return;
+  const std::string indent;
+  out << "\nMisses at step " << c["step"].get<int>() << label << " (" << c["misses"].get<std::size_t>()
+      << " runs), what they named instead (most frequent first; (=): congruent with the explored object):\n";
+  std::size_t width = 6;
+  for (const auto& p : c["pairs"]) width = std::max(width, p["object"].get<std::string>().size());
+  std::size_t shown = 0;
+  for (const auto& p : c["pairs"]) {
+    if (shown++ == most) {
+      out << indent << "  ... " << c["pairs"].size() - most << " more (the report's JSON: confusions)\n";
+      break;
+    }
+    out << indent << "  " << std::left << std::setw(static_cast<int>(width)) << p["object"].get<std::string>()
+        << std::right << "  -> " << (p["named"].is_null() ? std::string("(nothing)") : p["named"].get<std::string>())
+        << (p["congruent"].get<bool>() ? " (=)" : "") << "  " << p["runs"].get<std::size_t>() << " run"
+        << (p["runs"].get<std::size_t>() == 1 ? "" : "s") << "\n";
   }
 }
 
@@ -952,6 +1019,7 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
     print_planner(report["per_step"], "", out);
     print_truth_pose(report.value("truth_pose", J(nullptr)), "", out);
     print_stages(report.value("stages", J(nullptr)), "", out);
+    print_confusions(report.value("confusions", J(nullptr)), "", out);
     out << "\nPer object:\n";
     print_objects(report["per_object"], out);
     return;
@@ -995,6 +1063,8 @@ void print_report(const nlohmann::ordered_json& report, std::ostream& out) {
     print_truth_pose(v.value("truth_pose", J(nullptr)), ", variant " + v["label"].get<std::string>(), out);
   for (const auto& v : report["variants"])
     print_stages(v.value("stages", J(nullptr)), ", variant " + v["label"].get<std::string>(), out);
+  for (const auto& v : report["variants"])
+    print_confusions(v.value("confusions", J(nullptr)), ", variant " + v["label"].get<std::string>(), out);
 }
 
 std::filesystem::path plot_script() {

@@ -173,6 +173,45 @@ TEST_CASE("Report: class-aware rates count an answer congruent with the true obj
   CHECK(large.str().find("nut_0 = nut_1") == std::string::npos);           // none explored
 }
 
+TEST_CASE("Report: the misses at the last step and what they named instead") {
+  // Step 3: run 3 of each object misses, naming bunny; make the sphere's name nothing, and add a
+  // cube run that names sphere (congruent with cube here) and one more that names bunny.
+  auto store = synthetic();
+  store.header.database_json = R"({"congruent_classes": [["cube", "sphere"]]})";
+  for (auto& r : store.runs)
+    if (r.object == 1 && r.run == 3) r.steps[2].best_object = -1;
+  for (int extra : {1, 2}) {
+    io::RunRecord r = store.runs[3];   // cube, run 3
+    r.run = 3 + extra;
+    r.steps[2].best_object = extra == 1 ? 1 : 2;
+    store.runs.push_back(r);
+  }
+  const auto j = report_json(store, {}, "run.h5");
+  const auto& c = j["confusions"];
+  CHECK(c["step"] == 3);
+  CHECK(c["misses"] == 4);
+  REQUIRE(c["pairs"].size() == 3);
+  CHECK(c["pairs"][0]["object"] == "cube");   // most frequent first
+  CHECK(c["pairs"][0]["named"] == "bunny");
+  CHECK(c["pairs"][0]["runs"] == 2);
+  CHECK(c["pairs"][0]["share_of_object_misses"].get<double>() == doctest::Approx(2.0 / 3));
+  CHECK(c["pairs"][0]["congruent"] == false);
+  bool nothing = false, congruent = false;
+  for (const auto& p : c["pairs"]) {
+    nothing = nothing || (p["object"] == "sphere" && p["named"].is_null() && p["runs"] == 1);
+    congruent = congruent || (p["object"] == "cube" && p["named"] == "sphere" && p["congruent"] == true);
+  }
+  CHECK(nothing);
+  CHECK(congruent);
+  CHECK(j["per_object"][1]["confusions"]["misses"] == 1);
+  std::ostringstream text;
+  print_report(j, text);
+  INFO(text.str());
+  CHECK(text.str().find("Misses at step 3 (4 runs)") != std::string::npos);
+  CHECK(text.str().find("-> (nothing)  1 run") != std::string::npos);
+  CHECK(text.str().find("-> sphere (=)  1 run") != std::string::npos);
+}
+
 TEST_CASE("Report: recognition rates get a cluster bootstrap over objects and say what each interval assumes") {
   // 10 objects x 4 runs x 1 step: objects 0-5 always right, 6-9 always wrong (all runs of an
   // object alike, the correlation the Wilson interval ignores).
