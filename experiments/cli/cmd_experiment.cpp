@@ -5,6 +5,7 @@
 #include "experiments/analysis/calibration.hpp"
 #include "experiments/analysis/report.hpp"
 #include "experiments/cli/cli_common.hpp"
+#include "experiments/cli/progress.hpp"
 #include "experiments/params/config.hpp"
 #include "experiments/params/parameters.hpp"
 #include "experiments/resources.hpp"
@@ -41,6 +42,7 @@ struct ExperimentOptions {
   bool mpi = false;               ///< one rank of an MPI job (mpi_runs.hpp)
   bool resume = false;
   bool seed_given = false;
+  ProgressOptions progress;
 };
 
 struct MergeOptions {
@@ -139,18 +141,6 @@ class SignalGuard {
  private:
   struct sigaction old_int_ {}, old_term_ {};
 };
-
-std::string eta_text(double s) {
-  std::ostringstream o;
-  if (s < 60) {
-    o << static_cast<int>(std::ceil(s)) << " s";
-  } else if (s < 3600) {
-    o << static_cast<int>(s / 60) << " min " << static_cast<int>(std::fmod(s, 60)) << " s";
-  } else {
-    o << static_cast<int>(s / 3600) << " h " << static_cast<int>(std::fmod(s, 3600) / 60) << " min";
-  }
-  return o.str();
-}
 
 /// Configuration: defaults, then the file, then each flag (validated by the same setter; a bad
 /// flag's error names the flag).
@@ -363,30 +353,26 @@ int run_experiment_in(const ExperimentOptions& o, experiments::MpiSession* mpi) 
   ds.parallel_runs = config.schedule == "runs";
   g_stop = false;
   ds.stop = &g_stop;
-  if (stderr_is_terminal()) {
+  ProgressReport progress(o.progress, "experiment", "runs", stderr_is_terminal(), std::cerr);
+  if (progress.active())
     ds.on_progress = [&](const experiments::Progress& p) {
-      std::ostringstream line;
-      line << "\r  runs " << p.done << "/" << p.total << " (" << std::fixed << std::setprecision(1)
-           << 100.0 * static_cast<double>(p.done) / static_cast<double>(std::max<std::size_t>(1, p.total))
-           << " %), " << std::setprecision(2) << 60.0 * static_cast<double>(p.session_done) / std::max(1e-9, p.elapsed_s)
-           << " runs/min";
-      if (auto left = p.remaining_s()) line << ", " << eta_text(*left) << " left";
-      line << "      ";
-      std::cerr << line.str() << std::flush;
+      progress.update(p.done, p.total, 60.0 * static_cast<double>(p.session_done) / std::max(1e-9, p.elapsed_s),
+                      p.remaining_s());
     };
+  {
+    std::ostringstream line;
+    line << "Experiment '" << config.name << "': " << tasks.size() << " runs ("
+         << (shard ? "shard " + shard->label() + " of " : std::string()) << header.variant_labels.size()
+         << " variant(s) x " << header.objects.size() << " object(s) x " << config.runs << " runs x "
+         << config.steps << " steps), " << threads << " threads";
+    progress.note(line.str());
   }
-  if (stderr_is_terminal())
-    std::cerr << "Experiment '" << config.name << "': " << tasks.size() << " runs ("
-              << (shard ? "shard " + shard->label() + " of " : std::string())
-              << header.variant_labels.size() << " variant(s) x " << header.objects.size()
-              << " object(s) x " << config.runs << " runs x " << config.steps << " steps), "
-              << threads << " threads\n";
   experiments::DriveOutcome outcome;
   {
     SignalGuard guard;
     outcome = experiments::drive(*engine, tasks, out, ds);
   }
-  if (stderr_is_terminal() && outcome.completed > 0) std::cerr << "\n";
+  progress.finish();
   if (outcome.interrupted) {
     const auto stored = io::RunStore::read(out).runs.size();
     std::cerr << "touchstone: interrupted: " << stored << " of " << tasks.size()
@@ -691,6 +677,7 @@ void register_experiment(CLI::App& app) {
               "handed out over the ranks, each appends to OUT.ranks/rank-R.h5, rank 0 folds them into --out");
   e->add_option("--plots", eo->plots, "Also write the figures (PNG) into this folder");
   add_common(e, eo->common);
+  add_progress(e, eo->progress);
   e->callback([eo, e] {
     eo->seed_given = e->get_option("--seed")->count() > 0;
     run_command(eo->common, [eo] { return run_experiment(*eo); });
