@@ -353,7 +353,7 @@ int run_experiment_in(const ExperimentOptions& o, experiments::MpiSession* mpi) 
   ds.parallel_runs = config.schedule == "runs";
   g_stop = false;
   ds.stop = &g_stop;
-  ProgressReport progress(o.progress, "experiment", "runs", stderr_is_terminal(), std::cerr);
+  ProgressReport progress(o.progress, "experiment", "runs", stderr_is_terminal(), o.common.json, std::cerr);
   if (progress.active())
     ds.on_progress = [&](const experiments::Progress& p) {
       progress.update(p.done, p.total, 60.0 * static_cast<double>(p.session_done) / std::max(1e-9, p.elapsed_s),

@@ -7,6 +7,7 @@
 #include "experiments/analysis/report.hpp"
 #include "experiments/analysis/scene.hpp"
 #include "experiments/cli/cli_common.hpp"
+#include "experiments/cli/progress.hpp"
 #include "experiments/params/parameters.hpp"
 #include "experiments/resources.hpp"
 #include "experiments/runs/log_steps.hpp"
@@ -56,6 +57,7 @@ namespace fs = std::filesystem;
 
 struct RecognizeOptions {
   CommonOptions common;
+  ProgressOptions progress;          ///< several inputs: --progress, --quiet
   std::string db, out, ground_truth, object;
   std::string calibration;           ///< --calibration: the confidence model (touchstone calibrate)
   std::optional<double> open_set_threshold;  ///< --open-set-threshold (unset: the calibration's)
@@ -710,9 +712,10 @@ int recognize_many(const Context& c, const std::vector<Input>& inputs,
   const RecognizeOptions& o = c.o;
   if (!o.out.empty()) fs::create_directories(o.out);
   std::vector<InputRun> runs(inputs.size());
-  const bool progress = stderr_is_terminal() && !o.common.json;
+  ProgressReport progress(o.progress, "recognize", "inputs", stderr_is_terminal(), o.common.json, std::cerr);
   std::mutex progress_mutex;
   std::size_t done = 0;
+  const auto started = std::chrono::steady_clock::now();
   // Every input's recognizer shares one FeatureTable, held here for the whole batch
   // (FeatureTable::shared keeps a table only while someone holds it).
   const auto table = c.rs.ransac.feature_table ? FeatureTable::shared(c.db, c.rs.objects) : nullptr;
@@ -734,14 +737,17 @@ int recognize_many(const Context& c, const std::vector<Input>& inputs,
             }
           });
           experiments::release_free_memory();   // what the input freed, before the next
-          if (progress) {
+          if (progress.active()) {
             std::lock_guard<std::mutex> lock(progress_mutex);
-            std::fprintf(stderr, "\rinputs %zu/%zu", ++done, inputs.size());
+            const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+            ++done;
+            progress.update(done, inputs.size(), 60.0 * static_cast<double>(done) / std::max(1e-9, elapsed),
+                            elapsed / static_cast<double>(done) * static_cast<double>(inputs.size() - done));
           }
         }
       },
       tbb::simple_partitioner());
-  if (progress) std::fprintf(stderr, "\n");
+  progress.finish();
   std::vector<const InputRun*> drawn;
   for (const InputRun& run : runs)
     if (run.error.empty()) drawn.push_back(&run);
@@ -914,6 +920,7 @@ void register_recognize(CLI::App& app) {
                   "(default 256; 0: no limit). Never changes results")
       ->check(CLI::NonNegativeNumber);
   add_common(sub, o->common);
+  add_progress(sub, o->progress);
   sub->callback([o] {
     // The preset's parameters, then the flags given (a bad value: a usage error naming the flag).
     experiments::MethodSettings m = experiments::MethodSettings::preset(o->preset);

@@ -11,8 +11,8 @@ namespace ts::cli {
 
 void add_progress(CLI::App* sub, ProgressOptions& o) {
   sub->add_option("--progress", o.mode,
-                  "auto (a line rewritten on a terminal, else a plain line every 30 s and every 5 %), bar, "
-                  "lines, json (one JSON object a line), none")
+                  "auto (a line rewritten on a terminal, else a plain line every 30 s and every 5 %; none "
+                  "with --json), bar, lines, json (one JSON object a line), none")
       ->check(CLI::IsMember({"auto", "bar", "lines", "json", "none"}));
   sub->add_flag("--quiet", o.quiet, "No progress (as --progress none)");
 }
@@ -41,9 +41,9 @@ std::string utc_now() {
 }  // namespace
 
 ProgressReport::ProgressReport(const ProgressOptions& o, std::string command, std::string unit, bool terminal,
-                               std::ostream& out, double line_interval_s)
+                               bool json_output, std::ostream& out, double line_interval_s)
     : command_(std::move(command)), unit_(std::move(unit)), out_(out), interval_s_(line_interval_s) {
-  if (o.quiet || o.mode == "none")
+  if (o.quiet || o.mode == "none" || (o.mode == "auto" && json_output))
     mode_ = Mode::none;
   else if (o.mode == "json")
     mode_ = Mode::json;

@@ -27,9 +27,11 @@ std::string eta_text(double seconds);
 class ProgressReport {
  public:
   /// `command` names the work in lines and JSON ("experiment"); `unit` what is counted ("runs").
-  /// auto: bar on a terminal, else lines. `out` is stderr unless a test gives another stream.
+  /// auto: bar on a terminal, else lines; none under --json (`json_output`: a program reads the
+  /// output; it asks for --progress lines or json when it wants them). `out` is stderr unless a
+  /// test gives another stream.
   ProgressReport(const ProgressOptions& options, std::string command, std::string unit, bool terminal,
-                 std::ostream& out, double line_interval_s = 30.0);
+                 bool json_output, std::ostream& out, double line_interval_s = 30.0);
   bool active() const { return mode_ != Mode::none; }
   /// `done` of `total` (done includes earlier sessions); `rate_per_min` and `left_s` from this
   /// session (left_s: nullopt before anything was done).

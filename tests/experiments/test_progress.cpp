@@ -29,7 +29,7 @@ std::vector<std::string> lines_of(const std::string& text) {
 TEST_CASE("progress lines: the first, every 5 % and the last; an interval of 0 prints every update") {
   cli::ProgressOptions o;   // auto, not on a terminal: lines
   std::ostringstream out;
-  cli::ProgressReport p(o, "experiment", "runs", false, out, 1e9);
+  cli::ProgressReport p(o, "experiment", "runs", false, false, out, 1e9);
   for (std::size_t done = 1; done <= 100; ++done) p.update(done, 100, 10.0, 60.0);
   p.finish();
   const auto lines = lines_of(out.str());
@@ -40,7 +40,7 @@ TEST_CASE("progress lines: the first, every 5 % and the last; an interval of 0 p
   CHECK(lines[0].size() > 20);
   CHECK(lines[0][4] == '-');     // starts with the UTC date
   std::ostringstream every;
-  cli::ProgressReport q(o, "experiment", "runs", false, every, 0.0);
+  cli::ProgressReport q(o, "experiment", "runs", false, false, every, 0.0);
   for (std::size_t done = 1; done <= 7; ++done) q.update(done, 1000, 1.0, std::nullopt);
   CHECK(lines_of(every.str()).size() == 7);
   CHECK(every.str().find("left") == std::string::npos);   // no estimate before a rate
@@ -50,7 +50,7 @@ TEST_CASE("progress: json lines, a terminal's bar, none and --quiet") {
   cli::ProgressOptions o;
   o.mode = "json";
   std::ostringstream js;
-  cli::ProgressReport j(o, "experiment", "runs", true, js, 1e9);
+  cli::ProgressReport j(o, "experiment", "runs", true, true, js, 1e9);
   j.note("not in JSON mode");
   for (std::size_t done = 1; done <= 4; ++done) j.update(done, 4, 2.0, done == 4 ? 0.0 : 30.0);
   const auto lines = lines_of(js.str());
@@ -65,7 +65,7 @@ TEST_CASE("progress: json lines, a terminal's bar, none and --quiet") {
   }
   o.mode = "auto";
   std::ostringstream bar;
-  cli::ProgressReport b(o, "experiment", "runs", true, bar);
+  cli::ProgressReport b(o, "experiment", "runs", true, false, bar);
   b.update(1, 2, 1.0, 60.0);
   b.finish();
   CHECK(bar.str().rfind("\r  runs 1/2 (50.0 %)", 0) == 0);
@@ -75,7 +75,7 @@ TEST_CASE("progress: json lines, a terminal's bar, none and --quiet") {
     n.mode = quiet ? "auto" : "none";
     n.quiet = quiet;
     std::ostringstream none;
-    cli::ProgressReport r(n, "experiment", "runs", false, none);
+    cli::ProgressReport r(n, "experiment", "runs", false, false, none);
     r.note("hello");
     r.update(1, 1, 1.0, 0.0);
     r.finish();
@@ -98,9 +98,22 @@ TEST_CASE("cli experiment: --progress lines | json, --quiet, and an unknown form
   const auto jl = lines_of(js.err);
   REQUIRE(jl.size() == 2);
   for (const auto& l : jl) CHECK(nlohmann::json::parse(l)["total"] == 2);
-  const auto quiet = test::touchstone(dir, base + " --quiet --out c.h5");
-  REQUIRE_MESSAGE(quiet.code == 0, quiet.err);
-  CHECK(quiet.err.empty());
+  for (const std::string flags : {" --quiet", ""}) {   // --json alone: no progress unless asked
+    const auto quiet = test::touchstone(dir, base + flags + " --out c" + std::to_string(flags.size()) + ".h5");
+    REQUIRE_MESSAGE(quiet.code == 0, quiet.err);
+    CHECK(quiet.err.empty());
+  }
+  const auto plain = test::touchstone(dir, "experiment --db db.h5 --objects box,nut --runs 1 --steps 2 --pool 2 --out e.h5");
+  REQUIRE_MESSAGE(plain.code == 0, plain.err);
+  CHECK(plain.err.find("experiment: runs 2/2 (100.0 %)") != std::string::npos);   // not a terminal: lines
+  // recognize over several inputs: a line per 5 % of inputs, here per input.
+  for (const std::string object : {"box", "nut"})
+    REQUIRE(test::touchstone(dir, "simulate --db db.h5 --object " + object + " --grasps 2 --noise ideal --out " + object +
+                                      "_log.h5").code == 0);
+  const auto many = test::touchstone(dir, "recognize --db db.h5 --log box_log.h5 nut_log.h5 --progress lines --threads 1");
+  REQUIRE_MESSAGE(many.code == 0, many.err);
+  CHECK(many.err.find("recognize: inputs 1/2 (50.0 %)") != std::string::npos);
+  CHECK(many.err.find("recognize: inputs 2/2 (100.0 %)") != std::string::npos);
   const auto bad = test::touchstone(dir, base + " --progress fancy --out d.h5");
   CHECK(bad.code == 2);
   CHECK(bad.err.find("--progress") != std::string::npos);
