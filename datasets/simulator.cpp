@@ -637,14 +637,12 @@ void Simulator::record_fingertips(const Pose& T_obj_eef, const std::vector<doubl
     // foam at the final joint angles.
     const Pose T_obj_link = T_obj_eef * true_links[static_cast<std::size_t>(j)];
     const LinkGeometry& L = m.links[static_cast<std::size_t>(j)];
-    ClosestPoint best;
-    best.distance = 1e300;
+    ClosestPoint best = m.mesh.closest(T_obj_link * L.rigid.front());   // a link always has rigid samples
     for (const auto* samples : {&L.rigid, &L.foam})
       for (const Vec3& x : *samples) {
         const ClosestPoint c = m.mesh.closest(T_obj_link * x);
         if (c.distance < best.distance) best = c;
       }
-    if (!(best.distance < 1e299)) continue;
     // As the robot reports it: the point fixed on its fingertip, placed by the measured arm pose
     // and joint readings, then rounded.
     const Vec3 on_link = T_obj_link.inverse() * best.point;

@@ -766,7 +766,6 @@ void print_steps(const J& per_step, std::ostream& out) {
 /// The misses' answers at the last step, most frequent first (at most `most` rows).
 void print_confusions(const J& c, const std::string& label, std::ostream& out, std::size_t most = 10) {
   if (c.is_null() || c["misses"].get<std::size_t>() == 0) return;
-  const std::string indent;
   out << "\nMisses at step " << c["step"].get<int>() << label << " (" << c["misses"].get<std::size_t>()
       << " runs), what they named instead (most frequent first; (=): congruent with the explored object):\n";
   std::size_t width = 6;
@@ -774,10 +773,10 @@ void print_confusions(const J& c, const std::string& label, std::ostream& out, s
   std::size_t shown = 0;
   for (const auto& p : c["pairs"]) {
     if (shown++ == most) {
-      out << indent << "  ... " << c["pairs"].size() - most << " more (the report's JSON: confusions)\n";
+      out << "  ... " << c["pairs"].size() - most << " more (the report's JSON: confusions)\n";
       break;
     }
-    out << indent << "  " << std::left << std::setw(static_cast<int>(width)) << p["object"].get<std::string>()
+    out << "  " << std::left << std::setw(static_cast<int>(width)) << p["object"].get<std::string>()
         << std::right << "  -> " << (p["named"].is_null() ? std::string("(nothing)") : p["named"].get<std::string>())
         << (p["congruent"].get<bool>() ? " (=)" : "") << "  " << p["runs"].get<std::size_t>() << " run"
         << (p["runs"].get<std::size_t>() == 1 ? "" : "s") << "\n";

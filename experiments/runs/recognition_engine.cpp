@@ -448,19 +448,12 @@ class RecognitionEngine final : public RunEngine {
       // Active touch: what the planner expected of the grasp it chose (nats; NaN when it did not
       // choose) and what the step gave: the drop of the posterior's entropy over objects.
       s.values.insert(s.values.end(), {expected_information, expected_object_information, entropy_drop});
-      // How well the answer explains the contacts, as on real data without a truth: the mean
-      // distance of the step's contacts to the answer's surface at its pose (its distance field).
-      double contact_distance = nan;
-      if (sr.valid && !contacts.empty()) {
-        const GeometryRef geo = group.database->geometry(sr.best.object);
-        if (geo && !geo->field.empty()) {
-          const Pose to_object = sr.best.pose.inverse();
-          double sum = 0.0;
-          for (const Vec3& p : contacts.points) sum += std::abs(geo->field.distance(to_object * p));
-          contact_distance = sum / static_cast<double>(contacts.size());
-        }
-      }
-      s.values.push_back(contact_distance);
+      // How well the answer explains the contacts, as on real data without a truth (what
+      // `recognize` prints as contact_model_distance_m).
+      s.values.push_back(sr.valid && !contacts.empty()
+                             ? mean_contact_distance(*group.database->geometry(sr.best.object), sr.best.pose,
+                                                     contacts.points)
+                             : nan);
       if (truth_pose_) {
         const std::optional<Funnel>& f = sr.watched;
         if (f && f->truth_pose_evaluated) {
