@@ -12,12 +12,17 @@
 //   build/bench/bench_recognize --db DB.h5 [--grasps 20] [--speed-logs 6] [--seeds 3]
 //       [--noise underwater] [--method bricpsf] [--objects N] [--skip-speed] [--skip-accuracy]
 //       [--preset improved|paper] [--KEY VALUE ...] [--set KEY=VALUE ...]
+//       [--accuracy-threads N] [--answers FILE]
 //   Method parameters (experiments/params/parameters.cpp, `touchstone params`) as `touchstone recognize`
 //   takes them: the preset's values (improved by default), then each --KEY (e.g. --ransac.triplets
 //   15, or an older flag, -N 15) or --set KEY=VALUE (a key or an older name: --set N=15).
 //   --method, --preset, --noise, its overrides (--arm-position-sigma, ...) and --sensors are the
 //   declared experiment and simulator parameters (the noise defaults to underwater here);
 //   --objects N (the first N objects of the database) is the benchmark's own selection.
+//
+// --answers FILE writes every step of every accuracy log, exactly (hexadecimal floats): the log, the
+// step, the answer's object, ln wt and pose, the posterior, and every hypothesis's object and
+// ln wt, so that two builds (or thread counts, --accuracy-threads) are compared with `cmp`.
 //
 // Prints the machine, thread counts, parameters and every figure.
 #include "datasets/simulator.hpp"
@@ -41,6 +46,7 @@
 #include <ctime>
 #include <iostream>
 #include <map>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -110,6 +116,8 @@ Log simulate(const io::DbReader& db, std::size_t object, std::size_t grasps,
 int main(int argc, char** argv) {
   std::string db_path, noise, method, preset;
   std::size_t grasps = 20, speed_logs = 6, seeds = 3, objects = 0;
+  int accuracy_threads = 0;
+  std::string answers_path;
   bool skip_speed = false, skip_accuracy = false;
   std::vector<std::string> sets;
   experiments::ParameterFlags flags, run_flags;
@@ -123,6 +131,10 @@ int main(int argc, char** argv) {
   app.add_option("--objects", objects, "First N objects of the database (0: all)");
   app.add_flag("--skip-speed", skip_speed, "Skip the speed part");
   app.add_flag("--skip-accuracy", skip_accuracy, "Skip the accuracy part");
+  app.add_option("--accuracy-threads", accuracy_threads, "Worker threads of the accuracy part (0: all cores)")
+      ->check(CLI::Range(0, 4096));
+  app.add_option("--answers", answers_path,
+                 "Write every accuracy step's answer, exactly, to this file (compare two builds with cmp)");
   app.add_option("--set", sets, "KEY=VALUE: a method parameter by its key or an older name (touchstone params)");
   // --method, --preset and the simulator's pad parameters (--noise, its overrides, --sensors).
   experiments::add_parameter_flags(app, run_flags, "Experiment and simulator parameters (touchstone params)",
@@ -262,53 +274,89 @@ int main(int argc, char** argv) {
       std::vector<double> pos, sym_ori;
       std::vector<std::string> failures;
       double time_total = 0.0;
-      for (std::size_t obj = 0; obj < n_obj; ++obj) {
-        for (std::size_t seed = 1; seed <= seeds; ++seed) {
-          const Log log = simulate(*reader, obj, grasps, simulation, seed);
-          const Steps st = clouds_of(log.log, grasps, s_obj_max, rs.evaluate.res_free, settings.contact_voxel);
-          Recognizer rec(db, index, rs);
-          StepResult r;
-          for (std::size_t k = 0; k < grasps; ++k) {
-            r = rec.step(st.contacts[k], st.free[k], st.grasps[k]);
-            time_total += r.times.total_s;
-          }
-          ++total;
-          const Pose truth = log.log.truth->object_pose;
-          const bool ok = r.valid && r.best.object == obj;
-          std::string line = db.info(obj).name + " seed " + std::to_string(seed) + ": ";
-          if (ok) {
-            ++right;
-            const PoseError e = pose_error(r.best.pose, truth, &symmetries.get(db, obj));
-            pos.push_back(e.symmetric_position_m);
-            sym_ori.push_back(e.symmetric_orientation_deg);
-            if (e.position_m < 0.01 || e.symmetric_position_m < 0.01) ++right_1cm;
-            else failures.push_back(line + "position error " + std::to_string(e.position_m) + " m");
-          } else {
-            std::string twin;
-            if (r.valid && congruence && congruence->same_class(r.best.object, obj)) {
-              ++right_class;
-              twin = ", congruent: right class-aware";
-              if (const auto T = congruence->motion(obj, r.best.object)) {
-                const Eigen::Affine3d P = Eigen::Affine3d(r.best.pose.matrix()) * *T;
-                Pose carried = Pose::Identity();
-                carried.linear() = P.linear();
-                carried.translation() = P.translation();
-                const PoseError e = pose_error(carried, truth, &symmetries.get(db, obj));
-                if (e.position_m < 0.01 || e.symmetric_position_m < 0.01) ++right_class_1cm;
-                else twin += " but position error " + std::to_string(e.position_m) + " m";
+      // --answers: written beside, renamed when complete (an interrupted run leaves no file).
+      const std::string answers_part = answers_path + ".part";
+      std::FILE* answers = nullptr;
+      if (!answers_path.empty() && !(answers = std::fopen(answers_part.c_str(), "w")))
+        throw std::runtime_error("cannot write " + answers_part);
+      const auto write_answer = [&](std::size_t obj, std::size_t seed, const StepResult& r) {
+        if (!answers) return;
+        std::fprintf(answers, "%s\t%zu\t%d\t%d\t%u\t%a\t%a", db.info(obj).name.c_str(), seed, r.step,
+                     int(r.valid), r.best.object, r.best.log_weight, r.posterior);
+        const Eigen::Matrix4d M = r.best.pose.matrix();
+        for (int i = 0; i < 12; ++i) std::fprintf(answers, "\t%a", M(i % 3, i / 3));
+        std::fprintf(answers, "\t%zu", r.hypotheses.size());
+        for (const Hypothesis& h : r.hypotheses) std::fprintf(answers, "\t%u:%a", h.object, h.log_weight);
+        std::fprintf(answers, "\n");
+      };
+      tbb::task_arena accuracy_arena(accuracy_threads > 0 ? accuracy_threads : tbb::task_arena::automatic);
+      try {
+        accuracy_arena.execute([&] {
+          for (std::size_t obj = 0; obj < n_obj; ++obj) {
+            for (std::size_t seed = 1; seed <= seeds; ++seed) {
+              const Log log = simulate(*reader, obj, grasps, simulation, seed);
+              const Steps st = clouds_of(log.log, grasps, s_obj_max, rs.evaluate.res_free, settings.contact_voxel);
+              Recognizer rec(db, index, rs);
+              StepResult r;
+              for (std::size_t k = 0; k < grasps; ++k) {
+                r = rec.step(st.contacts[k], st.free[k], st.grasps[k]);
+                time_total += r.times.total_s;
+                write_answer(obj, seed, r);
               }
+              ++total;
+              const Pose truth = log.log.truth->object_pose;
+              const bool ok = r.valid && r.best.object == obj;
+              std::string line = db.info(obj).name + " seed " + std::to_string(seed) + ": ";
+              if (ok) {
+                ++right;
+                const PoseError e = pose_error(r.best.pose, truth, &symmetries.get(db, obj));
+                pos.push_back(e.symmetric_position_m);
+                sym_ori.push_back(e.symmetric_orientation_deg);
+                if (e.position_m < 0.01 || e.symmetric_position_m < 0.01) ++right_1cm;
+                else failures.push_back(line + "position error " + std::to_string(e.position_m) + " m");
+              } else {
+                std::string twin;
+                if (r.valid && congruence && congruence->same_class(r.best.object, obj)) {
+                  ++right_class;
+                  twin = ", congruent: right class-aware";
+                  if (const auto T = congruence->motion(obj, r.best.object)) {
+                    const Eigen::Affine3d P = Eigen::Affine3d(r.best.pose.matrix()) * *T;
+                    Pose carried = Pose::Identity();
+                    carried.linear() = P.linear();
+                    carried.translation() = P.translation();
+                    const PoseError e = pose_error(carried, truth, &symmetries.get(db, obj));
+                    if (e.position_m < 0.01 || e.symmetric_position_m < 0.01) ++right_class_1cm;
+                    else twin += " but position error " + std::to_string(e.position_m) + " m";
+                  }
+                }
+                failures.push_back(line + "recognized " + (r.valid ? db.info(r.best.object).name : "nothing") +
+                                   " (posterior " + std::to_string(r.posterior) + twin + ")");
+              }
+              std::fprintf(stderr, "\r%zu/%zu logs", total, n_obj * seeds);
             }
-            failures.push_back(line + "recognized " + (r.valid ? db.info(r.best.object).name : "nothing") +
-                               " (posterior " + std::to_string(r.posterior) + twin + ")");
           }
-          std::fprintf(stderr, "\r%zu/%zu logs", total, n_obj * seeds);
+        });
+      } catch (...) {   // nothing half-written
+        if (answers) {
+          std::fclose(answers);
+          std::remove(answers_part.c_str());
         }
+        throw;
       }
       std::fprintf(stderr, "\n");
-      std::printf("accuracy (%zu logs, %s, step %zu): right object %.1f %%, right object and position error < 1 cm "
+      if (answers) {
+        const bool ok = std::fflush(answers) == 0 && !std::ferror(answers);
+        std::fclose(answers);
+        if (!ok || std::rename(answers_part.c_str(), answers_path.c_str()) != 0) {
+          std::remove(answers_part.c_str());
+          throw std::runtime_error("cannot write " + answers_path);
+        }
+        std::printf("answers of %zu steps written to %s\n", total * grasps, answers_path.c_str());
+      }
+      std::printf("accuracy (%zu logs, %s, step %zu, %d threads): right object %.1f %%, right object and position error < 1 cm "
                   "%.1f %%; over right objects: position error median %.4f m, symmetric orientation error "
                   "median %.2f deg (p90 %.2f deg); mean step time %.1f ms\n",
-                  total, noise.c_str(), grasps, 100.0 * double(right) / double(total),
+                  total, noise.c_str(), grasps, accuracy_arena.max_concurrency(), 100.0 * double(right) / double(total),
                   100.0 * double(right_1cm) / double(total), median(pos), median(sym_ori),
                   percentile(sym_ori, 0.9), 1e3 * time_total / double(total * grasps));
       if (congruence)

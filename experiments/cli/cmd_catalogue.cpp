@@ -1,16 +1,20 @@
 // `touchstone catalogue`: generate parametric subsea objects (datasets/catalogue/catalogue.hpp).
 #include "experiments/cli/cli_common.hpp"
+#include "experiments/cli/progress.hpp"
 
 #include "datasets/catalogue/catalogue.hpp"
 #include "experiments/resources.hpp"
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <iostream>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
 
 namespace ts::cli {
@@ -25,6 +29,7 @@ struct CatalogueOptions {
   std::string out, families, config;
   bool force = false;
   double coarsen = 1.0;
+  ProgressOptions progress;
 };
 
 /// --config FILE (TOML or INI, CLI11's parser): sections are families, keys are parameters
@@ -76,20 +81,20 @@ int run_catalogue(const CatalogueOptions& o) {
   s.build.coarsen = o.coarsen;
   s.families = catalogue::FamilySet::select(o.families);
   if (!o.config.empty()) load_config(s.families, o.config);
-  const bool tty = stderr_is_terminal();
-  auto mutex = std::make_shared<std::mutex>();
-  auto next_tenth = std::make_shared<std::size_t>(1);
-  s.progress = [tty, mutex, next_tenth](std::size_t done, std::size_t total) {
-    std::lock_guard<std::mutex> lock(*mutex);
-    if (tty) {
-      std::cerr << "\r\033[K[" << done << "/" << total << "]" << std::flush;
-    } else if (done * 10 >= *next_tenth * total) {
-      *next_tenth = done * 10 / total + 1;
-      std::cerr << "built " << done << " of " << total << " objects\n";
-    }
-  };
+  // Progress with the time left (progress.hpp); objects finish on several threads.
+  ProgressReport progress(o.progress, "catalogue", "objects", stderr_is_terminal(), o.common.json, std::cerr);
+  std::mutex progress_mutex;
+  const auto started = std::chrono::steady_clock::now();
+  if (progress.active())
+    s.progress = [&](std::size_t done, std::size_t total) {
+      std::lock_guard<std::mutex> lock(progress_mutex);
+      const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+      progress.update(done, total, 60.0 * static_cast<double>(done) / std::max(1e-9, elapsed),
+                      done ? std::optional<double>(elapsed / static_cast<double>(done) * static_cast<double>(total - done))
+                           : std::nullopt);
+    };
   const auto r = catalogue::generate_catalogue(o.out, s);
-  if (tty) std::cerr << "\r\033[K";
+  progress.finish();
 
   std::map<std::string, std::size_t> per_family;
   std::size_t remeshed = 0, tri_sum = 0, tri_max = 0, tri_min = r.objects.empty() ? 0 : r.objects[0].triangles;
@@ -168,6 +173,7 @@ void register_catalogue(CLI::App& app) {
   sub->add_option("--coarsen", opt->coarsen, "Multiply every voxel size (faster, coarser meshes)")
       ->check(CLI::Range(0.25, 20.0))->capture_default_str();
   add_common(sub, opt->common);
+  add_progress(sub, opt->progress);
   std::string list;
   for (const auto& f : catalogue::all_families()) list += "  " + f.name + ": " + f.description + "\n";
   sub->footer("Families:\n" + list);

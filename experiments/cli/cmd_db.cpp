@@ -1,6 +1,7 @@
 // `touchstone db build|add|info|classes|export`: the object database (docs/database.md,
 // io/FORMAT_DB.md).
 #include "experiments/cli/cli_common.hpp"
+#include "experiments/cli/progress.hpp"
 
 #include "datasets/db_builder.hpp"
 #include "engine/core.hpp"
@@ -90,14 +91,6 @@ json params_json(const DatabaseSettings& s, std::uint64_t seed) {
 
 void print_warnings(const std::string& name, const std::vector<std::string>& warnings, const std::string& where) {
   for (const auto& w : warnings) std::cerr << "touchstone: warning: " << name << ": " << w << " (" << where << ")\n";
-}
-
-/// "45 s", "12 min 5 s", "2 h 3 min".
-std::string duration_text(double seconds) {
-  const long s = std::lround(std::max(0.0, seconds));
-  if (s < 60) return std::to_string(s) + " s";
-  if (s < 3600) return std::to_string(s / 60) + " min " + std::to_string(s % 60) + " s";
-  return std::to_string(s / 3600) + " h " + std::to_string((s % 3600) / 60) + " min";
 }
 
 std::string fixed(double v, int digits) {
@@ -199,6 +192,7 @@ struct BuildOptions {
   DatabaseSettings settings;
   int deflate = io::DbWriteSettings{}.deflate;
   double congruence_tolerance = CongruenceSettings{}.tolerance;
+  ProgressOptions progress;
 };
 
 /// The --units option (m, cm, mm, in) of db build and db add.
@@ -223,21 +217,17 @@ int run_build(const BuildOptions& o) {
   bs.write.deflate = o.deflate;
   check_tolerance(o.congruence_tolerance, o.manifest.empty() ? o.meshes : o.manifest);
   bs.congruence.tolerance = o.congruence_tolerance;
-  const bool tty = stderr_is_terminal();
-  // Progress with the time left: a line kept up to date on a terminal, else a line per tenth.
-  auto next_tenth = std::make_shared<std::size_t>(1);
-  bs.progress = [tty, next_tenth](const datasets::BuildProgress& p) {
-    const std::string left = p.done == p.total ? "" : ", about " + duration_text(p.remaining_s()) + " left";
-    const std::string resumed = p.resumed ? " (" + std::to_string(p.resumed) + " resumed)" : "";
-    if (tty) {
-      std::cerr << "\r\033[K[" << p.done << "/" << p.total << "]" << resumed << " " << p.name << left << std::flush;
-    } else if (p.done * 10 >= *next_tenth * p.total) {
-      *next_tenth = p.done * 10 / p.total + 1;
-      std::cerr << "built " << p.done << " of " << p.total << " objects" << resumed << left << "\n";
-    }
-  };
+  // Progress with the time left (progress.hpp): a line rewritten on a terminal, else a plain line
+  // every 30 s and every 5 %, JSON lines, or nothing.
+  ProgressReport progress(o.progress, "db build", "objects", stderr_is_terminal(), o.common.json, std::cerr);
+  if (progress.active())
+    bs.progress = [&progress](const datasets::BuildProgress& p) {
+      const std::size_t built = p.done - p.resumed;
+      progress.update(p.done, p.total, 60.0 * static_cast<double>(built) / std::max(1e-9, p.elapsed_s),
+                      built ? std::optional<double>(p.remaining_s()) : std::nullopt);
+    };
   const auto report = datasets::build_database(inputs, o.out, bs);
-  if (tty) std::cerr << "\r\033[K";
+  progress.finish();
   if (report.resumed) std::cerr << "resumed a stopped build: " << report.resumed << " objects were already built\n";
   for (std::size_t i = 0; i < inputs.size(); ++i) print_warnings(report.names[i], report.warnings[i], inputs[i].display());
 
@@ -493,6 +483,7 @@ void register_db(CLI::App& app) {
     add_congruence_option(sub, o->congruence_tolerance, true);
     auto* units = add_units_option(sub, o->units);
     add_common(sub, o->common);
+    add_progress(sub, o->progress);
     sub->callback([o, units] {
       o->units_given = units->count() > 0;
       run_command(o->common, [o] { return run_build(*o); });

@@ -16,12 +16,14 @@
 #include "io/run_store.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <csignal>
 #include <map>
 #include <optional>
 #include <set>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <iomanip>
 #include <iostream>
 #include <limits>
@@ -48,7 +50,8 @@ struct ExperimentOptions {
 struct MergeOptions {
   CommonOptions common;
   std::string out;
-  std::vector<std::string> shards;
+  std::vector<std::string> shards;   ///< the positionals: the shards (or, without --out, OUT then the shards)
+  ProgressOptions progress;
 };
 
 struct ReportOptions {
@@ -65,6 +68,7 @@ struct CalibrateOptions {
   int open_set_step = 20;        ///< at this step (the last when the runs are shorter)
   std::string step_ranges;       ///< first steps of the ranges, "1,2,3,..." ("": the default)
   std::optional<double> alpha;   ///< --alpha: the answer sets' level (unset: 0.05 when the stores allow)
+  ProgressOptions progress;
 };
 
 /// --step-ranges: first steps, ascending from 1.
@@ -390,9 +394,27 @@ int run_experiment_in(const ExperimentOptions& o, experiments::MpiSession* mpi) 
   return 0;
 }
 
-int run_merge(const MergeOptions& o) {
+int run_merge(MergeOptions o) {
+  if (o.out.empty()) {   // the old form, `merge OUT SHARD...`: still taken, with a note
+    if (o.shards.size() < 2)
+      throw Error("name the merged store with --out (merge --out OUT SHARD...)", {}, "--out");
+    o.out = o.shards.front();
+    o.shards.erase(o.shards.begin());
+    std::cerr << "touchstone: note: `merge OUT SHARD...` is the old form; write `merge --out " << o.out
+              << " SHARD...` (the old form will be removed in a later version)\n";
+  }
   std::vector<std::filesystem::path> shards(o.shards.begin(), o.shards.end());
-  const std::size_t runs = experiments::merge_shards(o.out, shards);
+  ProgressReport progress(o.progress, "merge", "stores", stderr_is_terminal(), o.common.json, std::cerr);
+  const auto started = std::chrono::steady_clock::now();
+  std::function<void(std::size_t, std::size_t)> on_progress;
+  if (progress.active())
+    on_progress = [&](std::size_t done, std::size_t total) {
+      const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+      progress.update(done, total, 60.0 * static_cast<double>(done) / std::max(1e-9, elapsed),
+                      elapsed / static_cast<double>(done) * static_cast<double>(total - done));
+    };
+  const std::size_t runs = experiments::merge_shards(o.out, shards, on_progress);
+  progress.finish();
   if (o.common.json) {
     nlohmann::ordered_json j;
     j["out"] = o.out;
@@ -452,6 +474,9 @@ int run_calibrate(const CalibrateOptions& o) {
   std::string no_set_reason;
   nlohmann::ordered_json sources = nlohmann::ordered_json::array();
   const RunRange range = parse_runs(o.runs);
+  // Progress over the stores read (the fit that follows takes seconds).
+  ProgressReport progress(o.progress, "calibrate", "stores", stderr_is_terminal(), o.common.json, std::cerr);
+  const auto started = std::chrono::steady_clock::now();
   for (const std::string& path : o.stores) {
     io::RunStoreContents c = io::RunStore::read(path);
     std::erase_if(c.runs, [&](const io::RunRecord& r) { return !range.has(r.run); });
@@ -527,7 +552,14 @@ int run_calibrate(const CalibrateOptions& o) {
                                    : nlohmann::ordered_json::array({range.first, range.end});
     src["step_answers"] = steps;
     sources.push_back(src);
+    if (progress.active()) {
+      const std::size_t done = sources.size();
+      const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+      progress.update(done, o.stores.size(), 60.0 * static_cast<double>(done) / std::max(1e-9, elapsed),
+                      elapsed / static_cast<double>(done) * static_cast<double>(o.stores.size() - done));
+    }
   }
+  progress.finish();
   if (rows.empty()) throw Error("the run stores hold no runs to fit on", o.stores.front(), "/runs");
   {  // database order (objects outside it after, by name)
     std::vector<std::pair<std::size_t, std::string>> keyed;
@@ -686,9 +718,12 @@ void register_experiment(CLI::App& app) {
   auto mo = std::make_shared<MergeOptions>();
   CLI::App* m = app.add_subcommand(
       "merge", "Fold the shard stores of one experiment (experiment --shard I/N) into one run store");
-  m->add_option("out", mo->out, "Run store to write (HDF5; must not exist)")->required();
-  m->add_option("shards", mo->shards, "The N shard stores, in any order")->required();
+  m->add_option("--out", mo->out, "Run store to write (HDF5; must not exist)");
+  m->add_option("shards", mo->shards,
+                "The N shard stores, in any order (the old form `merge OUT SHARD...` still works, with a note)")
+      ->required();
   add_common(m, mo->common);
+  add_progress(m, mo->progress);
   m->callback([mo] { run_command(mo->common, [mo] { return run_merge(*mo); }); });
 
   auto ro = std::make_shared<ReportOptions>();
@@ -729,6 +764,7 @@ void register_experiment(CLI::App& app) {
                  "Open set: ... at this step (default 20; the last when runs are shorter)")
       ->check(CLI::PositiveNumber);
   add_common(cb, co->common);
+  add_progress(cb, co->progress);
   cb->callback([co] { run_command(co->common, [co] { return run_calibrate(*co); }); });
 }
 

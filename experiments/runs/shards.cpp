@@ -51,13 +51,17 @@ int configured_runs(const io::RunStoreHeader& h, const std::string& path) {
 
 }  // namespace
 
-std::size_t merge_shards(const std::filesystem::path& out, const std::vector<std::filesystem::path>& shards) {
+std::size_t merge_shards(const std::filesystem::path& out, const std::vector<std::filesystem::path>& shards,
+                         const std::function<void(std::size_t, std::size_t)>& progress) {
   if (shards.empty()) throw Error("no shard stores to merge", out.string(), "SHARD");
   std::error_code ec;
   if (std::filesystem::exists(out, ec))
     throw Error("the merged store already exists (remove it, or choose another name)", out.string());
   std::vector<io::RunStoreContents> stores;
-  for (const auto& path : shards) stores.push_back(io::RunStore::read(path));
+  for (const auto& path : shards) {
+    stores.push_back(io::RunStore::read(path));
+    if (progress) progress(stores.size(), shards.size() + 1);
+  }
   const io::RunStoreHeader& first = stores.front().header;
   const std::string first_path = shards.front().string();
   std::map<int, std::string> seen;   // shard index -> its store
@@ -105,6 +109,7 @@ std::size_t merge_shards(const std::filesystem::path& out, const std::vector<std
   merged.machine.clear();
   for (const auto& m : machines) merged.machine += (merged.machine.empty() ? "" : "; ") + m;
   io::RunStore::merge(out, merged, shards, true);
+  if (progress) progress(shards.size() + 1, shards.size() + 1);
   std::size_t runs = 0;
   for (const auto& c : stores) runs += c.runs.size();
   return runs;

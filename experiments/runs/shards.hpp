@@ -8,6 +8,7 @@
 #include "experiments/runs/driver.hpp"
 
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -31,7 +32,10 @@ std::vector<RunTask> shard_tasks(const std::vector<RunTask>& tasks, const Shard&
 /// `shard` unset). One clear error naming the store at fault when a shard is missing, given
 /// twice, of another experiment (configuration, database, objects, variants or build layout),
 /// not a shard, or incomplete; `out` must not exist. The shards are left as they are.
-/// Returns the number of runs merged.
-std::size_t merge_shards(const std::filesystem::path& out, const std::vector<std::filesystem::path>& shards);
+/// Returns the number of runs merged. `progress`, when given, is called with (stores done, of
+/// total): after each shard is read and checked, and once the merged store is written (total:
+/// shards + 1).
+std::size_t merge_shards(const std::filesystem::path& out, const std::vector<std::filesystem::path>& shards,
+                         const std::function<void(std::size_t, std::size_t)>& progress = {});
 
 }  // namespace ts::experiments

@@ -35,6 +35,7 @@ TEST_CASE("cli catalogue: 12 objects, JSON summary, readable manifest and meshes
   CHECK(again.err.find("use --force") != std::string::npos);
   const auto forced = touchstone(dir, "catalogue --count 2 --families hex_nut,bracket --coarsen 3 --out cat --force");
   REQUIRE_MESSAGE(forced.code == 0, forced.err);
+  CHECK_MESSAGE(forced.err.find("catalogue: objects 2/2 (100.0 %)") != std::string::npos, forced.err);   // not a terminal
   CHECK(forced.out.find("objects per family:") != std::string::npos);
   CHECK(forced.out.find("closest pairs") != std::string::npos);
   CHECK(ts::datasets::read_manifest(dir / "cat/manifest.tsv").size() == 2);

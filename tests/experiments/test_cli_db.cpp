@@ -77,6 +77,24 @@ TEST_CASE("cli db: build is byte-identical for any --threads; info lists every o
   const std::string machine = built["machine"].get<std::string>();
   CHECK_MESSAGE(machine.ends_with(std::string(", ") + TS_EXPECT_ALLOCATOR), machine);
 
+  // Progress: plain lines (not a terminal), the last complete; JSON lines; nothing with --quiet.
+  CHECK_MESSAGE(a.err.find("db build: objects 3/3 (100.0 %)") != std::string::npos, a.err);
+  const auto js = touchstone(dir, "db build --meshes meshes --out t3.h5 --threads 1 --progress json" + kFast);
+  REQUIRE_MESSAGE(js.code == 0, js.err);
+  std::size_t progress_lines = 0;
+  for (std::size_t at = 0, end; (end = js.err.find('\n', at)) != std::string::npos; at = end + 1)
+    if (js.err.compare(at, 13, "{\"progress\":\"") == 0) {
+      const auto j = nlohmann::json::parse(js.err.substr(at, end - at));
+      CHECK(j["progress"] == "db build");
+      CHECK(j["total"] == 3);
+      ++progress_lines;
+    }
+  CHECK(progress_lines == 3);   // the first, then 5 % steps: every object of 3
+  const auto quiet = touchstone(dir, "db build --meshes meshes --out t4.h5 --threads 1 --quiet" + kFast);
+  REQUIRE_MESSAGE(quiet.code == 0, quiet.err);
+  CHECK(quiet.err.find("db build:") == std::string::npos);
+  CHECK(ts::test::read_bytes(dir / "t1.h5") == ts::test::read_bytes(dir / "t4.h5"));
+
   const auto info = touchstone(dir, "db info t1.h5 --json");
   REQUIRE(info.code == 0);
   const auto j = nlohmann::json::parse(info.out);

@@ -109,9 +109,13 @@ TEST_CASE("experiment --shard I/N, then merge: the results of one process, for N
     }
     CHECK(held == 9);
     const std::string merged = "merged" + std::to_string(n) + ".h5";
-    const auto m = touchstone(dir, "merge " + merged + names + " --json");
+    const auto m = touchstone(dir, "merge --out " + merged + names + " --json --progress lines");
     REQUIRE_MESSAGE(m.code == 0, m.err);
     CHECK(nlohmann::json::parse(m.out)["runs"] == 9);
+    // Progress: a line per store read and one for the merged store written, the last complete.
+    const std::string last = "merge: stores " + std::to_string(n + 1) + "/" + std::to_string(n + 1) + " (100.0 %)";
+    CHECK_MESSAGE(m.err.find(last) != std::string::npos, m.err);
+    CHECK(m.err.find("old form") == std::string::npos);
     const io::RunStoreContents c = io::RunStore::read(dir / merged);
     CHECK(c.complete);
     CHECK(c.header.shard.empty());
@@ -140,7 +144,7 @@ TEST_CASE("merge: a missing, repeated, foreign, unsharded or incomplete shard is
   const std::string names = run_shards(dir, 3);   // s3_1.h5 s3_2.h5 s3_3.h5
   auto refused = [&](const std::string& args, const std::string& file, const std::string& words) {
     CAPTURE(args);
-    const auto r = touchstone(dir, "merge out.h5 " + args);
+    const auto r = touchstone(dir, "merge --out out.h5 " + args + " --quiet");   // progress lines aside
     CHECK(r.code != 0);
     CHECK_MESSAGE(r.err.find(words) != std::string::npos, r.err);
     CHECK_MESSAGE(r.err.find(file) != std::string::npos, r.err);
@@ -149,6 +153,13 @@ TEST_CASE("merge: a missing, repeated, foreign, unsharded or incomplete shard is
     CHECK_FALSE(fs::exists(dir / "out.h5.runs"));
   };
   refused("s3_1.h5 s3_3.h5", "out.h5", "shard 2/3 is missing");
+  {  // With progress (not a terminal: a line per store read), the error is still the last line.
+    const auto r = touchstone(dir, "merge --out out.h5 s3_1.h5 s3_3.h5");
+    CHECK(r.code != 0);
+    CHECK_MESSAGE(r.err.find("merge: stores 2/3") != std::string::npos, r.err);
+    CHECK(r.err.rfind("error: ") > r.err.rfind("merge: stores"));
+    CHECK_FALSE(fs::exists(dir / "out.h5"));
+  }
   refused("s3_1.h5 s3_2.h5 s3_2.h5 s3_3.h5", "s3_2.h5", "given twice");
   // Another configuration (seed) for shard 2: named, with the key.
   REQUIRE(touchstone(dir, "experiment --db db.h5 --objects box,nut,wedge --runs 3 --steps 3 --pool 5 --seed 4 "
@@ -172,10 +183,20 @@ TEST_CASE("merge: a missing, repeated, foreign, unsharded or incomplete shard is
   // The output exists: refused, and left as it was.
   {
     std::ofstream(dir / "taken.h5") << "mine";
-    const auto r = touchstone(dir, "merge taken.h5" + names);
+    const auto r = touchstone(dir, "merge --out taken.h5" + names);
     CHECK(r.code != 0);
     CHECK(r.err.find("already exists") != std::string::npos);
     CHECK(test::read_bytes(dir / "taken.h5") == "mine");
+  }
+  // The old form, output first: still merges, with a note naming the new form.
+  {
+    const auto r = touchstone(dir, "merge old.h5" + names + " --quiet");
+    CHECK_MESSAGE(r.code == 0, r.err);
+    CHECK_MESSAGE(r.err.find("old form; write `merge --out old.h5 SHARD...`") != std::string::npos, r.err);
+    CHECK(io::RunStore::read(dir / "old.h5").runs.size() == 9);
+    const auto alone = touchstone(dir, "merge s3_1.h5");   // one name and no --out: which is the output?
+    CHECK(alone.code != 0);
+    CHECK_MESSAGE(alone.err.find("--out") != std::string::npos, alone.err);
   }
   // A shard store resumed as another shard is refused, untouched.
   {
