@@ -173,6 +173,8 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   std::optional<pipeline::FunnelObserver> funnel;
   std::vector<pipeline::StepObserver*> observers;
   if (watch_ && *watch_ < db_.size()) observers.push_back(&funnel.emplace(*watch_, watch_pose_));
+  std::optional<pipeline::ExplainObserver> explainer;
+  if (explain_) observers.push_back(&explainer.emplace());
   pipeline::run_pipeline(*stages_, c, observers);
   step_ = res.step;   // a stage or an observer that throws leaves the recognizer as it was
   if (c.finished) {   // e.g. no contacts: the state waits for data
@@ -185,7 +187,8 @@ StepResult Recognizer::step(const PointCloud& contacts_world, const std::vector<
   db_.trim();  // nothing of this step is pinned any more
   res.geometry_loads = db_.geometry_loads();
   res.geometry_resident = db_.geometry_resident();
-  res.times.total_s = detail::seconds_since(t_start) - (res.watched ? res.watched->diagnostic_s : 0.0);
+  res.times.total_s = detail::seconds_since(t_start) - (res.watched ? res.watched->diagnostic_s : 0.0) -
+                     (explainer ? explainer->seconds : 0.0);
   return res;
 }
 

@@ -63,6 +63,9 @@ class Recognizer {
     watch_ = object;
     watch_pose_ = object ? T_world_object : std::nullopt;
   }
+  /// Each step also says why its answer won over its best rival (StepResult::explanation,
+  /// decided_by). Changes no result; its time is not counted in the step's.
+  void explain(bool on) { explain_ = on; }
   int steps_done() const { return step_; }
   const std::vector<Hypothesis>& hypotheses() const { return state_; }
   const RecognizerSettings& settings() const { return s_; }
@@ -76,6 +79,7 @@ class Recognizer {
   std::vector<Hypothesis> state_;   ///< S_t, world poses, best first
   std::optional<std::uint32_t> watch_;
   std::optional<Pose> watch_pose_;
+  bool explain_ = false;
   std::shared_ptr<const ShapePrior> prior_;  ///< when the shape prior acts (large databases)
   std::shared_ptr<SparseTables> sparse_;  ///< taken (SparseTables::shared) when the sparse source first runs
   /// The method's stages (engine/recognition/pipeline/compose.hpp); immutable, shared by copies.

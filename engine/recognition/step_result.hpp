@@ -100,6 +100,26 @@ struct AnswerFit {
   double normal_worst_deg = 0.0;    ///< the largest of those angles (clamped likewise)
 };
 
+/// Why a hypothesis scored what it did on the step's scene (Recognizer::explain): its ln wt split
+/// into Eq. 6's two terms, the fit in absolute terms, the near-twin score and its object's
+/// posterior. The step's own numbers, not a re-evaluation.
+struct Evidence {
+  std::uint32_t object = 0;
+  Pose pose = Pose::Identity();     ///< T_world_object
+  std::size_t rank = 0;             ///< 1-based, in the step's state (weight order)
+  double log_weight = -std::numeric_limits<double>::infinity();  ///< ln wt, as the step scored it
+  double contact_log_weight = 0.0;  ///< ln wt_cont (Eq. 5, 7): minus the mean Eq. 4 error
+  double free_log_weight = 0.0;     ///< ln wt_free (Eq. 9): -lambda x the summed Eq. 8 error (0:
+                                    ///< no free-space term)
+  std::size_t free_points_checked = 0;  ///< free points near enough to its object to be checked
+                                        ///< (Eq. 8 charges those within d_thresh of its surface)
+  double offset_rms_m = 0.0;        ///< m, RMS of the per-grasp offsets fitted (0: none)
+  AnswerFit fit;                    ///< contacts in sigmas after the offsets (as StepResult::fit)
+  double twin_score = std::numeric_limits<double>::quiet_NaN();  ///< V of the near-twin
+                                    ///< verification when it compared this one (lower wins)
+  double posterior = 0.0;           ///< its object's posterior
+};
+
 /// One stage of a step's pipeline (engine/recognition/pipeline/): whether it ran, why not, and
 /// its wall time (observers' time excluded).
 struct StageRun {
@@ -137,6 +157,12 @@ struct StepResult {
   AnswerFit fit;                    ///< of the answer (best)
   StageTimes times;
   std::vector<StageRun> stages;     ///< the step's pipeline, in order: ran or left out, and why
+  /// Recognizer::explain: the answer's evidence, then its best rival's (the best hypothesis of
+  /// another object; absent when the state holds one object), and what decided between them:
+  /// "near_twin" (the verification's V), "contacts" or "free_space" (the term of ln wt that
+  /// differs most), or "" (no rival).
+  std::vector<Evidence> explanation;
+  std::string decided_by;
   std::string stopped;              ///< why the step stopped before any matching ("no contacts",
                                     ///< "fewer than 3 distinct contacts (2)"; "" : it did not)
 };

@@ -77,6 +77,7 @@ struct RecognizeOptions {
   int suggest = 0;                   ///< --suggest N: the N best next grasps after the last step
   ActiveSettings active;             ///< the next-grasp planner's parameters (active.*)
   bool truth_pose = false;           ///< diagnostics.truth_pose: the truth_funnel's truth_pose_*
+  bool explain = false;              ///< --explain: why the answer won over its best rival
   std::string scene;                 ///< --scene DIR: pictures of chosen steps (experiments/analysis/scene.hpp)
   std::vector<int> scene_steps;      ///< --scene-steps (empty: the last step)
   int exploration = 0;               ///< exploration.strategy (recorded; experiments act on it)
@@ -298,6 +299,7 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
   // A probe's path: free by the ball radius only, unless the flags say otherwise (log_steps.hpp).
   const RecognizerSettings rs = log ? experiments::log_settings(c.rs, *log, o.inside_margin) : c.rs;
   Recognizer rec(db, rs);
+  rec.explain(o.explain);
   if (truth_object)   // the JSON's truth_funnel (with --diagnostics.truth-pose and a true pose: truth_pose_*)
     rec.watch(static_cast<std::uint32_t>(*truth_object), c.o.truth_pose ? run.truth_pose : std::nullopt);
   const SymmetryGroup* sym = nullptr;
@@ -430,6 +432,75 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
   return run;
 }
 
+/// --explain: a step's answer and its best rival, each with its evidence (StepResult::explanation).
+nlohmann::ordered_json explanation_json(const Context& c, const StepResult& r) {
+  if (r.explanation.empty()) return nullptr;
+  nlohmann::ordered_json j;
+  j["decided_by"] = r.decided_by.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(r.decided_by);
+  auto& hyps = j["hypotheses"] = nlohmann::ordered_json::array();
+  for (const Evidence& e : r.explanation) {
+    nlohmann::ordered_json h;
+    h["role"] = &e == &r.explanation.front() ? "answer" : "rival";
+    h["object"] = c.db.info(e.object).name;
+    h["rank"] = e.rank;
+    h["pose"] = pose_json(e.pose);
+    h["log_weight"] = e.log_weight;
+    h["contact_log_weight"] = e.contact_log_weight;
+    h["free_log_weight"] = e.free_log_weight;
+    h["free_points_checked"] = e.free_points_checked;
+    h["offset_rms_m"] = e.offset_rms_m;
+    h["contact_rms_sigma"] = e.fit.valid ? nlohmann::ordered_json(e.fit.rms_sigma) : nullptr;
+    h["contacts_beyond_3_sigma"] = e.fit.valid ? nlohmann::ordered_json(e.fit.far_share) : nullptr;
+    h["twin_score"] = number_or_null(std::isnan(e.twin_score) ? std::nullopt : std::optional(e.twin_score));
+    h["posterior"] = e.posterior;
+    hyps.push_back(std::move(h));
+  }
+  return j;
+}
+
+/// --explain, the table's form: the last step's answer beside its best rival, term by term.
+void print_explanation(const Context& c, const StepResult& r) {
+  if (r.explanation.empty()) return;
+  const Evidence& a = r.explanation.front();
+  const std::string an = c.db.info(a.object).name;
+  if (r.explanation.size() < 2) {
+    std::printf("\nwhy %s: every hypothesis of the state is of %s (no rival)\n", an.c_str(), an.c_str());
+    return;
+  }
+  const Evidence& b = r.explanation[1];
+  const std::string bn = c.db.info(b.object).name;
+  std::printf("\nwhy %s and not %s (step %d; its best hypothesis is #%zu of the state):\n", an.c_str(), bn.c_str(),
+              r.step, b.rank);
+  std::printf("  %-34s %12.12s %12.12s %12s\n", "", an.c_str(), bn.c_str(), "difference");
+  auto row = [](const char* what, double x, double y) {
+    std::printf("  %-34s %12.4g %12.4g %+12.4g\n", what, x, y, x - y);
+  };
+  row("ln wt (Eq. 6)", a.log_weight, b.log_weight);
+  row("  contacts: - mean Eq. 4 error", a.contact_log_weight, b.contact_log_weight);
+  row("  free space: - lambda x Eq. 8 sum", a.free_log_weight, b.free_log_weight);
+  std::printf("  %-34s %12zu %12zu\n", "free points checked near it", a.free_points_checked, b.free_points_checked);
+  auto opt = [](bool have, double x, const char* fmt) {
+    char buf[32];
+    if (!have || !std::isfinite(x)) return std::string("-");
+    std::snprintf(buf, sizeof buf, fmt, x);
+    return std::string(buf);
+  };
+  std::printf("  %-34s %12s %12s\n", "contact RMS after offsets (sigma)", opt(a.fit.valid, a.fit.rms_sigma, "%.2f").c_str(),
+              opt(b.fit.valid, b.fit.rms_sigma, "%.2f").c_str());
+  std::printf("  %-34s %12s %12s\n", "contacts beyond 3 sigma", opt(a.fit.valid, 100 * a.fit.far_share, "%.1f %%").c_str(),
+              opt(b.fit.valid, 100 * b.fit.far_share, "%.1f %%").c_str());
+  std::printf("  %-34s %12s %12s\n", "per-grasp offsets, RMS", opt(a.offset_rms_m > 0, 1e3 * a.offset_rms_m, "%.2f mm").c_str(),
+              opt(b.offset_rms_m > 0, 1e3 * b.offset_rms_m, "%.2f mm").c_str());
+  std::printf("  %-34s %12s %12s\n", "near-twin score V (lower wins)", opt(true, a.twin_score, "%.1f").c_str(),
+              opt(true, b.twin_score, "%.1f").c_str());
+  std::printf("  %-34s %12.3f %12.3f\n", "object posterior", a.posterior, b.posterior);
+  if (r.decided_by == "near_twin")
+    std::printf("decided by the near-twin verification: their ln wt were within its gap, and %s's V is lower\n",
+                an.c_str());
+  else
+    std::printf("decided by ln wt, mostly its %s term\n", r.decided_by == "free_space" ? "free-space" : "contact");
+}
+
 nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
   nlohmann::ordered_json steps = nlohmann::ordered_json::array();
   for (std::size_t k = 0; k < run.results.size(); ++k) {
@@ -521,6 +592,7 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
         t["rival_twin_score"] = number_or_null(f.rival_twin_score);
       }
     }
+    if (c.o.explain) st["explanation"] = explanation_json(c, r);
     st["geometry_loads"] = r.geometry_loads;
     st["geometry_resident"] = r.geometry_resident;
     // The step's pipeline: the stages that ran, the ones its scene did not need (and why), and
@@ -626,6 +698,11 @@ void print_table(const Context& c, const InputRun& run) {
     else
       std::cout << "? the contacts leave " << last.unobservable_dof
                 << " pose DOF unobservable (e.g. a single flat patch): the pose is not reliable\n";
+  }
+  if (c.o.explain && !run.results.empty()) {
+    std::cout << std::flush;
+    print_explanation(c, run.results.back());
+    std::fflush(stdout);
   }
   if (!run.written.empty()) std::cout << "wrote " << run.written << '\n';
 }
@@ -869,6 +946,10 @@ void register_recognize(CLI::App& app) {
   sub->add_option("--only", o->only,
                   "Objects the answer may name, NAME[,NAME...] (one name: localize a known object)")
       ->delimiter(',');
+  sub->add_flag("--explain", o->explain,
+                "Say why the answer won over its best rival (the best hypothesis of another object): ln wt "
+                "split into the contact and free-space terms, the fit, the near-twin score, the posteriors "
+                "(the last step's table; JSON: every step's explanation)");
   sub->add_option("--method", o->method, "bricpsf | batch-ransac | ransac-icp | ransac-icp-fs")
       ->check(CLI::IsMember({"bricpsf", "batch-ransac", "ransac-icp", "ransac-icp-fs"}));
   sub->add_option("--steps", o->steps, "Steps (grasps) to process (default: all)")

@@ -495,3 +495,72 @@ TEST_CASE("The true pose against a stretched twin under the near-twin verificati
     CHECK(compared > 0);
   }
 }
+
+TEST_CASE("Explaining a step: the answer's and its best rival's own numbers, Eq. 6 split; no result changed") {
+  auto src = test::make_source();
+  Database db(src);
+  const std::size_t wedge = 4;
+  const Pose T = test::random_pose(44, Vec3(0.1, 0.2, -0.1));
+  Recognizer plain(db, fast()), explained(db, fast());
+  explained.explain(true);
+  const double lambda = fast().evaluate.lambda;
+  for (int k = 1; k <= 6; ++k) {
+    const PointCloud contacts = test::touch(src->fines[wedge], T, k, 15, 0.0005, 0.0002);
+    // Free space hugging the object 5 mm outside its surface (a swept hand passing close): Eq. 8
+    // charges every hypothesis near the true pose for it, each free point at most 1.
+    std::vector<Vec3> free;
+    const PointCloud& fine = src->fines[wedge];
+    for (std::size_t i = 0; i < fine.size(); i += 7) free.push_back(T * (fine.points[i] + 0.005 * fine.normals[i]));
+    const StepResult a = plain.step(contacts, free);
+    const StepResult b = explained.step(contacts, free);
+    CAPTURE(k);
+    CHECK(a.explanation.empty());
+    CHECK(a.decided_by.empty());
+    REQUIRE(a.hypotheses.size() == b.hypotheses.size());
+    for (std::size_t i = 0; i < a.hypotheses.size(); ++i) {
+      CHECK(a.hypotheses[i].object == b.hypotheses[i].object);
+      CHECK(a.hypotheses[i].log_weight == b.hypotheses[i].log_weight);
+      CHECK(a.hypotheses[i].pose.matrix() == b.hypotheses[i].pose.matrix());
+    }
+    REQUIRE(b.valid);
+    REQUIRE_FALSE(b.explanation.empty());
+    // The answer: the step's best, its ln wt and fit as the step reported them.
+    const Evidence& ans = b.explanation.front();
+    CHECK(ans.object == b.best.object);
+    CHECK(ans.log_weight == b.best.log_weight);
+    CHECK(ans.pose.matrix() == b.best.pose.matrix());
+    CHECK(ans.fit.rms_sigma == b.fit.rms_sigma);
+    CHECK(ans.posterior == b.posterior);
+    CHECK(b.hypotheses.at(ans.rank - 1).log_weight == ans.log_weight);
+    for (const Evidence& e : b.explanation) {
+      // Eq. 6 split: ln wt_cont = -mean Eq. 4 in [-1, 0]; ln wt_free = -lambda sum Eq. 8, each
+      // free point's error in [0, 1] and only near ones count.
+      const double terms = e.contact_log_weight + e.free_log_weight;
+      CHECK(terms == doctest::Approx(e.log_weight).epsilon(1e-12));
+      CHECK(e.contact_log_weight <= 0.0);
+      CHECK(e.contact_log_weight >= -1.0);
+      CHECK(e.free_log_weight <= 0.0);
+      CHECK(e.free_log_weight >= -lambda * static_cast<double>(e.free_points_checked) - 1e-12);
+      if (e.free_log_weight < 0.0) CHECK(e.free_points_checked > 0);
+      CHECK(e.posterior == b.posteriors.at(e.object));
+    }
+    CHECK(ans.free_points_checked > 0);   // the hugging free space costs the right answer too
+    if (b.explanation.size() == 2) {
+      // The rival: the first hypothesis of the state, in weight order, of another object.
+      const Evidence& riv = b.explanation[1];
+      CHECK(riv.object != ans.object);
+      const auto first_other = std::find_if(b.hypotheses.begin(), b.hypotheses.end(),
+                                            [&](const Hypothesis& h) { return h.object != ans.object; });
+      REQUIRE(first_other != b.hypotheses.end());
+      CHECK(riv.rank == static_cast<std::size_t>(first_other - b.hypotheses.begin()) + 1);
+      CHECK(riv.log_weight == first_other->log_weight);
+      CHECK(riv.pose.matrix() == first_other->pose.matrix());
+      CHECK((b.decided_by == "contacts" || b.decided_by == "free_space" || b.decided_by == "near_twin"));
+    } else {
+      CHECK(std::all_of(b.hypotheses.begin(), b.hypotheses.end(),
+                        [&](const Hypothesis& h) { return h.object == ans.object; }));
+      CHECK(b.decided_by.empty());
+    }
+  }
+  CHECK(explained.hypotheses().front().object == wedge);
+}

@@ -152,6 +152,45 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
     REQUIRE(h.code == 0);
     CHECK(h.out.find("step") != std::string::npos);
     CHECK(h.out.find("bricpsf") != std::string::npos);
+    CHECK(h.out.find("why ") == std::string::npos);   // no explanation unless asked
+  }
+  SUBCASE("--explain: the answer beside its best rival, the same answers") {
+    const Run e = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --threads 1 --explain" + kFastFlags);
+    REQUIRE_MESSAGE(e.code == 0, e.err);
+    const auto je = nlohmann::json::parse(e.out);
+    REQUIRE(je["steps"].size() == 6);
+    for (std::size_t k = 0; k < 6; ++k) {
+      const auto& s = je["steps"][k];
+      CHECK_FALSE(ja["steps"][k].contains("explanation"));
+      if (s["object"].is_null()) continue;
+      auto x = s, y = ja["steps"][k];   // everything else as without --explain
+      for (auto* j : {&x, &y})
+        for (const char* key : {"time_s", "stages_s", "pipeline_s", "explanation"}) j->erase(key);
+      CHECK(x == y);
+      const auto& ex = s["explanation"];
+      REQUIRE(ex["hypotheses"].is_array());
+      REQUIRE(ex["hypotheses"].size() >= 1);
+      const auto& ans = ex["hypotheses"][0];
+      CHECK(ans["role"] == "answer");
+      CHECK(ans["object"] == s["object"]);
+      CHECK(ans["log_weight"].get<double>() == s["log_weight"].get<double>());
+      const double terms = ans["contact_log_weight"].get<double>() + ans["free_log_weight"].get<double>();
+      CHECK(terms == doctest::Approx(ans["log_weight"].get<double>()).epsilon(1e-12));
+      if (ex["hypotheses"].size() == 2) {
+        CHECK(ex["hypotheses"][1]["role"] == "rival");
+        CHECK(ex["hypotheses"][1]["object"] != s["object"]);
+        CHECK(ex["hypotheses"][1]["log_weight"].get<double>() <= ans["log_weight"].get<double>() + 0.1);
+        const std::string by = ex["decided_by"].get<std::string>();
+        CHECK((by == "contacts" || by == "free_space" || by == "near_twin"));
+      }
+    }
+    const Run t = touchstone(dir, "recognize --db db.h5 --log log.h5 --threads 1 --explain" + kFastFlags);
+    REQUIRE_MESSAGE(t.code == 0, t.err);
+    const std::string answer = je["steps"][5]["object"].get<std::string>();
+    CHECK_MESSAGE(t.out.find("why " + answer) != std::string::npos, t.out);
+    CHECK(t.out.find("ln wt (Eq. 6)") != std::string::npos);
+    const bool said = t.out.find("decided by") != std::string::npos || t.out.find("(no rival)") != std::string::npos;
+    CHECK(said);
   }
 }
 
@@ -1136,10 +1175,13 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
   const Run b = touchstone(dir, "experiment --db db.h5 --objects wedge,ball,nut,box --seed 4 --set hidden=each"
                                 " --out hidden.h5" + fast);
   REQUIRE_MESSAGE(b.code == 0, b.err);
-  const Run ab = touchstone(dir, "calibrate known.h5 hidden.h5 --step-ranges 1,3 --out ab.json");
+  const Run ab = touchstone(dir, "calibrate known.h5 hidden.h5 --step-ranges 1,3 --out ab.json --progress lines");
   REQUIRE_MESSAGE(ab.code == 0, ab.err);
-  const Run ba = touchstone(dir, "calibrate hidden.h5 known.h5 --step-ranges 1,3 --out ba.json");
+  CHECK_MESSAGE(ab.err.find("calibrate: stores 1/2 (50.0 %)") != std::string::npos, ab.err);   // a line per store
+  CHECK_MESSAGE(ab.err.find("calibrate: stores 2/2 (100.0 %)") != std::string::npos, ab.err);
+  const Run ba = touchstone(dir, "calibrate hidden.h5 known.h5 --step-ranges 1,3 --out ba.json --quiet");
   REQUIRE_MESSAGE(ba.code == 0, ba.err);
+  CHECK(ba.err.find("calibrate:") == std::string::npos);
   const auto jab = nlohmann::json::parse(test::read_bytes(dir / "ab.json"));
   const auto jba = nlohmann::json::parse(test::read_bytes(dir / "ba.json"));
   CHECK(jab["format"] == "touchstone-calibration");

@@ -79,6 +79,14 @@ expect("a commit hash in the README", append("README.md", "\nmeasured at 1103ea2
 expect("an unknown study", lambda d: None, ["study99"], 1, "no study 'study99'")
 expect("a study's unknown key", append("experiments/studies/registry.toml", '\n[studies.x]\ntitle = "t"\ncolour = 1\n'),
        ["--list"], 1, "studies.x: unknown key colour")
+expect("a recipe's prepare that is not a list of commands",
+       append("experiments/studies/registry.toml", '\n[databases.bad]\ncommand = ["db", "build", "--out", "{out}"]\n'
+              'prepare = ["catalogue", "--count", "2"]\n'),
+       ["--list"], 1, "databases.bad.prepare: a list of commands")
+expect("a recipe's unknown key",
+       append("experiments/studies/registry.toml", '\n[databases.bad]\ncommand = ["db", "build", "--out", "{out}"]\n'
+              'inputz = ["datasets/dev45.tsv"]\n'),
+       ["--list"], 1, "databases.bad: unknown key inputz")
 
 for f in failures:
     print(f"FAIL {f}", file=sys.stderr)

@@ -4,6 +4,7 @@
 #include "engine/recognition/pipeline/stages.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 namespace ts::inline recognition::pipeline {
 
@@ -94,6 +95,47 @@ void FunnelObserver::at_true_pose(StepContext& c) const {
       f.rival_twin_score = std::min(f.rival_twin_score, rule.v[k]);
   }
   f.diagnostic_s += detail::seconds_since(t0);
+}
+
+void ExplainObserver::after(std::string_view stage, bool ran, StepContext& c) {
+  if (stage != "state" || !ran || !c.res.valid || c.next.empty()) return;
+  const auto t0 = detail::Clock::now();
+  const std::size_t chosen = c.rule.chosen;
+  std::optional<std::size_t> rival;   // the best hypothesis of another object
+  for (std::size_t i = 0; i < c.next.size() && !rival; ++i)
+    if (c.next[i].cand.object != c.next[chosen].cand.object) rival = i;
+  const bool free_term = c.ev.free_space && c.scene.has_free_space() && c.ev.lambda > 0.0;
+  auto evidence = [&](std::size_t i) {
+    const Working& h = c.next[i];
+    Evidence e;
+    e.object = h.cand.object;
+    e.pose = c.scene.to_world(h.cand.T_scene_object);
+    e.rank = i + 1;
+    e.log_weight = h.eval.log_weight;
+    e.free_log_weight = free_term ? 0.0 - c.ev.lambda * h.eval.free_error : 0.0;   // (no -0)
+    e.contact_log_weight = e.log_weight - e.free_log_weight;
+    e.free_points_checked = free_term ? h.eval.free_points : 0;
+    e.offset_rms_m = h.eval.grasp_offset_rms;
+    e.fit = i == chosen ? c.res.fit : absolute_fit(c.scene, c.db, h, c.s.evaluate);
+    for (std::size_t k = 0; k < c.rule.leaders.size() && k < c.rule.v.size(); ++k)
+      if (c.rule.leaders[k] == i) e.twin_score = c.rule.v[k];
+    e.posterior = e.object < c.res.posteriors.size() ? c.res.posteriors[e.object] : 0.0;
+    return e;
+  };
+  c.res.explanation = {evidence(chosen)};
+  c.res.decided_by.clear();
+  if (rival) {
+    c.res.explanation.push_back(evidence(*rival));
+    const Evidence& a = c.res.explanation[0];
+    const Evidence& b = c.res.explanation[1];
+    if (!std::isnan(a.twin_score) && !std::isnan(b.twin_score))
+      c.res.decided_by = "near_twin";
+    else
+      c.res.decided_by = std::abs(a.free_log_weight - b.free_log_weight) > std::abs(a.contact_log_weight - b.contact_log_weight)
+                             ? "free_space"
+                             : "contacts";
+  }
+  seconds += detail::seconds_since(t0);
 }
 
 }  // namespace ts::recognition::pipeline

@@ -29,4 +29,14 @@ class FunnelObserver final : public StepObserver {
   std::vector<Candidate> unscreened_;   ///< the candidates before the shortlist (one step)
 };
 
+/// Why the answer won (StepResult::explanation): once the state is set, the answer's and its
+/// best rival's evidence from the step's own evaluations (ln wt split into Eq. 6's terms), their
+/// absolute fit, the near-twin verification's V where it compared them, and their posteriors.
+class ExplainObserver final : public StepObserver {
+ public:
+  void before(std::string_view, bool, StepContext&) override {}
+  void after(std::string_view stage, bool ran, StepContext& c) override;
+  double seconds = 0.0;   ///< its own time (kept out of the step's)
+};
+
 }  // namespace ts::recognition::pipeline

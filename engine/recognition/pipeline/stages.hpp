@@ -41,6 +41,10 @@ std::unique_ptr<const Stage> state_stage();          ///< "state": S_t in world 
 std::unique_ptr<const Stage> observability_stage();  ///< "observability": the free pose DOF on the
                                                      ///< answer's surface (contacts without normals)
 
+/// A hypothesis's fit in absolute terms (state_stage.cpp; StepResult::fit for the answer): the
+/// contacts' distances after the per-grasp offsets against evaluate.grasp_contact_sigma.
+AnswerFit absolute_fit(const Scene& scene, const Database& db, const Working& h, const EvaluateSettings& s);
+
 /// The answer rule (answer_rule.cpp): the best hypothesis of `next` (sorted by `better`), unless
 /// the near-twin verification of the leading objects' best hypotheses re-decides a near tie.
 AnswerRule decide_answer(const Scene& scene, const Database& db, const std::vector<Working>& next,

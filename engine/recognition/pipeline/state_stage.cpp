@@ -9,10 +9,7 @@
 
 namespace ts::inline recognition::pipeline {
 
-namespace {
-
-/// The answer's fit in absolute terms (AnswerFit).
-AnswerFit fit_of_answer(const Scene& scene, const Database& db, const Working& h, const EvaluateSettings& s) {
+AnswerFit absolute_fit(const Scene& scene, const Database& db, const Working& h, const EvaluateSettings& s) {
   AnswerFit out;
   const GeometryPins geometry = pin(db, std::vector<Working>{h});
   const ObjectGeometry& geo = geometry[h.cand.object];
@@ -43,6 +40,8 @@ AnswerFit fit_of_answer(const Scene& scene, const Database& db, const Working& h
   return out;
 }
 
+namespace {
+
 class StateStage final : public Stage {
  public:
   std::string_view name() const override { return "state"; }
@@ -67,7 +66,7 @@ class StateStage final : public Stage {
     const std::size_t chosen = c.rule.chosen;
     res.best = res.hypotheses[chosen];
     res.posterior = res.posteriors[res.best.object];
-    res.fit = fit_of_answer(c.scene, c.db, c.next[chosen], c.s.evaluate);
+    res.fit = absolute_fit(c.scene, c.db, c.next[chosen], c.s.evaluate);
   }
 };
 
