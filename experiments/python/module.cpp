@@ -280,6 +280,33 @@ py::dict step_dict(const Database& db, const StepResult& r, const std::optional<
   }
   o["stages_ran"] = ran;
   o["stages_skipped"] = skipped;
+  // Recognizer(explain=True): why the answer won over its best rival (as recognize --explain).
+  if (r.explanation.empty()) {
+    o["explanation"] = py::none();
+  } else {
+    py::dict x;
+    x["decided_by"] = r.decided_by.empty() ? py::object(py::none()) : py::object(py::str(r.decided_by));
+    py::list hs;
+    for (const Evidence& e : r.explanation) {
+      py::dict h;
+      h["role"] = &e == &r.explanation.front() ? "answer" : "rival";
+      h["object"] = db.info(e.object).name;
+      h["rank"] = e.rank;
+      h["pose"] = matrix_of(e.pose);
+      h["log_weight"] = e.log_weight;
+      h["contact_log_weight"] = e.contact_log_weight;
+      h["free_log_weight"] = e.free_log_weight;
+      h["free_points_checked"] = e.free_points_checked;
+      h["offset_rms_m"] = e.offset_rms_m;
+      h["contact_rms_sigma"] = e.fit.valid ? py::object(py::float_(e.fit.rms_sigma)) : py::none();
+      h["contacts_beyond_3_sigma"] = e.fit.valid ? py::object(py::float_(e.fit.far_share)) : py::none();
+      h["twin_score"] = std::isfinite(e.twin_score) ? py::object(py::float_(e.twin_score)) : py::none();
+      h["posterior"] = e.posterior;
+      hs.append(h);
+    }
+    x["hypotheses"] = hs;
+    o["explanation"] = x;
+  }
   // Against the truth, when known (a simulated log): as the result files store them.
   const bool known = scored && scored->correct.has_value();
   o["correct"] = known ? py::object(py::bool_(*scored->correct)) : py::none();
@@ -294,8 +321,8 @@ class PyRecognizer {
  public:
   PyRecognizer(std::shared_ptr<PyDatabase> d, const std::string& preset, const std::string& method,
                std::uint64_t seed, const py::dict& params, const std::optional<std::vector<std::string>>& only,
-               const std::optional<std::string>& calibration, const std::optional<double>& alpha)
-      : d_(std::move(d)), m_(method_settings(preset, params)) {
+               const std::optional<std::string>& calibration, const std::optional<double>& alpha, bool explain)
+      : d_(std::move(d)), m_(method_settings(preset, params)), explain_(explain) {
     // Set answers (as `recognize --calibration FILE --alpha A`): the calibration's answer sets.
     if (calibration) {
       calibration_ = experiments::read_calibration(*calibration, experiments::file_fingerprint(*d_->reader));
@@ -322,6 +349,7 @@ class PyRecognizer {
     d_->db->set_surface(needs_surface(m_.recognizer, d_->db->settings()));
     py::gil_scoped_release release;
     rec_ = std::make_unique<Recognizer>(*d_->db, m_.recognizer);
+    rec_->explain(explain_);
   }
 
   py::dict step(const py::object& contacts, const py::object& free, const py::object& grasps) {
@@ -383,6 +411,7 @@ class PyRecognizer {
       const Database& db = *d_->db;
       const RecognizerSettings rs = experiments::log_settings(m_.recognizer, log, inside_margin_given_);
       Recognizer rec(db, rs);
+      rec.explain(explain_);
       Exploration ex(log, experiments::log_exploration(db, m_.recognizer, m_.contact_voxel));
       std::optional<std::size_t> truth;
       if (!log.object.empty() && db.find(log.object) < db.size()) truth = db.find(log.object);
@@ -420,6 +449,7 @@ class PyRecognizer {
  private:
   std::shared_ptr<PyDatabase> d_;
   experiments::MethodSettings m_;
+  bool explain_ = false;   ///< each step says why its answer won (StepResult::explanation)
   bool inside_margin_given_ = false;
   std::unique_ptr<Recognizer> rec_;
   SymmetryCache symmetries_;
@@ -713,10 +743,10 @@ PYBIND11_MODULE(_touchstone, m) {
   py::class_<PyRecognizer>(m, "Recognizer", "The C++ recognizer (touchstone.Recognizer wraps it).")
       .def(py::init<std::shared_ptr<PyDatabase>, const std::string&, const std::string&, std::uint64_t,
                     const py::dict&, const std::optional<std::vector<std::string>>&, const std::optional<std::string>&,
-                    const std::optional<double>&>(),
+                    const std::optional<double>&, bool>(),
            py::arg("db"), py::arg("preset") = "improved", py::arg("method") = "bricpsf", py::arg("seed") = 1,
            py::arg("params") = py::dict(), py::arg("only") = py::none(), py::arg("calibration") = py::none(),
-           py::arg("alpha") = py::none())
+           py::arg("alpha") = py::none(), py::arg("explain") = false)
       .def("step", &PyRecognizer::step, py::arg("contacts"), py::arg("free") = py::none(),
            py::arg("grasps") = py::none())
       .def("recognize_log", &PyRecognizer::recognize_log, py::arg("log"), py::arg("steps") = 0)

@@ -147,6 +147,30 @@ def test_recognize_log_returns_what_the_command_returns(built, db, tmp_path):
     assert last.posterior == pytest.approx(last.posteriors[last.object_index], rel=1e-12)
 
 
+def test_explain_is_the_commands_and_changes_no_answer(built, db, tmp_path):
+    root, names = built
+    log = ts.simulate(db, names[1], grasps=6, seed=5)
+    path = tmp_path / "log.h5"
+    log.write(str(path))
+    cli = json.loads(run("recognize", "--db", root / "db.h5", "--log", path, "--json", "--seed", 2,
+                         "--threads", 1, "--explain"))
+    plain = ts.Recognizer(db, seed=2).recognize_log(ts.read_log(str(path)))
+    explained = ts.Recognizer(db, seed=2, explain=True).recognize_log(ts.read_log(str(path)))
+    assert all(p.explanation is None for p in plain)
+    for p, e, c in zip(plain, explained, cli["steps"]):
+        assert (p.object, p.log_weight, p.posterior) == (e.object, e.log_weight, e.posterior)
+        if not e.valid:
+            continue
+        x, cx = e.explanation, c["explanation"]
+        assert x["decided_by"] == cx["decided_by"]
+        assert [h["object"] for h in x["hypotheses"]] == [h["object"] for h in cx["hypotheses"]]
+        for h, ch in zip(x["hypotheses"], cx["hypotheses"]):
+            for key in ("log_weight", "contact_log_weight", "free_log_weight", "rank", "posterior"):
+                assert h[key] == ch[key], key
+        assert x["hypotheses"][0]["role"] == "answer" and x["hypotheses"][0]["object"] == e.object
+        assert x["hypotheses"][0]["log_weight"] == e.log_weight
+
+
 def test_stepping_with_arrays_equals_recognize_log(db, built):
     _, names = built
     log = ts.simulate(db, names[2], grasps=5, seed=7)

@@ -86,6 +86,11 @@ class StepResult:
     # The set answer with a calibration (Recognizer(calibration=...)): {"alpha", "informative",
     # "size", "calibrated_step", "members": [{"objects", "p_value", "log_weight_gap"}]}
     answer_set: Optional[Dict[str, Any]] = None
+    # Recognizer(explain=True): why the answer won over its best rival, as `recognize --explain`
+    # gives it: {"decided_by", "hypotheses": [{"role", "object", "rank", "pose", "log_weight",
+    # "contact_log_weight", "free_log_weight", "free_points_checked", "offset_rms_m",
+    # "contact_rms_sigma", "contacts_beyond_3_sigma", "twin_score", "posterior"}, ...]}
+    explanation: Optional[Dict[str, Any]] = None
     _raw: Dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @staticmethod
@@ -103,15 +108,17 @@ class Recognizer:
     the answer to these object names. Same database, settings and seed: the same answers as
     ``touchstone recognize`` for any thread count. ``calibration``: a file of ``touchstone
     calibrate`` with answer sets, so that each step's ``answer_set`` holds the touched object's
-    class with probability at least 1 - ``alpha`` (default: the file's).
+    class with probability at least 1 - ``alpha`` (default: the file's). ``explain``: each step's
+    ``explanation`` says why the answer won over its best rival (changes no answer).
     """
 
     def __init__(self, db: Database, preset: str = "improved", method: str = "bricpsf", seed: int = 1,
                  params: Optional[Mapping[str, Any]] = None, only: Optional[Sequence[str]] = None,
-                 calibration: Optional[str] = None, alpha: Optional[float] = None) -> None:
+                 calibration: Optional[str] = None, alpha: Optional[float] = None,
+                 explain: bool = False) -> None:
         self._impl = _ts.Recognizer(db, preset, method, seed, dict(params or {}),
                                     None if only is None else list(only),
-                                    None if calibration is None else str(calibration), alpha)
+                                    None if calibration is None else str(calibration), alpha, bool(explain))
 
     def step(self, contacts: Any, free: Any = None, grasps: Optional[Sequence[Any]] = None) -> StepResult:
         """One exploration step with the cumulative contacts (N x 3, world frame, metres), the
