@@ -7,6 +7,8 @@
 #include <unistd.h>
 
 #include <iostream>
+#include <string>
+#include <tuple>
 
 namespace ts::cli {
 
@@ -14,11 +16,24 @@ namespace {
 int g_exit_code = 0;
 }
 
-void add_common(CLI::App* sub, CommonOptions& o, bool with_json) {
-  sub->add_option("--threads", o.threads, "Worker threads (default: all cores)")
-      ->check(CLI::Range(0, 4096));
-  sub->add_option("--seed", o.seed, "Seed of every random draw (default 1)");
-  if (with_json) sub->add_flag("--json", o.json, "Print exactly one JSON object on stdout");
+void add_common(CLI::App* sub, CommonOptions& o, unsigned offered) {
+  auto* threads = sub->add_option("--threads", o.threads, "Worker threads (default: all cores)")
+                      ->check(CLI::Range(0, 4096));
+  auto* seed = sub->add_option("--seed", o.seed, "Seed of every random draw (default 1)");
+  // Not offered: hidden from the help and the reference, taken with a note (nothing changes).
+  const std::string command = "touchstone " + (sub->get_parent() && !sub->get_parent()->get_name().empty() &&
+                                                       sub->get_parent()->get_parent()
+                                                   ? sub->get_parent()->get_name() + " "
+                                                   : std::string()) +
+                              sub->get_name();
+  for (auto [opt, flag, name] : {std::tuple{threads, kThreads, "--threads"}, std::tuple{seed, kSeed, "--seed"}}) {
+    if (offered & flag) continue;
+    opt->group("");
+    opt->each([name = std::string(name), command](const std::string&) {
+      std::cerr << "touchstone: note: " << name << " changes nothing in `" << command << "` (ignored)\n";
+    });
+  }
+  if (offered & kJson) sub->add_flag("--json", o.json, "Print exactly one JSON object on stdout");
 }
 
 int thread_count(const CommonOptions& o) {

@@ -16,8 +16,13 @@ struct CommonOptions {
   bool json = false;          ///< exactly one JSON object on stdout
 };
 
-/// Add --threads and --seed (and --json when with_json) to a subcommand.
-void add_common(CLI::App* sub, CommonOptions& options, bool with_json = true);
+/// The shared flags a subcommand offers: only those that mean something to it (a command without
+/// random draws takes no --seed; one without parallel work no --threads).
+enum CommonFlag : unsigned { kThreads = 1u, kSeed = 2u, kJson = 4u, kAllCommon = 7u };
+
+/// Add the offered shared flags to a subcommand. --threads and --seed where not offered are still
+/// taken, hidden, with a note that they change nothing (older scripts pass them).
+void add_common(CLI::App* sub, CommonOptions& options, unsigned offered = kAllCommon);
 
 /// Run a command body inside a task arena of options.threads threads. A ts::Error or any other
 /// exception becomes one line "touchstone: error: ..." on stderr and exit code 1.

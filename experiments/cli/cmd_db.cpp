@@ -509,7 +509,7 @@ void register_db(CLI::App& app) {
     auto o = std::make_shared<InfoOptions>();
     auto* sub = db->add_subcommand("info", "Summary of a database (reads no point data)");
     sub->add_option("db", o->db, "Database (HDF5)")->required();
-    add_common(sub, o->common);
+    add_common(sub, o->common, kJson);
     sub->callback([o] { run_command(o->common, [o] { return run_info(*o); }); });
   }
   {
@@ -520,7 +520,7 @@ void register_db(CLI::App& app) {
     sub->add_option("db", o->db, "Database (HDF5)")->required();
     add_congruence_option(sub, o->congruence_tolerance, true);
     sub->add_flag("--dry-run", o->dry_run, "Report the classes without writing them");
-    add_common(sub, o->common);
+    add_common(sub, o->common, kThreads | kJson);
     sub->callback([o] { run_command(o->common, [o] { return run_classes(*o); }); });
   }
   {
@@ -533,7 +533,7 @@ void register_db(CLI::App& app) {
         ->check(CLI::IsMember({"fine", "coarse"}))
         ->capture_default_str();
     sub->add_flag("--ascii", o->ascii, "Write ascii instead of binary");
-    add_common(sub, o->common);
+    add_common(sub, o->common, kJson);
     sub->callback([o] { run_command(o->common, [o] { return run_export(*o); }); });
   }
 }

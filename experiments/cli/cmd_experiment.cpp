@@ -722,7 +722,7 @@ void register_experiment(CLI::App& app) {
   m->add_option("shards", mo->shards,
                 "The N shard stores, in any order (the old form `merge OUT SHARD...` still works, with a note)")
       ->required();
-  add_common(m, mo->common);
+  add_common(m, mo->common, kJson);   // copies the shards' runs: no draws, no parallel work
   add_progress(m, mo->progress);
   m->callback([mo] { run_command(mo->common, [mo] { return run_merge(*mo); }); });
 
@@ -736,7 +736,7 @@ void register_experiment(CLI::App& app) {
   r->add_option("--calibration", ro->calibration,
                 "Confidence calibration file (touchstone calibrate): the confidences are recomputed "
                 "from the store's features and judged against its outcomes (ECE, Brier, reliability)");
-  add_common(r, ro->common);
+  add_common(r, ro->common, kThreads | kJson);
   r->callback([ro] { run_command(ro->common, [ro] { return run_report(*ro); }); });
 
   auto co = std::make_shared<CalibrateOptions>();
@@ -763,7 +763,7 @@ void register_experiment(CLI::App& app) {
   cb->add_option("--open-set-step", co->open_set_step,
                  "Open set: ... at this step (default 20; the last when runs are shorter)")
       ->check(CLI::PositiveNumber);
-  add_common(cb, co->common);
+  add_common(cb, co->common, kThreads | kJson);
   add_progress(cb, co->progress);
   cb->callback([co] { run_command(co->common, [co] { return run_calibrate(*co); }); });
 }

@@ -21,7 +21,7 @@ void register_params(CLI::App& app) {
   sub->add_option("--preset", o->preset, "Only this preset's values: paper | improved (default: both)")
       ->check(CLI::IsMember({"paper", "improved"}));
   auto* md = sub->add_flag("--markdown", o->markdown, "The parameter table of docs/parameters.md (Markdown)");
-  add_common(sub, o->common);
+  add_common(sub, o->common, kJson);   // no random draws, no parallel work
   md->excludes("--json");
   sub->callback([o] {
     run_command(o->common, [o] {

@@ -340,14 +340,14 @@ void register_tactile(CLI::App& app) {
     auto opt = std::make_shared<LogInfoOptions>();
     CLI::App* sub = log->add_subcommand("info", "Summary of a tactile log");
     sub->add_option("log", opt->log, "Tactile log (HDF5)")->required();
-    add_common(sub, opt->common);
+    add_common(sub, opt->common, kJson);
     sub->callback([opt] { run_command(opt->common, [opt] { return run_log_info(*opt); }); });
   }
   {
     auto opt = std::make_shared<LogTopicsOptions>();
     CLI::App* sub = log->add_subcommand("topics", "Channels of a ROS 2 recording (MCAP): topics, schemas, message counts");
     sub->add_option("recording", opt->recording, "Recording (.mcap; chunks plain, lz4 or zstd)")->required();
-    add_common(sub, opt->common);
+    add_common(sub, opt->common, kJson);
     sub->callback([opt] { run_command(opt->common, [opt] { return run_log_topics(*opt); }); });
   }
   {
@@ -358,7 +358,7 @@ void register_tactile(CLI::App& app) {
     sub->add_option("--map", opt->map, "Which topics hold the arm pose, the joints and the tactile images (TOML; "
                                         "docs/logs-and-simulator.md, ROS 2 recordings)")->required();
     sub->add_option("--out", opt->out, "Tactile log to write (HDF5)")->required();
-    add_common(sub, opt->common);
+    add_common(sub, opt->common, kThreads | kJson);
     sub->callback([opt] { run_command(opt->common, [opt] { return run_log_import(*opt); }); });
   }
   {
@@ -378,7 +378,7 @@ void register_tactile(CLI::App& app) {
         ->group(fs)->check(CLI::NonNegativeNumber)->capture_default_str();
     sub->add_option("--occupancy-voxel", opt->exploration.free.voxel, "m, occupancy grid voxel")
         ->group(fs)->check(CLI::PositiveNumber)->capture_default_str();
-    add_common(sub, opt->common);
+    add_common(sub, opt->common, kThreads | kJson);
     sub->callback([opt] { run_command(opt->common, [opt] { return run_log_export(*opt); }); });
   }
 }

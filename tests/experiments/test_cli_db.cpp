@@ -350,6 +350,31 @@ TEST_CASE("cli db: usage errors exit 2") {
   CHECK(touchstone(dir, "db info --help").code == 0);
 }
 
+TEST_CASE("cli: --threads and --seed only where they mean something; elsewhere hidden, taken, with a note") {
+  TempDir dir("cli");
+  write_meshes(dir);
+  REQUIRE(touchstone(dir, "db build --meshes meshes --out db.h5 --quiet" + kFast).code == 0);
+  const auto help = touchstone(dir, "db info --help");
+  CHECK(help.out.find("--seed") == std::string::npos);
+  CHECK(help.out.find("--threads") == std::string::npos);
+  CHECK(help.out.find("--json") != std::string::npos);
+  CHECK(touchstone(dir, "params --help").out.find("--seed") == std::string::npos);
+  CHECK(touchstone(dir, "report --help").out.find("--seed") == std::string::npos);
+  CHECK(touchstone(dir, "report --help").out.find("--threads") != std::string::npos);   // offered
+  CHECK(touchstone(dir, "db build --help").out.find("--seed") != std::string::npos);    // offered
+  // Given anyway: the same output, and a note naming the flag and the command.
+  const auto plain = touchstone(dir, "db info db.h5 --json");
+  const auto given = touchstone(dir, "db info db.h5 --json --seed 7 --threads 1");
+  REQUIRE_MESSAGE(given.code == 0, given.err);
+  CHECK(given.out == plain.out);
+  CHECK_MESSAGE(given.err.find("note: --seed changes nothing in `touchstone db info`") != std::string::npos, given.err);
+  CHECK(given.err.find("note: --threads changes nothing") != std::string::npos);
+  CHECK(plain.err.find("note:") == std::string::npos);
+  const auto params = touchstone(dir, "params --json --seed 3");
+  CHECK(params.code == 0);
+  CHECK(params.err.find("note: --seed changes nothing in `touchstone params`") != std::string::npos);
+}
+
 TEST_CASE("cli db: build killed at random instants resumes to the same bytes, never a partial database") {
   // `db build` is stopped with SIGKILL after a random delay, again and again; each restart
   // resumes from the objects already written. The database appears only when complete and is
