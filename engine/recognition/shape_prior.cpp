@@ -39,6 +39,10 @@ struct ShapePrior::Impl {
   std::vector<std::uint32_t> dbins;       // per object: distance bins of its histogram (0: none)
   std::vector<std::size_t> offset;        // per object: first code
   std::vector<std::uint8_t> codes;        // round(255 ln(p + floor) / ln(floor)), bin-major
+  // The distances' marginal (the angles summed out), for contacts without normals: per object
+  // dbins codes from dist_offset (the D2 shape distribution of Osada et al. 2002).
+  std::vector<std::size_t> dist_offset;
+  std::vector<std::uint8_t> dist_codes;
 };
 
 ShapePrior::ShapePrior(const Database& db, const ShapePriorSettings& settings,
@@ -71,6 +75,9 @@ ShapePrior::ShapePrior(const Database& db, const ShapePriorSettings& settings,
   m.offset.assign(n + 1, 0);
   for (std::size_t o = 0; o < n; ++o) m.offset[o + 1] = m.offset[o] + m.dbins[o] * m.angles;
   m.codes.assign(m.offset[n], kEmpty);
+  m.dist_offset.assign(n + 1, 0);
+  for (std::size_t o = 0; o < n; ++o) m.dist_offset[o + 1] = m.dist_offset[o] + m.dbins[o];
+  m.dist_codes.assign(m.dist_offset[n], kEmpty);
   const double ln_floor = std::log(settings.floor);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1), [&](const tbb::blocked_range<std::size_t>& r) {
     std::vector<double> h;
@@ -110,9 +117,16 @@ ShapePrior::ShapePrior(const Database& db, const ShapePriorSettings& settings,
         }
       if (!(total > 0.0)) continue;  // no pair: every bin stays empty
       std::uint8_t* out = &m.codes[m.offset[o]];
-      for (std::size_t i = 0; i < h.size(); ++i) {
-        const double c = 255.0 * std::log(h[i] / total + settings.floor) / ln_floor;
-        out[i] = static_cast<std::uint8_t>(std::clamp(std::lround(c), 0L, 255L));
+      auto code = [&](double p) {
+        const double c = 255.0 * std::log(p + settings.floor) / ln_floor;
+        return static_cast<std::uint8_t>(std::clamp(std::lround(c), 0L, 255L));
+      };
+      for (std::size_t i = 0; i < h.size(); ++i) out[i] = code(h[i] / total);
+      std::uint8_t* dist = &m.dist_codes[m.dist_offset[o]];
+      for (std::size_t k = 0; k < D; ++k) {
+        double sum = 0.0;
+        for (std::size_t a = 0; a < m.angles; ++a) sum += h[k * m.angles + a];
+        dist[k] = code(sum / total);
       }
     }
   });
@@ -130,15 +144,23 @@ std::vector<double> ShapePrior::score(const Scene& scene, const std::vector<std:
   const std::size_t n = m.dbins.size();
   constexpr double kNone = -std::numeric_limits<double>::infinity();
   std::vector<double> out(n, kNone);
-  // The contact pairs: every pair when there are few, else scene_pairs drawn at random.
+  // The contact pairs: every pair when there are few, else scene_pairs drawn at random. When
+  // fewer than half the contacts have a normal (isolated points: fingertips, a probe, a
+  // points-only cloud), every contact, scored on the distances alone.
   std::vector<std::uint32_t> with;
   for (std::uint32_t i = 0; i < scene.contacts.points.size(); ++i)
     if (i < scene.contacts.normals.size() && has_normal(scene.contacts.normals[i])) with.push_back(i);
+  const bool distances_only = 2 * with.size() < scene.contacts.points.size();
+  if (distances_only) {
+    with.resize(scene.contacts.points.size());
+    std::iota(with.begin(), with.end(), 0u);
+  }
   std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs;  // (distance bin, angle bin)
   auto add = [&](std::uint32_t a, std::uint32_t b) {
     double d = 0.0;
-    const int ab = angle_bin(scene.contacts.points[a], scene.contacts.normals[a], scene.contacts.points[b],
-                             scene.contacts.normals[b], m.s.angle_bins, d);
+    const int ab = distances_only ? ((d = (scene.contacts.points[b] - scene.contacts.points[a]).norm()) > 0.0 ? 0 : -1)
+                                  : angle_bin(scene.contacts.points[a], scene.contacts.normals[a],
+                                              scene.contacts.points[b], scene.contacts.normals[b], m.s.angle_bins, d);
     if (ab < 0 || d < m.s.min_pair_distance) return false;
     pairs.emplace_back(static_cast<std::uint32_t>(std::min(4.0e9, std::floor(d / m.s.distance_bin))),
                        static_cast<std::uint32_t>(ab));
@@ -161,10 +183,15 @@ std::vector<double> ShapePrior::score(const Scene& scene, const std::vector<std:
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 16), [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t o = r.begin(); o != r.end(); ++o) {
       if (m.dbins[o] == 0 || (!allowed.empty() && !allowed[o])) continue;
-      const std::uint8_t* h = &m.codes[m.offset[o]];
       std::uint64_t sum = 0;
-      for (const auto& [db, ab] : pairs)
-        sum += db < m.dbins[o] ? h[static_cast<std::size_t>(db) * m.angles + ab] : kEmpty;
+      if (distances_only) {
+        const std::uint8_t* h = &m.dist_codes[m.dist_offset[o]];
+        for (const auto& [db, ab] : pairs) sum += db < m.dbins[o] ? h[db] : kEmpty;
+      } else {
+        const std::uint8_t* h = &m.codes[m.offset[o]];
+        for (const auto& [db, ab] : pairs)
+          sum += db < m.dbins[o] ? h[static_cast<std::size_t>(db) * m.angles + ab] : kEmpty;
+      }
       out[o] = per_code * static_cast<double>(sum);
     }
   });

@@ -14,7 +14,11 @@
 // is the mean over the contact pairs of ln(h_o(bin) + floor), the log-likelihood of the pairs
 // under the object's pair distribution (the pairs treated as independent: for ranking only).
 // A pair longer than the object's diagonal falls outside its histogram and scores ln(floor):
-// the prior also knows each object's size. Pose-free and geometry-free: the histograms come
+// the prior also knows each object's size.
+// Contacts that mostly lack normals (fewer than half have one: fingertips, a probe, a
+// points-only cloud) are scored on the pair distances alone, against each object's marginal
+// of the same histogram (the D2 shape distribution, Osada et al. 2002): a weaker test, but one
+// that still ranks the objects by size and shape where the angles are unknown. Pose-free and geometry-free: the histograms come
 // from the keypoints, which stay in memory; a step scores every object in a few milliseconds.
 #pragma once
 

@@ -212,6 +212,77 @@ TEST_CASE("Shape prior: the sampled object ranks first, by form and by size, wha
   CHECK(std::find(ranked.begin(), ranked.end(), 3u) == ranked.end());
 }
 
+TEST_CASE("Shape prior without normals: the distances' marginal, by an oracle; size and form still rank") {
+  auto src = shapes();
+  Database db(src);
+  ShapePriorSettings s;
+  s.object_points = 1000;  // every keypoint: the oracle uses them all
+  s.scene_pairs = 100000;  // every contact pair
+  const ShapePrior prior(db, s);
+  // The oracle: each object's pair distances (pairs of keypoints with normals, split between
+  // the two bins whose centres bracket d), the contacts' pairs scored by distance alone.
+  auto oracle = [&](std::size_t o, const Scene& scene) {
+    const PointCloud& obj = src->clouds[o];
+    const long max_bin = static_cast<long>(std::floor(src->infos[o].extent.norm() / s.distance_bin));
+    std::map<long, double> h;
+    double total = 0.0;
+    for (std::size_t a = 0; a < obj.points.size(); ++a)
+      for (std::size_t b = a + 1; b < obj.points.size(); ++b) {
+        const double d = (obj.points[b] - obj.points[a]).norm();
+        if (d < s.min_pair_distance) continue;
+        const double f = d / s.distance_bin - 0.5;
+        const long k = static_cast<long>(std::floor(f));
+        const double w = f - double(k);
+        if (k >= 0 && k <= max_bin) { h[k] += 1.0 - w; total += 1.0 - w; }
+        if (k + 1 >= 0 && k + 1 <= max_bin) { h[k + 1] += w; total += w; }
+      }
+    double sum = 0.0;
+    int pairs = 0;
+    const auto& P = scene.contacts.points;
+    for (std::size_t a = 0; a < P.size(); ++a)
+      for (std::size_t b = a + 1; b < P.size(); ++b) {
+        const double d = (P[b] - P[a]).norm();
+        if (d < s.min_pair_distance) continue;
+        const auto it = h.find(static_cast<long>(std::floor(d / s.distance_bin)));
+        sum += std::log((it == h.end() ? 0.0 : it->second / total) + s.floor);
+        ++pairs;
+      }
+    return sum / pairs;
+  };
+  Rng rng(5);
+  const std::vector<PointCloud> samples = {box({0.10, 0.10, 0.10}, 40, rng), box({0.30, 0.04, 0.04}, 40, rng),
+                                           sphere(0.10, 40, rng), box({0.20, 0.20, 0.20}, 40, rng)};
+  const std::size_t truths[] = {0, 2, 4, 6};
+  std::size_t first = 0;
+  for (std::size_t k = 0; k < samples.size(); ++k) {
+    Scene scene = scene_of(samples[k], some_pose(40 + k));
+    // Fingertip-like: most contacts without a normal (zero), a few with one; below half, the
+    // prior scores every contact by distance alone.
+    for (std::size_t i = 0; i < scene.contacts.normals.size(); ++i)
+      if (i % 3 != 0) scene.contacts.normals[i] = Vec3::Zero();
+    const std::vector<double> score = prior.score(scene, {}, 1, 1);
+    for (std::size_t o = 0; o < db.size(); ++o) {
+      CAPTURE(o);
+      REQUIRE(std::isfinite(score[o]));
+      CHECK(std::abs(score[o] - oracle(o, scene)) <= 0.5 * std::abs(std::log(s.floor)) / 255.0 + 1e-9);
+    }
+    const std::vector<std::uint32_t> ranked = rank_by_prior(score);
+    CAPTURE(src->infos[truths[k]].name);
+    const auto at = std::find(ranked.begin(), ranked.end(), static_cast<std::uint32_t>(truths[k]));
+    CHECK(at - ranked.begin() < 3);   // distances alone: near the top (form is weaker than with angles)
+    first += ranked.front() == truths[k];
+  }
+  CHECK(first >= 3);
+  // With at least half the contacts carrying a normal the angles are used, as before: the
+  // score differs from the distances' one.
+  Scene half = scene_of(samples[0], some_pose(7));
+  for (std::size_t i = 0; i < half.contacts.normals.size(); i += 2) half.contacts.normals[i] = Vec3::Zero();
+  const std::vector<double> with_angles = prior.score(half, {}, 1, 1);
+  CHECK(std::isfinite(with_angles[0]));
+  for (auto& n : half.contacts.normals) n = Vec3::Zero();
+  CHECK(prior.score(half, {}, 1, 1)[0] != with_angles[0]);
+}
+
 TEST_CASE("Shape prior: the same histograms and scores for 1 and 2 threads; sampled scene pairs") {
   auto src = shapes();
   Database db(src);
