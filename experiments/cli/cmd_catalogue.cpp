@@ -84,14 +84,10 @@ int run_catalogue(const CatalogueOptions& o) {
   // Progress with the time left (progress.hpp); objects finish on several threads.
   ProgressReport progress(o.progress, "catalogue", "objects", stderr_is_terminal(), o.common.json, std::cerr);
   std::mutex progress_mutex;
-  const auto started = std::chrono::steady_clock::now();
   if (progress.active())
     s.progress = [&](std::size_t done, std::size_t total) {
       std::lock_guard<std::mutex> lock(progress_mutex);
-      const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-      progress.update(done, total, 60.0 * static_cast<double>(done) / std::max(1e-9, elapsed),
-                      done ? std::optional<double>(elapsed / static_cast<double>(done) * static_cast<double>(total - done))
-                           : std::nullopt);
+      progress.update(done, total);
     };
   const auto r = catalogue::generate_catalogue(o.out, s);
   progress.finish();

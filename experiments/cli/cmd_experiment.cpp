@@ -405,14 +405,8 @@ int run_merge(MergeOptions o) {
   }
   std::vector<std::filesystem::path> shards(o.shards.begin(), o.shards.end());
   ProgressReport progress(o.progress, "merge", "stores", stderr_is_terminal(), o.common.json, std::cerr);
-  const auto started = std::chrono::steady_clock::now();
   std::function<void(std::size_t, std::size_t)> on_progress;
-  if (progress.active())
-    on_progress = [&](std::size_t done, std::size_t total) {
-      const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-      progress.update(done, total, 60.0 * static_cast<double>(done) / std::max(1e-9, elapsed),
-                      elapsed / static_cast<double>(done) * static_cast<double>(total - done));
-    };
+  if (progress.active()) on_progress = [&](std::size_t done, std::size_t total) { progress.update(done, total); };
   const std::size_t runs = experiments::merge_shards(o.out, shards, on_progress);
   progress.finish();
   if (o.common.json) {
@@ -476,7 +470,6 @@ int run_calibrate(const CalibrateOptions& o) {
   const RunRange range = parse_runs(o.runs);
   // Progress over the stores read (the fit that follows takes seconds).
   ProgressReport progress(o.progress, "calibrate", "stores", stderr_is_terminal(), o.common.json, std::cerr);
-  const auto started = std::chrono::steady_clock::now();
   for (const std::string& path : o.stores) {
     io::RunStoreContents c = io::RunStore::read(path);
     std::erase_if(c.runs, [&](const io::RunRecord& r) { return !range.has(r.run); });
@@ -552,12 +545,7 @@ int run_calibrate(const CalibrateOptions& o) {
                                    : nlohmann::ordered_json::array({range.first, range.end});
     src["step_answers"] = steps;
     sources.push_back(src);
-    if (progress.active()) {
-      const std::size_t done = sources.size();
-      const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-      progress.update(done, o.stores.size(), 60.0 * static_cast<double>(done) / std::max(1e-9, elapsed),
-                      elapsed / static_cast<double>(done) * static_cast<double>(o.stores.size() - done));
-    }
+    progress.update(sources.size(), o.stores.size());
   }
   progress.finish();
   if (rows.empty()) throw Error("the run stores hold no runs to fit on", o.stores.front(), "/runs");

@@ -792,7 +792,6 @@ int recognize_many(const Context& c, const std::vector<Input>& inputs,
   ProgressReport progress(o.progress, "recognize", "inputs", stderr_is_terminal(), o.common.json, std::cerr);
   std::mutex progress_mutex;
   std::size_t done = 0;
-  const auto started = std::chrono::steady_clock::now();
   // Every input's recognizer shares one FeatureTable, held here for the whole batch
   // (FeatureTable::shared keeps a table only while someone holds it).
   const auto table = c.rs.ransac.feature_table ? FeatureTable::shared(c.db, c.rs.objects) : nullptr;
@@ -816,10 +815,7 @@ int recognize_many(const Context& c, const std::vector<Input>& inputs,
           experiments::release_free_memory();   // what the input freed, before the next
           if (progress.active()) {
             std::lock_guard<std::mutex> lock(progress_mutex);
-            const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-            ++done;
-            progress.update(done, inputs.size(), 60.0 * static_cast<double>(done) / std::max(1e-9, elapsed),
-                            elapsed / static_cast<double>(done) * static_cast<double>(inputs.size() - done));
+            progress.update(++done, inputs.size());
           }
         }
       },

@@ -2,6 +2,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <ctime>
 #include <iomanip>
@@ -92,6 +93,13 @@ void ProgressReport::update(std::size_t done, std::size_t total, double rate_per
        << std::setprecision(1) << percent << " %), " << std::setprecision(2) << rate_per_min << ' ' << unit_ << "/min";
   if (left_s) line << ", " << eta_text(*left_s) << " left";
   out_ << line.str() << '\n' << std::flush;
+}
+
+void ProgressReport::update(std::size_t done, std::size_t total) {
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
+  update(done, total, 60.0 * static_cast<double>(done) / std::max(1e-9, elapsed),
+         done ? std::optional<double>(elapsed / static_cast<double>(done) * static_cast<double>(total - done))
+              : std::nullopt);
 }
 
 void ProgressReport::note(const std::string& text) {

@@ -36,6 +36,9 @@ class ProgressReport {
   /// `done` of `total` (done includes earlier sessions); `rate_per_min` and `left_s` from this
   /// session (left_s: nullopt before anything was done).
   void update(std::size_t done, std::size_t total, double rate_per_min, std::optional<double> left_s);
+  /// The same with the rate and the time left measured from this report's construction (all of
+  /// `done` counted as this session's work).
+  void update(std::size_t done, std::size_t total);
   /// Ends a bar's line (no-op otherwise).
   void finish();
   /// A line for a person (bar and lines; not json or none).
@@ -50,6 +53,7 @@ class ProgressReport {
   bool printed_ = false, bar_open_ = false;
   int last_twentieth_ = -1;
   std::chrono::steady_clock::time_point last_line_;
+  std::chrono::steady_clock::time_point started_ = std::chrono::steady_clock::now();
 };
 
 }  // namespace ts::cli
