@@ -13,8 +13,8 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 }
 
-std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, std::span<const std::uint32_t> class_of,
-                                          std::size_t classes) {
+std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, double answer_log_weight,
+                                          std::span<const std::uint32_t> class_of, std::size_t classes) {
   std::vector<double> best(classes, -kInf);
   double top = -kInf;
   for (const Hypothesis& h : state) {
@@ -29,9 +29,20 @@ std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, std
   }
   std::vector<double> gaps(classes, kInf);
   if (top == -kInf) return gaps;
-  for (std::size_t c = 0; c < classes; ++c)
-    if (best[c] > -kInf) gaps[c] = top == kInf ? (best[c] == kInf ? 0.0 : kInf) : top - best[c];
+  const double ref = std::isnan(answer_log_weight) ? top : answer_log_weight;
+  for (std::size_t c = 0; c < classes; ++c) {
+    if (best[c] == -kInf) continue;
+    if (ref == kInf)
+      gaps[c] = best[c] == kInf ? 0.0 : kInf;
+    else
+      gaps[c] = std::max(0.0, ref - best[c]);   // a class weighted at or above the answer: 0
+  }
   return gaps;
+}
+
+std::vector<double> class_log_weight_gaps(const StepResult& r, std::span<const std::uint32_t> class_of, std::size_t classes) {
+  if (!r.valid) return class_log_weight_gaps({}, 0.0, class_of, classes);
+  return class_log_weight_gaps(r.hypotheses, r.best.log_weight, class_of, classes);
 }
 
 std::vector<std::uint32_t> class_indices(std::size_t objects, const std::vector<std::vector<std::size_t>>& members,

@@ -470,7 +470,7 @@ nlohmann::ordered_json to_json(const Calibration& c) {
     const AnswerSetCalibration& a = *c.answer_sets;
     nlohmann::ordered_json s;
     s["alpha"] = a.alpha;
-    s["score"] = "log-weight gap of the true class of congruent objects (engine/recognition/answer_set.hpp)";
+    s["score"] = "log-weight gap of the true class of congruent objects to the answer (engine/recognition/answer_set.hpp)";
     s["simulation"] = a.simulation;
     s["steps"] = nlohmann::ordered_json::array();
     for (std::size_t k = 0; k < a.steps.size(); ++k)
@@ -555,7 +555,14 @@ Calibration read_calibration(const std::filesystem::path& path, const std::strin
                     "steps[" + std::to_string(k) + "].in_database");
     c.open_set_threshold = t.get<double>();
   }
-  if (j.contains("answer_sets") && !j["answer_sets"].is_null()) c.answer_sets = read_answer_sets(j["answer_sets"], file);
+  if (j.contains("answer_sets") && !j["answer_sets"].is_null()) {
+    if (j["version"].get<long long>() < 5)
+      throw Error("the answer sets of a version " + j["version"].dump() +
+                  " calibration scored classes against the ln w leader, which left the truth out when the near-twin "
+                  "verification chose a lighter twin; refit with `touchstone calibrate` (version 5 scores against the answer)",
+                  file, "answer_sets");
+    c.answer_sets = read_answer_sets(j["answer_sets"], file);
+  }
   c.provenance = j.contains("provenance") ? j["provenance"] : nlohmann::ordered_json::object();
   return c;
 }

@@ -98,11 +98,12 @@ struct AnswerSetCalibration {
 /// JSON (touchstone's config_json): noise, noise.*, sensing, sensors.
 nlohmann::ordered_json simulation_of(const nlohmann::ordered_json& config);
 
-/// The calibration file (JSON, "format": "touchstone-calibration", version 4; versions 2 (all
-/// models linear) and 3 (no answer sets) are read as well): one set of models per range of steps
+/// The calibration file (JSON, "format": "touchstone-calibration", version 5; versions 2 (all
+/// models linear), 3 (no answer sets) and 4 (answer sets scored against the ln w leader: refused,
+/// refit) are read as well): one set of models per range of steps
 /// (how far an exploration is changes what the features mean), and the answer sets' scores.
 struct Calibration {
-  static constexpr int kVersion = 4;
+  static constexpr int kVersion = 5;
   static constexpr int kOldestVersion = 2;
   std::string database_fingerprint;   ///< of the database the runs explored
   std::vector<std::string> features;  ///< confidence_feature_names() when fitted
@@ -111,7 +112,7 @@ struct Calibration {
   /// (unset: every answer names an object). Chosen on calibration runs by
   /// choose_open_set_threshold; needs in_database in every range.
   std::optional<double> open_set_threshold;
-  /// Set answers (unset: a calibration fitted without them, or before version 4).
+  /// Set answers (unset: a calibration fitted without them, or before version 5).
   std::optional<AnswerSetCalibration> answer_sets;
   nlohmann::ordered_json provenance;  ///< what it was fitted on (stores, runs, steps, seeds)
 

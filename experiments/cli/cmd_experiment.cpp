@@ -490,10 +490,10 @@ int run_calibrate(const CalibrateOptions& o) {
     }
     const std::set<int> hidden = experiments::hidden_explored_objects(c.header);
     const experiments::ClassMap classes = experiments::class_map(c.header);
-    const auto gap_column = std::find(c.header.step_values.begin(), c.header.step_values.end(), "set.truth_gap");
+    const auto gap_column = std::find(c.header.step_values.begin(), c.header.step_values.end(), "set.truth_gap_to_answer");
     const auto config_json = nlohmann::ordered_json::parse(c.header.config_json, nullptr, false);
     if (gap_column == c.header.step_values.end()) {
-      if (no_set_reason.empty()) no_set_reason = path + " has no per-step 'set.truth_gap' (written before set answers)";
+      if (no_set_reason.empty()) no_set_reason = path + " has no per-step 'set.truth_gap_to_answer' (written before set answers scored against the answer: rerun it)";
     } else {
       const auto sim = experiments::simulation_of(config_json);
       if (c.header.variant_labels.size() > 1)

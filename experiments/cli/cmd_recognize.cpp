@@ -184,7 +184,7 @@ struct StepSet {
 
 StepSet step_set(const Context& c, const StepResult& r) {
   const experiments::AnswerSetCalibration& a = *c.calibration->answer_sets;
-  StepSet s{class_log_weight_gaps(r.hypotheses, c.class_of, c.classes), &a.at(r.step), a.calibrated_step(r.step), {}};
+  StepSet s{class_log_weight_gaps(r, c.class_of, c.classes), &a.at(r.step), a.calibrated_step(r.step), {}};
   s.set = conformal_set(s.gaps, *s.scores, c.o.alpha.value_or(a.alpha));
   return s;
 }
@@ -192,7 +192,7 @@ StepSet step_set(const Context& c, const StepResult& r) {
 /// The step's set answer (the calibration's answer sets, at --alpha or the calibration's level):
 /// the classes of congruent objects that hold the truth with probability at least 1 - alpha, each
 /// with its conformal p-value (it stays in the set for every alpha below it) and its log-weight gap
-/// to the leader, or "informative": false when no class can be excluded.
+/// to the answer, or "informative": false when no class can be excluded.
 nlohmann::ordered_json answer_set_json(const Context& c, const StepSet& s) {
   const AnswerSet& set = s.set;
   std::vector<std::vector<std::size_t>> members(c.classes);

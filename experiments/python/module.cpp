@@ -374,7 +374,7 @@ class PyRecognizer {
     if (!calibration_) return py::none();
     const experiments::AnswerSetCalibration& a = *calibration_->answer_sets;
     const double alpha = alpha_.value_or(a.alpha);
-    const AnswerSet set = conformal_set(class_log_weight_gaps(r.hypotheses, class_of_, classes_), a.at(r.step), alpha);
+    const AnswerSet set = conformal_set(class_log_weight_gaps(r, class_of_, classes_), a.at(r.step), alpha);
     py::dict o;
     o["alpha"] = alpha;
     o["informative"] = set.informative;

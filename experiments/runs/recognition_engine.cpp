@@ -431,9 +431,9 @@ class RecognitionEngine final : public RunEngine {
         const auto g = std::find_if(sr.stages.begin(), sr.stages.end(), [&](const StageRun& x) { return x.name == stage; });
         s.values.push_back(g == sr.stages.end() ? nan : g->ran ? 1.0 : 0.0);
       }
-      // Set answers: the true class's log-weight gap (what `calibrate` fits on; NaN for a hidden
+      // Set answers: the true class's log-weight gap to the answer (what `calibrate` fits on; NaN for a hidden
       // object), and with a calibration's answer sets the set's size and whether it holds the truth.
-      const std::vector<double> gaps = class_log_weight_gaps(sr.hypotheses, group.class_of, group.classes);
+      const std::vector<double> gaps = class_log_weight_gaps(sr, group.class_of, group.classes);
       s.values.push_back(hidden ? nan : gaps.at(group.class_of.at(local_true)));
       if (calibration_ && calibration_->answer_sets) {
         const AnswerSetCalibration& a = *calibration_->answer_sets;
@@ -561,7 +561,7 @@ const std::vector<std::string>& recognition_step_values() {
     std::vector<std::string> n{"confidence_object", "confidence_pose"};
     for (const std::string& f : confidence_feature_names()) n.push_back("feature." + f);
     for (const std::string& stage : pipeline_stage_names()) n.push_back("ran." + stage);
-    n.insert(n.end(), {"set.truth_gap", "answer_set.size", "answer_set.covers", "answer_set.informative",
+    n.insert(n.end(), {"set.truth_gap_to_answer", "answer_set.size", "answer_set.covers", "answer_set.informative",
                        "plan.expected_information", "plan.expected_object_information", "plan.entropy_drop",
                        "fit.contact_distance_m"});
     return n;

@@ -23,24 +23,42 @@ Hypothesis hyp(std::uint32_t object, double log_weight) {
 }
 }  // namespace
 
-TEST_CASE("Classes' log-weight gaps: the leader's ln w minus each class's best, +inf without hypotheses") {
+TEST_CASE("Classes' log-weight gaps: the answer's ln w minus each class's best, floored at 0, +inf without hypotheses") {
   std::size_t classes = 0;
   // Objects 1 and 3 congruent: classes {1, 3} -> 0, then 0 -> 1, 2 -> 2, 4 -> 3.
   const std::vector<std::uint32_t> of = class_indices(5, {{1, 3}}, classes);
   REQUIRE(classes == 4);
   CHECK(of == std::vector<std::uint32_t>{1, 0, 2, 0, 3});
   const std::vector<Hypothesis> state{hyp(2, -0.5), hyp(3, -0.01), hyp(0, -0.25), hyp(1, -0.04), hyp(2, -0.75)};
-  const std::vector<double> gaps = class_log_weight_gaps(state, of, classes);
+  // The answer is the ln w leader (object 3).
+  std::vector<double> gaps = class_log_weight_gaps(state, -0.01, of, classes);
   REQUIRE(gaps.size() == 4);
   CHECK(gaps[0] == 0.0);                              // object 3 leads; its class holds object 1 too
   CHECK(gaps[1] == doctest::Approx(0.24).epsilon(1e-12));
   CHECK(gaps[2] == doctest::Approx(0.49).epsilon(1e-12));   // object 2's best, not its worse one
   CHECK(gaps[3] == kInf);                             // no hypothesis of object 4
+  // NaN: the leader stands in for the answer.
+  CHECK(class_log_weight_gaps(state, std::nan(""), of, classes) == gaps);
+  // The answer rule chose object 0 (ln w -0.25) over the heavier class {1, 3}: object 0's class
+  // scores 0, the heavier class 0 too (floored), object 2 its distance below the answer.
+  gaps = class_log_weight_gaps(state, -0.25, of, classes);
+  CHECK(gaps[0] == 0.0);
+  CHECK(gaps[1] == 0.0);
+  CHECK(gaps[2] == doctest::Approx(0.25).epsilon(1e-12));
+  CHECK(gaps[3] == kInf);
+  // The same through a step: its answer is r.best; a step without hypotheses has no evidence.
+  StepResult r;
+  r.valid = true;
+  r.hypotheses = state;
+  r.best = state[2];
+  CHECK(class_log_weight_gaps(r, of, classes) == gaps);
+  r.valid = false;
+  for (double g : class_log_weight_gaps(r, of, classes)) CHECK(g == kInf);
   // An empty state: no class has evidence.
-  for (double g : class_log_weight_gaps({}, of, classes)) CHECK(g == kInf);
+  for (double g : class_log_weight_gaps({}, 0.0, of, classes)) CHECK(g == kInf);
   // A hypothesis outside the database, a class index out of range, an object in two classes.
-  CHECK_THROWS_AS(class_log_weight_gaps(std::vector<Hypothesis>{hyp(7, 0.0)}, of, classes), Error);
-  CHECK_THROWS_AS(class_log_weight_gaps(state, of, 2), Error);
+  CHECK_THROWS_AS(class_log_weight_gaps(std::vector<Hypothesis>{hyp(7, 0.0)}, 0.0, of, classes), Error);
+  CHECK_THROWS_AS(class_log_weight_gaps(state, -0.01, of, 2), Error);
   CHECK_THROWS_AS(class_indices(5, {{1, 3}, {3, 4}}, classes), Error);
   CHECK_THROWS_AS(class_indices(5, {{1, 5}}, classes), Error);
 }

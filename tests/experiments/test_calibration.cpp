@@ -192,7 +192,7 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   CHECK(qback.object_confidence(1, x) == back.object_confidence(1, x));
   CHECK_THROWS_AS(q.predict(std::vector<double>(2 * f, 0.0)), Error);   // terms given as features
   auto qj = to_json(qc);
-  CHECK(qj["version"] == 4);
+  CHECK(qj["version"] == 5);
   CHECK(qj["steps"][1]["object"]["terms"] == "quadratic");
   auto short_q = qj;   // quadratic, but the coefficients of a linear model
   short_q["steps"][1]["object"]["coef"] = j["steps"][1]["object"]["coef"];
@@ -217,7 +217,7 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   std::ofstream(dir / "v3.json") << v3.dump();
   CHECK_FALSE(read_calibration(dir / "v3.json", "abc123").answer_sets);
   auto newer = qj;
-  newer["version"] = 5;
+  newer["version"] = 6;
   CHECK(error_of(newer.dump(), "abc123") == "version");
   // The clamp of standardized terms: written, read back, applied (the pose model, mean 0 and
   // scale 1: z = -0.5 - 0.5 * sum(clamp(t)), t = 10 clamped to 4 in every term).
@@ -588,6 +588,15 @@ TEST_CASE("Calibration files: answer sets round trip, and every bad count or num
   auto infinite = j;
   infinite["answer_sets"]["steps"][0]["infinite"] = -1;
   CHECK(error_of(infinite) == "answer_sets.steps[0].infinite");
+  // Version 4's answer sets were scored against the ln w leader: refused (refit), its models not.
+  auto v4 = j;
+  v4["version"] = 4;
+  CHECK(error_of(v4) == "answer_sets");
+  v4["answer_sets"] = nullptr;
+  {
+    std::ofstream(dir / "v4.json") << v4.dump();
+    CHECK_FALSE(read_calibration(dir / "v4.json", "f").answer_sets);
+  }
   // A huge count that agrees with itself is read without allocating by it.
   auto huge = j;
   huge["answer_sets"]["steps"][0]["gaps"] = nlohmann::ordered_json::array();

@@ -1228,8 +1228,13 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
     CHECK(a["calibrated_step"] == st["step"]);
     if (!a["informative"].get<bool>()) continue;
     REQUIRE(a["members"].size() == a["size"].get<std::size_t>());
-    CHECK(a["members"][0]["log_weight_gap"] == 0.0);   // the leader
+    CHECK(a["members"][0]["log_weight_gap"] == 0.0);   // the answer's class (or one weighted above it)
     CHECK(a["members"][0]["p_value"] == 1.0);
+    bool has_answer = false;   // the answer is always in its set
+    for (const auto& m : a["members"])
+      for (const auto& name : m["objects"])
+        has_answer = has_answer || name == (st["object"].is_null() ? st["best_guess"] : st["object"]);
+    CHECK(has_answer);
     double last = 0.0;
     for (const auto& m : a["members"]) {
       CHECK(m["p_value"].get<double>() > 0.5);
@@ -1311,7 +1316,7 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
     const io::RunStoreContents store = io::RunStore::read(dir / "sets.h5");
     const auto& v = store.header.step_values;
     auto col = [&](const char* name) { return static_cast<std::size_t>(std::find(v.begin(), v.end(), name) - v.begin()); };
-    const std::size_t gap = col("set.truth_gap"), covers = col("answer_set.covers"), informative = col("answer_set.informative");
+    const std::size_t gap = col("set.truth_gap_to_answer"), covers = col("answer_set.covers"), informative = col("answer_set.informative");
     REQUIRE(informative < v.size());
     std::size_t checked = 0;
     for (const auto& r : store.runs)
