@@ -44,7 +44,8 @@ J matrix_json(const Pose& T) {
 
 J scene_json(const Database& db, const StepResult& r, const PointCloud& contacts, const std::vector<Vec3>& free,
              const std::optional<std::size_t>& truth_object, const std::optional<Pose>& truth_pose,
-             const std::string& name, const std::string& label, const SceneLimits& limits) {
+             const std::string& name, const std::string& label, std::optional<double> answer_confidence,
+             const SceneLimits& limits) {
   J s;
   s["name"] = name;
   s["label"] = label;
@@ -54,15 +55,44 @@ J scene_json(const Database& db, const StepResult& r, const PointCloud& contacts
   s["free"] = J::array();
   for (std::size_t i : spread(free.size(), limits.free_points)) s["free"].push_back(point(free[i]));
   s["free_total"] = free.size();
+  // One entry per object: the answer's hypothesis for the answer's object, each other object's
+  // best by ln w; ranked by the object's posterior (the number the legend shows), ties by ln w,
+  // the answer always among those drawn.
+  struct Entry {
+    const Hypothesis* h;
+    double posterior;
+  };
+  std::vector<Entry> objects;
+  std::set<std::uint32_t> seen;
+  if (r.valid) {
+    seen.insert(r.best.object);
+    objects.push_back({&r.best, 0.0});
+  }
+  for (const Hypothesis& h : r.hypotheses)   // best ln w first
+    if (seen.insert(h.object).second) objects.push_back({&h, 0.0});
+  for (Entry& e : objects) e.posterior = e.h->object < r.posteriors.size() ? r.posteriors[e.h->object] : 0.0;
+  std::stable_sort(objects.begin(), objects.end(), [](const Entry& a, const Entry& b) {
+    return a.posterior != b.posterior ? a.posterior > b.posterior : a.h->log_weight > b.h->log_weight;
+  });
+  if (objects.size() > limits.hypotheses) {
+    const auto answer = std::find_if(objects.begin(), objects.end(),
+                                     [&](const Entry& e) { return r.valid && e.h->object == r.best.object; });
+    const auto cut = objects.begin() + static_cast<std::ptrdiff_t>(limits.hypotheses);
+    if (answer >= cut && limits.hypotheses > 0) std::rotate(cut - 1, answer, answer + 1);   // in, last
+    objects.resize(limits.hypotheses);
+  }
+  s["answer"] = r.valid ? J(db.info(r.best.object).name) : J(nullptr);
+  s["ranked_by"] = "posterior";
   s["hypotheses"] = J::array();
-  std::set<std::uint32_t> drawn;
-  for (const Hypothesis& h : r.hypotheses) {   // best first; one per object
-    if (drawn.size() >= limits.hypotheses) break;
-    if (!drawn.insert(h.object).second) continue;
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    const Hypothesis& h = *objects[k].h;
+    const bool is_answer = r.valid && h.object == r.best.object;
     J hj;
-    hj["rank"] = drawn.size();
+    hj["rank"] = k + 1;
     hj["object"] = db.info(h.object).name;
-    hj["posterior"] = h.object < r.posteriors.size() ? r.posteriors[h.object] : 0.0;
+    hj["answer"] = is_answer;
+    hj["posterior"] = objects[k].posterior;
+    hj["confidence"] = is_answer && answer_confidence ? J(*answer_confidence) : J(nullptr);
     hj["log_weight"] = std::isfinite(h.log_weight) ? J(h.log_weight) : J(nullptr);
     hj["pose"] = matrix_json(h.pose);
     hj["points"] = object_points(db, h.object, h.pose, limits.object_points);

@@ -23,11 +23,16 @@ struct SceneLimits {
 };
 
 /// One step's scene. `name` names the picture's files (scene_<name>_step<k>); `label` titles it.
-/// Coordinates in metres, world frame, rounded to 0.1 mm.
+/// Coordinates in metres, world frame, rounded to 0.1 mm. "hypotheses": one per object (the
+/// answer's own hypothesis for the answer's object, each other object's best by ln w), ranked by
+/// the object's posterior (normalized weights summed per object: a share of the state's weight,
+/// not a calibrated probability), at most limits.hypotheses, the answer always among them
+/// ("answer": true, with `answer_confidence`, the calibrated confidence, when there is one).
 nlohmann::ordered_json scene_json(const Database& db, const StepResult& r, const PointCloud& contacts,
                                   const std::vector<Vec3>& free, const std::optional<std::size_t>& truth_object,
                                   const std::optional<Pose>& truth_pose, const std::string& name,
-                                  const std::string& label, const SceneLimits& limits = {});
+                                  const std::string& label, std::optional<double> answer_confidence = std::nullopt,
+                                  const SceneLimits& limits = {});
 
 /// The steps to draw from `--scene-steps` (1-based, ascending, unique; empty: the last step);
 /// throws ts::Error naming `--scene-steps` for a step outside 1..steps.

@@ -345,8 +345,10 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
             ? mean_contact_distance(*db.geometry(r.best.object), r.best.pose, contacts.points)
             : std::numeric_limits<double>::quiet_NaN());
     if (std::find(draw.begin(), draw.end(), k) != draw.end())
-      run.scenes.push_back(experiments::scene_json(db, r, contacts, free, truth_object, run.truth_pose, stem,
-                                                   stem + ", step " + std::to_string(k)));
+      run.scenes.push_back(experiments::scene_json(
+          db, r, contacts, free, truth_object, run.truth_pose, stem, stem + ", step " + std::to_string(k),
+          c.calibration && r.valid ? std::optional(c.calibration->object_confidence(r.step, experiments::confidence_features(r)))
+                                   : std::nullopt));
     run.stored.push_back(io::to_result_step(r, truth_object, run.truth_pose, sym));
     if (run.truth_outside) run.stored.back().correct = !r.valid;
     if (c.calibration && c.calibration->answer_sets) {
@@ -988,7 +990,7 @@ void register_recognize(CLI::App& app) {
       ->check(CLI::Range(1, 1000));
   sub->add_option("--scene", o->scene,
                   "Pictures of the scene into this folder: for each input and chosen step, the contacts, the "
-                  "free-space points, the leading hypotheses' objects at their poses and the true object when "
+                  "free-space points, the answer and its leading rivals (by object posterior) at their poses and the true object when "
                   "known, as scene_<input>_step<k>.png (two views) and .html (interactive, self-contained)");
   sub->add_option("--scene-steps", o->scene_steps, "The steps --scene draws (default: the last)")
       ->delimiter(',');

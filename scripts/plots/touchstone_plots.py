@@ -334,6 +334,31 @@ SCENE_COLOURS = {"contacts": "#d62728", "free": "#9ecae1", "truth": "#7f7f7f",
                  "hypotheses": ["#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2"]}
 
 
+def is_answer(scene, h):
+    """Whether a drawn hypothesis is the step's answer (scenes before "answer" was written: the first)."""
+    if "answer" in h:
+        return bool(h["answer"])
+    return h is scene.get("hypotheses", [None])[0]
+
+
+def hypothesis_label(h, answer):
+    """'#2 hand: posterior 0.110' (the share of the state's weight, which ranks them); the answer
+    adds its calibrated confidence, or says that the posterior is not one."""
+    text = "#%d %s: posterior %.3f" % (h["rank"], h["object"], h["posterior"])
+    if not answer:
+        return text
+    if h.get("confidence") is not None:
+        return text + " (the answer; calibrated confidence %.2f)" % h["confidence"]
+    return text + " (the answer; a share of the weight, not a calibrated probability)"
+
+
+def answer_name(scene):
+    """The object the step named (older scenes: the first drawn), or 'nothing'."""
+    if "answer" in scene:
+        return scene["answer"] if scene["answer"] is not None else "nothing"
+    return scene["hypotheses"][0]["object"] if scene.get("hypotheses") else "nothing"
+
+
 def scene_layers(scene):
     """The drawn layers, back to front: (label, points N x 3, colour, size, opacity). The leading
     hypothesis is drawn solid, its rivals faint, the truth as a larger grey shell behind them."""
@@ -346,10 +371,16 @@ def scene_layers(scene):
         layers.append(("truth: %s" % truth["object"], np.asarray(truth["points"], float),
                        SCENE_COLOURS["truth"], 3.0, 0.25))
     hypotheses = scene.get("hypotheses", [])
-    for i, h in reversed(list(enumerate(hypotheses))):   # the leader drawn last, on top
+    # Ranked by the object's posterior, the number each label shows; the answer drawn solid, on top.
+    # Drawn rivals from the last rank up, then the answer; the legend reverses the drawing order.
+    order = [i for i in reversed(range(len(hypotheses))) if not is_answer(scene, hypotheses[i])] + \
+            [i for i in range(len(hypotheses)) if is_answer(scene, hypotheses[i])]
+    for i in order:
+        h = hypotheses[i]
         colour = SCENE_COLOURS["hypotheses"][i % len(SCENE_COLOURS["hypotheses"])]
-        layers.append(("#%d %s (object posterior %.3f)" % (h["rank"], h["object"], h["posterior"]),
-                       np.asarray(h["points"], float), colour, 1.6 if i == 0 else 1.0, 0.9 if i == 0 else 0.25))
+        answer = is_answer(scene, h)
+        layers.append((hypothesis_label(h, answer), np.asarray(h["points"], float), colour,
+                       1.6 if answer else 1.0, 0.9 if answer else 0.25))
     if scene.get("contacts"):
         layers.append(("contacts (%d)" % len(scene["contacts"]), np.asarray(scene["contacts"], float),
                        SCENE_COLOURS["contacts"], 5.0, 1.0))
@@ -377,12 +408,13 @@ def plot_scene(scene, out, written):
         ax.set_zlabel("z (m)")
         ax.set_title("azimuth %d°" % azim)
     handles, labels = fig.axes[0].get_legend_handles_labels()
-    # The legend reads contacts, hypotheses #1 to #3, truth, free space (the drawing order reversed).
+    # The legend reads contacts, the answer, its rivals by rank, truth, free space (the drawing order
+    # reversed).
     handles, labels = handles[::-1], labels[::-1]
     legend = fig.legend(handles, labels, loc="lower center", ncol=3, markerscale=4, frameon=False)
     for handle in legend.legend_handles if hasattr(legend, "legend_handles") else legend.legendHandles:
         handle.set_alpha(1.0)
-    best = scene["hypotheses"][0]["object"] if scene.get("hypotheses") else "nothing"
+    best = answer_name(scene)
     fig.suptitle("%s: named %s%s" % (scene["label"], best,
                                      ", truth %s" % scene["truth"]["object"] if scene.get("truth") else ""))
     fig.subplots_adjust(bottom=0.16)
@@ -440,7 +472,7 @@ def scene_html(scene, layers):
     import html
     data = [{"label": label, "colour": colour, "size": max(2, round(size)), "alpha": alpha,
              "points": np.round(pts, 4).tolist()} for label, pts, colour, size, alpha in layers]
-    best = scene["hypotheses"][0]["object"] if scene.get("hypotheses") else "nothing"
+    best = answer_name(scene)
     title = html.escape("%s: named %s" % (scene["label"], best))
     # The data inside a <script>: no "</" may close it early.
     return SCENE_VIEWER % {"title": title, "layers": json.dumps(data).replace("</", "<\\/")}

@@ -5,6 +5,7 @@
 #include "engine/recognition_fixture.hpp"
 #include "engine/touch/fusion.hpp"
 #include "experiments/analysis/calibration.hpp"
+#include "experiments/analysis/scene.hpp"
 #include "experiments/runs/recognition_engine.hpp"
 #include "io/cloud_io.hpp"
 #include "io/db_store.hpp"
@@ -1161,6 +1162,87 @@ TEST_CASE("cli recognize --scene: each chosen step drawn in the world frame, a P
   CHECK(bad.err.find("--scene-steps") != std::string::npos);
   CHECK(bad.err.find("log.h5") != std::string::npos);
   CHECK_FALSE(fs::exists(dir / "pics2"));
+}
+
+// The scene's data (experiments/analysis/scene.hpp) directly: ranked by the number the legend
+// shows, the answer always drawn, also when the answer rule chose an object neither ln w nor the
+// posterior puts first.
+namespace {
+Hypothesis scene_hyp(std::uint32_t object, double log_weight, double x) {
+  Hypothesis h;
+  h.object = object;
+  h.log_weight = log_weight;
+  h.weight = std::exp(log_weight);
+  h.pose = Pose::Identity();
+  h.pose.translation() = Vec3(x, 0.0, 0.0);
+  return h;
+}
+}  // namespace
+
+TEST_CASE("Scene: objects ranked by their posterior, the answer always drawn, its confidence only where calibrated") {
+  test::TempDir dir("scene_rank");
+  make_db(dir);
+  const Database db(std::make_shared<io::DbReader>((dir / "db.h5").string()));
+  REQUIRE(db.size() >= 3);
+  // ln w ranks object 0 first; the posteriors (weights summed per object) rank object 1 first
+  // (two hypotheses); the answer rule chose object 2, last by both.
+  StepResult r;
+  r.step = 4;
+  r.valid = true;
+  r.hypotheses = {scene_hyp(0, -0.1, 0.01), scene_hyp(1, -0.2, 0.02), scene_hyp(1, -0.25, 0.03), scene_hyp(2, -0.3, 0.04)};
+  r.posteriors.assign(db.size(), 0.0);
+  r.posteriors[0] = 0.3;
+  r.posteriors[1] = 0.5;
+  r.posteriors[2] = 0.2;
+  r.best = r.hypotheses[3];
+  const PointCloud contacts;
+  auto drawn = [&](std::size_t limit, std::optional<double> confidence) {
+    experiments::SceneLimits limits;
+    limits.hypotheses = limit;
+    limits.object_points = 10;
+    return experiments::scene_json(db, r, contacts, {}, std::nullopt, std::nullopt, "s", "s", confidence, limits);
+  };
+  const std::string n0 = db.info(0).name, n1 = db.info(1).name, n2 = db.info(2).name;
+
+  const auto all = drawn(3, 0.8);
+  CHECK(all["answer"] == n2);
+  CHECK(all["ranked_by"] == "posterior");
+  REQUIRE(all["hypotheses"].size() == 3);
+  const std::vector<std::string> order{n1, n0, n2};
+  for (std::size_t k = 0; k < 3; ++k) {
+    const auto& h = all["hypotheses"][k];
+    CHECK(h["rank"] == k + 1);
+    CHECK(h["object"] == order[k]);
+    CHECK(h["answer"] == (k == 2));
+    if (k == 2) CHECK(h["confidence"] == 0.8);
+    else CHECK(h["confidence"].is_null());
+  }
+  CHECK(all["hypotheses"][0]["posterior"] == 0.5);
+  CHECK(all["hypotheses"][0]["log_weight"] == -0.2);   // object 1's best hypothesis
+  CHECK(all["hypotheses"][2]["pose"][0][3] == 0.04);   // the answer's own hypothesis
+
+  // Two drawn: the answer takes the last place; the order stays by posterior.
+  const auto two = drawn(2, std::nullopt);
+  REQUIRE(two["hypotheses"].size() == 2);
+  CHECK(two["hypotheses"][0]["object"] == n1);
+  CHECK(two["hypotheses"][1]["object"] == n2);
+  CHECK(two["hypotheses"][1]["answer"] == true);
+  CHECK(two["hypotheses"][1]["confidence"].is_null());   // no calibration: none shown
+  CHECK(two["hypotheses"][1]["rank"] == 2);
+
+  // The answer leading by posterior: drawn first, nothing moved.
+  r.best = r.hypotheses[1];
+  const auto lead = drawn(1, std::nullopt);
+  REQUIRE(lead["hypotheses"].size() == 1);
+  CHECK(lead["hypotheses"][0]["object"] == n1);
+  CHECK(lead["hypotheses"][0]["answer"] == true);
+
+  // A step without hypotheses: nothing named, nothing drawn.
+  StepResult none;
+  none.step = 1;
+  const auto empty = experiments::scene_json(db, none, contacts, {}, std::nullopt, std::nullopt, "s", "s");
+  CHECK(empty["answer"].is_null());
+  CHECK(empty["hypotheses"].empty());
 }
 
 TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the order they are given in") {
