@@ -64,7 +64,8 @@ def option_row(o):
     if o["default"] != "":
         value += f" (default `{o['default']}`)"
     what = o["description"]
-    aliases = [f"`--{n}`" for n in o["long"][1:]] + [f"`-{n}`" for n in o["short"]]
+    # A positional's flag form (`db info --db DB`), a flag's other spellings.
+    aliases = [f"`--{n}`" for n in (o["long"] if o["positional"] else o["long"][1:])] + [f"`-{n}`" for n in o["short"]]
     if aliases:
         what += f" (also {', '.join(aliases)})"
     if o["excludes"]:

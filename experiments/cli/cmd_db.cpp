@@ -492,8 +492,8 @@ void register_db(CLI::App& app) {
   {
     auto o = std::make_shared<AddOptions>();
     auto* sub = db->add_subcommand("add", "Append one mesh to a database (built with the database's parameters)");
-    sub->add_option("db", o->db, "Database (HDF5)")->required();
-    sub->add_option("mesh", o->mesh, "Mesh file, or ARCHIVE:MEMBER")->required();
+    sub->add_option("db,--db", o->db, "Database (HDF5)")->required();
+    sub->add_option("mesh,--mesh", o->mesh, "Mesh file, or ARCHIVE:MEMBER")->required();
     sub->add_option("--name", o->name, "Object name (default: the file name without extension)");
     add_units_option(sub, o->units);
     sub->add_option("--congruence-tolerance", o->congruence_tolerance,
@@ -508,7 +508,7 @@ void register_db(CLI::App& app) {
   {
     auto o = std::make_shared<InfoOptions>();
     auto* sub = db->add_subcommand("info", "Summary of a database (reads no point data)");
-    sub->add_option("db", o->db, "Database (HDF5)")->required();
+    sub->add_option("db,--db", o->db, "Database (HDF5)")->required();
     add_common(sub, o->common, kJson);
     sub->callback([o] { run_command(o->common, [o] { return run_info(*o); }); });
   }
@@ -517,7 +517,7 @@ void register_db(CLI::App& app) {
     auto* sub = db->add_subcommand("classes",
                                    "Find congruent objects and mirror images (every pair) and store them in the database "
                                    "(written to a copy that replaces it when complete)");
-    sub->add_option("db", o->db, "Database (HDF5)")->required();
+    sub->add_option("db,--db", o->db, "Database (HDF5)")->required();
     add_congruence_option(sub, o->congruence_tolerance, true);
     sub->add_flag("--dry-run", o->dry_run, "Report the classes without writing them");
     add_common(sub, o->common, kThreads | kJson);
@@ -526,7 +526,7 @@ void register_db(CLI::App& app) {
   {
     auto o = std::make_shared<ExportOptions>();
     auto* sub = db->add_subcommand("export", "Write an object's cloud (object frame, with normals) as PLY or PCD");
-    sub->add_option("db", o->db, "Database (HDF5)")->required();
+    sub->add_option("db,--db", o->db, "Database (HDF5)")->required();
     sub->add_option("--object", o->object, "Object name")->required();
     sub->add_option("--out", o->out, "Output .ply or .pcd")->required();
     sub->add_option("--cloud", o->cloud, "Which cloud: fine (default) or coarse (the feature points)")

@@ -57,12 +57,14 @@ struct MergeOptions {
 struct ReportOptions {
   CommonOptions common;
   std::string store, plots, calibration, runs;
+  std::string runs_old;   ///< --runs A:B, the old spelling of --run-range
 };
 
 struct CalibrateOptions {
   CommonOptions common;
   std::vector<std::string> stores;
   std::string out, runs;
+  std::string runs_old;          ///< --runs A:B, the old spelling of --run-range
   double open_set_drop = 0.03;   ///< known-object recognition the open-set threshold may cost
   double open_set_confidence = 0.9;   ///< ... in this share of resamples of the explored objects
   int open_set_step = 20;        ///< at this step (the last when the runs are shorter)
@@ -94,7 +96,7 @@ std::vector<int> parse_step_ranges(const std::string& text) {
   return out;
 }
 
-/// --runs A:B, the runs A <= run < B of every object ("" : all).
+/// --run-range A:B, the runs A <= run < B of every object ("" : all).
 struct RunRange {
   int first = 0, end = std::numeric_limits<int>::max();
   bool has(int run) const { return run >= first && run < end; }
@@ -102,6 +104,7 @@ struct RunRange {
 };
 
 RunRange parse_runs(const std::string& text) {
+  static const std::string flag = "--run-range";
   RunRange r;
   if (text.empty()) return r;
   const auto colon = text.find(':');
@@ -114,14 +117,24 @@ RunRange parse_runs(const std::string& text) {
       used = 0;
     }
     if (t.empty() || used != t.size() || v < 0)
-      throw Error("--runs expects A:B, the runs A <= run < B (got '" + text + "')", {}, "--runs");
+      throw Error(flag + " expects A:B, the runs A <= run < B (got '" + text + "')", {}, flag);
     return v;
   };
-  if (colon == std::string::npos) throw Error("--runs expects A:B (got '" + text + "')", {}, "--runs");
+  if (colon == std::string::npos) throw Error(flag + " expects A:B (got '" + text + "')", {}, flag);
   r.first = number(text.substr(0, colon));
   r.end = number(text.substr(colon + 1));
-  if (r.end <= r.first) throw Error("--runs A:B needs A < B (got '" + text + "')", {}, "--runs");
+  if (r.end <= r.first) throw Error(flag + " A:B needs A < B (got '" + text + "')", {}, flag);
   return r;
+}
+
+/// --runs A:B, the old spelling of --run-range (--runs counts runs in `experiment` and `stress`):
+/// taken, with a note; both given is an error.
+std::string run_range_of(const std::string& range, const std::string& old, const char* command) {
+  if (old.empty()) return range;
+  if (!range.empty()) throw Error("give --run-range only (--runs A:B is its old spelling)", {}, "--runs");
+  std::cerr << "touchstone: note: `" << command << " --runs " << old << "` is the old spelling; write `--run-range "
+            << old << "` (--runs counts runs in experiment and stress)\n";
+  return old;
 }
 
 // --- Ctrl-C: finish cleanly (runs in flight are dropped, the store stays consistent) ---------
@@ -432,7 +445,7 @@ std::string store_fingerprint(const io::RunStoreHeader& h) {
 
 int run_report(const ReportOptions& o) {
   io::RunStoreContents contents = io::RunStore::read(o.store);
-  const RunRange range = parse_runs(o.runs);
+  const RunRange range = parse_runs(run_range_of(o.runs, o.runs_old, "report"));
   if (!range.all())   // only these runs (e.g. those a calibration was not fitted on)
     std::erase_if(contents.runs, [&](const io::RunRecord& r) { return !range.has(r.run); });
   experiments::ReportSettings rs;
@@ -467,7 +480,7 @@ int run_calibrate(const CalibrateOptions& o) {
   std::optional<nlohmann::ordered_json> set_simulation;
   std::string no_set_reason;
   nlohmann::ordered_json sources = nlohmann::ordered_json::array();
-  const RunRange range = parse_runs(o.runs);
+  const RunRange range = parse_runs(run_range_of(o.runs, o.runs_old, "calibrate"));
   // Progress over the stores read (the fit that follows takes seconds).
   ProgressReport progress(o.progress, "calibrate", "stores", stderr_is_terminal(), o.common.json, std::cerr);
   for (const std::string& path : o.stores) {
@@ -716,11 +729,12 @@ void register_experiment(CLI::App& app) {
 
   auto ro = std::make_shared<ReportOptions>();
   CLI::App* r = app.add_subcommand("report", "Report a run store: tables, JSON (--json), figures (--plots)");
-  r->add_option("store", ro->store, "Run store (HDF5) written by `touchstone experiment`")->required();
+  r->add_option("store,--store", ro->store, "Run store (HDF5) written by `touchstone experiment`")->required();
   r->add_option("--plots", ro->plots, "Write the figures (PNG) into this folder");
-  r->add_option("--runs", ro->runs,
+  r->add_option("--run-range", ro->runs,
                 "Report only the runs A <= run < B of every object (A:B), e.g. those a calibration "
                 "was not fitted on");
+  r->add_option("--runs", ro->runs_old, "Old spelling of --run-range (taken, with a note)")->group("");
   r->add_option("--calibration", ro->calibration,
                 "Confidence calibration file (touchstone calibrate): the confidences are recomputed "
                 "from the store's features and judged against its outcomes (ECE, Brier, reliability)");
@@ -732,7 +746,8 @@ void register_experiment(CLI::App& app) {
       "calibrate", "Fit the step confidence (object right; pose within 1 cm) on run stores' steps");
   cb->add_option("stores", co->stores, "Run stores (HDF5) of simulated runs of one database")->required();
   cb->add_option("--out", co->out, "Calibration file to write (JSON)")->required();
-  cb->add_option("--runs", co->runs, "Fit on the runs A <= run < B of every object only (A:B)");
+  cb->add_option("--run-range", co->runs, "Fit on the runs A <= run < B of every object only (A:B)");
+  cb->add_option("--runs", co->runs_old, "Old spelling of --run-range (taken, with a note)")->group("");
   cb->add_option("--open-set-drop", co->open_set_drop,
                  "Open set (needs runs of hidden objects, config hidden): the threshold on the "
                  "in-database score may cost at most this share of the known objects' runs their right answer "

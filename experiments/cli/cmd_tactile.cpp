@@ -339,14 +339,14 @@ void register_tactile(CLI::App& app) {
   {
     auto opt = std::make_shared<LogInfoOptions>();
     CLI::App* sub = log->add_subcommand("info", "Summary of a tactile log");
-    sub->add_option("log", opt->log, "Tactile log (HDF5)")->required();
+    sub->add_option("log,--log", opt->log, "Tactile log (HDF5)")->required();
     add_common(sub, opt->common, kJson);
     sub->callback([opt] { run_command(opt->common, [opt] { return run_log_info(*opt); }); });
   }
   {
     auto opt = std::make_shared<LogTopicsOptions>();
     CLI::App* sub = log->add_subcommand("topics", "Channels of a ROS 2 recording (MCAP): topics, schemas, message counts");
-    sub->add_option("recording", opt->recording, "Recording (.mcap; chunks plain, lz4 or zstd)")->required();
+    sub->add_option("recording,--recording", opt->recording, "Recording (.mcap; chunks plain, lz4 or zstd)")->required();
     add_common(sub, opt->common, kJson);
     sub->callback([opt] { run_command(opt->common, [opt] { return run_log_topics(*opt); }); });
   }
@@ -354,7 +354,7 @@ void register_tactile(CLI::App& app) {
     auto opt = std::make_shared<LogImportOptions>();
     CLI::App* sub = log->add_subcommand("import", "A tactile log from a ROS 2 recording (MCAP): one grasp per tactile "
                                                   "message, the arm pose and joints nearest in time");
-    sub->add_option("recording", opt->recording, "Recording (.mcap)")->required();
+    sub->add_option("recording,--recording", opt->recording, "Recording (.mcap)")->required();
     sub->add_option("--map", opt->map, "Which topics hold the arm pose, the joints and the tactile images (TOML; "
                                         "docs/logs-and-simulator.md, ROS 2 recordings)")->required();
     sub->add_option("--out", opt->out, "Tactile log to write (HDF5)")->required();
@@ -364,7 +364,7 @@ void register_tactile(CLI::App& app) {
   {
     auto opt = std::make_shared<LogExportOptions>();
     CLI::App* sub = log->add_subcommand("export", "Cumulative contact cloud (and free space) as PLY/PCD");
-    sub->add_option("log", opt->log, "Tactile log (HDF5)")->required();
+    sub->add_option("log,--log", opt->log, "Tactile log (HDF5)")->required();
     sub->add_option("--out", opt->out, "Contact cloud to write (.ply or .pcd)")->required();
     sub->add_option("--grasps", opt->grasps, "Use the first K grasps (default: all)")->check(CLI::PositiveNumber);
     sub->add_option("--free", opt->free, "Also write the free-space cloud of Eq. 3 (.ply or .pcd)");

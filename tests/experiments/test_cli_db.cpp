@@ -370,6 +370,11 @@ TEST_CASE("cli: --threads and --seed only where they mean something; elsewhere h
   CHECK_MESSAGE(given.err.find("note: --seed changes nothing in `touchstone db info`") != std::string::npos, given.err);
   CHECK(given.err.find("note: --threads changes nothing") != std::string::npos);
   CHECK(plain.err.find("note:") == std::string::npos);
+  // The input named as everywhere else (--db), or positional: the same output.
+  const auto named = touchstone(dir, "db info --db db.h5 --json");
+  REQUIRE_MESSAGE(named.code == 0, named.err);
+  CHECK(named.out == plain.out);
+  CHECK(touchstone(dir, "db info db.h5 --db db.h5").code != 0);   // given twice: which one?
   const auto params = touchstone(dir, "params --json --seed 3");
   CHECK(params.code == 0);
   CHECK(params.err.find("note: --seed changes nothing in `touchstone params`") != std::string::npos);

@@ -194,6 +194,24 @@ TEST_CASE("merge: a missing, repeated, foreign, unsharded or incomplete shard is
     CHECK_MESSAGE(r.code == 0, r.err);
     CHECK_MESSAGE(r.err.find("old form; write `merge --out old.h5 SHARD...`") != std::string::npos, r.err);
     CHECK(io::RunStore::read(dir / "old.h5").runs.size() == 9);
+    // A range of runs is --run-range A:B (--runs counts runs in experiment); --runs A:B, the old
+    // spelling, is taken with a note; both, or a range the wrong way round, are one error.
+    const auto all = touchstone(dir, "report --store old.h5 --json");
+    const auto first = touchstone(dir, "report --store old.h5 --run-range 0:1 --json");
+    REQUIRE_MESSAGE(first.code == 0, first.err);
+    CHECK(nlohmann::json::parse(all.out)["per_step"][0]["runs"] == 9);
+    CHECK(nlohmann::json::parse(first.out)["per_step"][0]["runs"] == 3);
+    const auto old_spelling = touchstone(dir, "report old.h5 --runs 0:1 --json");
+    REQUIRE_MESSAGE(old_spelling.code == 0, old_spelling.err);
+    CHECK(old_spelling.out == first.out);
+    CHECK_MESSAGE(old_spelling.err.find("write `--run-range 0:1`") != std::string::npos, old_spelling.err);
+    CHECK(first.err.find("note:") == std::string::npos);
+    const auto both = touchstone(dir, "report old.h5 --runs 0:1 --run-range 0:1");
+    CHECK(both.code == 1);
+    CHECK(both.err.find("--runs") != std::string::npos);
+    const auto backwards = touchstone(dir, "report old.h5 --run-range 2:1");
+    CHECK(backwards.code == 1);
+    CHECK(backwards.err.find("--run-range") != std::string::npos);
     const auto alone = touchstone(dir, "merge s3_1.h5");   // one name and no --out: which is the output?
     CHECK(alone.code != 0);
     CHECK_MESSAGE(alone.err.find("--out") != std::string::npos, alone.err);
