@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdlib>
+#include <fstream>
 #include <sys/wait.h>
 
 using namespace ts;
@@ -206,6 +207,25 @@ TEST_CASE("log import: a recording of a simulated log becomes that log again") {
   REQUIRE(r.code == 0);
   const auto j = nlohmann::json::parse(r.out);
   CHECK(j["grasps"] == 5);
+  {  // The output against docs/schemas/log-import.schema.json (flat: its required keys and their
+     // types; tests/scripts/test_schemas.py validates every other command's output in full).
+    std::ifstream in(TS_SOURCE_DIR "/docs/schemas/log-import.schema.json");
+    const auto schema = nlohmann::json::parse(in);
+    auto type_of = [](const nlohmann::json& v) -> std::string {
+      return v.is_null() ? "null" : v.is_boolean() ? "boolean" : v.is_number_integer() ? "integer"
+           : v.is_number() ? "number" : v.is_string() ? "string" : v.is_array() ? "array" : "object";
+    };
+    REQUIRE(!schema["required"].empty());
+    for (const auto& key : schema["required"]) {
+      REQUIRE_MESSAGE(j.contains(key.get<std::string>()), key);
+      auto allowed = schema["properties"][key.get<std::string>()]["type"];
+      if (!allowed.is_array()) allowed = nlohmann::json::array({allowed});
+      const std::string t = type_of(j[key.get<std::string>()]);
+      bool ok = false;
+      for (const auto& a : allowed) ok = ok || a == t || (a == "number" && t == "integer");
+      CHECK_MESSAGE(ok, key << " is " << t);
+    }
+  }
   const TactileLog back = io::read_log(dir / "imported.h5");
   REQUIRE(back.grasps.size() == 5);
   for (std::size_t g = 0; g < 5; ++g) {
