@@ -159,6 +159,59 @@ std::shared_ptr<PyDatabase> open_database(const std::string& path, std::optional
   return d;
 }
 
+// ---- the database's geometry as arrays (object frame, metres) ---------------------------------
+
+/// An object's stored cloud: "fine" (the scanner's, exact face normals) or "coarse" (the feature
+/// points, PCA normals).
+PointCloud object_cloud(const PyDatabase& d, std::size_t i, const std::string& cloud) {
+  if (cloud != "fine" && cloud != "coarse")
+    throw py::value_error("cloud: expected \"fine\" or \"coarse\", got \"" + cloud + "\"");
+  py::gil_scoped_release release;
+  return cloud == "fine" ? d.db->load_fine(i) : d.reader->load_coarse(i);
+}
+
+py::array_t<double> object_points(const PyDatabase& d, const py::object& key, const std::string& cloud) {
+  return array_of(object_cloud(d, d.index(key), cloud).points);
+}
+
+py::array_t<double> object_normals(const PyDatabase& d, const py::object& key, const std::string& cloud) {
+  const std::size_t i = d.index(key);
+  const PointCloud c = object_cloud(d, i, cloud);
+  if (!c.has_normals())
+    throw Error("the " + cloud + " cloud of '" + d.db->info(i).name + "' has no normals", d.path, "/objects");
+  return array_of(c.normals);
+}
+
+/// (vertices V x 3 float64, faces F x 3 int64), the object-frame mesh the simulator touches.
+py::tuple object_mesh(const PyDatabase& d, const py::object& key) {
+  const std::size_t i = d.index(key);
+  Mesh mesh;
+  {
+    py::gil_scoped_release release;
+    mesh = d.reader->load_mesh(i);
+  }
+  py::array_t<std::int64_t> faces({static_cast<py::ssize_t>(mesh.faces.size()), py::ssize_t{3}});
+  auto w = faces.mutable_unchecked<2>();
+  for (std::size_t f = 0; f < mesh.faces.size(); ++f)
+    for (int c = 0; c < 3; ++c) w(static_cast<py::ssize_t>(f), c) = mesh.faces[f](c);
+  return py::make_tuple(array_of(mesh.vertices), faces);
+}
+
+/// The object's distance field at N x 3 object-frame points: the signed distance to its surface
+/// (m, negative inside a closed mesh), exact to the field's interpolation near the surface and a
+/// lower bound (>= the field's coarse margin) far from it.
+py::array_t<double> object_distance(const PyDatabase& d, const py::object& key, const py::object& points) {
+  const std::size_t i = d.index(key);
+  const std::vector<Vec3> p = points_of(points, "points");
+  std::vector<double> out(p.size());
+  {
+    py::gil_scoped_release release;
+    const GeometryRef g = d.db->geometry(i);
+    g->field.distances(p.data(), p.size(), Pose::Identity(), out.data());
+  }
+  return vector_of(out);
+}
+
 py::dict object_info(const PyDatabase& d, std::size_t i) {
   const ObjectInfo& info = d.db->info(i);
   py::dict o;
@@ -697,6 +750,16 @@ PYBIND11_MODULE(_touchstone, m) {
       .def("index", [](const PyDatabase& d, const std::string& name) { return d.index(py::str(name)); }, py::arg("name"))
       .def("object_info", [](const PyDatabase& d, const py::object& key) { return object_info(d, d.index(key)); },
            py::arg("object"))
+      .def("points", &object_points, py::arg("object"), py::arg("cloud") = "fine",
+           "An object's stored points, N x 3, object frame, m: cloud \"fine\" (the scanner's) or \"coarse\" "
+           "(the feature points)")
+      .def("normals", &object_normals, py::arg("object"), py::arg("cloud") = "fine",
+           "The unit outward normals of points(object, cloud), row for row")
+      .def("mesh", &object_mesh, py::arg("object"),
+           "(vertices V x 3 float64, faces F x 3 int64): the object-frame mesh, m")
+      .def("distance", &object_distance, py::arg("object"), py::arg("points"),
+           "The object's distance field at N x 3 object-frame points (m; negative inside a closed "
+           "mesh; far from the surface a lower bound)")
       .def_property_readonly("settings", [](const PyDatabase& d) {
         py::dict o;
         for (const auto& v : ts::io::settings_values(d.db->settings()))

@@ -94,6 +94,50 @@ def test_database_lists_the_manifest(built, db):
         db.object_info(4)
 
 
+def read_ascii_ply(path):
+    """(points N x 3, normals N x 3) of an ascii PLY with x y z nx ny nz vertices."""
+    lines = Path(path).read_text().splitlines()
+    end = lines.index("end_header")
+    n = int(next(l.split()[2] for l in lines[:end] if l.startswith("element vertex")))
+    rows = np.array([[float(x) for x in l.split()] for l in lines[end + 1:end + 1 + n]])
+    return rows[:, :3], rows[:, 3:6]
+
+
+def test_geometry_arrays_are_the_databases(built, db, tmp_path):
+    """points/normals equal what `db export --ascii` writes; the mesh spans the object's extent;
+    the distance field is 0 on the surface points and d at points moved d out along their normals."""
+    name = db.objects[0]
+    info = db.object_info(name)
+    for cloud, count in (("fine", info["fine_points"]), ("coarse", info["coarse_points"])):
+        p, n = db.points(name, cloud), db.normals(name, cloud)
+        assert p.shape == (count, 3) and n.shape == (count, 3)
+        run("db", "export", built[0] / "db.h5", "--object", name, "--cloud", cloud, "--ascii",
+            "--out", tmp_path / (cloud + ".ply"))
+        ep, en = read_ascii_ply(tmp_path / (cloud + ".ply"))
+        np.testing.assert_allclose(p, ep, rtol=0, atol=1e-6)   # ascii keeps 6-7 significant digits
+        np.testing.assert_allclose(n, en, rtol=0, atol=1e-5)
+        np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-6)
+    assert np.array_equal(db.points(0), db.points(name))
+    vertices, faces = db.mesh(name)
+    assert vertices.shape[1] == 3 and faces.shape[1] == 3 and faces.dtype == np.int64
+    assert faces.min() == 0 and faces.max() < len(vertices)
+    np.testing.assert_allclose(vertices.max(0) - vertices.min(0), info["extent_m"], rtol=1e-9, atol=1e-9)
+    # Surface points: 0 within the field's interpolation (a fraction of its voxel); moved out
+    # along their normals by d (inside its fine band): d within a fraction of a voxel.
+    p, n = db.points(name), db.normals(name)
+    voxel = db.settings["field.fine_voxel"]
+    sample = p[:: max(1, len(p) // 400)], n[:: max(1, len(p) // 400)]
+    assert np.max(np.abs(db.distance(name, sample[0]))) < 0.5 * voxel
+    d = 0.5 * db.settings["field.fine_band_voxels"] * voxel   # within the fine band
+    out = db.distance(name, sample[0] + d * sample[1])
+    assert np.median(np.abs(out - d)) < 0.25 * voxel
+    assert db.distance(name, np.zeros((0, 3))).shape == (0,)
+    with pytest.raises(ValueError):
+        db.points(name, "medium")
+    with pytest.raises(ValueError):
+        db.distance(name, np.zeros((4, 2)))
+
+
 def test_errors_name_the_file(tmp_path):
     missing = tmp_path / "missing.h5"
     with pytest.raises(ts.Error) as e:
