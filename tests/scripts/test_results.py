@@ -88,6 +88,47 @@ expect("a recipe's unknown key",
               'inputz = ["datasets/dev45.tsv"]\n'),
        ["--list"], 1, "databases.bad: unknown key inputz")
 
+expect("render of no study", lambda d: None, ["render", "study99"], 1, "render: name studies of the registry")
+expect("render of a study without a page", page("study4_db5_full", ("stamp.json",)), ["render", "study4_db5_full"],
+       1, "no complete page to render")
+
+
+def render_case():
+    """`render` rewrites a page from what it holds: the same bytes when the registry did not change;
+    a figure added to the registry appears as a column, the stamp and the report text unchanged."""
+    global cases
+    cases += 1
+    d = tree()
+    try:
+        pages = sorted(p.name for p in (d / "docs/results").iterdir() if (p / "stamp.json").exists())
+        before = {n: (d / "docs/results" / n / "README.md").read_text() for n in pages}
+        p = subprocess.run([sys.executable, script, "--root", d, "render", *pages], capture_output=True, text=True)
+        changed = [n for n in pages if (d / "docs/results" / n / "README.md").read_text() != before[n]]
+        if p.returncode != 0 or changed:
+            failures.append(f"render as it is: exit {p.returncode}, changed {changed}:\n{p.stderr}")
+        registry = d / "experiments/studies/registry.toml"
+        text = registry.read_text()
+        anchor = ('figures = ["recognition_rate", "position_error_m_median", '
+                  '"symmetric_orientation_error_deg_median", "time_s_median"]')
+        at = text.find("[studies.demo]")
+        wider = anchor.replace('"time_s_median"', '"time_s_median", "mssd_m_median"')
+        registry.write_text(text[:at] + text[at:].replace(anchor, wider, 1))
+        p = subprocess.run([sys.executable, script, "--root", d, "render", "demo"], capture_output=True, text=True)
+        after = (d / "docs/results/demo/README.md").read_text()
+        def stamp(t):
+            return t.split("## Stamp")[1].split("Study file")[0]
+
+        def report(t):
+            return t.split("## The report")[1]
+        if p.returncode != 0 or "| mssd_m_median |" not in after or stamp(before["demo"]) != stamp(after) or \
+                report(before["demo"]) != report(after):
+            failures.append(f"render with a figure added: exit {p.returncode}\n{p.stderr}")
+    finally:
+        shutil.rmtree(d)
+
+
+render_case()
+
 for f in failures:
     print(f"FAIL {f}", file=sys.stderr)
 print(f"{cases - len(failures)} of {cases} cases as expected")
