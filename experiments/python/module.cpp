@@ -553,7 +553,9 @@ class PyExploration {
 /// `touchstone experiment` without the command line: the configuration file (optional) with
 /// `set` on top, the runs into `out` (resumed with `resume`), the report as JSON text.
 std::string run_experiment(const std::string& db, const std::string& out, const std::string& config_file,
-                           const py::dict& set, int threads, bool resume) {
+                           const py::dict& set, int threads, bool resume, const py::object& progress) {
+  if (!progress.is_none() && !PyCallable_Check(progress.ptr()))
+    throw py::type_error("progress: expected a callable progress(done, total, seconds_left) or None");
   experiments::ExperimentConfig c;
   if (!config_file.empty()) experiments::load_config_file(c, config_file);
   for (const auto& [k, v] : set) {
@@ -582,7 +584,28 @@ std::string run_experiment(const std::string& db, const std::string& out, const 
   }
   experiments::DriveSettings ds;
   ds.parallel_runs = c.schedule == "runs";
-  experiments::drive(*engine, experiments::all_tasks(header, c.runs), out, ds);
+  // The progress callback, after each stored run (on a worker thread, one call at a time): what
+  // it raises stops the experiment as Ctrl-C stops the command (the runs finished are stored,
+  // resume=True continues) and is raised again here.
+  std::atomic<bool> stop{false};
+  std::exception_ptr raised;
+  if (!progress.is_none()) {
+    ds.stop = &stop;
+    ds.on_progress = [&](const experiments::Progress& p) {
+      if (stop) return;
+      py::gil_scoped_acquire gil;
+      try {
+        const auto left = p.remaining_s();
+        progress(p.done, p.total, left ? py::object(py::float_(*left)) : py::object(py::none()));
+      } catch (...) {
+        raised = std::current_exception();
+        stop = true;
+      }
+    };
+  }
+  const experiments::DriveOutcome outcome = experiments::drive(*engine, experiments::all_tasks(header, c.runs), out, ds);
+  if (raised) std::rethrow_exception(raised);
+  if (outcome.interrupted) throw Error("the experiment stopped before its last run; resume=True continues it", out, "out");
   io::RunStore::compact(out, true);
   experiments::ReportSettings rs;
   rs.threads = used;
@@ -818,7 +841,8 @@ PYBIND11_MODULE(_touchstone, m) {
       .def_property_readonly("hypotheses", &PyRecognizer::hypotheses);
 
   m.def("run_experiment_json", &run_experiment, py::arg("db"), py::arg("out"), py::arg("config") = "",
-        py::arg("set") = py::dict(), py::arg("threads") = 0, py::arg("resume") = false);
+        py::arg("set") = py::dict(), py::arg("threads") = 0, py::arg("resume") = false,
+        py::arg("progress") = py::none());
   m.def("report_json", &report, py::arg("store"));
   m.def("read_runs", &read_runs, py::arg("path"));
 }

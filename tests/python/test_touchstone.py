@@ -341,6 +341,38 @@ def test_experiment_and_its_run_store(built, tmp_path):
     assert e.value.field == "runs"
 
 
+def test_experiment_progress_callback(built, tmp_path):
+    """progress(done, total, seconds_left) after each run; what it raises stops the experiment with
+    the runs finished stored, and resume=True then completes the same report."""
+    root, names = built
+    config = {"objects": names[:2], "runs": 2, "steps": 2, "seed": 5}
+    calls = []
+    full = ts.run_experiment(str(root / "db.h5"), str(tmp_path / "a.h5"), set=config, threads=1,
+                             progress=lambda done, total, left: calls.append((done, total, left)))
+    assert [c[:2] for c in calls] == [(k, 4) for k in range(1, 5)]
+    assert all(left is None or left >= 0 for _, _, left in calls)
+
+    class Enough(Exception):
+        pass
+
+    def stop_after_two(done, total, left):
+        if done == 2:
+            raise Enough("stop here")
+    out = tmp_path / "b.h5"
+    with pytest.raises(Enough):
+        ts.run_experiment(str(root / "db.h5"), str(out), set=config, threads=1, progress=stop_after_two)
+    seen = []
+    resumed = ts.run_experiment(str(root / "db.h5"), str(out), set=config, threads=1, resume=True,
+                                progress=lambda done, total, left: seen.append(done))
+    assert seen == [3, 4]                           # two runs were kept; only the two others ran
+    def answers(report):   # what the runs answered (their times differ from run to run)
+        return [{k: v for k, v in row.items() if "time" not in k} for row in report["per_step"]]
+    assert answers(resumed) == answers(full)
+    with pytest.raises(TypeError):
+        ts.run_experiment(str(root / "db.h5"), str(tmp_path / "c.h5"), set=config, progress=3)
+    assert not (tmp_path / "c.h5").exists()
+
+
 def test_set_answers_are_the_commands(built, db, tmp_path):
     """A calibration with answer sets: the Recognizer's answer_set is the command's, step by step."""
     root, names = built

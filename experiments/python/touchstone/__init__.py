@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Mapping, Optional, Sequence
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -169,11 +169,16 @@ def parameters(kind: Optional[str] = None) -> List[Dict[str, Any]]:
 
 
 def run_experiment(db: str, out: str, config: Optional[str] = None, set: Optional[Mapping[str, Any]] = None,
-                   threads: int = 0, resume: bool = False) -> Dict[str, Any]:
+                   threads: int = 0, resume: bool = False,
+                   progress: Optional[Callable[[int, int, Optional[float]], Any]] = None) -> Dict[str, Any]:
     """Run an experiment (``touchstone experiment``) into the run store ``out``: the configuration
     file ``config`` (optional), then ``set`` (any configuration key, as ``--set KEY=VALUE``; a
-    list for a sweep key). Returns the report (``touchstone report --json``)."""
-    return json.loads(_ts.run_experiment_json(db, out, config or "", dict(set or {}), threads, resume))
+    list for a sweep key). Returns the report (``touchstone report --json``).
+
+    ``progress(done, total, seconds_left)`` is called after each stored run (``seconds_left`` is
+    None before the first). An exception it raises stops the experiment: the runs finished are
+    in ``out`` (``resume=True`` continues) and the exception is raised again."""
+    return json.loads(_ts.run_experiment_json(db, out, config or "", dict(set or {}), threads, resume, progress))
 
 
 def report(store: str) -> Dict[str, Any]:
