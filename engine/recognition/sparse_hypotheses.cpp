@@ -37,51 +37,6 @@ PairAngles pair_angles(const Vec3& pa, const Vec3& na, const Vec3& pb, const Vec
   return {angle_between(na, d), angle_between(nb, d), angle_between(na, nb)};
 }
 
-/// Angles in the table's units (pi / 255).
-int angle_units(double rad) {
-  return static_cast<int>(std::lround(std::clamp(rad, 0.0, std::numbers::pi) * 255.0 / std::numbers::pi));
-}
-
-/// angle_units(std::atan2(y, x)) for y >= 0, bit for bit, at a fraction of its cost: a table of
-/// 600 points takes 359 400 pairs and three angles a pair, and std::atan2 was a third of a
-/// one-shot recognition's time. The angle comes from Abramowitz and Stegun's 4.4.49 polynomial
-/// (|error| <= 2e-8 rad, 1.6e-6 of a unit); where the scaled angle lies within 1e-4 of a unit
-/// of a rounding boundary, which that error could cross, it is computed exactly instead (about
-/// 2 angles in 10 000).
-/// angle_units of an angle `rad` known within 2e-8 rad of atan2(y, x); std::atan2 itself where
-/// that error could change the rounding.
-[[gnu::always_inline]] inline std::uint8_t rounded_units(double rad, double y, double x) {
-  const double v = rad * 255.0 / std::numbers::pi;   // >= 0
-  const int whole = static_cast<int>(v);
-  const double part = v - whole;
-  if (std::abs(part - 0.5) < 1e-4) [[unlikely]]
-    return static_cast<std::uint8_t>(angle_units(std::atan2(y, x)));
-  return static_cast<std::uint8_t>(std::min(whole + (part > 0.5 ? 1 : 0), 255));
-}
-
-/// angle_units(std::atan2(y, x)) and angle_units(std::atan2(y, -x)) for y >= 0 and x != 0 (a
-/// pair's angle from either end), bit for bit, at a fraction of std::atan2's cost.
-[[gnu::always_inline]] inline void angle_units_both(double y, double x, std::uint8_t& plus, std::uint8_t& minus) {
-  const double ax = std::abs(x);
-  const double hi = std::max(ax, y), lo = std::min(ax, y);
-  if (!(hi > 0.0 && hi <= std::numeric_limits<double>::max())) {
-    plus = static_cast<std::uint8_t>(angle_units(std::atan2(y, x)));
-    minus = static_cast<std::uint8_t>(angle_units(std::atan2(y, -x)));
-    return;
-  }
-  // atan(z), z in [0, 1]; the polynomial in z^2 evaluated by Estrin's scheme (short dependency
-  // chains, so the angles of several pairs overlap).
-  const double z = lo / hi, z2 = z * z, z4 = z2 * z2, z8 = z4 * z4;
-  const double p01 = 1.0 + z2 * -0.3333314528, p23 = 0.1999355085 + z2 * -0.1420889944;
-  const double p45 = 0.1065626393 + z2 * -0.0752896400, p67 = 0.0429096138 + z2 * -0.0161657367;
-  const double p = (p01 + z4 * p23) + z8 * ((p45 + z4 * p67) + z8 * 0.0028662257);
-  double a = z * p;                                  // the angle of (y, |x|), in [0, pi/2]
-  if (y > ax) a = std::numbers::pi / 2 - a;
-  const double obtuse = std::numbers::pi - a;
-  plus = rounded_units(x < 0.0 ? obtuse : a, y, x);
-  minus = rounded_units(x < 0.0 ? a : obtuse, y, -x);
-}
-
 struct ContactTriplet {
   std::uint32_t k[3] = {0, 0, 0};
 };
@@ -145,9 +100,9 @@ TripletQuery make_query(const ObjectPairs& T, const Vec3 (&p)[3], const Vec3 (&n
   bounds(d02, q.lo02, q.hi02);
   if (normals) {
     const PairAngles a = pair_angles(p[0], n[0], p[1], n[1]);
-    q.sa = angle_units(a.a), q.sb = angle_units(a.b), q.sab = angle_units(a.ab);
+    q.sa = pair_angle_units(a.a), q.sb = pair_angle_units(a.b), q.sab = pair_angle_units(a.ab);
     const PairAngles c = pair_angles(p[0], n[0], p[2], n[2]);   // the third side, from contact 0
-    q.ta = angle_units(c.a), q.tb = angle_units(c.b), q.tab = angle_units(c.ab);
+    q.ta = pair_angle_units(c.a), q.tb = pair_angle_units(c.b), q.tab = pair_angle_units(c.ab);
   }
   return q;
 }
@@ -222,96 +177,6 @@ void close_triangles(const ObjectPairs& T, const TripletQuery& q,
 }
 
 }  // namespace
-
-ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSettings& s) {
-  ObjectPairs out;
-  const std::size_t cap = std::min<std::size_t>(s.max_model_points, 65535);
-  PointCloud thin;
-  for (double voxel = s.model_spacing; ; voxel *= 1.5) {
-    thin = voxel_filter(keypoints.coarse, voxel);
-    if (thin.size() <= cap) break;
-  }
-  out.points = thin.points;
-  out.normals = thin.has_normals() ? thin.normals : std::vector<Vec3>(thin.size(), Vec3::Zero());
-  const std::size_t n = out.points.size();
-  if (n < 2) return out;
-  double largest = 0.0;
-  for (std::size_t i = 0; i < n; ++i)
-    for (std::size_t j = i + 1; j < n; ++j) largest = std::max(largest, (out.points[i] - out.points[j]).norm());
-  out.unit = std::max(largest, 1e-9) / 65535.0;
-  out.near.reserve(n * (n - 1));
-  // Row i: every j != i sorted by (distance, index), each with angle(n_i, d), angle(n_j, d) and
-  // angle(n_i, n_j) of d = p_j - p_i (pair_angles, in units). Each unordered pair is measured
-  // once, for both rows: from j's end, d is exactly -d (its norm and cross products' norms the
-  // same, its dot products negated), so angle(n_j, -d) and angle(n_i, -d) are atan2 of the same
-  // numbers with x negated. A dot product of exactly 0 (its sign is then not the negation's) and
-  // a cross product whose norm differs either way round (fused multiply-adds) are measured
-  // again as the row's own. Then each row is sorted as 32-bit keys (distance, index).
-  std::vector<std::uint16_t> distance(n * n);
-  std::vector<std::array<std::uint8_t, 3>> angles(n * n);
-  auto measure = [&](std::size_t i, std::size_t j) {   // row i's entry j, as pair_angles would
-    const Vec3 d = out.points[j] - out.points[i];
-    const Vec3& ni = out.normals[i];
-    const Vec3& nj = out.normals[j];
-    std::uint8_t ignored = 0;
-    auto& e = angles[i * n + j];
-    angle_units_both(ni.cross(d).norm(), ni.dot(d), e[0], ignored);
-    angle_units_both(nj.cross(d).norm(), nj.dot(d), e[1], ignored);
-    angle_units_both(ni.cross(nj).norm(), ni.dot(nj), e[2], ignored);
-  };
-  for (std::size_t i = 0; i < n; ++i) {
-    const Vec3& p_i = out.points[i];
-    const Vec3& ni = out.normals[i];
-    for (std::size_t j = i + 1; j < n; ++j) {
-      const Vec3 d = out.points[j] - p_i;
-      const Vec3& nj = out.normals[j];
-      const auto units = static_cast<std::uint16_t>(std::lround(std::min((p_i - out.points[j]).norm() / out.unit, 65535.0)));
-      distance[i * n + j] = distance[j * n + i] = units;
-      const double si = ni.dot(d), sj = nj.dot(d), sij = ni.dot(nj);
-      if (si == 0.0 || sj == 0.0 || sij == 0.0) {
-        measure(i, j);
-        measure(j, i);
-        continue;
-      }
-      const double ci = ni.cross(d).norm(), cj = nj.cross(d).norm(), cij = ni.cross(nj).norm();
-      auto& row_i = angles[i * n + j];
-      auto& row_j = angles[j * n + i];
-      angle_units_both(ci, si, row_i[0], row_j[1]);   // angle(n_i, d); from j: angle(n_i, -d)
-      angle_units_both(cj, sj, row_i[1], row_j[0]);   // angle(n_j, d); from j: angle(n_j, -d)
-      std::uint8_t ignored = 0;
-      angle_units_both(cij, sij, row_i[2], ignored);
-      if (nj.cross(ni).norm() == cij)
-        row_j[2] = row_i[2];
-      else
-        angle_units_both(nj.cross(ni).norm(), nj.dot(ni), row_j[2], ignored);
-    }
-  }
-  // Each row sorted by (distance, index): j taken in increasing order, then a stable radix sort
-  // on the distance's low byte and on its high byte.
-  std::vector<std::uint16_t> order(n - 1), by_low(n - 1);
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::uint16_t* row = distance.data() + i * n;
-    std::size_t k = 0;
-    for (std::size_t j = 0; j < n; ++j)
-      if (j != i) order[k++] = static_cast<std::uint16_t>(j);
-    for (const int shift : {0, 8}) {
-      std::array<std::uint32_t, 257> start{};
-      for (const std::uint16_t j : order) ++start[((row[j] >> shift) & 0xffu) + 1];
-      for (std::size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
-      for (const std::uint16_t j : order) by_low[start[(row[j] >> shift) & 0xffu]++] = j;
-      order.swap(by_low);
-    }
-    for (const std::uint16_t j : order) {
-      const auto& a = angles[i * n + j];
-      out.near.push_back({row[j], j, a[0], a[1], a[2], 0});
-    }
-  }
-  return out;
-}
-
-std::size_t ObjectPairs::memory_bytes() const {
-  return points.size() * 2 * sizeof(Vec3) + near.size() * sizeof(Near);
-}
 
 SparseTables::SparseTables(const Database& db, SparseSettings settings)
     : db_(db), s_(settings), tables_(db.size()), last_wanted_(db.size(), 0) {}
@@ -481,7 +346,7 @@ std::vector<Candidate> sparse_candidates(const Scene& scene, SparseTables& table
   // and fills its own slot, so the candidates depend on neither the grouping nor the order.
   const std::size_t tasks = triplets.size() * objects.size();
   std::vector<std::vector<Pose>> slots(tasks);
-  const int utol = angle_units(s.normal_tolerance_deg * std::numbers::pi / 180.0);
+  const int utol = pair_angle_units(s.normal_tolerance_deg * std::numbers::pi / 180.0);
   const std::size_t groups = std::clamp<std::size_t>((16 + objects.size() - 1) / objects.size(), 1, triplets.size());
   detail::parallel_each(objects.size() * groups, 1, [&](std::size_t job) {
     const std::size_t k = job / groups, g = job % groups;

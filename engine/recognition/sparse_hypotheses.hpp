@@ -95,7 +95,10 @@ struct ObjectPairs {
   std::size_t memory_bytes() const;
 };
 
-/// Build one object's table from its keypoints.
+/// An angle in the tables' units (pi / 255), rounded: [0, pi] -> 0..255.
+int pair_angle_units(double rad);
+
+/// Build one object's table from its keypoints (engine/recognition/pair_table.cpp).
 ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSettings& s);
 
 /// Lazily built tables of a database's objects. Thread-safe; built tables are never changed.

@@ -71,6 +71,44 @@ std::pair<double, double> closest(const Scene& scene, const std::vector<Candidat
 
 }  // namespace
 
+namespace {
+
+/// Entries of a table that differ from the plain way of computing them (std::atan2, rounded;
+/// the distance from Eigen's norm), after checking each row's order and indices; `angles`
+/// counts the angles compared.
+std::size_t table_mismatches(const ObjectPairs& t, std::size_t& angles) {
+  auto units = [](const Vec3& a, const Vec3& b) {
+    const double rad = std::atan2(a.cross(b).norm(), a.dot(b));
+    return static_cast<int>(std::lround(std::clamp(rad, 0.0, std::numbers::pi) * 255.0 / std::numbers::pi));
+  };
+  const std::size_t n = t.points.size();
+  REQUIRE(t.near.size() == n * (n - 1));
+  std::size_t mismatched = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    std::vector<std::uint8_t> seen(n, 0);
+    for (std::size_t k = 0; k < n - 1; ++k) {
+      const ObjectPairs::Near& e = t.near[i * (n - 1) + k];
+      if (k > 0) {
+        const ObjectPairs::Near& f = t.near[i * (n - 1) + k - 1];
+        CHECK((f.distance < e.distance || (f.distance == e.distance && f.index < e.index)));
+      }
+      REQUIRE(e.index < n);
+      CHECK(e.index != i);
+      CHECK_FALSE(seen[e.index]);
+      seen[e.index] = 1;
+      const Vec3 d = t.points[e.index] - t.points[i];
+      mismatched += e.distance != std::lround(std::min((t.points[i] - t.points[e.index]).norm() / t.unit, 65535.0));
+      mismatched += e.a_i != units(t.normals[i], d);
+      mismatched += e.a_j != units(t.normals[e.index], d);
+      mismatched += e.a_ij != units(t.normals[i], t.normals[e.index]);
+      angles += 3;
+    }
+  }
+  return mismatched;
+}
+
+}  // namespace
+
 TEST_CASE("Pair tables: every other point per point, sorted by distance, with the pair's angles") {
   // The oracle: each entry's distance and angles in the table's units, computed the plain way
   // (std::atan2, rounded), equal bit for bit: the table's fast angles fall back to std::atan2
@@ -80,10 +118,6 @@ TEST_CASE("Pair tables: every other point per point, sorted by distance, with th
   Database db(src);
   SparseSettings s;
   s.max_model_points = 250;
-  auto units = [](const Vec3& a, const Vec3& b) {
-    const double rad = std::atan2(a.cross(b).norm(), a.dot(b));
-    return static_cast<int>(std::lround(std::clamp(rad, 0.0, std::numbers::pi) * 255.0 / std::numbers::pi));
-  };
   std::size_t angles = 0, mismatched = 0;
   for (std::size_t o = 0; o < db.size(); ++o) {
     CAPTURE(o);
@@ -91,31 +125,45 @@ TEST_CASE("Pair tables: every other point per point, sorted by distance, with th
     const std::size_t n = t.points.size();
     REQUIRE(n >= 20);
     CHECK(n <= 250);
-    REQUIRE(t.near.size() == n * (n - 1));
-    for (std::size_t i = 0; i < n; ++i) {
-      std::vector<std::uint8_t> seen(n, 0);
-      for (std::size_t k = 0; k < n - 1; ++k) {
-        const ObjectPairs::Near& e = t.near[i * (n - 1) + k];
-        if (k > 0) {
-          const ObjectPairs::Near& f = t.near[i * (n - 1) + k - 1];
-          CHECK((f.distance < e.distance || (f.distance == e.distance && f.index < e.index)));
-        }
-        REQUIRE(e.index < n);
-        CHECK(e.index != i);
-        CHECK_FALSE(seen[e.index]);
-        seen[e.index] = 1;
-        const Vec3 d = t.points[e.index] - t.points[i];
-        CHECK(e.distance == std::lround(std::min((t.points[i] - t.points[e.index]).norm() / t.unit, 65535.0)));
-        mismatched += e.a_i != units(t.normals[i], d);
-        mismatched += e.a_j != units(t.normals[e.index], d);
-        mismatched += e.a_ij != units(t.normals[i], t.normals[e.index]);
-        angles += 3;
-      }
-    }
+    mismatched += table_mismatches(t, angles);
     for (const Vec3& v : t.normals) CHECK(std::abs(v.norm() - 1.0) < 1e-6);
   }
   CHECK(angles > 400000);
   CHECK(mismatched == 0);
+}
+
+TEST_CASE("Pair tables: the cases the fast path leaves to the exact one") {
+  // Points on a grid with axis-aligned normals (dot products of exactly +0 and -0, angles of
+  // exactly pi / 2), points without normals (atan2(0, +-0): 0 or 255 by the sign of zero) and
+  // normals exactly opposite each other: the table equals the plain
+  // computation entry for entry.
+  ObjectKeypoints grid, bare;
+  for (int x = 0; x < 5; ++x)
+    for (int y = 0; y < 5; ++y)
+      for (int z = 0; z < 3; ++z) {
+        const Vec3 p(0.01 * x, 0.01 * y, 0.01 * z);
+        grid.coarse.points.push_back(p);
+        grid.coarse.normals.push_back(z == 0 ? Vec3(0, 0, -1) : (x == 0 ? Vec3(-1, 0, 0) : Vec3(0, 0, 1)));
+        bare.coarse.points.push_back(p + Vec3(0.003 * y, 0.0, 0.001 * x));
+      }
+  grid.coarse.normals[7] = Vec3(1, 1, 0).normalized();
+  SparseSettings s;
+  s.model_spacing = 1e-4;   // keep every point
+  std::size_t angles = 0;
+  const ObjectPairs g = build_object_pairs(grid, s);
+  REQUIRE(g.points.size() == 75);
+  CHECK(table_mismatches(g, angles) == 0);
+  const ObjectPairs b = build_object_pairs(bare, s);
+  REQUIRE(b.points.size() == 75);
+  for (const Vec3& v : b.normals) CHECK(v == Vec3::Zero());
+  CHECK(table_mismatches(b, angles) == 0);
+  // Without normals every a_i is 0 or 255 (atan2(0, +-0)), and both occur.
+  std::size_t zero = 0, full = 0;
+  for (const ObjectPairs::Near& e : b.near) zero += e.a_i == 0, full += e.a_i == 255;
+  CHECK(zero > 0);
+  CHECK(full > 0);
+  CHECK(zero + full == b.near.size());
+  CHECK(angles == 3 * 2 * 75 * 74);
 }
 
 TEST_CASE("The source runs on isolated contacts, not on tactile patches") {
