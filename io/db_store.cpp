@@ -386,6 +386,48 @@ void append_values(std::vector<SettingValue>& out, const char* group, const S& s
 }
 }  // namespace
 
+namespace {
+template <class S>
+bool set_field(S& s, const std::vector<Field<S>>& fields, const std::string& name, double value,
+               const std::string& key, const std::string& origin) {
+  for (const auto& f : fields) {
+    if (name != f.name) continue;
+    if (f.real) {
+      s.*f.real = value;
+    } else {
+      if (!(value == std::floor(value) && value <= 1e6))
+        throw Error("expected a whole number of at most 1e6, got " + std::to_string(value), origin, key);
+      s.*f.integer = static_cast<int>(value);
+    }
+    return true;
+  }
+  return false;
+}
+}  // namespace
+
+void set_setting_value(DatabaseSettings& s, const std::string& key, double value, const std::string& origin) {
+  const bool may_be_zero = key == "field.coarse_margin";
+  if (!std::isfinite(value) || value < 0.0 || (value == 0.0 && !may_be_zero))
+    throw Error(std::string("expected a finite ") + (may_be_zero ? "non-negative" : "positive") + " number, got " +
+                    std::to_string(value),
+                origin, key);
+  if (key == "scan.target_coverage" && value > 1.0)
+    throw Error("expected a covered fraction of at most 1, got " + std::to_string(value), origin, key);
+  const auto dot = key.find('.');
+  const std::string group = dot == std::string::npos ? "" : key.substr(0, dot);
+  const std::string name = dot == std::string::npos ? key : key.substr(dot + 1);
+  bool known = false;
+  if (group.empty() && name == "max_extent") s.max_extent = value, known = true;
+  else if (group == "scan") known = set_field(s.scan, scan_fields(), name, value, key, origin);
+  else if (group == "fpfh") known = set_field(s.fpfh, fpfh_fields(), name, value, key, origin);
+  else if (group == "field") known = set_field(s.field, field_fields(), name, value, key, origin);
+  if (!known) {
+    std::string names;
+    for (const auto& v : settings_values(s)) names += (names.empty() ? "" : ", ") + (v.group.empty() ? v.name : v.group + "." + v.name);
+    throw Error("unknown build parameter (known: " + names + ")", origin, key);
+  }
+}
+
 std::vector<SettingValue> settings_values(const DatabaseSettings& s) {
   std::vector<SettingValue> out{{"", "max_extent", s.max_extent, false}};
   append_values(out, "scan", s.scan, scan_fields());

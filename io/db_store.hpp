@@ -134,6 +134,12 @@ struct SettingValue {
   bool integer = false;
 };
 std::vector<SettingValue> settings_values(const DatabaseSettings& settings);
+/// Sets the build parameter `key`, one of settings_values' names ("max_extent", or the group and
+/// the name: "scan.fine_spacing", "field.fine_band_voxels", ...), to `value`. An unknown key, or a
+/// value out of its range (a finite positive number; `field.coarse_margin` may be 0;
+/// `scan.target_coverage` at most 1; the integers whole, up to 1e6), is an Error naming `origin`
+/// and the key.
+void set_setting_value(DatabaseSettings& settings, const std::string& key, double value, const std::string& origin);
 
 /// Seed of one object: derived from the build seed and the object's name (not its position),
 /// so an object's data do not depend on the order of the manifest, on threads, or on whether it

@@ -6,9 +6,12 @@
 #include <tbb/task_arena.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <iostream>
+#include <limits>
 #include <string>
 #include <tuple>
+#include <vector>
 
 namespace ts::cli {
 
@@ -55,6 +58,70 @@ void run_command(const CommonOptions& o, const std::function<int()>& body) {
 
 int exit_code() { return g_exit_code; }
 
+namespace {
+
+/// Levenshtein distance: what "the nearest valid flag" means.
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diagonal = up;
+    }
+  }
+  return row[b.size()];
+}
+
+/// The long flags of a (sub)command, its option groups' included.
+void long_flags(const CLI::App* app, std::vector<std::string>& out) {
+  for (const CLI::Option* o : app->get_options())
+    for (const auto& name : o->get_lnames()) out.push_back("--" + name);
+  for (const CLI::App* group : app->get_subcommands([](const CLI::App* a) { return a->get_name().empty(); }))
+    long_flags(group, out);
+}
+
+/// A flag the command line gives that its subcommand does not know, as one usage error naming
+/// the nearest valid flag; empty when every flag is known. Looked for before CLI11 parses, so
+/// that a misspelt flag is named rather than the required one it misses (`--dbb` is "did you
+/// mean --db?", not "--db is required"). Tokens after `--` are not flags.
+std::string unknown_flag(const CLI::App& app, int argc, char** argv) {
+  const CLI::App* current = &app;
+  std::string path = "touchstone";
+  for (int i = 1; i < argc; ++i) {
+    const std::string token = argv[i];
+    if (token == "--") break;
+    if (token.rfind("--", 0) != 0) {
+      const auto subs = current->get_subcommands(
+          [&](const CLI::App* a) { return !a->get_name().empty() && a->check_name(token); });
+      if (!subs.empty()) {
+        current = subs.front();
+        path += " " + token;
+      }
+      continue;
+    }
+    if (current->get_allow_extras()) continue;
+    const std::string flag = token.substr(0, token.find('='));
+    std::vector<std::string> flags;
+    long_flags(current, flags);
+    if (std::find(flags.begin(), flags.end(), flag) != flags.end()) continue;
+    std::string nearest;
+    std::size_t best = std::numeric_limits<std::size_t>::max();
+    for (const auto& f : flags)
+      if (const std::size_t d = edit_distance(flag, f); d < best) best = d, nearest = f;
+    const std::size_t near_enough = std::max<std::size_t>(2, flag.size() / 3);
+    std::string message = "touchstone: error: unknown flag " + flag + " for `" + path + "`";
+    if (!nearest.empty() && best <= near_enough) message += " (did you mean " + nearest + "?)";
+    return message + "; `" + path + " --help` lists its flags";
+  }
+  return {};
+}
+
+}  // namespace
+
 int run_touchstone(int argc, char** argv, const char* version) {
   g_exit_code = 0;
   CLI::App app{"touchstone: tactile object recognition and 6-DOF localization"};
@@ -71,6 +138,10 @@ int run_touchstone(int argc, char** argv, const char* version) {
   if (argc == 2 && std::string(argv[1]) == "--help-reference") {   // not in --help: a tool's input
     print_reference(app);
     return 0;
+  }
+  if (const std::string unknown = unknown_flag(app, argc, argv); !unknown.empty()) {
+    std::cerr << unknown << '\n';
+    return 2;
   }
   try {
     app.parse(argc, argv);

@@ -16,6 +16,7 @@
 #include "experiments/runs/log_steps.hpp"
 #include "experiments/runs/recognition_engine.hpp"
 
+#include "datasets/db_builder.hpp"
 #include "datasets/simulator.hpp"
 #include "engine/database/symmetry_cache.hpp"
 #include "engine/geometry/symmetry.hpp"
@@ -548,6 +549,103 @@ class PyExploration {
   std::unique_ptr<Exploration> ex_;
 };
 
+// ---- building a database ---------------------------------------------------------------------
+
+/// `touchstone db build` without the command line. `inputs`: (name, path, source) per mesh, or
+/// `manifest`, or `folder` (one of the three, as the Python wrapper gives them); `params`: build
+/// parameters by their names in Database.settings. Returns what was built, as a dict.
+py::dict build_database(const std::string& out, const py::list& inputs, const std::string& manifest,
+                        const std::string& folder, const py::dict& params, const std::string& scale,
+                        const std::string& units, std::uint64_t seed, double congruence_tolerance, int threads,
+                        const py::object& progress) {
+  if (!progress.is_none() && !PyCallable_Check(progress.ptr()))
+    throw py::type_error("progress: expected a callable progress(done, total, seconds_left) or None");
+  std::vector<datasets::MeshInput> meshes;
+  if (!manifest.empty()) {
+    meshes = datasets::inputs_from_manifest(manifest);
+  } else if (!folder.empty()) {
+    meshes = datasets::inputs_from_folder(folder);
+  } else {
+    for (const auto& item : inputs) {
+      const auto t = item.cast<py::tuple>();
+      auto in = datasets::input_from_path(t[1].cast<std::string>(), t[0].cast<std::string>());
+      const auto source = t[2].cast<std::string>();
+      if (!source.empty()) in.source = source;
+      in.origin = "build_database";
+      in.origin_field = "meshes";
+      meshes.push_back(std::move(in));
+    }
+  }
+  datasets::BuildSettings bs;
+  if (scale == "keep") bs.database.scale = ObjectScale::keep;
+  else if (scale != "fit") throw Error("expected \"fit\" or \"keep\", got \"" + scale + "\"", out, "scale");
+  const auto per_unit = io::metres_per_unit(units);
+  if (!per_unit) throw Error("expected a unit of m, cm, mm or in, got \"" + units + "\"", out, "units");
+  bs.units = *per_unit;
+  for (const auto& [k, v] : params) {
+    const std::string key = py::str(k).cast<std::string>();
+    if (key == "descriptor") {
+      const std::string d = py::str(v).cast<std::string>();
+      try {
+        bs.database.descriptor = ts::parse_descriptor(d);
+      } catch (const Error& e) {
+        throw Error(e.message(), out, "params.descriptor");
+      }
+      continue;
+    }
+    if (!py::isinstance<py::int_>(v) && !py::isinstance<py::float_>(v))
+      throw Error("expected a number", out, "params." + key);
+    io::set_setting_value(bs.database, key, v.cast<double>(), out);   // errors name the key
+  }
+  bs.seed = seed;
+  bs.congruence.tolerance = congruence_tolerance;
+  // The callback after each object (on the worker that built it, one at a time): what it raises
+  // stops the build (the objects finished stay in OUT.parts, so the same call resumes) and is
+  // raised again here.
+  struct ProgressRaised {};
+  std::exception_ptr raised;
+  if (!progress.is_none())
+    bs.progress = [&](const datasets::BuildProgress& p) {
+      if (raised) throw ProgressRaised{};
+      py::gil_scoped_acquire gil;
+      try {
+        const std::size_t built = p.done - p.resumed;
+        progress(p.done, p.total, built ? py::object(py::float_(p.remaining_s())) : py::object(py::none()));
+      } catch (...) {
+        raised = std::current_exception();
+        throw ProgressRaised{};
+      }
+    };
+  datasets::BuildReport report;
+  try {
+    py::gil_scoped_release release;
+    std::optional<tbb::global_control> limit;
+    if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
+    report = datasets::build_database(meshes, out, bs);
+  } catch (const ProgressRaised&) {
+    std::rethrow_exception(raised);
+  }
+  py::dict d;
+  d["out"] = out;
+  d["objects"] = report.names;
+  d["resumed"] = report.resumed;
+  py::list warnings;
+  for (std::size_t i = 0; i < report.names.size(); ++i)
+    for (const auto& w : report.warnings[i]) warnings.append(py::make_tuple(report.names[i], w));
+  d["warnings"] = warnings;
+  py::list classes;
+  for (const auto& members : report.congruence.record.classes()) {
+    py::list names;
+    for (std::size_t i : members) names.append(report.names.at(i));
+    classes.append(names);
+  }
+  d["congruent_classes"] = classes;
+  const auto& t = report.times;
+  d["times_s"] = py::dict(py::arg("import") = t.import_s, py::arg("scan") = t.scan_s, py::arg("features") = t.features_s,
+                          py::arg("field") = t.field_s, py::arg("write") = t.write_s, py::arg("wall") = t.wall_s);
+  return d;
+}
+
 // ---- experiments and run stores -------------------------------------------------------------
 
 /// `touchstone experiment` without the command line: the configuration file (optional) with
@@ -758,7 +856,7 @@ PYBIND11_MODULE(_touchstone, m) {
   m.def("set_threads", &set_threads, py::arg("threads"));
   m.def("parameters_json", &parameters_json);
 
-  py::class_<PyDatabase, std::shared_ptr<PyDatabase>>(m, "Database",
+  py::class_<PyDatabase, std::shared_ptr<PyDatabase>>(m, "Database", py::dynamic_attr(),
       "An object database (HDF5, `touchstone db build`). Geometry is loaded on demand within "
       "memory_budget_mb (None: the default, 256 MB; 0: no limit), evicted least-recently-used.")
       .def(py::init(&open_database), py::arg("path"), py::arg("memory_budget_mb") = py::none())
@@ -843,6 +941,9 @@ PYBIND11_MODULE(_touchstone, m) {
   m.def("run_experiment_json", &run_experiment, py::arg("db"), py::arg("out"), py::arg("config") = "",
         py::arg("set") = py::dict(), py::arg("threads") = 0, py::arg("resume") = false,
         py::arg("progress") = py::none());
+  m.def("build_database_impl", &build_database, py::arg("out"), py::arg("inputs"), py::arg("manifest"),
+        py::arg("folder"), py::arg("params"), py::arg("scale"), py::arg("units"), py::arg("seed"),
+        py::arg("congruence_tolerance"), py::arg("threads"), py::arg("progress"));
   m.def("report_json", &report, py::arg("store"));
   m.def("read_runs", &read_runs, py::arg("path"));
 }

@@ -21,11 +21,13 @@
 
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <map>
 #include <set>
+#include <tuple>
 
 using namespace ts;
 namespace fs = std::filesystem;
@@ -330,6 +332,29 @@ TEST_CASE("cli recognize: bad input gives one clear error and no output file") {
   // usage errors exit 2
   CHECK(touchstone(dir, "recognize --db db.h5").code == 2);
   CHECK(touchstone(dir, "recognize --db db.h5 --log log.h5 --method nonsense").code == 2);
+  // An unknown flag: one line naming it, its command and the nearest valid flag; before any
+  // other usage error (a misspelt --db is named, not "--db is required").
+  for (const auto& [args, flag, nearest] : std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"recognize --db db.h5 --lgo log.h5", "--lgo", "--log"},
+           {"recognize --dbb db.h5 --log log.h5", "--dbb", "--db"},
+           {"recognize --db=db.h5 --log log.h5 --sparse.mdoe=always", "--sparse.mdoe", "--sparse.mode"},
+           {"db info --db db.h5 --jsno", "--jsno", "--json"},
+           {"--versoin", "--versoin", "--version"}}) {
+    CAPTURE(args);
+    const auto r = touchstone(dir, args);
+    CHECK(r.code == 2);
+    CHECK(r.err.find("unknown flag " + flag + " for `touchstone") != std::string::npos);
+    CHECK(r.err.find("(did you mean " + nearest + "?)") != std::string::npos);
+    CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
+  }
+  const auto far = touchstone(dir, "recognize --db db.h5 --log log.h5 --zzzzzzzz");
+  CHECK(far.code == 2);
+  CHECK(far.err.find("unknown flag --zzzzzzzz for `touchstone recognize`; `touchstone recognize --help` lists") !=
+        std::string::npos);
+  CHECK(far.err.find("did you mean") == std::string::npos);
+  // Known flags in every form pass the check: --flag=value, a hidden alias, an option group's.
+  CHECK(touchstone(dir, "recognize --db=db.h5 --log=log.h5 --steps 1 --json").code == 0);
+  CHECK(touchstone(dir, "db info db.h5 --json").code == 0);
 }
 
 // ---- several inputs in one process ------------------------------------------------------------

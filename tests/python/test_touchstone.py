@@ -8,6 +8,7 @@ import ast
 import json
 import os
 import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -41,6 +42,18 @@ def built(tmp_path_factory):
 @pytest.fixture(scope="session")
 def db(built):
     return ts.Database(str(built[0] / "db.h5"))
+
+
+class Enough(Exception):
+    """What a progress callback raises to stop a long call."""
+
+
+def stop_at(n):
+    """A progress callback that raises Enough when `done` reaches n."""
+    def progress(done, total, left):
+        if done == n:
+            raise Enough("stop here")
+    return progress
 
 
 def rotation_to_quaternion(R):
@@ -136,6 +149,104 @@ def test_geometry_arrays_are_the_databases(built, db, tmp_path):
         db.points(name, "medium")
     with pytest.raises(ValueError):
         db.distance(name, np.zeros((4, 2)))
+
+
+def test_build_database_is_the_commands(built, tmp_path):
+    """build_database from the manifest writes the very file `db build` wrote (same seed, any
+    thread count), and its report names the objects."""
+    root, names = built
+    db = ts.build_database(str(tmp_path / "py.h5"), manifest=str(root / "cat" / "manifest.tsv"), scale="keep",
+                           threads=1)
+    assert db.objects == names and db.build_report["objects"] == names
+    assert db.build_report["resumed"] == 0 and db.build_report["times_s"]["wall"] > 0
+    assert (tmp_path / "py.h5").read_bytes() == (root / "db.h5").read_bytes()
+    assert not (tmp_path / "py.h5.parts").exists()
+
+
+def test_build_database_from_arrays(db, tmp_path):
+    """(name, vertices, faces) arrays: the object's mesh is those arrays (centred, metres), and
+    its scanned points lie on the original object's surface."""
+    name = db.objects[1]
+    vertices, faces = db.mesh(name)
+    shifted = vertices + np.array([0.5, -2.0, 3.0])          # the object frame centres it again
+    new = ts.build_database(str(tmp_path / "arr.h5"), [(name, shifted, faces)], scale="keep")
+    assert new.objects == [name]
+    v, f = new.mesh(name)
+    assert np.array_equal(f, faces)
+    np.testing.assert_allclose(v, vertices, rtol=0, atol=1e-6)
+    voxel = db.settings["field.fine_voxel"]
+    on = db.distance(name, new.points(name))
+    assert np.max(np.abs(on)) < 0.5 * voxel
+    assert new.object_info(name)["source"] == "python arrays"
+    # {name: (vertices, faces)} and {name: path} name the objects as given.
+    mesh_file = tmp_path / "m.off"
+    with open(mesh_file, "w") as out:
+        out.write(f"OFF\n{len(vertices)} {len(faces)} 0\n")
+        np.savetxt(out, vertices, fmt="%.17g")
+        np.savetxt(out, np.hstack([np.full((len(faces), 1), 3), faces]), fmt="%d")
+    two = ts.build_database(str(tmp_path / "two.h5"), {"first": (vertices, faces), "second": str(mesh_file)},
+                            scale="keep")
+    assert two.objects == ["first", "second"]
+    np.testing.assert_allclose(two.mesh("second")[0], vertices, rtol=0, atol=1e-6)
+
+
+def test_build_database_progress_and_resume(built, tmp_path):
+    """progress(done, total, seconds_left) after each object; what it raises stops the build with
+    the finished objects kept, and the same call resumes to the same file."""
+    root, names = built
+    cat = root / "cat" / "meshes"
+    meshes = sorted(p for p in cat.iterdir() if p.is_file())[:3]
+    calls = []
+    ts.build_database(str(tmp_path / "full.h5"), [str(p) for p in meshes], scale="keep", threads=1,
+                      progress=lambda done, total, left: calls.append((done, total, left)))
+    assert [c[:2] for c in calls] == [(1, 3), (2, 3), (3, 3)]
+    assert calls[0][2] is not None and calls[-1][2] == 0
+    out = tmp_path / "stopped.h5"
+    with pytest.raises(Enough):
+        ts.build_database(str(out), [str(p) for p in meshes], scale="keep", threads=1, progress=stop_at(1))
+    assert not out.exists() and (tmp_path / "stopped.h5.parts").is_dir()
+    seen = []
+    resumed = ts.build_database(str(out), [str(p) for p in meshes], scale="keep", threads=1,
+                                progress=lambda done, total, left: seen.append(done))
+    assert seen == [2, 3] and resumed.build_report["resumed"] == 1
+    assert out.read_bytes() == (tmp_path / "full.h5").read_bytes()
+
+
+def test_build_database_rejects_bad_input(db, tmp_path):
+    vertices, faces = db.mesh(0)
+    out = str(tmp_path / "bad.h5")
+    cases = [({"params": {"scan.bogus": 1}}, "scan.bogus"),
+             ({"params": {"scan.fine_spacing": -0.001}}, "scan.fine_spacing"),
+             ({"params": {"scan.max_views": 2.5}}, "scan.max_views"),
+             ({"params": {"descriptor": "sift"}}, "params.descriptor"),
+             ({"scale": "stretch"}, "scale"),
+             ({"units": "furlong"}, "units")]
+    for kwargs, field in cases:
+        with pytest.raises(ts.Error) as e:
+            ts.build_database(out, [("x", vertices, faces)], **kwargs)
+        assert e.value.field == field, (kwargs, e.value)
+    for bad in ((vertices[:, :2], faces), (vertices, faces + len(vertices)), (vertices * np.nan, faces)):
+        with pytest.raises(ts.Error):
+            ts.build_database(out, [("x", *bad)])
+    with pytest.raises(ts.Error):
+        ts.build_database(out)                                  # neither meshes nor manifest
+    with pytest.raises(TypeError):
+        ts.build_database(out, [("x", vertices, faces)], progress=3)
+    assert not os.path.exists(out) and not os.path.exists(out + ".parts")
+
+
+def test_open3d_example_round_trip(tmp_path):
+    """examples/python/open3d_roundtrip.py: Open3D meshes -> a database, an Open3D cloud -> the
+    answer, which names the touched primitive and lies on its contacts."""
+    script = Path(__file__).resolve().parents[2] / "examples" / "python" / "open3d_roundtrip.py"
+    for touched in ("cylinder", "torus"):
+        p = subprocess.run([sys.executable, str(script), str(tmp_path / touched), touched], capture_output=True,
+                           text=True, env={**os.environ})
+        assert p.returncode == 0, p.stderr
+        assert f"answer {touched} " in p.stdout and "right" in p.stdout, p.stdout
+        median = float(p.stdout.split("median ")[1].split(" mm")[0])
+        assert median < 3.0, p.stdout                         # underwater noise: 3 mm arm error
+        assert (tmp_path / touched / "answer.ply").stat().st_size > 0
 
 
 def test_errors_name_the_file(tmp_path):
@@ -351,16 +462,9 @@ def test_experiment_progress_callback(built, tmp_path):
                              progress=lambda done, total, left: calls.append((done, total, left)))
     assert [c[:2] for c in calls] == [(k, 4) for k in range(1, 5)]
     assert all(left is None or left >= 0 for _, _, left in calls)
-
-    class Enough(Exception):
-        pass
-
-    def stop_after_two(done, total, left):
-        if done == 2:
-            raise Enough("stop here")
     out = tmp_path / "b.h5"
     with pytest.raises(Enough):
-        ts.run_experiment(str(root / "db.h5"), str(out), set=config, threads=1, progress=stop_after_two)
+        ts.run_experiment(str(root / "db.h5"), str(out), set=config, threads=1, progress=stop_at(2))
     seen = []
     resumed = ts.run_experiment(str(root / "db.h5"), str(out), set=config, threads=1, resume=True,
                                 progress=lambda done, total, left: seen.append(done))

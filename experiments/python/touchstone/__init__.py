@@ -20,6 +20,8 @@ calls release the GIL, so recognizers in several Python threads run in parallel.
 from __future__ import annotations
 
 import json
+import os
+import tempfile
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
@@ -37,7 +39,8 @@ set_threads = _ts.set_threads
 
 __all__ = [
     "Error", "Database", "TactileLog", "Exploration", "Hypothesis", "StepResult", "Recognizer",
-    "read_log", "simulate", "parameters", "run_experiment", "report", "read_runs", "set_threads",
+    "read_log", "simulate", "parameters", "build_database", "run_experiment", "report", "read_runs",
+    "set_threads",
     "__version__",
 ]
 
@@ -179,6 +182,80 @@ def run_experiment(db: str, out: str, config: Optional[str] = None, set: Optiona
     None before the first). An exception it raises stops the experiment: the runs finished are
     in ``out`` (``resume=True`` continues) and the exception is raised again."""
     return json.loads(_ts.run_experiment_json(db, out, config or "", dict(set or {}), threads, resume, progress))
+
+
+MeshItem = Any   # a path, (name, path), or (name, vertices, faces)
+
+
+def _write_off(path: str, vertices: Any, faces: Any, name: str) -> None:
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces)
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
+        raise Error(f"vertices of {name!r}: expected a V x 3 array, got shape {v.shape}")
+    if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or not np.issubdtype(f.dtype, np.integer):
+        raise Error(f"faces of {name!r}: expected an F x 3 array of vertex indices, got shape {f.shape} ({f.dtype})")
+    if not np.all(np.isfinite(v)):
+        raise Error(f"vertices of {name!r}: not all finite")
+    if f.min() < 0 or f.max() >= len(v):
+        raise Error(f"faces of {name!r}: an index outside 0..{len(v) - 1}")
+    with open(path, "w", encoding="ascii") as out:
+        out.write(f"OFF\n{len(v)} {len(f)} 0\n")
+        np.savetxt(out, v, fmt="%.17g")
+        np.savetxt(out, np.hstack([np.full((len(f), 1), 3), f.astype(np.int64)]), fmt="%d")
+
+
+def build_database(out: str, meshes: Any = None, *, manifest: Optional[str] = None,
+                   params: Optional[Mapping[str, Any]] = None, scale: str = "fit", units: str = "m",
+                   seed: int = 1, congruence_tolerance: float = 0.01, threads: int = 0,
+                   progress: Optional[Callable[[int, int, Optional[float]], Any]] = None) -> Database:
+    """Build an object database into ``out`` (HDF5), as ``touchstone db build`` does, and open it.
+
+    ``meshes``: a folder of mesh files (any format Assimp reads; names from the file names); or a
+    sequence whose items are a mesh file path, a ``(name, path)`` pair or a ``(name, vertices,
+    faces)`` triple (V x 3 coordinates in the mesh's units, F x 3 vertex indices: an Open3D or
+    trimesh mesh's arrays); or a dict ``{name: path or (vertices, faces)}``. Or ``manifest``: a
+    manifest file (source, path, name per line) instead.
+
+    ``params``: build parameters by the names of :attr:`Database.settings` (``"scan.fine_spacing"``,
+    ``"fpfh.feature_radius"``, ``"descriptor"``, ...); ``scale``: ``"fit"`` (every object scaled to
+    ``max_extent``) or ``"keep"`` (each mesh's own size, in ``units``: m, cm, mm or in). The same
+    inputs, parameters and seed give the same file for any thread count.
+
+    ``progress(done, total, seconds_left)`` is called after each object. An exception it raises
+    stops the build: the objects finished stay in ``out + ".parts"``, so the same call resumes,
+    and the exception is raised again. The returned database's ``build_report`` holds what the
+    build said (objects, warnings, congruent classes, times)."""
+    if (meshes is None) == (manifest is None):
+        raise Error("build_database: give meshes or manifest (one of them)")
+    inputs: List[Any] = []
+    folder = ""
+    with tempfile.TemporaryDirectory(prefix="touchstone-meshes-") as tmp:
+        if manifest is None and isinstance(meshes, (str, os.PathLike)):
+            folder = os.fspath(meshes)
+        elif manifest is None:
+            items = list(meshes.items()) if isinstance(meshes, Mapping) else list(meshes)
+            for k, item in enumerate(items):
+                if isinstance(meshes, Mapping):
+                    name, value = item
+                    item = (name, value) if isinstance(value, (str, os.PathLike)) else (name, *value)
+                if isinstance(item, (str, os.PathLike)):
+                    inputs.append(("", os.fspath(item), ""))
+                elif len(item) == 2:
+                    inputs.append((str(item[0]), os.fspath(item[1]), ""))
+                elif len(item) == 3:
+                    name = str(item[0])
+                    path = os.path.join(tmp, f"{k:06d}.off")
+                    _write_off(path, item[1], item[2], name)
+                    inputs.append((name, path, "python arrays"))
+                else:
+                    raise Error(f"build_database: meshes[{k}]: expected a path, (name, path) or "
+                                f"(name, vertices, faces)")
+        report = _ts.build_database_impl(os.fspath(out), inputs, os.fspath(manifest or ""), folder,
+                                         dict(params or {}), scale, units, seed, congruence_tolerance,
+                                         threads, progress)
+    db = Database(os.fspath(out))
+    db.build_report = report
+    return db
 
 
 def report(store: str) -> Dict[str, Any]:
