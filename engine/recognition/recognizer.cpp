@@ -80,10 +80,11 @@ RecognizerSettings RecognizerSettings::improved() {
   s.sparse.mode = kSparseAlways;
   // A step that the leading survivor alone explains within noise takes no new candidates
   // (study 3, shortened: the same recognition at step 20, 0.3 s -> 0.02 s a step on
-  // bench_recognize; CHANGELOG.md). Measured on databases of 45 objects and fewer only: off
-  // above 48 until the large databases' studies (7) are run with it.
+  // bench_recognize; CHANGELOG.md), on databases of any size: study 7 at 450 catalogue objects,
+  // paired over 100 runs, the same recognition within one run at every step (91 -> 92 % at step
+  // 20, 96 -> 95 % at step 40) and the median step at step 40 329 -> 80 ms.
   s.early_stop = true;
-  s.early_stop_max_database = 48;
+  s.early_stop_max_database = 0;
   return s;
 }
 
