@@ -140,10 +140,9 @@ void pair_row(std::size_t i, std::size_t n, PairRow& R) {
   return !(std::abs(part - 0.5) < 1e-4);
 }
 
-}  // namespace
-
-ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSettings& s) {
-  ObjectPairs out;
+/// The table's points: the keypoints thinned by a voxel filter, its voxel grown by 1.5 until at
+/// most max_model_points remain; zero normals where the keypoints have none.
+void thin_table_points(const ObjectKeypoints& keypoints, const SparseSettings& s, ObjectPairs& out) {
   const std::size_t cap = std::min<std::size_t>(s.max_model_points, 65535);
   PointCloud thin;
   for (double voxel = s.model_spacing; ; voxel *= 1.5) {
@@ -152,6 +151,38 @@ ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSet
   }
   out.points = thin.points;
   out.normals = thin.has_normals() ? thin.normals : std::vector<Vec3>(thin.size(), Vec3::Zero());
+}
+
+/// The rows into out.near: row i holds every j != i sorted by (distance, index), j taken in
+/// increasing order, then a stable radix sort on the distance's low byte and on its high byte.
+void append_sorted_rows(std::size_t n, const std::vector<std::uint16_t>& distance,
+                        const std::vector<std::array<std::uint8_t, 3>>& angles, ObjectPairs& out) {
+  out.near.reserve(n * (n - 1));
+  std::vector<std::uint16_t> order(n - 1), by_low(n - 1);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint16_t* row = distance.data() + i * n;
+    std::size_t k = 0;
+    for (std::size_t j = 0; j < n; ++j)
+      if (j != i) order[k++] = static_cast<std::uint16_t>(j);
+    for (const int shift : {0, 8}) {
+      std::array<std::uint32_t, 257> start{};
+      for (const std::uint16_t j : order) ++start[((row[j] >> shift) & 0xffu) + 1];
+      for (std::size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
+      for (const std::uint16_t j : order) by_low[start[(row[j] >> shift) & 0xffu]++] = j;
+      order.swap(by_low);
+    }
+    for (const std::uint16_t j : order) {
+      const auto& a = angles[i * n + j];
+      out.near.push_back({row[j], j, a[0], a[1], a[2], 0});
+    }
+  }
+}
+
+}  // namespace
+
+ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSettings& s) {
+  ObjectPairs out;
+  thin_table_points(keypoints, s, out);
   const std::size_t n = out.points.size();
   if (n < 2) return out;
   PairRow R(n);
@@ -165,13 +196,12 @@ ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSet
   for (std::size_t i = 0; i < n; ++i)
     for (std::size_t j = i + 1; j < n; ++j) largest2 = std::max(largest2, (out.points[i] - out.points[j]).squaredNorm());
   out.unit = std::max(std::sqrt(largest2), 1e-9) / 65535.0;
-  out.near.reserve(n * (n - 1));
   // Row i: every j != i sorted by (distance, index), each with angle(n_i, d), angle(n_j, d) and
   // angle(n_i, n_j) of d = p_j - p_i (in units, as pair_angle_units(std::atan2(|n x d|, n . d))
   // would give). Each unordered pair is measured once, for both rows: from j's end, d is exactly
   // -d (its norm and cross products' norms the same, its dot products negated), so angle(n_j,
   // -d) and angle(n_i, -d) are atan2 of the same numbers with x negated, and n_j x n_i is
-  // exactly -(n_i x n_j). Then each row is sorted as 32-bit keys (distance, index).
+  // exactly -(n_i x n_j).
   std::vector<std::uint16_t> distance(n * n);
   std::vector<std::array<std::uint8_t, 3>> angles(n * n);
   auto measure = [&](std::size_t i, std::size_t j) {   // row i's entry j, the scalar way
@@ -202,26 +232,7 @@ ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSet
       }
     }
   }
-  // Each row sorted by (distance, index): j taken in increasing order, then a stable radix sort
-  // on the distance's low byte and on its high byte.
-  std::vector<std::uint16_t> order(n - 1), by_low(n - 1);
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::uint16_t* row = distance.data() + i * n;
-    std::size_t k = 0;
-    for (std::size_t j = 0; j < n; ++j)
-      if (j != i) order[k++] = static_cast<std::uint16_t>(j);
-    for (const int shift : {0, 8}) {
-      std::array<std::uint32_t, 257> start{};
-      for (const std::uint16_t j : order) ++start[((row[j] >> shift) & 0xffu) + 1];
-      for (std::size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
-      for (const std::uint16_t j : order) by_low[start[(row[j] >> shift) & 0xffu]++] = j;
-      order.swap(by_low);
-    }
-    for (const std::uint16_t j : order) {
-      const auto& a = angles[i * n + j];
-      out.near.push_back({row[j], j, a[0], a[1], a[2], 0});
-    }
-  }
+  append_sorted_rows(n, distance, angles, out);
   return out;
 }
 

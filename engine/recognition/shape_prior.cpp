@@ -31,6 +31,59 @@ int angle_bin(const Vec3& pa, const Vec3& na, const Vec3& pb, const Vec3& nb, in
   return (q(std::min(ca, cb)) * bins + q(std::max(ca, cb))) * bins + q(cn);
 }
 
+void prior_check_settings(const ShapePriorSettings& settings, std::size_t mask, std::size_t objects) {
+  if (!(settings.distance_bin > 0.0) || !std::isfinite(settings.distance_bin))
+    throw Error("shape prior: distance_bin must be positive", {}, "prior.distance_bin");
+  if (settings.angle_bins < 1 || settings.angle_bins > 64)
+    throw Error("shape prior: angle_bins must be in [1, 64]", {}, "prior.angle_bins");
+  if (!(settings.floor > 0.0 && settings.floor < 1.0))
+    throw Error("shape prior: floor must be in (0, 1)", {}, "prior.floor");
+  if (settings.object_points < 2)
+    throw Error("shape prior: object_points must be at least 2", {}, "prior.object_points");
+  if (mask != 0 && mask != objects)
+    throw Error("shape prior: object mask has " + std::to_string(mask) + " entries, the database " +
+                std::to_string(objects) + " objects", {}, "objects");
+}
+
+/// Object o's pair histogram into h (D distance bins x `angles`, each pair split linearly
+/// between the two distance bins whose centres bracket it) over at most object_points of its
+/// coarse points with normals (a uniform sample, the same on every run); its total weight, 0
+/// without a pair. `pick` is scratch.
+double prior_object_histogram(const PointCloud& coarse, std::size_t o, std::size_t D, std::size_t angles,
+                              const ShapePriorSettings& settings, std::vector<double>& h,
+                              std::vector<std::uint32_t>& pick) {
+  pick.clear();
+  for (std::uint32_t i = 0; i < coarse.points.size(); ++i)
+    if (i < coarse.normals.size() && has_normal(coarse.normals[i])) pick.push_back(i);
+  if (pick.size() > settings.object_points) {
+    Rng rng(kTagPrior, o);
+    for (std::size_t k = 0; k < settings.object_points; ++k)
+      std::swap(pick[k], pick[k + rng.index(pick.size() - k)]);
+    pick.resize(settings.object_points);
+    std::sort(pick.begin(), pick.end());
+  }
+  h.assign(D * angles, 0.0);
+  double total = 0.0;
+  for (std::size_t a = 0; a < pick.size(); ++a)
+    for (std::size_t b = a + 1; b < pick.size(); ++b) {
+      double d = 0.0;
+      const int ab = angle_bin(coarse.points[pick[a]], coarse.normals[pick[a]], coarse.points[pick[b]],
+                               coarse.normals[pick[b]], settings.angle_bins, d);
+      if (ab < 0 || d < settings.min_pair_distance) continue;
+      // Linear split between the bins whose centres ((k + 1/2) bin) bracket d.
+      const double f = d / settings.distance_bin - 0.5;
+      const double k0 = std::floor(f), w1 = f - k0;
+      for (int j = 0; j < 2; ++j) {
+        const double k = k0 + j;
+        const double w = j == 0 ? 1.0 - w1 : w1;
+        if (k < 0.0 || k >= static_cast<double>(D) || w <= 0.0) continue;
+        h[static_cast<std::size_t>(k) * angles + static_cast<std::size_t>(ab)] += w;
+        total += w;
+      }
+    }
+  return total;
+}
+
 }  // namespace
 
 struct ShapePrior::Impl {
@@ -50,17 +103,7 @@ ShapePrior::ShapePrior(const Database& db, const ShapePriorSettings& settings,
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.s = settings;
-  if (!(settings.distance_bin > 0.0) || !std::isfinite(settings.distance_bin))
-    throw Error("shape prior: distance_bin must be positive", {}, "prior.distance_bin");
-  if (settings.angle_bins < 1 || settings.angle_bins > 64)
-    throw Error("shape prior: angle_bins must be in [1, 64]", {}, "prior.angle_bins");
-  if (!(settings.floor > 0.0 && settings.floor < 1.0))
-    throw Error("shape prior: floor must be in (0, 1)", {}, "prior.floor");
-  if (settings.object_points < 2)
-    throw Error("shape prior: object_points must be at least 2", {}, "prior.object_points");
-  if (!objects.empty() && objects.size() != db.size())
-    throw Error("shape prior: object mask has " + std::to_string(objects.size()) + " entries, the database " +
-                std::to_string(db.size()) + " objects", {}, "objects");
+  prior_check_settings(settings, objects.size(), db.size());
   const auto A = static_cast<std::size_t>(settings.angle_bins);
   m.angles = A * A * A;
   const std::size_t n = db.size();
@@ -85,36 +128,7 @@ ShapePrior::ShapePrior(const Database& db, const ShapePriorSettings& settings,
     for (std::size_t o = r.begin(); o != r.end(); ++o) {
       const std::size_t D = m.dbins[o];
       if (D == 0) continue;
-      const PointCloud& coarse = db.keypoints(o).coarse;
-      pick.clear();
-      for (std::uint32_t i = 0; i < coarse.points.size(); ++i)
-        if (i < coarse.normals.size() && has_normal(coarse.normals[i])) pick.push_back(i);
-      if (pick.size() > settings.object_points) {  // a uniform sample, the same on every run
-        Rng rng(kTagPrior, o);
-        for (std::size_t k = 0; k < settings.object_points; ++k)
-          std::swap(pick[k], pick[k + rng.index(pick.size() - k)]);
-        pick.resize(settings.object_points);
-        std::sort(pick.begin(), pick.end());
-      }
-      h.assign(D * m.angles, 0.0);
-      double total = 0.0;
-      for (std::size_t a = 0; a < pick.size(); ++a)
-        for (std::size_t b = a + 1; b < pick.size(); ++b) {
-          double d = 0.0;
-          const int ab = angle_bin(coarse.points[pick[a]], coarse.normals[pick[a]], coarse.points[pick[b]],
-                                   coarse.normals[pick[b]], settings.angle_bins, d);
-          if (ab < 0 || d < settings.min_pair_distance) continue;
-          // Linear split between the bins whose centres ((k + 1/2) bin) bracket d.
-          const double f = d / settings.distance_bin - 0.5;
-          const double k0 = std::floor(f), w1 = f - k0;
-          for (int j = 0; j < 2; ++j) {
-            const double k = k0 + j;
-            const double w = j == 0 ? 1.0 - w1 : w1;
-            if (k < 0.0 || k >= static_cast<double>(D) || w <= 0.0) continue;
-            h[static_cast<std::size_t>(k) * m.angles + static_cast<std::size_t>(ab)] += w;
-            total += w;
-          }
-        }
+      const double total = prior_object_histogram(db.keypoints(o).coarse, o, D, m.angles, settings, h, pick);
       if (!(total > 0.0)) continue;  // no pair: every bin stays empty
       std::uint8_t* out = &m.codes[m.offset[o]];
       auto code = [&](double p) {
