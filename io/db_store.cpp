@@ -4,6 +4,8 @@
 #include "io/h5.hpp"
 
 #include <algorithm>
+#include <cstdio>
+#include <limits>
 #include <cmath>
 #include <functional>
 #include <optional>
@@ -395,8 +397,11 @@ bool set_field(S& s, const std::vector<Field<S>>& fields, const std::string& nam
     if (f.real) {
       s.*f.real = value;
     } else {
-      if (!(value == std::floor(value) && value <= 1e6))
-        throw Error("expected a whole number of at most 1e6, got " + std::to_string(value), origin, key);
+      if (value != std::floor(value)) {
+        char shown[64];
+        std::snprintf(shown, sizeof shown, "%.17g", value);
+        throw Error(std::string("expected a whole number, got ") + shown, origin, key);
+      }
       s.*f.integer = static_cast<int>(value);
     }
     return true;
@@ -406,26 +411,50 @@ bool set_field(S& s, const std::vector<Field<S>>& fields, const std::string& nam
 }  // namespace
 
 void set_setting_value(DatabaseSettings& s, const std::string& key, double value, const std::string& origin) {
-  const bool may_be_zero = key == "field.coarse_margin";
-  if (!std::isfinite(value) || value < 0.0 || (value == 0.0 && !may_be_zero))
-    throw Error(std::string("expected a finite ") + (may_be_zero ? "non-negative" : "positive") + " number, got " +
-                    std::to_string(value),
-                origin, key);
-  if (key == "scan.target_coverage" && value > 1.0)
-    throw Error("expected a covered fraction of at most 1, got " + std::to_string(value), origin, key);
+  // The ranges `db build` takes (its flags' checks), and for the parameters it has no flag for,
+  // what the scanner can use: every count at least 1, angles in (0, 90] degrees.
+  struct Range {
+    const char* key;
+    double lo, hi;
+    bool lo_open;
+  };
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  static const Range ranges[] = {
+      {"max_extent", 0, kInf, true},           {"scan.fine_spacing", 0, kInf, true},
+      {"scan.coarse_voxel", 0, kInf, true},    {"scan.ray_pitch", 0, kInf, true},
+      {"scan.max_views", 1, 100000, false},    {"scan.candidate_views", 1, 100000, false},
+      {"scan.target_coverage", 0, 1, false},   {"scan.random_every", 1, 100000, false},
+      {"scan.stall_views", 1, 100000, false},  {"scan.min_gain", 0, 1, false},
+      {"scan.coverage_radius", 0, kInf, true}, {"scan.max_incidence_deg", 0, 90, true},
+      {"scan.grazing_incidence_deg", 0, 90, true}, {"scan.coverage_samples", 1, 1e7, false},
+      {"fpfh.normal_radius", 0, kInf, true},   {"fpfh.feature_radius", 0, kInf, true},
+      {"field.fine_voxel", 0, kInf, true},     {"field.fine_band_voxels", 1, 1000, false},
+      {"field.coarse_voxel", 0, kInf, true},   {"field.coarse_margin", 0, kInf, false}};
+  const Range* range = nullptr;
+  for (const Range& r : ranges)
+    if (key == r.key) range = &r;
+  if (!range) {
+    std::string names;
+    for (const auto& v : settings_values(s)) names += (v.group.empty() ? v.name : v.group + "." + v.name) + ", ";
+    throw Error("unknown build parameter (known: " + names + "descriptor)", origin, key);
+  }
+  char shown[64];
+  std::snprintf(shown, sizeof shown, "%.17g", value);
+  const bool below = range->lo_open ? !(value > range->lo) : !(value >= range->lo);
+  if (!std::isfinite(value) || below || value > range->hi) {
+    char bounds[96];
+    std::snprintf(bounds, sizeof bounds, "%s%g, %s%s", range->lo_open ? "(" : "[", range->lo,
+                  std::isinf(range->hi) ? "inf" : std::to_string(static_cast<long long>(range->hi)).c_str(),
+                  std::isinf(range->hi) ? ")" : "]");
+    throw Error(std::string("expected a finite number in ") + bounds + ", got " + shown, origin, key);
+  }
   const auto dot = key.find('.');
   const std::string group = dot == std::string::npos ? "" : key.substr(0, dot);
   const std::string name = dot == std::string::npos ? key : key.substr(dot + 1);
-  bool known = false;
-  if (group.empty() && name == "max_extent") s.max_extent = value, known = true;
-  else if (group == "scan") known = set_field(s.scan, scan_fields(), name, value, key, origin);
-  else if (group == "fpfh") known = set_field(s.fpfh, fpfh_fields(), name, value, key, origin);
-  else if (group == "field") known = set_field(s.field, field_fields(), name, value, key, origin);
-  if (!known) {
-    std::string names;
-    for (const auto& v : settings_values(s)) names += (names.empty() ? "" : ", ") + (v.group.empty() ? v.name : v.group + "." + v.name);
-    throw Error("unknown build parameter (known: " + names + ")", origin, key);
-  }
+  if (group.empty()) s.max_extent = value;
+  else if (group == "scan") set_field(s.scan, scan_fields(), name, value, key, origin);
+  else if (group == "fpfh") set_field(s.fpfh, fpfh_fields(), name, value, key, origin);
+  else set_field(s.field, field_fields(), name, value, key, origin);
 }
 
 std::vector<SettingValue> settings_values(const DatabaseSettings& s) {

@@ -136,9 +136,9 @@ struct SettingValue {
 std::vector<SettingValue> settings_values(const DatabaseSettings& settings);
 /// Sets the build parameter `key`, one of settings_values' names ("max_extent", or the group and
 /// the name: "scan.fine_spacing", "field.fine_band_voxels", ...), to `value`. An unknown key, or a
-/// value out of its range (a finite positive number; `field.coarse_margin` may be 0;
-/// `scan.target_coverage` at most 1; the integers whole, up to 1e6), is an Error naming `origin`
-/// and the key.
+/// value out of its range (the ranges `db build`'s flags take; lengths positive, counts at least
+/// 1 and whole, fractions in [0, 1], angles in (0, 90] degrees), is an Error naming `origin` and
+/// the key, before anything is built.
 void set_setting_value(DatabaseSettings& settings, const std::string& key, double value, const std::string& origin);
 
 /// Seed of one object: derived from the build seed and the object's name (not its position),

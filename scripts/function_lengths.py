@@ -8,7 +8,8 @@ Prints `file:line: name: N lines` for each function longer than --max (default 8
 when there is one; without --max prints every function. A brace-matching reader, not a parser:
 comments, strings and character literals are skipped; a body is a `{` that follows `)` (after
 qualifiers such as const, override, noexcept, -> type, or a constructor's initializer list) at
-namespace or class depth; lambdas inside a body count toward that body.
+namespace or class depth (a brace right after a name, `=`, `,` or `(` is an initializer); lambdas
+inside a body count toward that body.
 """
 import argparse
 import re
@@ -56,11 +57,18 @@ def functions(path):
         c = text[i]
         if c == "{":
             head = text[stmt_start:i]
-            in_body = "body" in depth_kinds
-            is_function = (not in_body and re.search(r"\)\s*(const|override|final|noexcept|mutable|->[^;{]*|"
-                                                       r"\s|&|\w+\s*\([^)]*\)|,|:[^;{]*)*$", head)
-                           and not re.match(r"\s*(namespace|class|struct|enum|union|extern)\b", head.strip() + " ")
-                           and not re.search(r"=\s*$", head))
+            in_body = any(k[0] == "body" for k in depth_kinds)
+            if not in_body and re.search(r"[\w>\]]$|[=,(]\s*$", head):
+                # A brace initializer (a member's `a_{1}`, `T x{...}`, `= {...}`, an argument; a
+                # body's brace follows a space): the statement goes on after it.
+                depth_kinds.append(("init", 0, ""))
+                i += 1
+                continue
+            while re.search(r"\{[^{}]*\}", head):          # initializers already read
+                head = re.sub(r"\{[^{}]*\}", "", head)
+            is_function = (not in_body and re.search(r"\)\s*(const|override|final|noexcept|mutable|try|"
+                                                       r"requires\b[^;{]*|->[^;{]*|\s|&|\w+\s*\([^)]*\)|,|:[^;{]*)*$", head)
+                           and not re.match(r"\s*(namespace|class|struct|enum|union|extern)\b", head.strip() + " "))
             if is_function:
                 name_match = re.findall(r"([~\w:]+(?:<[^;{]*?>)?|operator\S+)\s*\(", head)
                 first = text.count("\n", 0, stmt_start + len(head) - len(head.lstrip())) + 1
@@ -71,11 +79,16 @@ def functions(path):
         elif c == "}":
             if depth_kinds:
                 kind = depth_kinds.pop()
-                if kind[0] == "body" and "body" not in [k[0] for k in depth_kinds]:
+                if kind[0] == "init":
+                    i += 1
+                    continue
+                if kind[0] == "body" and not any(k[0] == "body" for k in depth_kinds):
                     last = text.count("\n", 0, i) + 1
                     found.append((kind[1], kind[2], last - kind[1] + 1))
             stmt_start = i + 1
-        elif c == ";":
+        elif c == ";" and not (depth_kinds and depth_kinds[-1][0] == "init"):
+            stmt_start = i + 1
+        elif c == ":" and re.search(r"\b(public|private|protected)\s*$", text[stmt_start:i]):
             stmt_start = i + 1
         i += 1
     return found

@@ -76,12 +76,14 @@ std::size_t edit_distance(const std::string& a, const std::string& b) {
   return row[b.size()];
 }
 
-/// The long flags of a (sub)command, its option groups' included.
-void long_flags(const CLI::App* app, std::vector<std::string>& out) {
+/// The long flags of a (sub)command, its option groups' included; `shown` only those its help
+/// shows (a hidden alias is taken, never suggested).
+void long_flags(const CLI::App* app, std::vector<std::string>& out, bool shown = false) {
   for (const CLI::Option* o : app->get_options())
-    for (const auto& name : o->get_lnames()) out.push_back("--" + name);
+    if (!shown || !o->get_group().empty())
+      for (const auto& name : o->get_lnames()) out.push_back("--" + name);
   for (const CLI::App* group : app->get_subcommands([](const CLI::App* a) { return a->get_name().empty(); }))
-    long_flags(group, out);
+    long_flags(group, out, shown);
 }
 
 /// A flag the command line gives that its subcommand does not know, as one usage error naming
@@ -100,6 +102,8 @@ std::string unknown_flag(const CLI::App& app, int argc, char** argv) {
       if (!subs.empty()) {
         current = subs.front();
         path += " " + token;
+      } else if (current->get_require_subcommand_min() > 0) {
+        return {};   // a misspelt subcommand: CLI11 names it, not the flags after it
       }
       continue;
     }
@@ -110,8 +114,13 @@ std::string unknown_flag(const CLI::App& app, int argc, char** argv) {
     if (std::find(flags.begin(), flags.end(), flag) != flags.end()) continue;
     std::string nearest;
     std::size_t best = std::numeric_limits<std::size_t>::max();
-    for (const auto& f : flags)
-      if (const std::size_t d = edit_distance(flag, f); d < best) best = d, nearest = f;
+    flags.clear();
+    long_flags(current, flags, true);
+    for (const auto& f : flags) {
+      // A flag cut short (`--thr`, `--run`) is as near as one letter off.
+      const std::size_t d = f.rfind(flag, 0) == 0 ? 1 : edit_distance(flag, f);
+      if (d < best) best = d, nearest = f;
+    }
     const std::size_t near_enough = std::max<std::size_t>(2, flag.size() / 3);
     std::string message = "touchstone: error: unknown flag " + flag + " for `" + path + "`";
     if (!nearest.empty() && best <= near_enough) message += " (did you mean " + nearest + "?)";

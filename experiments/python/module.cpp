@@ -566,13 +566,19 @@ py::dict build_database(const std::string& out, const py::list& inputs, const st
   } else if (!folder.empty()) {
     meshes = datasets::inputs_from_folder(folder);
   } else {
-    for (const auto& item : inputs) {
-      const auto t = item.cast<py::tuple>();
-      auto in = datasets::input_from_path(t[1].cast<std::string>(), t[0].cast<std::string>());
+    for (std::size_t k = 0; k < inputs.size(); ++k) {
+      const auto t = inputs[k].cast<py::tuple>();
+      const std::string field = "meshes[" + std::to_string(k) + "]";
+      datasets::MeshInput in;
+      try {
+        in = datasets::input_from_path(t[1].cast<std::string>(), t[0].cast<std::string>());
+      } catch (const Error& e) {   // e.g. an object name a database cannot hold
+        throw Error(e.message(), out, field);
+      }
       const auto source = t[2].cast<std::string>();
       if (!source.empty()) in.source = source;
       in.origin = "build_database";
-      in.origin_field = "meshes";
+      in.origin_field = field;
       meshes.push_back(std::move(in));
     }
   }
@@ -589,15 +595,18 @@ py::dict build_database(const std::string& out, const py::list& inputs, const st
       try {
         bs.database.descriptor = ts::parse_descriptor(d);
       } catch (const Error& e) {
-        throw Error(e.message(), out, "params.descriptor");
+        throw Error(e.message(), out, "descriptor");
       }
       continue;
     }
-    if (!py::isinstance<py::int_>(v) && !py::isinstance<py::float_>(v))
-      throw Error("expected a number", out, "params." + key);
-    io::set_setting_value(bs.database, key, v.cast<double>(), out);   // errors name the key
+    // A number: Python's or NumPy's (anything with __float__ but a bool or a string).
+    if (py::isinstance<py::bool_>(v) || py::isinstance<py::str>(v) || !py::hasattr(v, "__float__"))
+      throw Error("expected a number, got " + py::repr(v).cast<std::string>(), out, key);
+    io::set_setting_value(bs.database, key, py::float_(py::reinterpret_borrow<py::object>(v)).cast<double>(), out);   // errors name the key
   }
   bs.seed = seed;
+  if (!(congruence_tolerance > 0.0) || !std::isfinite(congruence_tolerance))
+    throw Error("expected a positive fraction of the object size (e.g. 0.01)", out, "congruence_tolerance");
   bs.congruence.tolerance = congruence_tolerance;
   // The callback after each object (on the worker that built it, one at a time): what it raises
   // stops the build (the objects finished stay in OUT.parts, so the same call resumes) and is
@@ -622,8 +631,11 @@ py::dict build_database(const std::string& out, const py::list& inputs, const st
     std::optional<tbb::global_control> limit;
     if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
     report = datasets::build_database(meshes, out, bs);
-  } catch (const ProgressRaised&) {
-    std::rethrow_exception(raised);
+  } catch (...) {
+    // What the callback raised comes first, also when another object's error reached here
+    // before it (the build rethrows the error of the smallest failing object).
+    if (raised) std::rethrow_exception(raised);
+    throw;
   }
   py::dict d;
   d["out"] = out;

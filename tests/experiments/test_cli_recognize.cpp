@@ -352,9 +352,24 @@ TEST_CASE("cli recognize: bad input gives one clear error and no output file") {
   CHECK(far.err.find("unknown flag --zzzzzzzz for `touchstone recognize`; `touchstone recognize --help` lists") !=
         std::string::npos);
   CHECK(far.err.find("did you mean") == std::string::npos);
-  // Known flags in every form pass the check: --flag=value, a hidden alias, an option group's.
+  // Known flags in every form pass the check: --flag=value, a hidden alias (`report --runs`),
+  // an option group's (`db build --manifest`), and what follows `--`.
   CHECK(touchstone(dir, "recognize --db=db.h5 --log=log.h5 --steps 1 --json").code == 0);
   CHECK(touchstone(dir, "db info db.h5 --json").code == 0);
+  for (const char* args : {"report --store missing.h5 --runs 0:1", "db build --manifest missing.tsv --out x.h5",
+                           "recognize --db db.h5 --log missing.h5 -- --not-a-flag"}) {
+    CAPTURE(args);
+    const auto r = touchstone(dir, args);
+    CHECK(r.err.find("unknown flag") == std::string::npos);
+    CHECK(r.code != 0);   // (the files are missing)
+  }
+  // A hidden alias is taken but never suggested: `--run` suggests --run-range, not --runs.
+  const auto near_hidden = touchstone(dir, "report --store missing.h5 --run 0:1");
+  CHECK(near_hidden.err.find("(did you mean --run-range?)") != std::string::npos);
+  // A misspelt subcommand is CLI11's to name, not the flags after it.
+  const auto misspelt = touchstone(dir, "recognise --db db.h5");
+  CHECK(misspelt.code == 2);
+  CHECK(misspelt.err.find("unknown flag") == std::string::npos);
 }
 
 // ---- several inputs in one process ------------------------------------------------------------

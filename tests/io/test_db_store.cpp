@@ -6,7 +6,10 @@
 
 #include <doctest/doctest.h>
 
+#include <cmath>
 #include <functional>
+#include <limits>
+#include <string>
 
 #include <thread>
 
@@ -526,4 +529,50 @@ TEST_CASE("db store: databases written before the descriptor was stored are FPFH
   CHECK(db.settings().descriptor == ts::Descriptor::fpfh);
   CHECK(db.feature_dim() == 33);
   CHECK(db.load_features(0).features.dim() == 33);
+}
+
+TEST_CASE("db store: build parameters set by name, within their ranges") {
+  using ts::DatabaseSettings;
+  // Every stored parameter can be set by its name, to its default and to a changed value that
+  // reads back; the ranges refuse what `db build` refuses, naming the key.
+  const DatabaseSettings defaults;
+  for (const auto& v : ts::io::settings_values(defaults)) {
+    const std::string key = v.group.empty() ? v.name : v.group + "." + v.name;
+    CAPTURE(key);
+    DatabaseSettings s;
+    ts::io::set_setting_value(s, key, v.value, "x.h5");
+    CHECK(ts::io::settings_values(s).size() == ts::io::settings_values(defaults).size());
+    const double changed = v.integer ? v.value + 1 : v.value * 0.5 + (v.value == 0 ? 0.1 : 0.0);
+    ts::io::set_setting_value(s, key, changed, "x.h5");
+    bool found = false;
+    for (const auto& w : ts::io::settings_values(s))
+      if ((w.group.empty() ? w.name : w.group + "." + w.name) == key) {
+        found = true;
+        CHECK(w.value == changed);
+      }
+    CHECK(found);
+  }
+  auto refused = [](const std::string& key, double value) {
+    DatabaseSettings s;
+    try {
+      ts::io::set_setting_value(s, key, value, "x.h5");
+    } catch (const ts::Error& e) {
+      return e.file() == "x.h5" && e.field() == key;
+    }
+    return false;
+  };
+  CHECK(refused("scan.bogus", 1.0));
+  CHECK(refused("scan.fine_spacing", 0.0));
+  CHECK(refused("scan.fine_spacing", -0.001));
+  CHECK(refused("max_extent", std::numeric_limits<double>::infinity()));
+  CHECK(refused("scan.target_coverage", 1.5));
+  CHECK(refused("scan.max_views", 2.5));
+  CHECK(refused("scan.max_views", 100001));
+  CHECK(refused("scan.random_every", 0));
+  CHECK(refused("field.fine_band_voxels", 1001));
+  CHECK(refused("scan.max_incidence_deg", 95));
+  CHECK(refused("fpfh.feature_radius", std::nan("")));
+  CHECK_FALSE(refused("field.coarse_margin", 0.0));
+  CHECK_FALSE(refused("scan.target_coverage", 0.0));
+  CHECK_FALSE(refused("field.fine_band_voxels", 1000));
 }

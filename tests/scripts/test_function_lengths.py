@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """scripts/function_lengths.py against a source whose function lengths are known: braces in
 comments, strings and character literals are not counted; lambdas count toward their function;
-class bodies, namespaces and initializer lists are not functions; --max fails on a long one.
+class bodies, namespaces, brace initializers and initializer lists are not functions; an access
+specifier does not start a function; --max fails on a long one.
 
     tests/scripts/test_function_lengths.py SOURCE_DIR
 """
@@ -22,11 +23,25 @@ int three(int x) {   // { a brace in a comment
 
 struct S {
   int v = 0;
+  int w{2};
   S() : v(1) {}
+  S(int a, int b) : v{a}, w{b} {
+    if (a > b) {
+      v = b;
+    }
+  }
+
+ public:
   int get() const {
     return v;
   }
+  template <class T>
+  T twice(T t) const requires true {
+    return t + t;
+  }
 };
+
+const int table[] = {1, 2, 3};
 
 /* } a block comment
    { over lines */
@@ -48,8 +63,8 @@ with tempfile.TemporaryDirectory() as tmp:
     f.write_text(source)
     p = subprocess.run([sys.executable, str(script), str(f)], capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
-    got = {line.split(": ")[1]: int(line.split(": ")[2].split()[0]) for line in p.stdout.splitlines()}
-    want = {"three": 3, "S": 1, "get": 3, "with_lambda": 7, "long_one": 87}
+    got = [(line.split(": ")[1], int(line.split(": ")[2].split()[0])) for line in p.stdout.splitlines()]
+    want = [("three", 3), ("S", 1), ("S", 5), ("get", 3), ("twice", 4), ("with_lambda", 7), ("long_one", 87)]
     assert got == want, (got, want)
     p = subprocess.run([sys.executable, str(script), "--max", "80", tmp], capture_output=True, text=True)
     assert p.returncode == 1 and p.stdout.strip().endswith("long_one: 87 lines"), (p.returncode, p.stdout)

@@ -187,17 +187,25 @@ def run_experiment(db: str, out: str, config: Optional[str] = None, set: Optiona
 MeshItem = Any   # a path, (name, path), or (name, vertices, faces)
 
 
-def _write_off(path: str, vertices: Any, faces: Any, name: str) -> None:
+def _error(message: str, file: str = "", field: str = "") -> Error:
+    """An Error as the library raises them: its text, and message, file and field."""
+    e = Error(f"{message} ({file}{', ' + field if field else ''})" if file else message)
+    e.message, e.file, e.field = message, file, field
+    return e
+
+
+def _write_off(path: str, vertices: Any, faces: Any, name: str, out: str, field: str) -> None:
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces)
     if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
-        raise Error(f"vertices of {name!r}: expected a V x 3 array, got shape {v.shape}")
+        raise _error(f"vertices of {name!r}: expected a V x 3 array, got shape {v.shape}", out, field)
     if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or not np.issubdtype(f.dtype, np.integer):
-        raise Error(f"faces of {name!r}: expected an F x 3 array of vertex indices, got shape {f.shape} ({f.dtype})")
+        raise _error(f"faces of {name!r}: expected an F x 3 array of vertex indices, got shape {f.shape} "
+                     f"({f.dtype})", out, field)
     if not np.all(np.isfinite(v)):
-        raise Error(f"vertices of {name!r}: not all finite")
+        raise _error(f"vertices of {name!r}: not all finite", out, field)
     if f.min() < 0 or f.max() >= len(v):
-        raise Error(f"faces of {name!r}: an index outside 0..{len(v) - 1}")
+        raise _error(f"faces of {name!r}: an index outside 0..{len(v) - 1}", out, field)
     with open(path, "w", encoding="ascii") as out:
         out.write(f"OFF\n{len(v)} {len(f)} 0\n")
         np.savetxt(out, v, fmt="%.17g")
@@ -225,10 +233,12 @@ def build_database(out: str, meshes: Any = None, *, manifest: Optional[str] = No
     stops the build: the objects finished stay in ``out + ".parts"``, so the same call resumes,
     and the exception is raised again. The returned database's ``build_report`` holds what the
     build said (objects, warnings, congruent classes, times)."""
+    out = os.fspath(out)
     if (meshes is None) == (manifest is None):
-        raise Error("build_database: give meshes or manifest (one of them)")
+        raise _error("give meshes or manifest (one of them)", out, "meshes")
     inputs: List[Any] = []
     folder = ""
+    arrays: Dict[str, str] = {}      # temporary mesh file -> what the caller gave
     with tempfile.TemporaryDirectory(prefix="touchstone-meshes-") as tmp:
         if manifest is None and isinstance(meshes, (str, os.PathLike)):
             folder = os.fspath(meshes)
@@ -245,15 +255,22 @@ def build_database(out: str, meshes: Any = None, *, manifest: Optional[str] = No
                 elif len(item) == 3:
                     name = str(item[0])
                     path = os.path.join(tmp, f"{k:06d}.off")
-                    _write_off(path, item[1], item[2], name)
+                    _write_off(path, item[1], item[2], name, out, f"meshes[{k}]")
+                    arrays[path] = f"meshes[{k}]"
                     inputs.append((name, path, "python arrays"))
                 else:
-                    raise Error(f"build_database: meshes[{k}]: expected a path, (name, path) or "
-                                f"(name, vertices, faces)")
-        report = _ts.build_database_impl(os.fspath(out), inputs, os.fspath(manifest or ""), folder,
-                                         dict(params or {}), scale, units, seed, congruence_tolerance,
-                                         threads, progress)
-    db = Database(os.fspath(out))
+                    raise _error("expected a path, (name, path) or (name, vertices, faces)", out, f"meshes[{k}]")
+        try:
+            report = _ts.build_database_impl(out, inputs, os.fspath(manifest or ""), folder,
+                                             dict(params or {}), scale, units, seed, congruence_tolerance,
+                                             threads, progress)
+        except Error as e:
+            # An error about arrays names the item, not the temporary file it was written to.
+            file = getattr(e, "file", "")
+            if file in arrays:
+                raise _error(e.message.replace(file, arrays[file]), out, arrays[file]) from None
+            raise
+    db = Database(out)
     db.build_report = report
     return db
 
