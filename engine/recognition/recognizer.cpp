@@ -82,7 +82,8 @@ RecognizerSettings RecognizerSettings::improved() {
   // (study 3, shortened: the same recognition at step 20, 0.3 s -> 0.02 s a step on
   // bench_recognize; CHANGELOG.md), on databases of any size: study 7 at 450 catalogue objects,
   // paired over 100 runs, the same recognition within one run at every step (91 -> 92 % at step
-  // 20, 96 -> 95 % at step 40) and the median step at step 40 329 -> 80 ms.
+  // 20, 96 -> 95 % at step 40) and the median step at step 40 329 -> 52 ms
+  // (docs/results/study7_cat450_sets).
   s.early_stop = true;
   s.early_stop_max_database = 0;
   return s;
