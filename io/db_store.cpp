@@ -4,10 +4,10 @@
 #include "io/h5.hpp"
 
 #include <algorithm>
-#include <cstdio>
-#include <limits>
 #include <cmath>
+#include <cstdio>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <set>
 
@@ -29,11 +29,16 @@ static_assert(sizeof(FpfhSettings) == 2 * sizeof(double),
               "FpfhSettings changed: update fpfh_fields() in io/db_store.cpp");
 static_assert(sizeof(DistanceFieldSettings) == 32,  // 3 doubles, 1 int, padding
               "DistanceFieldSettings changed: update field_fields() in io/db_store.cpp");
+/// A stored build parameter: its name, its member, and the range set_setting_value takes (`db
+/// build`'s flags' checks; for the parameters without a flag, what the scanner can use: counts
+/// at least 1, angles in (0, 90] degrees). Lengths are positive: (0, inf).
 template <class S>
 struct Field {
   const char* name;
   double S::*real = nullptr;
   int S::*integer = nullptr;
+  double lo = 0.0, hi = std::numeric_limits<double>::infinity();
+  bool lo_open = true;
 };
 
 const std::vector<Field<ScanSettings>>& scan_fields() {
@@ -41,16 +46,16 @@ const std::vector<Field<ScanSettings>>& scan_fields() {
       {"fine_spacing", &ScanSettings::fine_spacing},
       {"coarse_voxel", &ScanSettings::coarse_voxel},
       {"ray_pitch", &ScanSettings::ray_pitch},
-      {"max_views", nullptr, &ScanSettings::max_views},
-      {"candidate_views", nullptr, &ScanSettings::candidate_views},
-      {"target_coverage", &ScanSettings::target_coverage},
-      {"random_every", nullptr, &ScanSettings::random_every},
-      {"stall_views", nullptr, &ScanSettings::stall_views},
-      {"min_gain", &ScanSettings::min_gain},
+      {"max_views", nullptr, &ScanSettings::max_views, 1, 100000, false},
+      {"candidate_views", nullptr, &ScanSettings::candidate_views, 1, 100000, false},
+      {"target_coverage", &ScanSettings::target_coverage, nullptr, 0, 1, false},
+      {"random_every", nullptr, &ScanSettings::random_every, 1, 100000, false},
+      {"stall_views", nullptr, &ScanSettings::stall_views, 1, 100000, false},
+      {"min_gain", &ScanSettings::min_gain, nullptr, 0, 1, false},
       {"coverage_radius", &ScanSettings::coverage_radius},
-      {"max_incidence_deg", &ScanSettings::max_incidence_deg},
-      {"grazing_incidence_deg", &ScanSettings::grazing_incidence_deg},
-      {"coverage_samples", nullptr, &ScanSettings::coverage_samples}};
+      {"max_incidence_deg", &ScanSettings::max_incidence_deg, nullptr, 0, 90},
+      {"grazing_incidence_deg", &ScanSettings::grazing_incidence_deg, nullptr, 0, 90},
+      {"coverage_samples", nullptr, &ScanSettings::coverage_samples, 1, 1e7, false}};
   return f;
 }
 const std::vector<Field<FpfhSettings>>& fpfh_fields() {
@@ -61,9 +66,9 @@ const std::vector<Field<FpfhSettings>>& fpfh_fields() {
 const std::vector<Field<DistanceFieldSettings>>& field_fields() {
   static const std::vector<Field<DistanceFieldSettings>> f = {
       {"fine_voxel", &DistanceFieldSettings::fine_voxel},
-      {"fine_band_voxels", nullptr, &DistanceFieldSettings::fine_band_voxels},
+      {"fine_band_voxels", nullptr, &DistanceFieldSettings::fine_band_voxels, 1, 1000, false},
       {"coarse_voxel", &DistanceFieldSettings::coarse_voxel},
-      {"coarse_margin", &DistanceFieldSettings::coarse_margin}};
+      {"coarse_margin", &DistanceFieldSettings::coarse_margin, nullptr, 0, std::numeric_limits<double>::infinity(), false}};
   return f;
 }
 
@@ -389,21 +394,30 @@ void append_values(std::vector<SettingValue>& out, const char* group, const S& s
 }  // namespace
 
 namespace {
+/// `value` for `key`, or an Error naming it: a finite number in [lo, hi] ((lo, hi] when lo_open),
+/// whole for an integer.
+void check_setting(double value, double lo, double hi, bool lo_open, bool integer, const std::string& key,
+                   const std::string& origin) {
+  char shown[64];
+  std::snprintf(shown, sizeof shown, "%.17g", value);
+  const bool below = lo_open ? !(value > lo) : !(value >= lo);
+  if (!std::isfinite(value) || below || value > hi) {
+    char bounds[96];
+    std::snprintf(bounds, sizeof bounds, "%s%g, %s%s", lo_open ? "(" : "[", lo,
+                  std::isinf(hi) ? "inf" : std::to_string(static_cast<long long>(hi)).c_str(), std::isinf(hi) ? ")" : "]");
+    throw Error(std::string("expected a finite number in ") + bounds + ", got " + shown, origin, key);
+  }
+  if (integer && value != std::floor(value)) throw Error(std::string("expected a whole number, got ") + shown, origin, key);
+}
+
 template <class S>
 bool set_field(S& s, const std::vector<Field<S>>& fields, const std::string& name, double value,
                const std::string& key, const std::string& origin) {
   for (const auto& f : fields) {
     if (name != f.name) continue;
-    if (f.real) {
-      s.*f.real = value;
-    } else {
-      if (value != std::floor(value)) {
-        char shown[64];
-        std::snprintf(shown, sizeof shown, "%.17g", value);
-        throw Error(std::string("expected a whole number, got ") + shown, origin, key);
-      }
-      s.*f.integer = static_cast<int>(value);
-    }
+    check_setting(value, f.lo, f.hi, f.lo_open, f.integer != nullptr, key, origin);
+    if (f.real) s.*f.real = value;
+    else s.*f.integer = static_cast<int>(value);
     return true;
   }
   return false;
@@ -411,50 +425,26 @@ bool set_field(S& s, const std::vector<Field<S>>& fields, const std::string& nam
 }  // namespace
 
 void set_setting_value(DatabaseSettings& s, const std::string& key, double value, const std::string& origin) {
-  // The ranges `db build` takes (its flags' checks), and for the parameters it has no flag for,
-  // what the scanner can use: every count at least 1, angles in (0, 90] degrees.
-  struct Range {
-    const char* key;
-    double lo, hi;
-    bool lo_open;
-  };
-  constexpr double kInf = std::numeric_limits<double>::infinity();
-  static const Range ranges[] = {
-      {"max_extent", 0, kInf, true},           {"scan.fine_spacing", 0, kInf, true},
-      {"scan.coarse_voxel", 0, kInf, true},    {"scan.ray_pitch", 0, kInf, true},
-      {"scan.max_views", 1, 100000, false},    {"scan.candidate_views", 1, 100000, false},
-      {"scan.target_coverage", 0, 1, false},   {"scan.random_every", 1, 100000, false},
-      {"scan.stall_views", 1, 100000, false},  {"scan.min_gain", 0, 1, false},
-      {"scan.coverage_radius", 0, kInf, true}, {"scan.max_incidence_deg", 0, 90, true},
-      {"scan.grazing_incidence_deg", 0, 90, true}, {"scan.coverage_samples", 1, 1e7, false},
-      {"fpfh.normal_radius", 0, kInf, true},   {"fpfh.feature_radius", 0, kInf, true},
-      {"field.fine_voxel", 0, kInf, true},     {"field.fine_band_voxels", 1, 1000, false},
-      {"field.coarse_voxel", 0, kInf, true},   {"field.coarse_margin", 0, kInf, false}};
-  const Range* range = nullptr;
-  for (const Range& r : ranges)
-    if (key == r.key) range = &r;
-  if (!range) {
+  const auto dot = key.find('.');
+  const std::string group = dot == std::string::npos ? "" : key.substr(0, dot);
+  const std::string name = dot == std::string::npos ? key : key.substr(dot + 1);
+  bool known = false;
+  if (key == "max_extent") {
+    check_setting(value, 0.0, std::numeric_limits<double>::infinity(), true, false, key, origin);
+    s.max_extent = value;
+    known = true;
+  } else if (group == "scan") {
+    known = set_field(s.scan, scan_fields(), name, value, key, origin);
+  } else if (group == "fpfh") {
+    known = set_field(s.fpfh, fpfh_fields(), name, value, key, origin);
+  } else if (group == "field") {
+    known = set_field(s.field, field_fields(), name, value, key, origin);
+  }
+  if (!known) {
     std::string names;
     for (const auto& v : settings_values(s)) names += (v.group.empty() ? v.name : v.group + "." + v.name) + ", ";
     throw Error("unknown build parameter (known: " + names + "descriptor)", origin, key);
   }
-  char shown[64];
-  std::snprintf(shown, sizeof shown, "%.17g", value);
-  const bool below = range->lo_open ? !(value > range->lo) : !(value >= range->lo);
-  if (!std::isfinite(value) || below || value > range->hi) {
-    char bounds[96];
-    std::snprintf(bounds, sizeof bounds, "%s%g, %s%s", range->lo_open ? "(" : "[", range->lo,
-                  std::isinf(range->hi) ? "inf" : std::to_string(static_cast<long long>(range->hi)).c_str(),
-                  std::isinf(range->hi) ? ")" : "]");
-    throw Error(std::string("expected a finite number in ") + bounds + ", got " + shown, origin, key);
-  }
-  const auto dot = key.find('.');
-  const std::string group = dot == std::string::npos ? "" : key.substr(0, dot);
-  const std::string name = dot == std::string::npos ? key : key.substr(dot + 1);
-  if (group.empty()) s.max_extent = value;
-  else if (group == "scan") set_field(s.scan, scan_fields(), name, value, key, origin);
-  else if (group == "fpfh") set_field(s.fpfh, fpfh_fields(), name, value, key, origin);
-  else set_field(s.field, field_fields(), name, value, key, origin);
 }
 
 std::vector<SettingValue> settings_values(const DatabaseSettings& s) {

@@ -28,21 +28,9 @@ int pair_angle_units(double rad) {
 
 namespace {
 
-/// pair_angle_units of an angle `rad` known within 2e-8 rad of atan2(y, x); std::atan2 itself
-/// where that error could change the rounding.
-[[gnu::always_inline]] inline std::uint8_t table_rounded_units(double rad, double y, double x) {
-  const double v = rad * 255.0 / std::numbers::pi;   // >= 0
-  const int whole = static_cast<int>(v);
-  const double part = v - whole;
-  if (std::abs(part - 0.5) < 1e-4) [[unlikely]]
-    return static_cast<std::uint8_t>(pair_angle_units(std::atan2(y, x)));
-  return static_cast<std::uint8_t>(std::min(whole + (part > 0.5 ? 1 : 0), 255));
-}
-
 /// atan(lo / hi) for 0 <= lo <= hi, hi > 0: Abramowitz and Stegun's 4.4.49 polynomial
 /// (|error| <= 2e-8 rad, 1.6e-6 of a unit), evaluated by Estrin's scheme (short dependency
-/// chains, so the angles of several pairs overlap). One definition for the scalar and the
-/// vectorized path, so both give the same bits.
+/// chains, so the angles of several pairs overlap).
 [[gnu::always_inline]] inline double table_atan_ratio(double lo, double hi) {
   const double z = lo / hi, z2 = z * z, z4 = z2 * z2, z8 = z4 * z4;
   const double p01 = 1.0 + z2 * -0.3333314528, p23 = 0.1999355085 + z2 * -0.1420889944;
@@ -51,21 +39,39 @@ namespace {
   return z * p;
 }
 
-/// pair_angle_units(std::atan2(y, x)) and pair_angle_units(std::atan2(y, -x)) for y >= 0 (a
-/// pair's angle from either end), bit for bit, at a fraction of std::atan2's cost.
-[[gnu::always_inline]] inline void table_angle_units_both(double y, double x, std::uint8_t& plus, std::uint8_t& minus) {
+/// The angles atan2(y, x) and atan2(y, -x) for y >= 0 (a pair's angle from either end), scaled
+/// to units before rounding (rad * 255 / pi), within 1.6e-6 of a unit. `odd` is set where the
+/// polynomial has no argument (hi not in (0, max]: y = x = 0, or not finite). One definition for
+/// the vectorized row loop and the scalar path, so both give the same bits.
+[[gnu::always_inline]] inline void lane_angles(double y, double x, double& plus, double& minus, std::int32_t& odd) {
   const double ax = std::abs(x);
   const double hi = std::max(ax, y), lo = std::min(ax, y);
-  if (!(hi > 0.0 && hi <= std::numeric_limits<double>::max())) {
-    plus = static_cast<std::uint8_t>(pair_angle_units(std::atan2(y, x)));
-    minus = static_cast<std::uint8_t>(pair_angle_units(std::atan2(y, -x)));
-    return;
-  }
+  odd |= !(hi > 0.0 && hi <= std::numeric_limits<double>::max());
   double a = table_atan_ratio(lo, hi);               // the angle of (y, |x|), in [0, pi/2]
-  if (y > ax) a = std::numbers::pi / 2 - a;
+  a = y > ax ? std::numbers::pi / 2 - a : a;
   const double obtuse = std::numbers::pi - a;
-  plus = table_rounded_units(x < 0.0 ? obtuse : a, y, x);
-  minus = table_rounded_units(x < 0.0 ? a : obtuse, y, -x);
+  plus = (x < 0.0 ? obtuse : a) * 255.0 / std::numbers::pi;
+  minus = (x < 0.0 ? a : obtuse) * 255.0 / std::numbers::pi;
+}
+
+/// A scaled angle rounded to units, where it lies clear of a rounding boundary (farther than
+/// 1e-4 of a unit, which the polynomial's error cannot cross).
+[[gnu::always_inline]] inline bool clear_units(double v, std::uint8_t& out) {
+  const int whole = static_cast<int>(v);
+  const double part = v - whole;
+  out = static_cast<std::uint8_t>(std::min(whole + (part > 0.5 ? 1 : 0), 255));
+  return !(std::abs(part - 0.5) < 1e-4);
+}
+
+/// pair_angle_units(std::atan2(y, x)) and pair_angle_units(std::atan2(y, -x)) for y >= 0, bit for
+/// bit: lane_angles rounded, and std::atan2 itself where the polynomial has no argument or its
+/// error could change the rounding (about 2 angles in 10 000).
+[[gnu::always_inline]] inline void table_angle_units_both(double y, double x, std::uint8_t& plus, std::uint8_t& minus) {
+  double vp = 0.0, vm = 0.0;
+  std::int32_t odd = 0;
+  lane_angles(y, x, vp, vm, odd);
+  if (odd || !clear_units(vp, plus)) plus = static_cast<std::uint8_t>(pair_angle_units(std::atan2(y, x)));
+  if (odd || !clear_units(vm, minus)) minus = static_cast<std::uint8_t>(pair_angle_units(std::atan2(y, -x)));
 }
 
 /// One row's pairs (i, j) for j in [i + 1, n), measured for the compiler to vectorize: the
@@ -81,17 +87,6 @@ struct PairRow {
   explicit PairRow(std::size_t n)
       : px(n), py(n), pz(n), nx(n), ny(n), nz(n), dist(n), ai(n), aj(n), ji(n), jj(n), aij(n), odd(n) {}
 };
-
-[[gnu::always_inline]] inline void lane_angles(double y, double x, double& plus, double& minus, std::int32_t& odd) {
-  const double ax = std::abs(x);
-  const double hi = std::max(ax, y), lo = std::min(ax, y);
-  odd |= !(hi > 0.0 && hi <= std::numeric_limits<double>::max());
-  double a = table_atan_ratio(lo, hi);
-  a = y > ax ? std::numbers::pi / 2 - a : a;
-  const double obtuse = std::numbers::pi - a;
-  plus = (x < 0.0 ? obtuse : a) * 255.0 / std::numbers::pi;
-  minus = (x < 0.0 ? a : obtuse) * 255.0 / std::numbers::pi;
-}
 
 /// Row i's pairs for j in [i + 1, n), into R. The arrays are the function's restrict
 /// parameters: the loop vectorizes only knowing they do not overlap.
@@ -130,14 +125,6 @@ void pair_row_lanes(std::size_t i, std::size_t n, const double* __restrict px, c
 void pair_row(std::size_t i, std::size_t n, PairRow& R) {
   pair_row_lanes(i, n, R.px.data(), R.py.data(), R.pz.data(), R.nx.data(), R.ny.data(), R.nz.data(),
                  R.dist.data(), R.ai.data(), R.aj.data(), R.ji.data(), R.jj.data(), R.aij.data(), R.odd.data());
-}
-
-/// A scaled angle rounded to units, where it lies clear of a rounding boundary.
-[[gnu::always_inline]] inline bool clear_units(double v, std::uint8_t& out) {
-  const int whole = static_cast<int>(v);
-  const double part = v - whole;
-  out = static_cast<std::uint8_t>(std::min(whole + (part > 0.5 ? 1 : 0), 255));
-  return !(std::abs(part - 0.5) < 1e-4);
 }
 
 /// The table's points: the keypoints thinned by a voxel filter, its voxel grown by 1.5 until at

@@ -549,6 +549,40 @@ class PyExploration {
   std::unique_ptr<Exploration> ex_;
 };
 
+// ---- progress callbacks ----------------------------------------------------------------------
+
+/// A Python progress(done, total, seconds_left) called from the C++ workers (one call at a time):
+/// it takes the GIL for the call and keeps what the callback raises, for the caller to stop its
+/// work and raise it again. None: no callback.
+class PyProgress {
+ public:
+  explicit PyProgress(py::object f) : f_(std::move(f)) {
+    if (!f_.is_none() && !PyCallable_Check(f_.ptr()))
+      throw py::type_error("progress: expected a callable progress(done, total, seconds_left) or None");
+  }
+  bool active() const { return !f_.is_none(); }
+  /// False once the callback has raised (it is not called again).
+  bool operator()(std::size_t done, std::size_t total, std::optional<double> seconds_left) {
+    if (raised_) return false;
+    py::gil_scoped_acquire gil;
+    try {
+      f_(done, total, seconds_left ? py::object(py::float_(*seconds_left)) : py::object(py::none()));
+      return true;
+    } catch (...) {
+      raised_ = std::current_exception();
+      return false;
+    }
+  }
+  /// Raises what the callback raised, if it did.
+  void raise_if_raised() const {
+    if (raised_) std::rethrow_exception(raised_);
+  }
+
+ private:
+  py::object f_;
+  std::exception_ptr raised_;
+};
+
 // ---- building a database ---------------------------------------------------------------------
 
 /// `touchstone db build` without the command line. `inputs`: (name, path, source) per mesh, or
@@ -557,9 +591,8 @@ class PyExploration {
 py::dict build_database(const std::string& out, const py::list& inputs, const std::string& manifest,
                         const std::string& folder, const py::dict& params, const std::string& scale,
                         const std::string& units, std::uint64_t seed, double congruence_tolerance, int threads,
-                        const py::object& progress) {
-  if (!progress.is_none() && !PyCallable_Check(progress.ptr()))
-    throw py::type_error("progress: expected a callable progress(done, total, seconds_left) or None");
+                        const py::object& progress_f) {
+  PyProgress progress(progress_f);
   std::vector<datasets::MeshInput> meshes;
   if (!manifest.empty()) {
     meshes = datasets::inputs_from_manifest(manifest);
@@ -612,18 +645,11 @@ py::dict build_database(const std::string& out, const py::list& inputs, const st
   // stops the build (the objects finished stay in OUT.parts, so the same call resumes) and is
   // raised again here.
   struct ProgressRaised {};
-  std::exception_ptr raised;
-  if (!progress.is_none())
+  if (progress.active())
     bs.progress = [&](const datasets::BuildProgress& p) {
-      if (raised) throw ProgressRaised{};
-      py::gil_scoped_acquire gil;
-      try {
-        const std::size_t built = p.done - p.resumed;
-        progress(p.done, p.total, built ? py::object(py::float_(p.remaining_s())) : py::object(py::none()));
-      } catch (...) {
-        raised = std::current_exception();
+      const std::size_t built = p.done - p.resumed;
+      if (!progress(p.done, p.total, built ? std::optional<double>(p.remaining_s()) : std::nullopt))
         throw ProgressRaised{};
-      }
     };
   datasets::BuildReport report;
   try {
@@ -634,7 +660,7 @@ py::dict build_database(const std::string& out, const py::list& inputs, const st
   } catch (...) {
     // What the callback raised comes first, also when another object's error reached here
     // before it (the build rethrows the error of the smallest failing object).
-    if (raised) std::rethrow_exception(raised);
+    progress.raise_if_raised();
     throw;
   }
   py::dict d;
@@ -663,9 +689,8 @@ py::dict build_database(const std::string& out, const py::list& inputs, const st
 /// `touchstone experiment` without the command line: the configuration file (optional) with
 /// `set` on top, the runs into `out` (resumed with `resume`), the report as JSON text.
 std::string run_experiment(const std::string& db, const std::string& out, const std::string& config_file,
-                           const py::dict& set, int threads, bool resume, const py::object& progress) {
-  if (!progress.is_none() && !PyCallable_Check(progress.ptr()))
-    throw py::type_error("progress: expected a callable progress(done, total, seconds_left) or None");
+                           const py::dict& set, int threads, bool resume, const py::object& progress_f) {
+  PyProgress progress(progress_f);
   experiments::ExperimentConfig c;
   if (!config_file.empty()) experiments::load_config_file(c, config_file);
   for (const auto& [k, v] : set) {
@@ -698,23 +723,14 @@ std::string run_experiment(const std::string& db, const std::string& out, const 
   // it raises stops the experiment as Ctrl-C stops the command (the runs finished are stored,
   // resume=True continues) and is raised again here.
   std::atomic<bool> stop{false};
-  std::exception_ptr raised;
-  if (!progress.is_none()) {
+  if (progress.active()) {
     ds.stop = &stop;
     ds.on_progress = [&](const experiments::Progress& p) {
-      if (stop) return;
-      py::gil_scoped_acquire gil;
-      try {
-        const auto left = p.remaining_s();
-        progress(p.done, p.total, left ? py::object(py::float_(*left)) : py::object(py::none()));
-      } catch (...) {
-        raised = std::current_exception();
-        stop = true;
-      }
+      if (!stop && !progress(p.done, p.total, p.remaining_s())) stop = true;
     };
   }
   const experiments::DriveOutcome outcome = experiments::drive(*engine, experiments::all_tasks(header, c.runs), out, ds);
-  if (raised) std::rethrow_exception(raised);
+  progress.raise_if_raised();
   if (outcome.interrupted) throw Error("the experiment stopped before its last run; resume=True continues it", out, "out");
   io::RunStore::compact(out, true);
   experiments::ReportSettings rs;

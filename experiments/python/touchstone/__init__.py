@@ -184,9 +184,6 @@ def run_experiment(db: str, out: str, config: Optional[str] = None, set: Optiona
     return json.loads(_ts.run_experiment_json(db, out, config or "", dict(set or {}), threads, resume, progress))
 
 
-MeshItem = Any   # a path, (name, path), or (name, vertices, faces)
-
-
 def _error(message: str, file: str = "", field: str = "") -> Error:
     """An Error as the library raises them: its text, and message, file and field."""
     e = Error(f"{message} ({file}{', ' + field if field else ''})" if file else message)
@@ -206,10 +203,10 @@ def _write_off(path: str, vertices: Any, faces: Any, name: str, out: str, field:
         raise _error(f"vertices of {name!r}: not all finite", out, field)
     if f.min() < 0 or f.max() >= len(v):
         raise _error(f"faces of {name!r}: an index outside 0..{len(v) - 1}", out, field)
-    with open(path, "w", encoding="ascii") as out:
-        out.write(f"OFF\n{len(v)} {len(f)} 0\n")
-        np.savetxt(out, v, fmt="%.17g")
-        np.savetxt(out, np.hstack([np.full((len(f), 1), 3), f.astype(np.int64)]), fmt="%d")
+    with open(path, "w", encoding="ascii") as stream:
+        stream.write(f"OFF\n{len(v)} {len(f)} 0\n")
+        np.savetxt(stream, v, fmt="%.17g")
+        np.savetxt(stream, np.hstack([np.full((len(f), 1), 3), f.astype(np.int64)]), fmt="%d")
 
 
 def build_database(out: str, meshes: Any = None, *, manifest: Optional[str] = None,
@@ -250,6 +247,8 @@ def build_database(out: str, meshes: Any = None, *, manifest: Optional[str] = No
                     item = (name, value) if isinstance(value, (str, os.PathLike)) else (name, *value)
                 if isinstance(item, (str, os.PathLike)):
                     inputs.append(("", os.fspath(item), ""))
+                elif not isinstance(item, (tuple, list)):
+                    raise _error("expected a path, (name, path) or (name, vertices, faces)", out, f"meshes[{k}]")
                 elif len(item) == 2:
                     inputs.append((str(item[0]), os.fspath(item[1]), ""))
                 elif len(item) == 3:
