@@ -15,6 +15,7 @@ constexpr double kDeg = std::numbers::pi / 180.0;
 
 // Rng stream tags: (seed, tag, index).
 constexpr std::uint64_t kStreamPose = 0, kStreamGeometry = 1, kStreamNoise = 2, kStreamGains = 3;
+constexpr std::uint64_t kStreamOffTarget = 4;   // a scene's off-target choice and aims, per grasp
 
 Vec3 perpendicular(const Vec3& a) {
   const Vec3 helper = std::abs(a.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
@@ -144,6 +145,10 @@ struct Simulator::Impl {
   double normal_sign = 1.0;
   Vec3 centre = Vec3::Zero();
   double radius = 0.0;
+  std::optional<Support> support;        // the scene's support (world frame), if any
+  std::optional<MeshIndex> world;        // object and support (object frame): what the hand meets
+
+  const MeshIndex& collide() const { return world ? *world : mesh; }
 
   Impl(Mesh m, std::string n, Gripper g, SimulatorSettings s)
       : mesh(std::move(m)), name(std::move(n)), gripper(std::move(g)), settings(std::move(s)) {}
@@ -188,13 +193,13 @@ struct Simulator::Impl {
           if (sg.rigid.empty() && sg.foam.empty()) continue;
           const Vec3 c0 = P0[m] * sg.centre, c1 = P1[m] * sg.centre;
           const double reach = sg.radius + (c1 - c0).norm() + rot * sg.radius + 1e-4;
-          if (!mesh.closest_within(c0, reach)) continue;
+          if (!collide().closest_within(c0, reach)) continue;
           auto test = [&](const Vec3& x, bool rigid) {
             const Vec3 A = P0[m] * x, B = P1[m] * x;
             const Vec3 d = B - A;
             const double len = d.norm();
             if (!(len > 0)) return;
-            const auto hit = mesh.raycast(A, d, len);
+            const auto hit = collide().raycast(A, d, len);
             if (!hit) return;
             const double frac = hit->t / len;
             if (frac < best_frac) {
@@ -222,7 +227,7 @@ struct Simulator::Impl {
     for (std::size_t j = 0; j < L.base.size(); ++j) {
       Vec3 b = L.base[j];
       if (lateral) b = T_link_pad * (s.sensel_position(static_cast<int>(j)) + lateral[j]);
-      const auto hit = mesh.raycast(T_obj_link * b, nrm, s.foam_thickness);
+      const auto hit = collide().raycast(T_obj_link * b, nrm, s.foam_thickness);
       out[j] = hit ? s.foam_thickness - hit->t : 0.0;
     }
   }
@@ -310,6 +315,9 @@ Simulator::Simulator(Mesh object_mesh, std::string object_name, Gripper gripper,
   if (!(ft.quantization >= 0) || !std::isfinite(ft.quantization) || !std::isfinite(ft.normal_sigma_deg) ||
       ft.normal_sigma_deg >= 90)
     throw Error("fingertips: need a finite quantization >= 0 and a normal noise below 90 degrees", {}, "fingertips");
+  validate(settings.scene);
+  if (settings.scene.kind != SceneKind::none && settings.sensing == Sensing::probe)
+    throw Error("the probe does not touch scenes yet: scene needs sensing = pads or fingertips", {}, "scene");
   const auto& n = settings.noise;
   for (double v : {n.arm_position_sigma, n.arm_rotation_sigma_deg, n.joint_sigma_deg, n.signal_noise,
                    n.force_noise, n.lateral_sigma})
@@ -335,6 +343,19 @@ Simulator::Simulator(Mesh object_mesh, std::string object_name, Gripper gripper,
   const double h = m.settings.placement;
   m.T_world_object.translation() =
       m.settings.world_offset + Vec3(pose_rng.uniform(-h, h), pose_rng.uniform(-h, h), pose_rng.uniform(-h, h));
+  if (m.settings.scene.kind != SceneKind::none) {
+    // The support, and the surface the hand meets in the object frame: the object's faces, then
+    // the support's, wound as the object's (face_normal's sign makes them point up).
+    m.support.emplace(M, m.T_world_object, m.settings.scene, m.gripper.reach(), m.settings.seed);
+    Mesh both = M;
+    const Pose T_object_world = m.T_world_object.inverse();
+    const int base = static_cast<int>(both.vertices.size());
+    for (const Vec3& v : m.support->mesh().vertices) both.vertices.push_back(T_object_world * v);
+    for (const auto& f : m.support->mesh().faces)
+      both.faces.push_back(m.normal_sign > 0 ? Eigen::Vector3i(f + Eigen::Vector3i::Constant(base))
+                                             : Eigen::Vector3i(f[0] + base, f[2] + base, f[1] + base));
+    m.world.emplace(std::move(both));
+  }
   Rng gain_rng(m.settings.seed, kStreamGains);
   const int S = m.gripper.sensor().sensels();
   for (std::size_t i = 0; i < m.gripper.pads().size() * S; ++i)
@@ -484,15 +505,35 @@ Simulator::Grasp Simulator::grasp_or_aim(std::size_t g, GraspCommand* aim_only) 
   std::vector<double> best_nominal;
   Vec3 best_p = Vec3::Zero(), best_d = Vec3::UnitZ();
   int attempts = 0;
-  for (bool accepted = false; !accepted && attempts < gs.max_attempts; ++attempts) {
+  // In a scene, a share of the grasps aim at the support beside the object (their own stream:
+  // the object's aims draw as without a scene).
+  Rng off_rng(m.settings.seed, kStreamOffTarget, g);
+  const bool off_target = m.support && off_rng.uniform() < m.settings.scene.off_target;
+  const Pose T_object_world = m.T_world_object.inverse();
+  bool aim_support = off_target;
+  const int limit = m.support ? 2 * gs.max_attempts : gs.max_attempts;
+  for (bool accepted = false; !accepted && attempts < limit; ++attempts) {
+    // In a scene, an aim the hand could reach only from under the support is no aim (below);
+    // when max_attempts draws gave none it could reach at all, the rest aim at the support.
+    if (attempts == gs.max_attempts) {
+      if (best_shortfall < 1e300) break;
+      aim_support = true;
+    }
     // A random surface point (area-uniform) and its outward normal, object frame.
-    const double u = rng.uniform() * m.area_cdf.back();
-    const int face = static_cast<int>(std::min<std::size_t>(
-        std::upper_bound(m.area_cdf.begin(), m.area_cdf.end(), u) - m.area_cdf.begin(), M.faces.size() - 1));
-    const double r1 = std::sqrt(rng.uniform()), r2 = rng.uniform();
-    const auto& tri = M.faces[face];
-    const Vec3 p = (1 - r1) * M.vertices[tri[0]] + r1 * (1 - r2) * M.vertices[tri[1]] + r1 * r2 * M.vertices[tri[2]];
-    const Vec3 n = m.face_normal(face);
+    Vec3 p, n;
+    if (aim_support) {
+      const auto [x, up] = m.support->aim(off_rng);
+      p = T_object_world * x;
+      n = T_object_world.linear() * up;
+    } else {
+      const double u = rng.uniform() * m.area_cdf.back();
+      const int face = static_cast<int>(std::min<std::size_t>(
+          std::upper_bound(m.area_cdf.begin(), m.area_cdf.end(), u) - m.area_cdf.begin(), M.faces.size() - 1));
+      const double r1 = std::sqrt(rng.uniform()), r2 = rng.uniform();
+      const auto& tri = M.faces[face];
+      p = (1 - r1) * M.vertices[tri[0]] + r1 * (1 - r2) * M.vertices[tri[1]] + r1 * r2 * M.vertices[tri[2]];
+      n = m.face_normal(face);
+    }
     // Pad frame: z within the cone about -n, random roll, p on the foam at a random sensel spot.
     const double cos_a = 1.0 - rng.uniform() * (1.0 - cos_max);
     const double sin_a = std::sqrt(std::max(0.0, 1.0 - cos_a * cos_a));
@@ -515,8 +556,9 @@ Simulator::Grasp Simulator::grasp_or_aim(std::size_t g, GraspCommand* aim_only) 
     T_obj_eef = target;
     T_obj_eef.translation() -= d * L;
     travel = L;
+    if (m.support && m.support->above(m.T_world_object * T_obj_eef.translation()) < G.reach()) continue;
     auto cast = [&](const Vec3& x_eef) {
-      const auto hit = m.mesh.raycast(T_obj_eef * x_eef, d, travel + gs.clearance);
+      const auto hit = m.collide().raycast(T_obj_eef * x_eef, d, travel + gs.clearance);
       if (hit) travel = std::min(travel, hit->t - gs.clearance);
     };
     for (const Vec3& s_eef : m.palm_samples) cast(s_eef);
@@ -637,10 +679,10 @@ void Simulator::record_fingertips(const Pose& T_obj_eef, const std::vector<doubl
     // foam at the final joint angles.
     const Pose T_obj_link = T_obj_eef * true_links[static_cast<std::size_t>(j)];
     const LinkGeometry& L = m.links[static_cast<std::size_t>(j)];
-    ClosestPoint best = m.mesh.closest(T_obj_link * L.rigid.front());   // a link always has rigid samples
+    ClosestPoint best = m.collide().closest(T_obj_link * L.rigid.front());   // a link always has rigid samples
     for (const auto* samples : {&L.rigid, &L.foam})
       for (const Vec3& x : *samples) {
-        const ClosestPoint c = m.mesh.closest(T_obj_link * x);
+        const ClosestPoint c = m.collide().closest(T_obj_link * x);
         if (c.distance < best.distance) best = c;
       }
     // As the robot reports it: the point fixed on its fingertip, placed by the measured arm pose
@@ -686,6 +728,10 @@ SimulationResult Simulator::run() const {
   }
   log.truth = LogGroundTruth{};
   log.truth->object_pose = m.T_world_object;
+  if (m.support) {
+    log.truth->scene = to_string(m.settings.scene.kind);
+    log.truth->support = m.support->mesh();
+  }
   for (auto& s : slots) {
     out.grasps_with_contact += s.diagnostics.contact_sensels > 0;
     log.truth->arm_poses.push_back(s.true_arm_pose);

@@ -30,6 +30,7 @@
 #include "engine/geometry/mesh.hpp"
 #include "engine/touch/active_touch.hpp"
 #include "engine/touch/fusion.hpp"
+#include "datasets/scene.hpp"
 
 #include <memory>
 #include <string>
@@ -101,6 +102,7 @@ struct SimulatorSettings {
                                      ///< fingertips: FingertipSettings
   ProbeSettings probe;
   FingertipSettings fingertips;
+  SceneSettings scene;               ///< what lies around the object (none: water alone)
   int sensors = 1;                   ///< 1: the gripper's single_pad; 6 (or all): every pad
   NoiseSettings noise;
   GraspSettings grasp;

@@ -54,6 +54,47 @@ Dims dims_of(const LogHeader& h) {
 bool probe_log(const LogHeader& h) { return h.sensing == Sensing::probe; }
 bool fingertip_log(const LogHeader& h) { return h.sensing == Sensing::fingertips; }
 
+constexpr std::uint64_t kMaxSupportVertices = 10'000'000;
+
+// /ground_truth/support: the scene's name and its support mesh, sizes checked before reading.
+void read_support(const h5::Group& g, const std::string& name, LogHeader& h) {
+  if (!g.has_attribute("scene")) throw Error("missing attribute", name, "/ground_truth/support/scene");
+  h.true_scene = g.string_attribute("scene");
+  if (h.true_scene.empty() || h.true_scene == "none" || h.true_scene.size() > 64)
+    throw Error("must name the scene (not empty or \"none\", at most 64 characters)", name,
+                "/ground_truth/support/scene");
+  const h5::Shape vs = g.shape("vertices"), fs = g.shape("faces");
+  if (vs.size() != 2 || vs[1] != 3 || vs[0] < 3 || vs[0] > kMaxSupportVertices)
+    throw Error("must be [V, 3] with 3 <= V <= 10^7", name, "/ground_truth/support/vertices");
+  if (fs.size() != 2 || fs[1] != 3 || fs[0] < 1 || fs[0] > 2 * kMaxSupportVertices)
+    throw Error("must be [F, 3] with 1 <= F <= 2 x 10^7", name, "/ground_truth/support/faces");
+  const auto v = g.read<double>("vertices", {kAny, 3});
+  const auto f = g.read<std::int32_t>("faces", {kAny, 3});
+  Mesh& m = h.true_support;
+  for (std::size_t i = 0; i < v.size(); i += 3) {
+    m.vertices.emplace_back(v[i], v[i + 1], v[i + 2]);
+    if (!m.vertices.back().allFinite())
+      throw Error("not finite", name, indexed("/ground_truth/support/vertices", i / 3));
+  }
+  for (std::size_t i = 0; i < f.size(); i += 3) {
+    for (std::size_t k = 0; k < 3; ++k)
+      if (f[i + k] < 0 || static_cast<std::uint64_t>(f[i + k]) >= vs[0])
+        throw Error("vertex index out of range", name, indexed("/ground_truth/support/faces", i / 3));
+    m.faces.emplace_back(f[i], f[i + 1], f[i + 2]);
+  }
+}
+
+void write_support(h5::Group& truth, const LogHeader& h) {
+  h5::Group g = truth.create_group("support");
+  g.set_attribute("scene", h.true_scene);
+  std::vector<double> v;
+  for (const Vec3& x : h.true_support.vertices) v.insert(v.end(), {x[0], x[1], x[2]});
+  std::vector<std::int32_t> f;
+  for (const auto& t : h.true_support.faces) f.insert(f.end(), {t[0], t[1], t[2]});
+  g.write("vertices", v.data(), {h.true_support.vertices.size(), 3});
+  g.write("faces", f.data(), {h.true_support.faces.size(), 3});
+}
+
 // Header: root attributes, /gripper, /sensors and (structure of) /ground_truth.
 LogHeader read_header(const h5::File& file) {
   const std::string name = file.name();
@@ -102,8 +143,13 @@ LogHeader read_header(const h5::File& file) {
     h.gains = sensors.read<float>("gain", {P, s.rows, s.cols});
   }
   if (root.has_group("ground_truth")) {
-    const auto row = file.group("ground_truth").read<double>("object_pose", {7});
+    const h5::Group truth = file.group("ground_truth");
+    const auto row = truth.read<double>("object_pose", {7});
     h.true_object_pose = checked_pose_from_row(row.data(), name, "/ground_truth/object_pose");
+    if (truth.has_group("support")) {
+      if (version < 4) throw Error("a log with a scene's support needs format_version 4", name, "/format_version");
+      read_support(truth.open_group("support"), name, h);
+    }
   }
   // The header must already be consistent (pads exist, gains positive).
   validate(log_of(h), name);
@@ -134,7 +180,11 @@ TactileLog log_of(const LogHeader& h) {
 LogHeader header_of(const TactileLog& log) {
   LogHeader h;
   copy_header(log, h);
-  if (log.truth) h.true_object_pose = log.truth->object_pose;
+  if (log.truth) {
+    h.true_object_pose = log.truth->object_pose;
+    h.true_scene = log.truth->scene;
+    h.true_support = log.truth->support;
+  }
   return h;
 }
 
@@ -166,6 +216,14 @@ LogWriter LogWriter::create(const std::filesystem::path& path, const LogHeader& 
   m.header = header;
   m.shape = log_of(header);
   validate(m.shape, m.display);
+  const bool scene = header.true_object_pose && !header.true_support.faces.empty();
+  if (!header.true_support.faces.empty() && !header.true_object_pose)
+    throw Error("a scene's support is ground truth: the log needs the true object pose", m.display,
+                "/ground_truth/support");
+  if (scene && (header.true_scene.empty() || header.true_scene == "none"))
+    throw Error("a support needs its scene's name", m.display, "/ground_truth/support/scene");
+  if (scene && probe_log(header))
+    throw Error("a probe log cannot store a scene (scene needs sensing = pads or fingertips)", m.display, "scene");
   if (atomic) {
     m.atomic.emplace(path);
     m.file = h5::File::create(*m.atomic);
@@ -177,7 +235,7 @@ LogWriter LogWriter::create(const std::filesystem::path& path, const LogHeader& 
   h5::Group root = m.file.root();
   root.set_attribute("format", kLogFormat);
   root.set_attribute("format_version",
-                     static_cast<std::int64_t>(fingertip_log(header) ? 3 : probe_log(header) ? 2 : 1));
+                     static_cast<std::int64_t>(scene ? 4 : fingertip_log(header) ? 3 : probe_log(header) ? 2 : 1));
   root.set_attribute("object", header.object);
   root.set_attribute("noise", header.noise);
   root.set_attribute("seed", seed_to_attr(header.seed));
@@ -234,6 +292,7 @@ LogWriter LogWriter::create(const std::filesystem::path& path, const LogHeader& 
     truth.write("object_pose", row.data(), {7});
     truth.create_extendible<double>("arm_pose", {7}, chunks(256));
     truth.create_extendible<double>("joints", {d.joints}, chunks(256));
+    if (scene) write_support(truth, header);
   }
   return w;
 }
@@ -426,6 +485,8 @@ TactileLog read_log(const std::filesystem::path& path) {
     const h5::Group t = file.group("ground_truth");
     LogGroundTruth truth;
     truth.object_pose = *h.true_object_pose;
+    truth.scene = h.true_scene;
+    truth.support = h.true_support;
     const auto tp = t.read<double>("arm_pose", {kAny, 7}, &s);
     if (s.at(0) != G)
       throw Error("ground truth has " + std::to_string(s.at(0)) + " arm poses for " + std::to_string(G) + " grasps",

@@ -23,7 +23,8 @@
 namespace ts::io {
 
 constexpr const char* kLogFormat = "touchstone-tactile-log";
-constexpr int kLogFormatVersion = 3;   ///< read: 1 to 3; written: 1 (pads), 2 (probe), 3 (fingertips)
+constexpr int kLogFormatVersion = 4;   ///< read: 1 to 4; written: 1 (pads), 2 (probe), 3 (fingertips),
+                                       ///< 4 (a simulated scene's support in the ground truth)
 
 /// Everything of a log except its grasps (what a writer needs before the first grasp).
 struct LogHeader {
@@ -39,6 +40,8 @@ struct LogHeader {
                                          ///< fingertips: no /sensors or images, fingertip points
   ProbeSpec probe;
   bool fingertip_normals = false;        ///< fingertips: the grasps carry normals
+  std::string true_scene = "none";       ///< ground truth: the simulated scene (with true_object_pose)
+  Mesh true_support;                     ///< ground truth: its support, world frame (empty: none)
 };
 
 LogHeader header_of(const TactileLog& log);

@@ -10,6 +10,7 @@
 #include "engine/recognition/scene.hpp"
 #include "engine/recognition/shortlist.hpp"
 #include "engine/recognition/sparse_hypotheses.hpp"
+#include "engine/recognition/support.hpp"
 #include "engine/recognition/twins.hpp"
 
 #include <optional>
@@ -62,6 +63,8 @@ struct RecognizerSettings {
   SparseSettings sparse;            ///< extension: feature-free triplet matching when the
                                     ///< contacts are isolated (touch probes; sparse_hypotheses.hpp)
   SceneSettings scene{.free_clearance = -1.0};  ///< free_clearance < 0: d_thresh (Eq. 8)
+  SupportSettings support;          ///< extension: the support under the object (a seabed), whose
+                                    ///< contacts are set aside (support.hpp; off by default)
   RansacSettings ransac;
   IcpSettings icp;
   EvaluateSettings evaluate;

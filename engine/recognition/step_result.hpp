@@ -4,6 +4,7 @@
 #pragma once
 
 #include "engine/core.hpp"
+#include "engine/recognition/support.hpp"
 
 #include <cstdint>
 #include <limits>
@@ -137,6 +138,8 @@ struct StepResult {
   std::vector<Hypothesis> hypotheses;  ///< the state S_t, best first
   std::vector<double> posteriors;   ///< per database object: weights summed, normalized
   std::size_t contacts = 0, free_points = 0;
+  SupportPlane support;             ///< the support the step found (found = false: none, or
+                                    ///< not looked for); its contacts are not in `contacts`
   int unobservable_dof = 6;         ///< pose DOF the contacts leave unconstrained (flat: 3)
   bool pose_ambiguous = true;       ///< unobservable_dof > 0: do not trust the pose
   bool observability_from_model = false;  ///< unobservable_dof judged on the answer's surface (the

@@ -71,6 +71,8 @@ struct LogGroundTruth {
   Pose object_pose = Pose::Identity();  ///< T_world_object
   std::vector<Pose> arm_poses;          ///< true T_world_eef per grasp
   std::vector<std::vector<double>> joints;  ///< true joint angles per grasp
+  std::string scene = "none";           ///< the simulator's scene ("none": the object alone)
+  Mesh support;                         ///< the scene's support surface, world frame (empty: none)
 };
 
 struct TactileLog {

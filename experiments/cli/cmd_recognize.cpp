@@ -564,6 +564,13 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     st["log_weight"] = r.valid ? nlohmann::ordered_json(r.best.log_weight) : nullptr;
     st["contacts"] = r.contacts;
     st["free_points"] = r.free_points;
+    // The support under the object (support.mode = plane): its plane and the contacts set aside.
+    st["support"] = r.support.found ? nlohmann::ordered_json{{"normal", {r.support.normal.x(), r.support.normal.y(),
+                                                                          r.support.normal.z()}},
+                                                              {"offset_m", r.support.offset},
+                                                              {"contacts", r.support.contacts_on},
+                                                              {"grasps", r.support.grasps_on}}
+                                    : nlohmann::ordered_json(nullptr);
     st["unobservable_dof"] = r.unobservable_dof;
     st["pose_ambiguous"] = r.pose_ambiguous;
     // Judged by the contacts' own normals, or (too few of them) on the answer's surface.

@@ -140,6 +140,8 @@ int run_log_info(const LogInfoOptions& o) {
     j["grasps"] = log.grasps.size();
     j["contacts_per_grasp"] = per_grasp;
     j["ground_truth"] = log.truth ? tactile_pose_json(log.truth->object_pose) : ojson(nullptr);
+    if (log.truth && !log.truth->support.faces.empty())
+      j["scene"] = {{"kind", log.truth->scene}, {"support_faces", log.truth->support.faces.size()}};
     j["noise"] = log.noise;
     j["sensors"] = log.pads.size();
     j["pads"] = pads;
@@ -175,6 +177,9 @@ int run_log_info(const LogInfoOptions& o) {
   if (log.truth) {
     const auto j = tactile_pose_json(log.truth->object_pose);
     std::cout << "object at t = " << j["t"].dump() << ", q = " << j["q"].dump() << "\n";
+    if (!log.truth->support.faces.empty())
+      std::cout << "  scene         " << log.truth->scene << " (its support: " << log.truth->support.faces.size()
+                << " faces, in the ground truth)\n";
   } else {
     std::cout << "none\n";
   }

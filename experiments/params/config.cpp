@@ -143,6 +143,9 @@ void validate(const ExperimentConfig& c, const std::string& file) {
           throw Error("sweep value " + v.front() + " is smaller than the " +
                           std::to_string(c.objects.size()) + " explored objects", file,
                       "sweep.database_size");
+  if (c.scene != "none" && c.sensing == "probe")
+    throw Error("scene " + c.scene + " needs sensing = pads or fingertips (the probe does not touch scenes yet)", file,
+                "scene");
   std::size_t variants = 1;
   for (const auto& a : c.sweep) {
     variants *= a.values.size();

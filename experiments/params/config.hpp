@@ -48,6 +48,17 @@ struct FingertipOverrides {
   std::optional<double> normals_deg;             ///< deg, normal noise; unset: no normals
 };
 
+/// Overrides of the simulated scene (scene = "seabed"; unset: datasets::SceneSettings' default).
+struct SceneOverrides {
+  std::optional<double> slope_deg;               ///< deg, the support's tilt
+  std::optional<double> relief_m;                ///< m, sediment relief amplitude
+  std::optional<double> relief_wavelength_m;     ///< m, the relief's wavelength
+  std::optional<double> gap_m;                   ///< m, the object's lowest point above the support
+  std::optional<double> off_target;              ///< share of grasps aimed at the support
+  std::optional<double> off_target_radius_m;     ///< m, how far from the object those aim
+  std::optional<double> extent_m;                ///< m, half-size of the support patch
+};
+
 struct SweepAxis {
   std::string key;                              ///< a scalar key, e.g. "ransac.samples"
   std::vector<std::vector<std::string>> values; ///< one entry per variant value (a key's inputs)
@@ -73,6 +84,8 @@ struct ExperimentConfig {
   NoiseOverrides noise_params;
   ProbeOverrides probe_params;
   FingertipOverrides fingertip_params;
+  std::string scene = "none";           ///< none | seabed (datasets::SceneSettings)
+  SceneOverrides scene_params;
   int sensors = 1;
   std::string sensing = "pads";         ///< pads | probe (datasets::ProbeSettings) | fingertips
                                         ///< (datasets::FingertipSettings)

@@ -278,6 +278,25 @@ std::vector<Parameter> declaration() {
                    "Feature-free source: point-pair tables held besides those in use; beyond this, the "
                    "least recently wanted are dropped and rebuilt when wanted again. Never changes results",
                    {"--sparse-table-budget", "sparse_table_budget"}, TS_FIELD(recognizer.sparse.table_budget_mb)));
+  // The support under the object (engine/recognition/support.hpp).
+  d.push_back(choice("support.mode", {"off", "plane"}, "",
+                     "The support under the object (a seabed, a deck): off, or plane (looked for among the "
+                     "contacts each step; its contacts are set aside and the object matched to the rest)",
+                     {"--support"}, TS_FIELD(recognizer.support.enabled)));
+  d.push_back(real("support.tolerance_m", "m", 1e-4, 0.1, "",
+                   "Support: a contact nearer its plane than this is the support's",
+                   {"--support-tolerance"}, TS_FIELD(recognizer.support.tolerance)));
+  d.push_back(integer("support.min_contacts", 3, kLarge, "",
+                      "Support: contacts on the plane, and off it, needed to decide",
+                      {"--support-min-contacts"}, TS_FIELD(recognizer.support.min_contacts)));
+  d.push_back(real("support.above_share", "", 0.51, 1, "",
+                   "Support: of the contacts off the plane, the share that must lie above it (the object rests "
+                   "on its support; a face of the object has the object behind it)",
+                   {"--support-above-share"}, TS_FIELD(recognizer.support.above_share)));
+  d.push_back(real("support.free_margin_m", "m", -1, 1, "",
+                   "Support: free space deeper than this below the plane refutes it (< 0: the tolerance plus "
+                   "half the free-space resolution)",
+                   {"--support-free-margin"}, TS_FIELD(recognizer.support.free_margin)));
   d.push_back(integer("prior.angle_bins", 1, 64, "", "Shape prior: bins of each angle term",
                       {"--prior-angle-bins"}, TS_FIELD(recognizer.prior.angle_bins)));
   d.push_back(real("prior.distance_bin_m", "m", 1e-4, 1, "", "Shape prior: pair-distance bin",
@@ -569,6 +588,37 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
                 "Fingertips report surface normals with this noise per axis (unset or -1: no normals; sensing = "
                 "fingertips)",
                 "--tip-normals", TS_CONFIG(fingertip_params.normals_deg));
+  d.push_back(named(setting("scene", S, Type::choice, "", 0, 0, "none",
+                            "What lies around the object: none (water alone) or seabed (the object rests on a "
+                            "support surface that the hand touches too, shaped by scene.*; sensing = pads or "
+                            "fingertips)"),
+                    {"none", "seabed"}, TS_CONFIG(scene)));
+  d.back().sweepable = false;
+  d.back().simulate = true;
+  probe_setting("scene.slope_deg", "deg", 0, 60, "The seabed's tilt from horizontal (unset: 0; scene = seabed)",
+                "--scene-slope", TS_CONFIG(scene_params.slope_deg));
+  probe_setting("scene.relief_m", "m", 0, 0.2,
+                "Peak amplitude of the seabed's sediment relief (unset, 0: flat; scene = seabed)", "--scene-relief",
+                TS_CONFIG(scene_params.relief_m));
+  probe_setting("scene.relief_wavelength_m", "m", 0.01, 10,
+                "Wavelength of the sediment relief's components (unset: 0.12; scene = seabed)",
+                "--scene-relief-wavelength", TS_CONFIG(scene_params.relief_wavelength_m));
+  probe_setting("scene.gap_m", "m", 0, 1,
+                "The object's lowest point above the seabed (unset, 0: it rests on it; below 0 the seabed would "
+                "intersect the object, refused; scene = seabed)",
+                "--scene-gap", TS_CONFIG(scene_params.gap_m));
+  probe_setting("scene.off_target", "", 0, 0.99,
+                "Share of the grasps aimed at the seabed beside the object instead of the object (unset: 0; "
+                "scene = seabed)",
+                "--scene-off-target", TS_CONFIG(scene_params.off_target));
+  probe_setting("scene.off_target_radius_m", "m", 0, 10,
+                "Those grasps aim within this of the object's footprint centre (unset, 0: 1.5 x the object's "
+                "radius; scene = seabed)",
+                "--scene-off-target-radius", TS_CONFIG(scene_params.off_target_radius_m));
+  probe_setting("scene.extent_m", "m", 0, 100,
+                "Half-size of the seabed patch about the object (unset, 0: the object's radius + the hand's reach "
+                "+ 5 cm; scene = seabed)",
+                "--scene-extent", TS_CONFIG(scene_params.extent_m));
   {
     Parameter p = setting("seed", E, Type::integer, "", 0, kInf, "", "Seed of every random draw (unsigned integer)");
     p.set_config = [](ExperimentConfig& c, const Inputs& in, const std::string& file, const std::string& name) {
@@ -874,7 +924,8 @@ void apply_flags(const ParameterFlags& flags, MethodSettings& m) {
 
 bool bench_run_parameter(const Parameter& p) {
   return p.key == "method" || p.key == "preset" ||
-         (p.simulate && p.key != "sensing" && !p.key.starts_with("probe.") && !p.key.starts_with("fingertips."));
+         (p.simulate && p.key != "sensing" && !p.key.starts_with("probe.") && !p.key.starts_with("fingertips.") &&
+          p.key != "scene" && !p.key.starts_with("scene."));
 }
 
 void apply_flags(const ParameterFlags& flags, ExperimentConfig& c) {

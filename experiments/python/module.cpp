@@ -307,6 +307,16 @@ py::dict step_dict(const Database& db, const StepResult& r, const std::optional<
   o["hypotheses"] = hs;
   o["contacts"] = r.contacts;
   o["free_points"] = r.free_points;
+  if (r.support.found) {
+    py::dict sp;
+    sp["normal"] = vector_of(std::vector<double>{r.support.normal.x(), r.support.normal.y(), r.support.normal.z()});
+    sp["offset_m"] = r.support.offset;
+    sp["contacts"] = r.support.contacts_on;
+    sp["grasps"] = r.support.grasps_on;
+    o["support"] = sp;
+  } else {
+    o["support"] = py::none();
+  }
   o["unobservable_dof"] = r.unobservable_dof;
   o["pose_ambiguous"] = r.pose_ambiguous;
   o["observability"] = r.observability_from_model ? "answer_surface" : "contact_normals";

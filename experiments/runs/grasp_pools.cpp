@@ -20,26 +20,38 @@ datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
   datasets::SimulatorSettings s;
   s.sensors = c.sensors;
   s.noise = datasets::noise_profile(c.noise);
+  auto take = [](const std::optional<double>& value, double& field) {   // unset: the default stays
+    if (value) field = *value;
+  };
   const NoiseOverrides& n = c.noise_params;
-  if (n.arm_position_sigma_m) s.noise.arm_position_sigma = *n.arm_position_sigma_m;
-  if (n.arm_rotation_sigma_deg) s.noise.arm_rotation_sigma_deg = *n.arm_rotation_sigma_deg;
-  if (n.sensel_noise) s.noise.signal_noise = *n.sensel_noise;
-  if (n.force_noise) s.noise.force_noise = *n.force_noise;
-  if (n.contact_sigma_m) s.noise.lateral_sigma = *n.contact_sigma_m;
-  if (n.joint_sigma_deg) s.noise.joint_sigma_deg = *n.joint_sigma_deg;
+  take(n.arm_position_sigma_m, s.noise.arm_position_sigma);
+  take(n.arm_rotation_sigma_deg, s.noise.arm_rotation_sigma_deg);
+  take(n.sensel_noise, s.noise.signal_noise);
+  take(n.force_noise, s.noise.force_noise);
+  take(n.contact_sigma_m, s.noise.lateral_sigma);
+  take(n.joint_sigma_deg, s.noise.joint_sigma_deg);
   s.sensing = parse_sensing(c.sensing, {}, "sensing");
   if (s.sensing == Sensing::probe && n.contact_sigma_m) {   // the probe's own contact noise
     s.probe.contact_sigma = *n.contact_sigma_m;
     s.noise.lateral_sigma = 0.0;
   }
   const ProbeOverrides& p = c.probe_params;
-  if (p.ball_radius_m) s.probe.spec.ball_radius = *p.ball_radius_m;
+  take(p.ball_radius_m, s.probe.spec.ball_radius);
   s.probe.spec.shaft_radius = std::min(s.probe.spec.shaft_radius, s.probe.spec.ball_radius);
-  if (p.tilt_deg) s.probe.max_tilt_deg = *p.tilt_deg;
-  if (p.quantization_m) s.probe.quantization = *p.quantization_m;
+  take(p.tilt_deg, s.probe.max_tilt_deg);
+  take(p.quantization_m, s.probe.quantization);
   const FingertipOverrides& t = c.fingertip_params;
-  if (t.quantization_m) s.fingertips.quantization = *t.quantization_m;
-  if (t.normals_deg) s.fingertips.normal_sigma_deg = *t.normals_deg;
+  take(t.quantization_m, s.fingertips.quantization);
+  take(t.normals_deg, s.fingertips.normal_sigma_deg);
+  s.scene.kind = datasets::parse_scene_kind(c.scene, {}, "scene");
+  const SceneOverrides& sc = c.scene_params;
+  take(sc.slope_deg, s.scene.slope_deg);
+  take(sc.relief_m, s.scene.relief_m);
+  take(sc.relief_wavelength_m, s.scene.relief_wavelength_m);
+  take(sc.gap_m, s.scene.gap_m);
+  take(sc.off_target, s.scene.off_target);
+  take(sc.off_target_radius_m, s.scene.off_target_radius_m);
+  take(sc.extent_m, s.scene.extent_m);
   s.grasps = static_cast<std::size_t>(c.pool);
   return s;
 }
@@ -54,6 +66,12 @@ std::string pool_key(const datasets::SimulatorSettings& s) {
     << '|' << s.probe.spec.shaft_radius << '|' << s.probe.max_tilt_deg << '|' << s.probe.quantization;
   if (s.sensing == Sensing::fingertips)   // (pads and probe keys as before: their cached pools stay valid)
     k << '|' << s.fingertips.quantization << '|' << s.fingertips.normal_sigma_deg;
+  if (s.scene.kind != datasets::SceneKind::none) {   // (scene-free keys as before)
+    const datasets::SceneSettings& sc = s.scene;
+    k << "|scene " << to_string(sc.kind) << '|' << sc.slope_deg << '|' << sc.relief_m << '|'
+      << sc.relief_wavelength_m << '|' << sc.gap_m << '|' << sc.off_target << '|' << sc.off_target_radius_m << '|'
+      << sc.extent_m;
+  }
   return k.str();
 }
 
@@ -66,6 +84,8 @@ TactileLog log_from_pool(const TactileLog& pool, const std::vector<std::int32_t>
   TactileLog log = io::log_of(io::header_of(pool));   // its header: a probe pool stays a probe log
   LogGroundTruth truth;
   truth.object_pose = pool.truth->object_pose;
+  truth.scene = pool.truth->scene;
+  truth.support = pool.truth->support;
   for (std::int32_t g : grasps) {
     const auto gi = static_cast<std::size_t>(g);
     log.grasps.push_back(pool.grasps.at(gi));

@@ -45,7 +45,7 @@ TEST_CASE("Pipeline: each method's stages in Algorithm 1's order, and a small da
   const Pose T = test::random_pose(7, Vec3(0.1, 0.0, 0.0));
   const StepResult r1 = rec.step(test::touch(src->fines[4], T, 1, 5), {});
   const StepResult r2 = rec.step(test::touch(src->fines[4], T, 2, 5), {});
-  const std::vector<std::string> bricpsf = {"scene",     "shape_prior",   "survivors",         "early_stop",
+  const std::vector<std::string> bricpsf = {"support", "scene",     "shape_prior",   "survivors",         "early_stop",
                                             "ransac",    "sparse",        "shortlist",         "sequential_filter",
                                             "pose_transfer", "posteriors", "answer_rule",      "state",
                                             "observability"};
@@ -61,6 +61,7 @@ TEST_CASE("Pipeline: each method's stages in Algorithm 1's order, and a small da
     CHECK_FALSE(stage_of(*r, "pose_transfer").ran);
     CHECK(stage_of(*r, "sparse").reason == "sparse.mode = never");
     CHECK(stage_of(*r, "early_stop").reason == "early_stop off");
+    CHECK(stage_of(*r, "support").reason == "support.mode off");
     CHECK_FALSE(r->sparse_active);
     CHECK(r->shortlist.empty());
     for (const char* always : {"scene", "ransac", "sequential_filter", "posteriors", "answer_rule", "state"}) {
@@ -170,8 +171,9 @@ TEST_CASE("Pipeline: no contacts leaves every later stage out and keeps the stat
   CHECK(rec.steps_done() == 2);
   CHECK_FALSE(empty.valid);
   REQUIRE(empty.stages.size() == first.stages.size());
-  CHECK(empty.stages.front().ran);     // the scene found nothing to match
-  for (std::size_t k = 1; k < empty.stages.size(); ++k) {
+  CHECK(empty.stages[0].reason == "support.mode off");
+  CHECK(empty.stages[1].ran);          // the scene found nothing to match
+  for (std::size_t k = 2; k < empty.stages.size(); ++k) {
     CHECK_FALSE(empty.stages[k].ran);
     CHECK(empty.stages[k].reason == "no contacts");
   }
@@ -222,8 +224,9 @@ TEST_CASE("Pipeline: an unknown stage and a throwing observer are errors naming 
     CHECK(std::string(e.what()).find("stage 'ransac': an observer after it failed: observer broke") != std::string::npos);
   }
   CHECK(res.hypotheses.empty());       // the state stage never ran
-  CHECK(res.stages.size() == 4);       // scene, shape_prior, survivors, early_stop recorded (the last
-                                       // two left out: no earlier step); ransac's not complete
+  CHECK(res.stages.size() == 5);       // support, scene, shape_prior, survivors, early_stop recorded
+                                       // (support off; the last two left out: no earlier step);
+                                       // ransac's not complete
 }
 
 namespace {

@@ -81,7 +81,8 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
     // a reason); a 6-object database needs none of the large-database stages.
     REQUIRE(s["stages_ran"].is_array());
     REQUIRE(s["stages_skipped"].is_array());
-    CHECK(s["stages_ran"].size() + s["stages_skipped"].size() == 13);
+    CHECK(s["stages_ran"].size() + s["stages_skipped"].size() == 14);
+    CHECK(s["support"].is_null());   // support.mode off: none looked for
     for (const auto& name : s["stages_ran"]) CHECK(s["pipeline_s"][name.get<std::string>()].get<double>() >= 0.0);
     CHECK(s["pipeline_s"].size() == s["stages_ran"].size());
     std::set<std::string> skipped;
@@ -768,6 +769,40 @@ TEST_CASE("cli fingertips: simulate --sensing fingertips, recognize the log and 
   CHECK_FALSE(fs::exists(dir / "bad.h5"));
 }
 
+TEST_CASE("cli seabed: simulate a scene, log info names it, recognize --support plane sets the seabed aside") {
+  test::TempDir dir("cli_seabed");
+  make_db(dir);
+  const Run sim = touchstone(dir, "simulate --db db.h5 --object box --grasps 24 --noise ideal --scene seabed "
+                                  "--scene-off-target 0.4 --seed 5 --out seabed.h5 --json");
+  REQUIRE_MESSAGE(sim.code == 0, sim.err);
+  const Run info = touchstone(dir, "log info seabed.h5 --json");
+  REQUIRE(info.code == 0);
+  const auto ji = nlohmann::json::parse(info.out);
+  CHECK(ji["scene"]["kind"] == "seabed");
+  CHECK(ji["scene"]["support_faces"] == 2);
+  const double floor_z = io::read_log(dir / "seabed.h5").truth->support.vertices[0].z();
+  const Run r = touchstone(dir, "recognize --db db.h5 --log seabed.h5 --support plane --json");
+  REQUIRE_MESSAGE(r.code == 0, r.err);
+  const auto last = nlohmann::json::parse(r.out)["steps"].back();
+  CHECK(last["object"] == "box");
+  REQUIRE(last["support"].is_object());
+  CHECK(last["support"]["normal"][2].get<double>() > std::cos(2.0 * 3.14159265 / 180));   // up, within 2 degrees
+  CHECK(std::abs(last["support"]["offset_m"].get<double>() - floor_z) < 0.002);          // at the seabed's height
+  CHECK(last["support"]["contacts"].get<int>() >= 12);
+  CHECK(last["position_error_m"].get<double>() < 0.005);
+  // Bad scenes: one error naming the key, nothing written.
+  const Run gap = touchstone(dir, "simulate --db db.h5 --object box --grasps 2 --scene seabed --scene-gap -0.01 "
+                                  "--out gap.h5");
+  CHECK(gap.code != 0);
+  CHECK(gap.err.find("scene.gap") != std::string::npos);
+  CHECK_FALSE(fs::exists(dir / "gap.h5"));
+  const Run probe = touchstone(dir, "experiment --db db.h5 --objects box --runs 1 --steps 2 --pool 2 --set sensing=probe "
+                                    "--set scene=seabed --out probe.h5");
+  CHECK(probe.code != 0);
+  CHECK(probe.err.find("(scene)") != std::string::npos);
+  CHECK_FALSE(fs::exists(dir / "probe.h5"));
+}
+
 TEST_CASE("cli probe experiment: sensing = probe under both protocols (the shared pool stays a probe log)") {
   test::TempDir dir("cli_probe_exp");
   make_db(dir);
@@ -895,6 +930,14 @@ TEST_CASE("cli params --json: every method parameter is a recognize flag (and ea
       {"probe.quantization_m", {"0.001", {{"probe.quantization_m", 0.001}}}},
       {"fingertips.quantization_m", {"0.001", {{"fingertips.quantization_m", 0.001}}}},
       {"fingertips.normals_deg", {"5", {{"fingertips.normals_deg", 5.0}}}},
+      {"scene", {"none", {{"scene", "none"}}}},   // (seabed with this walk's probe is refused: tested apart)
+      {"scene.slope_deg", {"10", {{"scene.slope_deg", 10.0}}}},
+      {"scene.relief_m", {"0.01", {{"scene.relief_m", 0.01}}}},
+      {"scene.relief_wavelength_m", {"0.1", {{"scene.relief_wavelength_m", 0.1}}}},
+      {"scene.gap_m", {"0.002", {{"scene.gap_m", 0.002}}}},
+      {"scene.off_target", {"0.25", {{"scene.off_target", 0.25}}}},
+      {"scene.off_target_radius_m", {"0.2", {{"scene.off_target_radius_m", 0.2}}}},
+      {"scene.extent_m", {"0.5", {{"scene.extent_m", 0.5}}}},
       {"seed", {"7", {{"seed", 7}}}},
       {"ransac.samples", {"3x20", {{"ransac.triplets", 3}, {"ransac.registrations", 20}}}},
       {"memory_budget_mb", {"64", {{"memory_budget_mb", 64.0}}}},

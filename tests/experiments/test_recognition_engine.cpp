@@ -228,7 +228,8 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
     for (std::size_t i = 2; i < 2 + F; ++i) CHECK(std::isfinite(s.values[i]));
     for (std::size_t i = 2 + F; i < G; ++i)   // ran.<stage>: 1, 0, or NaN (not bricpsf's)
       CHECK((s.values[i] == 1.0 || s.values[i] == 0.0 || std::isnan(s.values[i])));
-    CHECK(s.values[2 + F] == 1.0);   // ran.scene
+    CHECK(s.values[2 + F] == 0.0);       // ran.support: support.mode off
+    CHECK(s.values[2 + F + 1] == 1.0);   // ran.scene
     CHECK(s.values[2] == doctest::Approx(s.posterior_best));  // feature.posterior_best
     // The true class's gap: >= 0 (+inf without a hypothesis of it).
     CHECK(s.values[G] >= 0.0);

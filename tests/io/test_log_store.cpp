@@ -145,6 +145,73 @@ TEST_CASE("log write -> read round trip, with and without ground truth") {
   check_equal(empty, io::read_log(dir / "e.h5"));
 }
 
+TEST_CASE("a scene's support in the ground truth: format_version 4, read back; bad ones named") {
+  test::TempDir dir("log");
+  TactileLog log = sample_log(3, true);
+  log.truth->scene = "seabed";
+  log.truth->support.vertices = {Vec3(-1, -1, 0), Vec3(1, -1, 0), Vec3(1, 1, 0.25), Vec3(-1, 1, 0)};
+  log.truth->support.faces = {Eigen::Vector3i(0, 1, 2), Eigen::Vector3i(0, 2, 3)};
+  const auto good = dir / "scene.h5";
+  io::write_log(good, log);
+  {
+    const h5::File f = h5::File::open(good);
+    CHECK(f.root().int_attribute("format_version") == 4);
+  }
+  const TactileLog back = io::read_log(good);
+  REQUIRE(back.truth);
+  CHECK(back.truth->scene == "seabed");
+  CHECK(back.truth->support.vertices == log.truth->support.vertices);
+  CHECK(back.truth->support.faces == log.truth->support.faces);
+  // Without ground truth a support cannot be written; nor a support without its scene's name.
+  TactileLog orphan = log;
+  orphan.truth->scene = "none";
+  CHECK_THROWS_AS(io::write_log(dir / "orphan.h5", orphan), Error);
+  CHECK_FALSE(std::filesystem::exists(dir / "orphan.h5"));
+
+  // Hand-made defects, each named: the group in an older version, an index out of range, a
+  // vertex not finite, no scene name, a shape outside the bounds (checked before reading).
+  auto defect = [&](const std::string& name, auto edit, const std::string& field) {
+    INFO(name);
+    const auto p = dir / (name + ".h5");
+    io::write_log(p, sample_log(2, true));   // version 1, no support
+    {
+      h5::File f = h5::File::open(p, h5::File::Access::read_write);
+      h5::Group g = f.root().open_group("ground_truth").create_group("support");
+      f.root().set_attribute("format_version", std::int64_t{4});
+      edit(f, g);
+    }
+    expect_error(p, field);
+  };
+  const std::vector<double> tri = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  defect("old version", [&](h5::File& f, h5::Group& g) {
+    f.root().set_attribute("format_version", std::int64_t{1});
+    g.set_attribute("scene", std::string("seabed"));
+    g.write("vertices", tri.data(), {3, 3});
+    g.write("faces", std::vector<std::int32_t>{0, 1, 2}.data(), {1, 3});
+  }, "/format_version");
+  defect("index", [&](h5::File&, h5::Group& g) {
+    g.set_attribute("scene", std::string("seabed"));
+    g.write("vertices", tri.data(), {3, 3});
+    g.write("faces", std::vector<std::int32_t>{0, 1, 2, 0, 3, 1}.data(), {2, 3});
+  }, "/ground_truth/support/faces[1]");
+  defect("nan", [&](h5::File&, h5::Group& g) {
+    g.set_attribute("scene", std::string("seabed"));
+    std::vector<double> v = tri;
+    v[4] = std::nan("");
+    g.write("vertices", v.data(), {3, 3});
+    g.write("faces", std::vector<std::int32_t>{0, 1, 2}.data(), {1, 3});
+  }, "/ground_truth/support/vertices[1]");
+  defect("no scene", [&](h5::File&, h5::Group& g) {
+    g.write("vertices", tri.data(), {3, 3});
+    g.write("faces", std::vector<std::int32_t>{0, 1, 2}.data(), {1, 3});
+  }, "/ground_truth/support/scene");
+  defect("empty", [&](h5::File&, h5::Group& g) {
+    g.set_attribute("scene", std::string("seabed"));
+    g.create_extendible<double>("vertices", {3});   // [0, 3]: too few rows
+    g.write("faces", std::vector<std::int32_t>{0, 1, 2}.data(), {1, 3});
+  }, "/ground_truth/support/vertices");
+}
+
 TEST_CASE("grasps append without rewriting; same content gives the same bytes") {
   test::TempDir dir("log");
   const TactileLog log = sample_log(6, true);

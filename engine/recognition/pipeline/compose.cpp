@@ -13,6 +13,7 @@ using Factory = std::unique_ptr<const Stage> (*)();
 /// name -> factory, in the order a step may run them.
 const std::vector<std::pair<std::string_view, Factory>>& stage_factories() {
   static const std::vector<std::pair<std::string_view, Factory>> all = {
+      {"support", support_stage},
       {"scene", scene_stage},
       {"shape_prior", shape_prior_stage},
       {"survivors", survivors_source},
@@ -40,7 +41,7 @@ std::vector<std::string_view> method_stages(Method m) {
   // evolves the previous state first (Algorithm 1, lines 3-7), which may explain the step
   // without new hypotheses (early_stop); it takes no draw, so the sources' candidates are the
   // same either way.
-  std::vector<std::string_view> s = {"scene", "shape_prior"};
+  std::vector<std::string_view> s = {"support", "scene", "shape_prior"};
   if (m == Method::bricpsf) s.insert(s.end(), {"survivors", "early_stop"});
   s.insert(s.end(), {"ransac", "sparse", "shortlist"});
   switch (m) {

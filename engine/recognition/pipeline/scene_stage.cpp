@@ -33,8 +33,8 @@ class SceneStage final : public Stage {
     scs.descriptor = c.db.settings().descriptor;   // the queries' descriptor is the database's
     if (scs.free_clearance < 0.0)  // automatic: d_thresh of Eq. 8
       scs.free_clearance = s.evaluate.d_thresh > 0.0 ? s.evaluate.d_thresh : 0.5 * s.evaluate.res_free;
-    c.scene = prepare_scene(c.contacts_world, c.free_world, c.db.settings().fpfh, scs, s.seed, c.step_u());
-    if (s.evaluate.grasp_offset_sigma > 0.0 || s.twins.rivals > 0) set_grasps(c.scene, c.grasps);
+    c.scene = prepare_scene(c.contacts(), c.free_world, c.db.settings().fpfh, scs, s.seed, c.step_u());
+    if (s.evaluate.grasp_offset_sigma > 0.0 || s.twins.rivals > 0) set_grasps(c.scene, c.grasp_groups());
     StepResult& res = c.res;
     res.times.prepare_s = detail::seconds_since(t0);
     res.contacts = c.scene.contacts.size();

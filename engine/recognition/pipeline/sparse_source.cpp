@@ -38,7 +38,7 @@ class SparseSource final : public Stage {
     if (!c.sparse_tables) c.sparse_tables = SparseTables::shared(c.db, c.s.sparse);
     SparseStats sp;
     const std::vector<Candidate> more =
-        sparse_candidates(c.scene, *c.sparse_tables, sparse_contact_normals(c.scene, c.contacts_world, c.s.sparse),
+        sparse_candidates(c.scene, *c.sparse_tables, sparse_contact_normals(c.scene, c.contacts(), c.s.sparse),
                           sparse_objects(c), c.s.sparse, c.s.seed, c.step_u(), &sp);
     c.cands.insert(c.cands.end(), more.begin(), more.end());
     c.res.sparse_active = true;

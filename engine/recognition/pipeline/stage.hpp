@@ -50,6 +50,13 @@ struct StepContext {
 
   std::uint64_t step_u() const { return static_cast<std::uint64_t>(step); }
 
+  // ---- the support (stage "support"): when it finds one, the contacts the step matches are
+  // the inputs without the support's
+  PointCloud object_contacts{};
+  GraspGroups object_grasps{};
+  const PointCloud& contacts() const { return res.support.found ? object_contacts : contacts_world; }
+  const GraspGroups& grasp_groups() const { return res.support.found ? object_grasps : grasps; }
+
   // ---- the scene (stage "scene")
   Scene scene{};
   EvaluateSettings ev{};                    ///< the evaluation of refined hypotheses

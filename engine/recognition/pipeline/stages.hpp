@@ -9,6 +9,8 @@
 namespace ts::inline recognition::pipeline {
 
 // ---- the query
+std::unique_ptr<const Stage> support_stage();        ///< "support": the plane under the object
+                                                     ///< and its contacts, set aside (SupportSettings)
 std::unique_ptr<const Stage> scene_stage();          ///< "scene": the local frame, normals,
                                                      ///< features (SceneSettings); the objects
                                                      ///< that can span the contacts

@@ -86,6 +86,10 @@ class StepResult:
     position_error_m: Optional[float] = None
     orientation_error_deg: Optional[float] = None
     symmetric_orientation_error_deg: Optional[float] = None
+    # The support under the object (params={"support.mode": "plane"}): {"normal" (unit, up, world),
+    # "offset_m" (the plane normal . x = offset_m), "contacts", "grasps"} it explains and were set
+    # aside; None: none found or not looked for
+    support: Optional[Dict[str, Any]] = None
     # The set answer with a calibration (Recognizer(calibration=...)): {"alpha", "informative",
     # "size", "calibrated_step", "members": [{"objects", "p_value", "log_weight_gap"}]}
     answer_set: Optional[Dict[str, Any]] = None

@@ -1,0 +1,183 @@
+#include "datasets/scene.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+namespace ts::datasets {
+
+namespace {
+constexpr std::uint64_t kStreamScene = 0x7363656eULL;   // "scen"
+constexpr double kDeg = std::numbers::pi / 180.0;
+constexpr int kMaxCells = 300;                          // per side: at most 90 601 vertices
+
+void require(bool ok, const std::string& key, const std::string& what) {
+  if (!ok) throw Error(key + " " + what, {}, key);
+}
+}  // namespace
+
+const char* to_string(SceneKind kind) { return kind == SceneKind::seabed ? "seabed" : "none"; }
+
+SceneKind parse_scene_kind(const std::string& word, const std::string& file, const std::string& field) {
+  if (word == "none") return SceneKind::none;
+  if (word == "seabed") return SceneKind::seabed;
+  throw Error("unknown scene '" + word + "' (none, seabed)", file, field);
+}
+
+void validate(const SceneSettings& s) {
+  auto in = [](double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; };
+  require(in(s.slope_deg, 0, 60), "scene.slope_deg", "must lie in [0, 60] degrees");
+  require(in(s.relief_m, 0, 0.2), "scene.relief_m", "must lie in [0, 0.2] m");
+  require(in(s.relief_wavelength_m, 0.01, 10), "scene.relief_wavelength_m", "must lie in [0.01, 10] m");
+  require(!(s.gap_m < 0), "scene.gap_m",
+          "must be >= 0: a negative gap would make the support intersect the object");
+  require(in(s.gap_m, 0, 1), "scene.gap_m", "must lie in [0, 1] m");
+  require(std::isfinite(s.off_target) && s.off_target >= 0 && s.off_target < 1, "scene.off_target",
+          "must lie in [0, 1)");
+  require(in(s.off_target_radius_m, 0, 10), "scene.off_target_radius_m", "must lie in [0, 10] m");
+  require(in(s.extent_m, 0, 100), "scene.extent_m", "must lie in [0, 100] m");
+}
+
+Support::Support(const Mesh& object_mesh, const Pose& T_world_object, const SceneSettings& s, double reach,
+                 std::uint64_t seed) {
+  validate(s);
+  if (s.kind == SceneKind::none) throw Error("scene none has no support", {}, "scene");
+  if (object_mesh.vertices.empty()) throw Error("the object has no vertices", {}, "scene");
+  Mesh world = object_mesh;
+  for (Vec3& v : world.vertices) v = T_world_object * v;
+  const auto box = mesh_bounds(world);
+  const Vec3 centre = box.center();
+  double r = 0.0;
+  for (const Vec3& v : world.vertices) r = std::max(r, (v - centre).norm());
+
+  // The plane: +z tilted by the slope about a seeded horizontal axis a; e1 = a, e2 = n x e1.
+  Rng rng(seed, kStreamScene);
+  const double phi = rng.uniform(0.0, 2.0 * std::numbers::pi);
+  const Vec3 a(std::cos(phi), std::sin(phi), 0.0);
+  n_ = Eigen::AngleAxisd(s.slope_deg * kDeg, a) * Vec3::UnitZ();
+  e1_ = a;
+  e2_ = n_.cross(e1_);
+  origin_ = centre;
+  half_ = s.extent_m > 0 ? s.extent_m : r + reach + 0.05;
+  radius_ = std::min(s.off_target_radius_m > 0 ? s.off_target_radius_m : 1.5 * r, 0.9 * half_);
+
+  // Heights on the grid: the relief (three seeded sinusoids), 0 when flat.
+  cells_ = 1;
+  if (s.relief_m > 0)
+    cells_ = std::clamp(static_cast<int>(std::ceil(2.0 * half_ / std::max(0.003, s.relief_wavelength_m / 8))), 1,
+                        kMaxCells);
+  spacing_ = 2.0 * half_ / cells_;
+  std::array<std::array<double, 4>, 3> waves{};   // kx, ky, phase, (unused)
+  for (auto& w : waves) {
+    const double psi = rng.uniform(0.0, 2.0 * std::numbers::pi);
+    const double k = 2.0 * std::numbers::pi / (s.relief_wavelength_m * rng.uniform(0.7, 1.3));
+    w = {k * std::cos(psi), k * std::sin(psi), rng.uniform(0.0, 2.0 * std::numbers::pi), 0.0};
+  }
+  const int N = cells_ + 1;
+  h_.assign(static_cast<std::size_t>(N) * N, 0.0);
+  for (int i = 0; i < N; ++i)
+    for (int j = 0; j < N; ++j) {
+      const double u = -half_ + i * spacing_, v = -half_ + j * spacing_;
+      double h = 0.0;
+      if (s.relief_m > 0)
+        for (const auto& w : waves) h += s.relief_m / 3.0 * std::sin(w[0] * u + w[1] * v + w[2]);
+      h_[static_cast<std::size_t>(i) * N + j] = h;
+    }
+
+  const double lift = clearance(world, r, s.relief_m > 0) - s.gap_m;
+  for (double& h : h_) h += lift;
+  triangulate();
+}
+
+double Support::clearance(const Mesh& world, double r, bool relief) const {
+  // Lowered until nothing of the object lies below it: at the object's vertices (the support
+  // interpolated there) and, with relief, along its edges (every quarter grid spacing) and at the
+  // grid's vertices under the object (the object's lowest surface point above each, by a ray cast
+  // up along n): where two piecewise-linear surfaces come nearest.
+  const int N = cells_ + 1;
+  double lift = std::numeric_limits<double>::infinity();
+  for (const Vec3& x : world.vertices) {
+    const Vec3 d = x - origin_;
+    lift = std::min(lift, d.dot(n_) - height(d.dot(e1_), d.dot(e2_)));
+  }
+  if (relief) {
+    // Along the object's edges too (where an edge crosses a ridge of the grid between vertices).
+    const double step = spacing_ / 4;
+    for (const auto& f : world.faces)
+      for (int e = 0; e < 3; ++e) {
+        const Vec3 &a = world.vertices[f[e]], &b = world.vertices[f[(e + 1) % 3]];
+        const int n = std::min(64, static_cast<int>(std::ceil((b - a).norm() / step)));
+        for (int k = 1; k < n; ++k) {
+          const Vec3 d = a + (b - a) * (static_cast<double>(k) / n) - origin_;
+          lift = std::min(lift, d.dot(n_) - height(d.dot(e1_), d.dot(e2_)));
+        }
+      }
+    const MeshIndex index(world);
+    for (int i = 0; i < N; ++i)
+      for (int j = 0; j < N; ++j) {
+        const double u = -half_ + i * spacing_, v = -half_ + j * spacing_;
+        if (u * u + v * v > r * r) continue;
+        const Vec3 start = origin_ + u * e1_ + v * e2_ - (2.0 * r + 1.0) * n_;
+        if (const auto hit = index.raycast(start, n_, 4.0 * r + 2.0))
+          lift = std::min(lift, hit->t - (2.0 * r + 1.0) - h_[static_cast<std::size_t>(i) * N + j]);
+      }
+  }
+  return lift;
+}
+
+void Support::triangulate() {
+  const int N = cells_ + 1;
+  for (int i = 0; i < N; ++i)
+    for (int j = 0; j < N; ++j) {
+      const double u = -half_ + i * spacing_, v = -half_ + j * spacing_;
+      mesh_.vertices.push_back(origin_ + u * e1_ + v * e2_ + h_[static_cast<std::size_t>(i) * N + j] * n_);
+    }
+  for (int i = 0; i < cells_; ++i)
+    for (int j = 0; j < cells_; ++j) {
+      const int A = i * N + j, B = (i + 1) * N + j, C = (i + 1) * N + j + 1, D = i * N + j + 1;
+      mesh_.faces.emplace_back(A, B, C);   // (B - A) x (C - A) along e1 x e2 = n: up
+      mesh_.faces.emplace_back(A, C, D);
+    }
+}
+
+double Support::height(double u, double v) const {
+  const int N = cells_ + 1;
+  const double gu = (u + half_) / spacing_, gv = (v + half_) / spacing_;
+  const int i = std::clamp(static_cast<int>(std::floor(gu)), 0, cells_ - 1);
+  const int j = std::clamp(static_cast<int>(std::floor(gv)), 0, cells_ - 1);
+  const double fu = gu - i, fv = gv - j;
+  auto at = [&](int a, int b) { return h_[static_cast<std::size_t>(a) * N + b]; };
+  const double ha = at(i, j), hb = at(i + 1, j), hc = at(i + 1, j + 1), hd = at(i, j + 1);
+  // The cell's two faces, split along its (i, j) - (i + 1, j + 1) diagonal.
+  return fu >= fv ? ha + fu * (hb - ha) + fv * (hc - hb) : ha + fv * (hd - ha) + fu * (hc - hd);
+}
+
+Vec3 Support::face_normal(double u, double v) const {
+  const int N = cells_ + 1;
+  const double gu = (u + half_) / spacing_, gv = (v + half_) / spacing_;
+  const int i = std::clamp(static_cast<int>(std::floor(gu)), 0, cells_ - 1);
+  const int j = std::clamp(static_cast<int>(std::floor(gv)), 0, cells_ - 1);
+  auto at = [&](int a, int b) { return h_[static_cast<std::size_t>(a) * N + b]; };
+  const double ha = at(i, j), hb = at(i + 1, j), hc = at(i + 1, j + 1), hd = at(i, j + 1);
+  const bool lower = gu - i >= gv - j;
+  const double du = (lower ? hb - ha : hc - hd) / spacing_, dv = (lower ? hc - hb : hd - ha) / spacing_;
+  return (n_ - du * e1_ - dv * e2_).normalized();
+}
+
+Vec3 Support::point(double u, double v) const { return origin_ + u * e1_ + v * e2_ + height(u, v) * n_; }
+
+double Support::above(const Vec3& x) const {
+  const Vec3 d = x - origin_;
+  return d.dot(n_) - height(d.dot(e1_), d.dot(e2_));
+}
+
+std::pair<Vec3, Vec3> Support::aim(Rng& rng) const {
+  const double rho = radius_ * std::sqrt(rng.uniform());
+  const double theta = rng.uniform(0.0, 2.0 * std::numbers::pi);
+  const double u = rho * std::cos(theta), v = rho * std::sin(theta);
+  return {point(u, v), face_normal(u, v)};
+}
+
+}  // namespace ts::datasets

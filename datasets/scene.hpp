@@ -1,0 +1,91 @@
+// Scenes of the simulator (issue 58): what lies around the explored object besides water.
+//
+// `seabed`: the object rests on a support surface, the seabed, which the hand touches as it
+// touches the object. World frame, gravity along -z. The support is a height field over a square
+// patch about the object's footprint: a plane whose upward normal is tilted `slope_deg` from +z
+// about a seeded horizontal axis, plus sediment relief (a seeded sum of three sinusoids of
+// wavelength about `relief_wavelength_m`, peak amplitude `relief_m`), triangulated on a grid. It is
+// lowered along its normal until no vertex of the object lies below it, then raised by `gap_m`:
+// with gap 0 the object's lowest point rests on it. A negative gap (the object sunk into the
+// sediment) would make the support intersect the object and is refused.
+//
+// A share `off_target` of the grasps aim at the support instead of the object: a point of the
+// support within `off_target_radius_m` of the object's footprint (area-uniform), approached from
+// above along its normal, as an ROV pilot feels for the seabed beside the target. The other aims
+// are the object's surface points as without a scene; an aim on the object's underside is
+// blocked by the support and redrawn (the simulator's operator), so the hand comes from the open
+// side.
+//
+// The support is recorded in the log's ground truth (the mesh, world frame), so a study can tell
+// which contacts touched the target and which the seabed. The recognizer does not see it.
+#pragma once
+
+#include "engine/core.hpp"
+#include "engine/geometry/mesh.hpp"
+
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace ts::datasets {
+
+enum class SceneKind { none, seabed };
+
+const char* to_string(SceneKind kind);   ///< "none" / "seabed"
+/// Throws ts::Error naming `file` and `field` for another word.
+SceneKind parse_scene_kind(const std::string& word, const std::string& file = {}, const std::string& field = "scene");
+
+struct SceneSettings {
+  SceneKind kind = SceneKind::none;
+  double slope_deg = 0.0;             ///< deg, the support's tilt from horizontal, in [0, 60]
+  double relief_m = 0.0;              ///< m, peak amplitude of the sediment relief (0: flat)
+  double relief_wavelength_m = 0.12;  ///< m, wavelength of the relief's components
+  double gap_m = 0.0;                 ///< m, the object's lowest point above the support (>= 0)
+  double off_target = 0.0;            ///< share of grasps aimed at the support, in [0, 1)
+  double off_target_radius_m = 0.0;   ///< m, those aims lie within this of the object's
+                                      ///< footprint centre (0: 1.5 x the object's radius)
+  double extent_m = 0.0;              ///< m, half-size of the support patch about the object
+                                      ///< (0: the object's radius + `reach` + 5 cm, so the hand
+                                      ///< meets the support wherever it goes down)
+};
+
+/// Throws ts::Error naming the key ("scene.slope_deg", ...) of a setting out of range.
+void validate(const SceneSettings& s);
+
+/// The support of a `seabed` scene under `object_mesh` (object frame) placed at `T_world_object`.
+/// `reach`: the hand's reach (m), for the default extent. Deterministic in `seed`. Throws
+/// ts::Error naming the key when s.kind is none or a setting is out of range.
+class Support {
+ public:
+  Support(const Mesh& object_mesh, const Pose& T_world_object, const SceneSettings& s, double reach,
+          std::uint64_t seed);
+
+  /// World frame; faces wound so that their normals point up (away from the sediment).
+  const Mesh& mesh() const { return mesh_; }
+  /// Unit upward normal of the support's plane (before relief), world frame.
+  const Vec3& up() const { return n_; }
+  /// The support's point above the plane point origin + u e1 + v e2 (on its triangulated surface).
+  Vec3 point(double u, double v) const;
+  /// How far world point x lies above the support, along up() (negative: below it).
+  double above(const Vec3& x) const;
+  /// An aim of an off-target grasp: a point of the support within off_target_radius of the
+  /// object's footprint centre (uniform over the disc) and the upward normal of the face under it.
+  std::pair<Vec3, Vec3> aim(Rng& rng) const;
+
+ private:
+  double height(double u, double v) const;   ///< above the plane, on the triangulated grid
+  /// How far the support (heights so far) may rise before it meets the object (world frame,
+  /// bounding radius r about origin_); with relief, also along edges and at grid vertices.
+  double clearance(const Mesh& world, double r, bool relief) const;
+  void triangulate();                        ///< mesh_ from the grid
+  Vec3 face_normal(double u, double v) const;
+
+  Vec3 origin_, e1_, e2_, n_;
+  double half_ = 0.0, spacing_ = 0.0, radius_ = 0.0;
+  int cells_ = 1;
+  std::vector<double> h_;                     ///< (cells + 1)^2 heights, row-major in (i: u, j: v)
+  Mesh mesh_;
+};
+
+}  // namespace ts::datasets

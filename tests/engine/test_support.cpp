@@ -1,0 +1,151 @@
+// The support under the object (engine/recognition/support.hpp): a box resting on a seabed is
+// found with its plane (normal and height); a box alone is not (its faces have the box behind
+// them); a block on a plate the hand went round is not (free space under the plate); a
+// points-only cloud finds it through triplets; its contacts are set aside; bad settings named.
+#include "engine/recognition/support.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+
+using namespace ts;
+
+namespace {
+
+// One grasp's patch: a 5 x 5 grid of contacts (2 mm apart) about `centre` in the plane with
+// normal `n`, and the hand's free points 2 and 4 cm out along n.
+void patch(GraspGroups& g, PointCloud& cloud, const Vec3& centre, const Vec3& n) {
+  const Vec3 a = (std::abs(n.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY()).cross(n).normalized();
+  const Vec3 b = n.cross(a);
+  std::vector<Vec3> pts, free;
+  for (int i = -2; i <= 2; ++i)
+    for (int j = -2; j <= 2; ++j) pts.push_back(centre + 0.002 * i * a + 0.002 * j * b);
+  for (double d : {0.02, 0.04})
+    for (int i = -1; i <= 1; ++i) free.push_back(centre + d * n + 0.01 * i * a);
+  g.add(pts, free);
+  for (const Vec3& p : pts) {
+    cloud.points.push_back(p);
+    cloud.normals.push_back(n);
+  }
+}
+
+// A box of half-sizes h resting on z = 0 (its centre at z = h.z), touched on its top and sides.
+void box_on_floor(GraspGroups& g, PointCloud& cloud, const Vec3& h) {
+  patch(g, cloud, Vec3(0, 0, 2 * h.z()), Vec3::UnitZ());
+  patch(g, cloud, Vec3(0.3 * h.x(), -0.2 * h.y(), 2 * h.z()), Vec3::UnitZ());
+  for (int s : {-1, 1}) {
+    patch(g, cloud, Vec3(s * h.x(), 0.1 * h.y(), 1.3 * h.z()), Vec3(s, 0, 0));
+    patch(g, cloud, Vec3(0.2 * h.x(), s * h.y(), 1.2 * h.z()), Vec3(0, s, 0));
+  }
+}
+
+// Free space: a lattice above z = 0 around the box (outside it), 2 cm apart.
+std::vector<Vec3> free_above(const Vec3& h, double below = 0.0) {
+  std::vector<Vec3> out;
+  for (double x = -0.2; x <= 0.2; x += 0.02)
+    for (double y = -0.2; y <= 0.2; y += 0.02)
+      for (double z = below + 0.01; z <= 0.2; z += 0.02) {
+        const bool inside = std::abs(x) < h.x() + 0.005 && std::abs(y) < h.y() + 0.005 && z < 2 * h.z() + 0.005;
+        if (!inside) out.emplace_back(x, y, z);
+      }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("support: a box on a seabed; its plane, the contacts set aside") {
+  const Vec3 h(0.05, 0.04, 0.03);
+  GraspGroups g;
+  PointCloud cloud;
+  box_on_floor(g, cloud, h);
+  const std::size_t object_contacts = cloud.points.size();
+  for (const Vec3& c : {Vec3(0.1, 0.02, 0), Vec3(-0.09, -0.07, 0), Vec3(0.02, 0.11, 0)})   // the seabed
+    patch(g, cloud, c, Vec3::UnitZ());
+  const std::vector<Vec3> free = free_above(h);
+  SupportSettings s;
+  s.enabled = true;
+  const SupportPlane p = estimate_support(cloud, g, free, s, 1, 1);
+  REQUIRE(p.found);
+  CHECK(p.normal.dot(Vec3::UnitZ()) > std::cos(0.5 * 3.14159265 / 180));
+  CHECK(std::abs(p.offset) < 1e-9);
+  CHECK(p.grasps_on == 3);
+  CHECK(p.contacts_on == 75);   // the seabed's three patches; the box's lowest contacts are 6 mm up
+  CHECK(p.contacts_above == object_contacts);
+  const PointCloud rest = without_support(cloud, p, s.tolerance);
+  CHECK(rest.points.size() == object_contacts);
+  CHECK(rest.normals.size() == object_contacts);
+  for (const Vec3& q : rest.points) CHECK(q.z() > 0.01);
+  const GraspGroups rest_g = without_support(g, p, s.tolerance);
+  CHECK(rest_g.grasps() == g.grasps());
+  CHECK(rest_g.points.size() == object_contacts);
+  CHECK(rest_g.free.size() == g.free.size());
+
+  // Tilted by 20 degrees about x and moved: the same plane, moved.
+  const Pose T(Eigen::Translation3d(0.3, -1.0, 2.0) * Eigen::AngleAxisd(0.35, Vec3::UnitX()));
+  PointCloud moved = cloud;
+  for (Vec3& q : moved.points) q = T * q;
+  for (Vec3& n : moved.normals) n = T.linear() * n;
+  GraspGroups mg = g;
+  for (Vec3& q : mg.points) q = T * q;
+  for (Vec3& q : mg.free) q = T * q;
+  std::vector<Vec3> mfree = free;
+  for (Vec3& q : mfree) q = T * q;
+  const SupportPlane tp = estimate_support(moved, mg, mfree, s, 1, 1);
+  REQUIRE(tp.found);
+  CHECK(tp.normal.dot(T.linear() * Vec3::UnitZ()) > std::cos(0.5 * 3.14159265 / 180));
+  CHECK(std::abs(tp.signed_distance(T.translation())) < 1e-9);
+
+  // Without grasp groups (a points-only cloud): seeded triplets find it too.
+  const SupportPlane pts = estimate_support(cloud, {}, free, s, 1, 1);
+  REQUIRE(pts.found);
+  CHECK(pts.normal.dot(Vec3::UnitZ()) > std::cos(0.5 * 3.14159265 / 180));
+  CHECK(pts.contacts_on == 75);
+}
+
+TEST_CASE("support: a box alone, and a block on a plate the hand went round, have none") {
+  const Vec3 h(0.05, 0.04, 0.03);
+  GraspGroups g;
+  PointCloud cloud;
+  box_on_floor(g, cloud, h);
+  // The box's bottom face touched too, from below, and free space all round: no support (every
+  // face has the box behind it).
+  patch(g, cloud, Vec3(0.01, 0.0, 0.0), -Vec3::UnitZ());
+  patch(g, cloud, Vec3(-0.02, 0.01, 0.0), -Vec3::UnitZ());
+  patch(g, cloud, Vec3(0.02, -0.01, 0.0), -Vec3::UnitZ());
+  SupportSettings s;
+  s.enabled = true;
+  std::vector<Vec3> free = free_above(h, -0.2);
+  CHECK_FALSE(estimate_support(cloud, g, free, s, 1, 1).found);
+
+  // A plate (z = 0) with the block on it, the plate's top touched beside the block, and free
+  // space under the plate (the hand went round its rim): the plate's top is no support.
+  GraspGroups pg;
+  PointCloud plate;
+  box_on_floor(pg, plate, h);
+  for (const Vec3& c : {Vec3(0.09, 0.02, 0), Vec3(-0.09, -0.07, 0), Vec3(0.02, 0.1, 0)}) patch(pg, plate, c, Vec3::UnitZ());
+  std::vector<Vec3> round = free_above(h);
+  for (double x = -0.2; x <= 0.2; x += 0.02)
+    for (double y = -0.2; y <= 0.2; y += 0.02) round.emplace_back(x, y, -0.05);
+  CHECK_FALSE(estimate_support(plate, pg, round, s, 1, 1).found);
+  // The same contacts with free space above only: a support.
+  CHECK(estimate_support(plate, pg, free_above(h), s, 1, 1).found);
+  // Touched on its underside too (contacts below the plane): no support.
+  for (const Vec3& c : {Vec3(0.08, 0.0, -0.02), Vec3(-0.05, 0.05, -0.02)}) patch(pg, plate, c, -Vec3::UnitZ());
+  CHECK_FALSE(estimate_support(plate, pg, free_above(h), s, 1, 1).found);
+}
+
+TEST_CASE("support: settings out of range are named") {
+  SupportSettings s;
+  s.tolerance = 0;
+  try {
+    estimate_support({}, {}, {}, s, 1, 1);
+    FAIL("accepted tolerance 0");
+  } catch (const Error& e) {
+    CHECK(e.field() == "support.tolerance");
+  }
+  s = {};
+  s.above_share = 0.4;
+  CHECK_THROWS_AS(estimate_support({}, {}, {}, s, 1, 1), Error);
+  s = {};
+  CHECK_FALSE(estimate_support({}, {}, {}, s, 1, 1).found);   // nothing to decide on
+}
