@@ -142,27 +142,25 @@ void Support::triangulate() {
     }
 }
 
-double Support::height(double u, double v) const {
+Support::Cell Support::cell(double u, double v) const {
   const int N = cells_ + 1;
   const double gu = (u + half_) / spacing_, gv = (v + half_) / spacing_;
   const int i = std::clamp(static_cast<int>(std::floor(gu)), 0, cells_ - 1);
   const int j = std::clamp(static_cast<int>(std::floor(gv)), 0, cells_ - 1);
-  const double fu = gu - i, fv = gv - j;
   auto at = [&](int a, int b) { return h_[static_cast<std::size_t>(a) * N + b]; };
-  const double ha = at(i, j), hb = at(i + 1, j), hc = at(i + 1, j + 1), hd = at(i, j + 1);
+  return {at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1), gu - i, gv - j};
+}
+
+double Support::height(double u, double v) const {
+  const Cell c = cell(u, v);
   // The cell's two faces, split along its (i, j) - (i + 1, j + 1) diagonal.
-  return fu >= fv ? ha + fu * (hb - ha) + fv * (hc - hb) : ha + fv * (hd - ha) + fu * (hc - hd);
+  return c.fu >= c.fv ? c.a + c.fu * (c.b - c.a) + c.fv * (c.c - c.b) : c.a + c.fv * (c.d - c.a) + c.fu * (c.c - c.d);
 }
 
 Vec3 Support::face_normal(double u, double v) const {
-  const int N = cells_ + 1;
-  const double gu = (u + half_) / spacing_, gv = (v + half_) / spacing_;
-  const int i = std::clamp(static_cast<int>(std::floor(gu)), 0, cells_ - 1);
-  const int j = std::clamp(static_cast<int>(std::floor(gv)), 0, cells_ - 1);
-  auto at = [&](int a, int b) { return h_[static_cast<std::size_t>(a) * N + b]; };
-  const double ha = at(i, j), hb = at(i + 1, j), hc = at(i + 1, j + 1), hd = at(i, j + 1);
-  const bool lower = gu - i >= gv - j;
-  const double du = (lower ? hb - ha : hc - hd) / spacing_, dv = (lower ? hc - hb : hd - ha) / spacing_;
+  const Cell c = cell(u, v);
+  const bool lower = c.fu >= c.fv;
+  const double du = (lower ? c.b - c.a : c.c - c.d) / spacing_, dv = (lower ? c.c - c.b : c.d - c.a) / spacing_;
   return (n_ - du * e1_ - dv * e2_).normalized();
 }
 

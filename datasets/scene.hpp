@@ -74,6 +74,12 @@ class Support {
   std::pair<Vec3, Vec3> aim(Rng& rng) const;
 
  private:
+  /// The grid cell holding (u, v): its corner heights (i, j), (i + 1, j), (i + 1, j + 1),
+  /// (i, j + 1) and where (u, v) lies in it (fractions, clamped to the patch's cells).
+  struct Cell {
+    double a, b, c, d, fu, fv;
+  };
+  Cell cell(double u, double v) const;
   double height(double u, double v) const;   ///< above the plane, on the triangulated grid
   /// How far the support (heights so far) may rise before it meets the object (world frame,
   /// bounding radius r about origin_); with relief, also along edges and at grid vertices.

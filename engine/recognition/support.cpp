@@ -73,13 +73,15 @@ struct Judge {
   SupportPlane operator()(Plane plane) const {
     SupportPlane out;
     const double tol = s.tolerance;
-    std::vector<Vec3> on;
-    for (const Vec3& p : contacts.points)
-      if (std::abs(plane.normal.dot(p - plane.point)) < tol) on.push_back(p);
+    auto within = [&](const Plane& q) {
+      std::vector<Vec3> near;
+      for (const Vec3& p : contacts.points)
+        if (std::abs(q.normal.dot(p - q.point)) < tol) near.push_back(p);
+      return near;
+    };
+    std::vector<Vec3> on = within(plane);
     if (on.size() < s.min_contacts || !fit_plane(on, plane)) return out;
-    on.clear();
-    for (const Vec3& p : contacts.points)
-      if (std::abs(plane.normal.dot(p - plane.point)) < tol) on.push_back(p);
+    on = within(plane);   // those of the refitted plane
     if (on.size() < s.min_contacts) return out;
     // The disc its contacts span (about their centroid, in the plane).
     Vec3 c = Vec3::Zero();
