@@ -75,7 +75,7 @@ GraspFit fit_grasp_offsets(const Scene& scene, const DistanceField& field, const
     field.distances(p, m, T, d.data());
     const double clamp2 = 9.0 * s.grasp_contact_sigma * s.grasp_contact_sigma;
     for (std::size_t i = 0; i < m; ++i) {
-      fit.error_sum += eq::contact_error(d[i], s.d_outlier);
+      fit.error_sum += eq::contact_error(d[i], s.d_outlier, eq::background(s));
       fit.clamped_sq_sum += std::min(d[i] * d[i], clamp2);
       fit.far += d[i] * d[i] > clamp2 ? 1 : 0;
       fit.far10 += std::abs(d[i]) > 10.0 * s.grasp_contact_sigma ? 1 : 0;
@@ -149,7 +149,7 @@ GraspFit contact_fit(const Scene& scene, const DistanceField& field, const Pose&
   field.distances(p.data(), p.size(), T_so.inverse(), d.data());
   const double clamp2 = 9.0 * s.grasp_contact_sigma * s.grasp_contact_sigma;
   for (double x : d) {
-    fit.error_sum += eq::contact_error(x, s.d_outlier);
+    fit.error_sum += eq::contact_error(x, s.d_outlier, eq::background(s));
     fit.clamped_sq_sum += std::min(x * x, clamp2);
     fit.far += x * x > clamp2 ? 1 : 0;
     fit.far10 += std::abs(x) > 10.0 * s.grasp_contact_sigma ? 1 : 0;

@@ -34,6 +34,10 @@ inline namespace recognition {
 
 struct EvaluateSettings {
   double d_outlier = 0.20;            ///< m, outlier distance of Eq. 4 (paper: 20 cm)
+  double outlier_m = 0.0;             ///< m, extension, the background term: a contact farther
+                                      ///< than this from the object costs what one at this
+                                      ///< distance does, as something else (the seabed, a
+                                      ///< neighbour) may have been touched (0: off, Eq. 4 alone)
   bool free_space = true;             ///< Eq. 6 (contact x free space); false: Eq. 5 only
   double lambda = 0.02;               ///< Eq. 9 weight of free space (paper: 0.02)
   double res_free = 0.04;             ///< m, free-space resolution; d_thresh = res_free / 2
@@ -164,11 +168,16 @@ std::vector<Evaluation> evaluate_all(const Scene& scene, const Database& db,
 // ---- implementation of the template -------------------------------------------------------
 
 namespace eq {   // Eq. 4 and Eq. 8 per point
-inline double contact_error(double d, double d_outlier) {  // Eq. 4
-  d = std::abs(d);
+/// Eq. 4, with the background term: |d| counted at most `background` (> 0; infinite: off).
+inline double contact_error(double d, double d_outlier, double background = std::numeric_limits<double>::infinity()) {
+  d = std::min(std::abs(d), background);
   if (!(d < d_outlier)) return 1.0;
   const double x = d / d_outlier;
   return x * x;
+}
+/// The background distance of `s` for contact_error (infinite when the term is off).
+inline double background(const EvaluateSettings& s) {
+  return s.outlier_m > 0.0 ? s.outlier_m : std::numeric_limits<double>::infinity();
 }
 inline double free_error(double d, double d_thresh, bool inside_penalty, double margin = 0.0) {  // Eq. 8
   if (inside_penalty && d < -margin) return 1.0;
@@ -193,6 +202,7 @@ Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const 
   // reject_below = +inf asks for the bound from the prefixes only (select_top's first phase).
   const bool bound_only = reject_below == std::numeric_limits<double>::infinity();
   double buf[kMax];
+  const double background = eq::background(s);
 
   // Contact term (Eq. 4, 5/7), in the scene's fixed pseudo-random order.
   double sum = given ? given->sum : 0.0;
@@ -201,7 +211,7 @@ Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const 
   while (nc < c_limit) {
     const std::size_t m = std::min(chunk, c_limit - nc);
     distances(scene.ordered.data() + nc, m, T_object_scene, buf);
-    for (std::size_t j = 0; j < m; ++j) sum += eq::contact_error(buf[j], s.d_outlier);
+    for (std::size_t j = 0; j < m; ++j) sum += eq::contact_error(buf[j], s.d_outlier, background);
     nc += m;
     if (!bound_only && nc < C && -sum * invC < reject_below) {
       ev.contacts = static_cast<std::uint32_t>(nc);

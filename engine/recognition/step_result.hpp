@@ -130,6 +130,13 @@ struct StageRun {
   double seconds = 0.0;             ///< s
 };
 
+/// What explains one contact (stage "attribution").
+enum class ContactLabel : std::uint8_t {
+  object = 0,       ///< within support.attribution_m of the answer's surface
+  support = 1,      ///< set aside as the support's (stage "support")
+  unexplained = 2,  ///< neither: something else was touched, or the answer is wrong
+};
+
 struct StepResult {
   int step = 0;                     ///< 1-based
   bool valid = false;               ///< there is at least one hypothesis
@@ -140,6 +147,8 @@ struct StepResult {
   std::size_t contacts = 0, free_points = 0;
   SupportPlane support;             ///< the support the step found (found = false: none, or
                                     ///< not looked for); its contacts are not in `contacts`
+  std::vector<ContactLabel> attribution;  ///< per input contact, in its order (stage
+                                          ///< "attribution"; empty when it did not run)
   int unobservable_dof = 6;         ///< pose DOF the contacts leave unconstrained (flat: 3)
   bool pose_ambiguous = true;       ///< unobservable_dof > 0: do not trust the pose
   bool observability_from_model = false;  ///< unobservable_dof judged on the answer's surface (the

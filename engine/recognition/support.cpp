@@ -45,6 +45,8 @@ void check(const SupportSettings& s) {
   require(std::isfinite(s.above_share) && s.above_share > 0.5 && s.above_share <= 1, "support.above_share",
           "must lie in (0.5, 1]");
   require(std::isfinite(s.free_margin) && s.free_margin <= 1, "support.free_margin", "must be at most 1 m");
+  require(std::isfinite(s.attribution) && s.attribution > 0 && s.attribution <= 1, "support.attribution",
+          "must lie in (0, 1] m");
 }
 
 /// Up for a plane through `centre` with normal `n`: the side of the witnesses (free points of

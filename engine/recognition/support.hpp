@@ -42,6 +42,8 @@ struct SupportSettings {
                                      ///< voxel's centre may lie that far from the volume the hand
                                      ///< swept; estimate_support alone, the tolerance)
   std::size_t triplets = 256;        ///< candidate planes without grasp groups
+  double attribution = 0.01;         ///< m, a contact this near the answer's surface is the
+                                     ///< object's (stage "attribution")
 };
 
 struct SupportPlane {

@@ -88,10 +88,11 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
                     informative_col = column("answer_set.informative");
   const std::size_t expected_col = column("plan.expected_object_information"), drop_col = column("plan.entropy_drop");
   const std::size_t fit_col = column("fit.contact_distance_m");
+  const std::size_t right_col = column("attribution.right_share"), off_col = column("contacts.off_target_share");
   J rows = J::array();
   for (int k = 0; k < steps; ++k) {
     std::map<int, ClusterCounts> covered_by_object;
-    std::vector<double> set_sizes, expected, drop_planned, drop_all, fit;
+    std::vector<double> set_sizes, expected, drop_planned, drop_all, fit, attributed, off_target;
     std::size_t covered = 0, informative = 0;
     std::map<int, ClusterCounts> strict_by_object, class_by_object;
     std::vector<StepSample> samples;
@@ -122,6 +123,8 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
         by.successes += c ? 1 : 0;
       }
       if (fit_col < s.values.size() && !std::isnan(s.values[fit_col])) fit.push_back(s.values[fit_col]);
+      if (right_col < s.values.size() && !std::isnan(s.values[right_col])) attributed.push_back(s.values[right_col]);
+      if (off_col < s.values.size() && !std::isnan(s.values[off_col])) off_target.push_back(s.values[off_col]);
       // Active touch: the planner's expectation of the chosen grasp and the step's entropy drop.
       if (drop_col < s.values.size() && !std::isnan(s.values[drop_col])) {
         drop_all.push_back(s.values[drop_col]);
@@ -181,6 +184,10 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
     // The mean contact-to-model distance of the answer at its pose, median over the runs that
     // answered (right or not): what real data without a truth can check.
     row["contact_distance_m_median"] = opt(median(fit));
+    // Scenes: the share of contacts truly off the target (mean over runs), and the share the
+    // step's attribution labelled right, target or not (mean over runs; null when it did not run).
+    row["off_target_share_mean"] = off_target.empty() ? J(nullptr) : J(mean_t_interval(off_target).mean);
+    row["attribution_accuracy_mean"] = attributed.empty() ? J(nullptr) : J(mean_t_interval(attributed).mean);
     // The interface's keys first, then the rest.
     row["position_error_m_median"] = opt(m.position_m.median);
     row["orientation_error_deg_median"] = opt(m.orientation_rad.median, kDeg);

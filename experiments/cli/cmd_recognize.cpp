@@ -131,6 +131,20 @@ nlohmann::ordered_json pose_json(const Pose& T) {
   return {{"t", {t.x(), t.y(), t.z()}}, {"q", {q.w(), q.x(), q.y(), q.z()}}};
 }
 
+/// A step's attribution: counts, and the labels as one character a contact in the order of the
+/// step's contact cloud (o: the object's, s: the support's, u: unexplained); null when the stage
+/// "attribution" did not run.
+nlohmann::ordered_json attribution_json(const std::vector<ContactLabel>& labels) {
+  if (labels.empty()) return nullptr;
+  std::size_t n[3] = {0, 0, 0};
+  std::string text;
+  for (ContactLabel l : labels) {
+    ++n[static_cast<int>(l)];
+    text += "osu"[static_cast<int>(l)];
+  }
+  return {{"object", n[0]}, {"support", n[1]}, {"unexplained", n[2]}, {"labels", text}};
+}
+
 nlohmann::ordered_json number_or_null(const std::optional<double>& x) {
   if (!x || !std::isfinite(*x)) return nullptr;
   return *x;
@@ -571,6 +585,8 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
                                                               {"contacts", r.support.contacts_on},
                                                               {"grasps", r.support.grasps_on}}
                                     : nlohmann::ordered_json(nullptr);
+    // What explains each contact (stage "attribution"): the answer, the support, or nothing.
+    st["attribution"] = attribution_json(r.attribution);
     st["unobservable_dof"] = r.unobservable_dof;
     st["pose_ambiguous"] = r.pose_ambiguous;
     // Judged by the contacts' own normals, or (too few of them) on the answer's surface.

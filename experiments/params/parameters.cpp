@@ -161,6 +161,10 @@ std::vector<Parameter> declaration() {
   // Evaluation (Eq. 4-9).
   d.push_back(real("ransac.d_outlier_m", "m", 1e-6, 100, "0.20 (Section 5.3)", "Outlier distance of Eq. 4",
                    {"--d-outlier", "d_outlier"}, TS_FIELD(recognizer.evaluate.d_outlier)));
+  d.push_back(real("evaluate.outlier_m", "m", 0, 100, "",
+                   "Extension, the background term: a contact farther than this from the object costs what "
+                   "one at this distance does (it may have touched the seabed or a neighbour; 0: off, Eq. 4 alone)",
+                   {"--outlier", "outlier"}, TS_FIELD(recognizer.evaluate.outlier_m)));
   d.push_back(real("bricpsf.lambda", "", 0, kInf, "0.02 (Section 5.5)", "Free-space weight of Eq. 9",
                    {"--lambda", "lambda"}, TS_FIELD(recognizer.evaluate.lambda)));
   d.push_back(real("evaluate.res_free_m", "m", 1e-6, 10, "0.04 (Section 5.5)",
@@ -297,6 +301,10 @@ std::vector<Parameter> declaration() {
                    "Support: free space deeper than this below the plane refutes it (< 0: the tolerance plus "
                    "half the free-space resolution)",
                    {"--support-free-margin"}, TS_FIELD(recognizer.support.free_margin)));
+  d.push_back(real("support.attribution_m", "m", 1e-4, 1, "",
+                   "A contact this near the answer's surface is the object's; the others are the support's "
+                   "or unexplained (the step's attribution; with support.mode = plane or evaluate.outlier_m > 0)",
+                   {"--attribution"}, TS_FIELD(recognizer.support.attribution)));
   d.push_back(integer("prior.angle_bins", 1, 64, "", "Shape prior: bins of each angle term",
                       {"--prior-angle-bins"}, TS_FIELD(recognizer.prior.angle_bins)));
   d.push_back(real("prior.distance_bin_m", "m", 1e-4, 1, "", "Shape prior: pair-distance bin",

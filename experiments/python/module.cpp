@@ -317,6 +317,14 @@ py::dict step_dict(const Database& db, const StepResult& r, const std::optional<
   } else {
     o["support"] = py::none();
   }
+  if (!r.attribution.empty()) {   // per contact: 0 the object's, 1 the support's, 2 unexplained
+    py::array_t<std::uint8_t> a(static_cast<py::ssize_t>(r.attribution.size()));
+    auto w = a.mutable_unchecked<1>();
+    for (std::size_t i = 0; i < r.attribution.size(); ++i) w(static_cast<py::ssize_t>(i)) = static_cast<std::uint8_t>(r.attribution[i]);
+    o["attribution"] = a;
+  } else {
+    o["attribution"] = py::none();
+  }
   o["unobservable_dof"] = r.unobservable_dof;
   o["pose_ambiguous"] = r.pose_ambiguous;
   o["observability"] = r.observability_from_model ? "answer_surface" : "contact_normals";

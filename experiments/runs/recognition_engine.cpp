@@ -3,6 +3,7 @@
 
 #include "datasets/simulator.hpp"
 #include "engine/database/feature_table.hpp"
+#include "engine/geometry/mesh.hpp"
 #include "engine/geometry/pose_error.hpp"
 #include "engine/geometry/symmetry.hpp"
 #include "engine/recognition/answer_set.hpp"
@@ -334,6 +335,9 @@ class RecognitionEngine final : public RunEngine {
     es.free.res_free = rs.evaluate.res_free;
     es.free.s_obj_max = largest_object_extent(*group.database);
     Exploration exploration(log, es);
+    // A scene's support, to tell which contacts truly touched the target (attribution).
+    std::optional<MeshIndex> support;
+    if (log.truth && !log.truth->support.faces.empty()) support.emplace(log.truth->support);
     const auto run_start = Clock::now();
     std::vector<Vec3> contacts_so_far;   // active: the contact cloud of the previous step
     const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -454,6 +458,27 @@ class RecognitionEngine final : public RunEngine {
                              ? mean_contact_distance(*group.database->geometry(sr.best.object), sr.best.pose,
                                                      contacts.points)
                              : nan);
+      // A scene's contacts: the share truly off the target (nearer the support than the object
+      // at its true pose), and the share the step's attribution labelled right, target or not.
+      {
+        double right_share = nan, off_share = nan;
+        if (support && !hidden && !contacts.empty()) {
+          const GeometryRef truth_geo = group.database->geometry(local_true);
+          std::vector<double> d(contacts.size());
+          truth_geo->field.distances(contacts.points.data(), contacts.size(), rec.truth.inverse(), d.data());
+          std::size_t off = 0, right = 0;
+          const bool labelled = sr.attribution.size() == contacts.size();
+          for (std::size_t i = 0; i < contacts.size(); ++i) {
+            const bool on_target = std::abs(d[i]) <= support->closest(contacts.points[i]).distance;
+            off += on_target ? 0 : 1;
+            right += labelled && (sr.attribution[i] == ContactLabel::object) == on_target ? 1 : 0;
+          }
+          const double n = static_cast<double>(contacts.size());
+          off_share = static_cast<double>(off) / n;
+          if (labelled) right_share = static_cast<double>(right) / n;
+        }
+        s.values.insert(s.values.end(), {right_share, off_share});
+      }
       if (truth_pose_) {
         const std::optional<Funnel>& f = sr.watched;
         if (f && f->truth_pose_evaluated) {
@@ -563,7 +588,7 @@ const std::vector<std::string>& recognition_step_values() {
     for (const std::string& stage : pipeline_stage_names()) n.push_back("ran." + stage);
     n.insert(n.end(), {"set.truth_gap_to_answer", "answer_set.size", "answer_set.covers", "answer_set.informative",
                        "plan.expected_information", "plan.expected_object_information", "plan.entropy_drop",
-                       "fit.contact_distance_m"});
+                       "fit.contact_distance_m", "attribution.right_share", "contacts.off_target_share"});
     return n;
   }();
   return names;

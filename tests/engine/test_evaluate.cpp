@@ -90,6 +90,25 @@ TEST_CASE("Eq. 4-5: contact errors, outliers saturate at 1") {
   CHECK(ev.contact_error == doctest::Approx(-expected));
 }
 
+TEST_CASE("The background term: a contact costs at most what one at evaluate.outlier_m does") {
+  Rng rng(12);
+  const Pose T = some_pose();
+  std::vector<Vec3> pts;
+  for (int i = 0; i < 90; ++i) pts.push_back(T * ((kR + 0.002) * rng.unit_vector()));   // e = 1e-4
+  for (int i = 0; i < 10; ++i) pts.push_back(T * ((kR + 0.05) * rng.unit_vector()));    // 5 cm off
+  const Scene sc = make_scene(pts);
+  EvaluateSettings s;
+  const Evaluation plain = evaluate_with(sc, sphere_distance, kHalf, T, s);
+  CHECK(plain.log_weight == doctest::Approx(-(90 * 1e-4 + 10 * 0.0625) / 100.0).scale(0).epsilon(1e-9));
+  s.outlier_m = 0.015;   // the 5 cm contacts cost what 1.5 cm does: (0.015 / 0.2)^2
+  const Evaluation capped = evaluate_with(sc, sphere_distance, kHalf, T, s);
+  CHECK(capped.log_weight == doctest::Approx(-(90 * 1e-4 + 10 * 0.005625) / 100.0).scale(0).epsilon(1e-9));
+  // Contacts nearer than the cap cost as before; NaN still costs the full 1.
+  CHECK(eq::contact_error(0.01, 0.2, 0.015) == doctest::Approx(0.0025).scale(0).epsilon(1e-15));
+  CHECK(eq::contact_error(-0.3, 0.2, 0.015) == doctest::Approx(0.005625).scale(0).epsilon(1e-15));
+  CHECK(eq::contact_error(std::nan(""), 0.2, 0.015) == 1.0);
+}
+
 TEST_CASE("Eq. 6-9: free space near the surface costs, far free space does not") {
   Rng rng(3);
   const Pose T = some_pose();

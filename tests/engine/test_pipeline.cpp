@@ -48,7 +48,7 @@ TEST_CASE("Pipeline: each method's stages in Algorithm 1's order, and a small da
   const std::vector<std::string> bricpsf = {"support", "scene",     "shape_prior",   "survivors",         "early_stop",
                                             "ransac",    "sparse",        "shortlist",         "sequential_filter",
                                             "pose_transfer", "posteriors", "answer_rule",      "state",
-                                            "observability"};
+                                            "observability", "attribution"};
   CHECK(stage_names(r1) == bricpsf);
   CHECK(stage_names(r2) == bricpsf);
   const std::string small = "database of " + std::to_string(db.size()) + " objects";
@@ -58,6 +58,8 @@ TEST_CASE("Pipeline: each method's stages in Algorithm 1's order, and a small da
     CHECK(stage_of(*r, "shape_prior").reason.starts_with(small));
     CHECK_FALSE(stage_of(*r, "shortlist").ran);
     CHECK(stage_of(*r, "shortlist").reason == small + " (the shortlist acts above 48)");
+    CHECK_FALSE(stage_of(*r, "attribution").ran);   // no support looked for, no background term
+    CHECK(stage_of(*r, "attribution").reason == "support.mode off, evaluate.outlier_m 0");
     CHECK_FALSE(stage_of(*r, "pose_transfer").ran);
     CHECK(stage_of(*r, "sparse").reason == "sparse.mode = never");
     CHECK(stage_of(*r, "early_stop").reason == "early_stop off");

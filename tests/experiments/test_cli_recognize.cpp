@@ -81,7 +81,7 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
     // a reason); a 6-object database needs none of the large-database stages.
     REQUIRE(s["stages_ran"].is_array());
     REQUIRE(s["stages_skipped"].is_array());
-    CHECK(s["stages_ran"].size() + s["stages_skipped"].size() == 14);
+    CHECK(s["stages_ran"].size() + s["stages_skipped"].size() == 15);
     CHECK(s["support"].is_null());   // support.mode off: none looked for
     for (const auto& name : s["stages_ran"]) CHECK(s["pipeline_s"][name.get<std::string>()].get<double>() >= 0.0);
     CHECK(s["pipeline_s"].size() == s["stages_ran"].size());
@@ -790,6 +790,40 @@ TEST_CASE("cli seabed: simulate a scene, log info names it, recognize --support 
   CHECK(std::abs(last["support"]["offset_m"].get<double>() - floor_z) < 0.002);          // at the seabed's height
   CHECK(last["support"]["contacts"].get<int>() >= 12);
   CHECK(last["position_error_m"].get<double>() < 0.005);
+  // What explains each contact, in the order of the cloud `log export` writes: the seabed's set
+  // aside on the seabed; every contact clear of it the box's (ideal noise, the right answer).
+  REQUIRE(last["attribution"].is_object());
+  const std::string labels = last["attribution"]["labels"];
+  CHECK(last["attribution"]["support"] == last["support"]["contacts"]);
+  CHECK(last["attribution"]["object"].get<std::size_t>() + last["attribution"]["support"].get<std::size_t>() +
+            last["attribution"]["unexplained"].get<std::size_t>() == labels.size());
+  REQUIRE(touchstone(dir, "log export seabed.h5 --out cloud.ply").code == 0);
+  const PointCloud cloud = io::read_cloud(dir / "cloud.ply");
+  REQUIRE(cloud.size() == labels.size());
+  std::size_t clear = 0;
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const double h = cloud.points[i].z() - floor_z;
+    if (labels[i] == 's') CHECK(std::abs(h) < 0.006);
+    if (h > 0.01) {
+      ++clear;
+      CHECK(labels[i] == 'o');
+    }
+  }
+  CHECK(clear > 20);
+  // An experiment on the scene scores the attribution against the truth; without the stage
+  // nothing is labelled, and the share off the target is the same.
+  const std::string exp = "experiment --db db.h5 --objects box --runs 1 --steps 24 --pool 24 --set noise=ideal "
+                          "--set scene=seabed --set scene.off_target=0.4 --json ";
+  const Run on = touchstone(dir, exp + "--set support.mode=plane --out on.h5");
+  const Run off = touchstone(dir, exp + "--out off.h5");
+  REQUIRE_MESSAGE(on.code == 0, on.err);
+  REQUIRE_MESSAGE(off.code == 0, off.err);
+  const auto s_on = nlohmann::json::parse(on.out)["per_step"][23], s_off = nlohmann::json::parse(off.out)["per_step"][23];
+  CHECK(s_on["recognition_rate"] == 1.0);
+  CHECK(s_on["off_target_share_mean"].get<double>() > 0.02);   // a single pad often misses a flat seabed
+  CHECK(s_on["off_target_share_mean"] == s_off["off_target_share_mean"]);
+  CHECK(s_on["attribution_accuracy_mean"].get<double>() >= 0.95);
+  CHECK(s_off["attribution_accuracy_mean"].is_null());
   // Bad scenes: one error naming the key, nothing written.
   const Run gap = touchstone(dir, "simulate --db db.h5 --object box --grasps 2 --scene seabed --scene-gap -0.01 "
                                   "--out gap.h5");

@@ -222,7 +222,7 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
   const std::size_t F = confidence_feature_names().size();
   const std::size_t G = 2 + F + pipeline_stage_names().size();   // set.truth_gap_to_answer, then answer_set.*
   for (const auto& s : runs[0].steps) {
-    REQUIRE(s.values.size() == G + 8);
+    REQUIRE(s.values.size() == G + 10);
     CHECK(std::isnan(s.values[0]));  // no calibration: no confidence
     CHECK(std::isnan(s.values[1]));
     for (std::size_t i = 2; i < 2 + F; ++i) CHECK(std::isfinite(s.values[i]));
@@ -241,6 +241,9 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
     if (s.best_object < 0) CHECK(std::isnan(s.values[G + 7]));
     if (s.best_object >= 0) CHECK(s.values[G + 7] >= 0.0);
     if (s.correct) CHECK(s.values[G + 7] < 0.004);
+    // attribution.right_share, contacts.off_target_share: no scene, nothing to score.
+    CHECK(std::isnan(s.values[G + 8]));
+    CHECK(std::isnan(s.values[G + 9]));
   }
   // The entropy drop: the previous step's posterior entropy minus this one's (none at step 1).
   const auto& st = runs[0].steps;

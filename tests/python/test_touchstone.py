@@ -327,6 +327,25 @@ def test_recognize_log_returns_what_the_command_returns(built, db, tmp_path):
     assert last.posterior == pytest.approx(last.posteriors[last.object_index], rel=1e-12)
 
 
+def test_attribution_is_the_commands(built, db, tmp_path):
+    root, names = built
+    log = ts.simulate(db, names[1], grasps=8, seed=5)
+    path = tmp_path / "log.h5"
+    log.write(str(path))
+    cli = json.loads(run("recognize", "--db", root / "db.h5", "--log", path, "--json", "--seed", 2,
+                         "--threads", 1, "--outlier", 0.015))
+    plain = ts.Recognizer(db, seed=2).recognize_log(ts.read_log(str(path)))
+    steps = ts.Recognizer(db, seed=2, params={"evaluate.outlier_m": 0.015}).recognize_log(ts.read_log(str(path)))
+    assert all(p.attribution is None for p in plain)
+    for py, c in zip(steps, cli["steps"]):
+        assert py.object == c["object"]
+        labels = "".join("osu"[x] for x in py.attribution)
+        assert labels == c["attribution"]["labels"] and len(labels) == py.contacts
+    last = steps[-1]
+    assert last.correct
+    assert (last.attribution == 0).mean() > 0.95   # no scene: the right answer explains its contacts
+
+
 def test_explain_is_the_commands_and_changes_no_answer(built, db, tmp_path):
     root, names = built
     log = ts.simulate(db, names[1], grasps=6, seed=5)

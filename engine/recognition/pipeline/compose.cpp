@@ -29,6 +29,7 @@ const std::vector<std::pair<std::string_view, Factory>>& stage_factories() {
       {"answer_rule", answer_rule_stage},
       {"state", state_stage},
       {"observability", observability_stage},
+      {"attribution", attribution_stage},
   };
   return all;
 }
@@ -57,8 +58,9 @@ std::vector<std::string_view> method_stages(Method m) {
       break;
   }
   // Large databases: the leader's pose tried on the objects that fit there. Then the answer, and
-  // (contacts without normals) the pose DOF it leaves free.
-  for (std::string_view n : {"pose_transfer", "posteriors", "answer_rule", "state", "observability"}) s.push_back(n);
+  // (contacts without normals) the pose DOF it leaves free, and what explains each contact.
+  for (std::string_view n : {"pose_transfer", "posteriors", "answer_rule", "state", "observability", "attribution"})
+    s.push_back(n);
   return s;
 }
 

@@ -42,6 +42,8 @@ std::unique_ptr<const Stage> state_stage();          ///< "state": S_t in world 
                                                      ///< and its fit
 std::unique_ptr<const Stage> observability_stage();  ///< "observability": the free pose DOF on the
                                                      ///< answer's surface (contacts without normals)
+std::unique_ptr<const Stage> attribution_stage();    ///< "attribution": what explains each contact
+                                                     ///< (the answer, the support, or nothing)
 
 /// A hypothesis's fit in absolute terms (state_stage.cpp; StepResult::fit for the answer): the
 /// contacts' distances after the per-grasp offsets against evaluate.grasp_contact_sigma.

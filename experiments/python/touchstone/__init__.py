@@ -90,6 +90,9 @@ class StepResult:
     # "offset_m" (the plane normal . x = offset_m), "contacts", "grasps"} it explains and were set
     # aside; None: none found or not looked for
     support: Optional[Dict[str, Any]] = None
+    # What explains each contact of the step's cloud (support.mode = "plane" or evaluate.outlier_m > 0),
+    # one uint8 a contact: 0 the answer's, 1 the support's, 2 unexplained; None: not labelled
+    attribution: Optional[Any] = None
     # The set answer with a calibration (Recognizer(calibration=...)): {"alpha", "informative",
     # "size", "calibrated_step", "members": [{"objects", "p_value", "log_weight_gap"}]}
     answer_set: Optional[Dict[str, Any]] = None

@@ -1,0 +1,54 @@
+// Stage "attribution": what explains each of the step's contacts (issue 58). A contact is the
+// support's when the stage "support" set it aside (within its tolerance of the plane), the
+// object's when it lies within support.attribution_m of the answer's surface at the answer's
+// pose, and unexplained otherwise (something else was touched: a neighbour, a fixture; or the
+// answer is wrong). StepResult::attribution, one label per input contact in its order. Left out
+// unless the support is looked for (support.mode = plane) or the background term is on
+// (evaluate.outlier_m > 0): it is what those users ask of the answer.
+#include "engine/recognition/pipeline/stages.hpp"
+
+#include <cmath>
+
+namespace ts::inline recognition::pipeline {
+
+namespace {
+
+class AttributionStage final : public Stage {
+ public:
+  std::string_view name() const override { return "attribution"; }
+
+  std::string skip_reason(const StepContext& c) const override {
+    if (!c.s.support.enabled && !(c.s.evaluate.outlier_m > 0.0)) return "support.mode off, evaluate.outlier_m 0";
+    return {};
+  }
+
+  void run(StepContext& c) const override {
+    const PointCloud& in = c.contacts_world;
+    std::vector<ContactLabel>& out = c.res.attribution;
+    out.assign(in.size(), ContactLabel::unexplained);
+    const SupportPlane& sp = c.res.support;
+    for (std::size_t i = 0; i < in.size(); ++i)
+      if (sp.found && std::abs(sp.signed_distance(in.points[i])) < c.s.support.tolerance) out[i] = ContactLabel::support;
+    if (!c.res.valid) return;
+    const Hypothesis& h = c.res.best;
+    const GeometryRef geo = c.db.geometry(h.object);
+    if (geo->field.empty()) return;
+    std::vector<Vec3> points;
+    std::vector<std::size_t> index;
+    for (std::size_t i = 0; i < in.size(); ++i)
+      if (out[i] != ContactLabel::support && std::isfinite(in.points[i].squaredNorm())) {
+        points.push_back(in.points[i]);
+        index.push_back(i);
+      }
+    std::vector<double> d(points.size());
+    geo->field.distances(points.data(), points.size(), h.pose.inverse(), d.data());
+    for (std::size_t k = 0; k < points.size(); ++k)
+      if (std::abs(d[k]) <= c.s.support.attribution) out[index[k]] = ContactLabel::object;
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<const Stage> attribution_stage() { return std::make_unique<AttributionStage>(); }
+
+}  // namespace ts::recognition::pipeline
