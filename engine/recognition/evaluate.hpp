@@ -5,6 +5,8 @@
 //   wt_free   = prod_j exp(-lambda e_free(q_j))                          (Eq. 9)
 //   wt        = wt_cont * wt_free                                       (Eq. 6)
 // Weights are handled as logarithms (wt_free underflows for large free-space clouds).
+// Extension, the background term (outlier_m > 0): d_c in Eq. 4 is counted at most outlier_m, so
+// a contact that something else explains (the seabed, a neighbour) costs a bounded amount.
 // Distances come from the object's distance field (O(1) per point); the paper's k-d tree
 // nearest neighbour is available as an option. Without free-space data the free term is skipped.
 //
@@ -169,7 +171,7 @@ std::vector<Evaluation> evaluate_all(const Scene& scene, const Database& db,
 
 namespace eq {   // Eq. 4 and Eq. 8 per point
 /// Eq. 4, with the background term: |d| counted at most `background` (> 0; infinite: off).
-inline double contact_error(double d, double d_outlier, double background = std::numeric_limits<double>::infinity()) {
+inline double contact_error(double d, double d_outlier, double background) {
   d = std::min(std::abs(d), background);
   if (!(d < d_outlier)) return 1.0;
   const double x = d / d_outlier;

@@ -251,6 +251,43 @@ PointCloud isolated_points(const PointCloud& fine, const Pose& T, std::size_t n,
 
 }  // namespace
 
+TEST_CASE("Pipeline: attribution labels the answer's contacts, one 5 mm off it too, one 5 cm off it unexplained") {
+  auto src = test::make_source();
+  Database db(src);
+  const Pose T = test::random_pose(13, Vec3(0.3, -0.2, 0.1));
+  PointCloud pts = test::touch(src->fines[0], T, 5, 3);   // the box, five patches
+  const std::size_t n = pts.size();
+  // Beside the top face's centre (the box is centred on its frame's origin): 5 mm and 5 cm out.
+  const double top = 0.5 * db.info(0).extent.z();
+  for (double off : {0.005, 0.05}) {
+    pts.points.push_back(T * Vec3(0.0, 0.0, top + off));
+    if (pts.has_normals() || !pts.normals.empty()) pts.normals.push_back(T.linear() * Vec3::UnitZ());
+  }
+  RecognizerSettings s = test::fast_settings(Method::bricpsf);
+  Recognizer plain(db, s);
+  const StepResult r0 = plain.step(pts, {});
+  CHECK_FALSE(stage_of(r0, "attribution").ran);
+  CHECK(r0.attribution.empty());
+  s.evaluate.outlier_m = 0.015;
+  Recognizer rec(db, s);
+  const StepResult r = rec.step(pts, {});
+  REQUIRE(r.valid);
+  REQUIRE(r.best.object == 0);
+  CHECK(stage_of(r, "attribution").ran);
+  REQUIRE(r.attribution.size() == n + 2);
+  std::size_t object = 0;
+  for (std::size_t i = 0; i < n; ++i) object += r.attribution[i] == ContactLabel::object;
+  CHECK(20 * object >= 19 * n);   // 95 % of the box's own contacts: the right answer, within a few mm
+  CHECK(r.attribution[n] == ContactLabel::object);
+  CHECK(r.attribution[n + 1] == ContactLabel::unexplained);
+  // A tighter attribution: the 5 mm contact is no longer the object's.
+  s.support.attribution = 0.003;
+  Recognizer tight(db, s);
+  const StepResult t = tight.step(pts, {});
+  REQUIRE(t.attribution.size() == n + 2);
+  CHECK(t.attribution[n] == ContactLabel::unexplained);
+}
+
 TEST_CASE("Pipeline: contacts without normals have their free pose DOF judged on the answer's surface") {
   auto src = test::make_source();
   Database db(src);

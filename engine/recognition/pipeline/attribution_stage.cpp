@@ -8,6 +8,7 @@
 #include "engine/recognition/pipeline/stages.hpp"
 
 #include <cmath>
+#include <limits>
 
 namespace ts::inline recognition::pipeline {
 
@@ -23,6 +24,9 @@ class AttributionStage final : public Stage {
   }
 
   void run(StepContext& c) const override {
+    const double near = c.s.support.attribution;
+    if (!(std::isfinite(near) && near > 0.0))
+      throw Error("support.attribution must be a positive length in m", {}, "support.attribution");
     const PointCloud& in = c.contacts_world;
     std::vector<ContactLabel>& out = c.res.attribution;
     out.assign(in.size(), ContactLabel::unexplained);
@@ -32,7 +36,6 @@ class AttributionStage final : public Stage {
     if (!c.res.valid) return;
     const Hypothesis& h = c.res.best;
     const GeometryRef geo = c.db.geometry(h.object);
-    if (geo->field.empty()) return;
     std::vector<Vec3> points;
     std::vector<std::size_t> index;
     for (std::size_t i = 0; i < in.size(); ++i)
@@ -41,9 +44,16 @@ class AttributionStage final : public Stage {
         index.push_back(i);
       }
     std::vector<double> d(points.size());
-    geo->field.distances(points.data(), points.size(), h.pose.inverse(), d.data());
+    const Pose to_object = h.pose.inverse();
+    if (!geo->field.empty()) {
+      geo->field.distances(points.data(), points.size(), to_object, d.data());
+    } else {   // no field (a database without one): the nearest surface point
+      for (std::size_t k = 0; k < points.size(); ++k)
+        d[k] = geo->fine.empty() ? std::numeric_limits<double>::infinity()
+                                 : std::sqrt(geo->tree.nearest(to_object * points[k]).sq_distance);
+    }
     for (std::size_t k = 0; k < points.size(); ++k)
-      if (std::abs(d[k]) <= c.s.support.attribution) out[index[k]] = ContactLabel::object;
+      if (std::abs(d[k]) <= near) out[index[k]] = ContactLabel::object;
   }
 };
 

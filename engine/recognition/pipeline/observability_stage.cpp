@@ -2,11 +2,11 @@
 // when the contacts carry too few normals to judge it themselves (isolated points: fingertips, a
 // probe, a points-only cloud; scene.cpp's unobservable_dof needs three contacts with normals,
 // and is trusted only when at least half the contacts have one).
-// Each contact within evaluate.d_outlier of the answer's model constrains the pose along the
+// Each contact within evaluate.d_outlier (and evaluate.outlier_m when set) of the answer's model constrains the pose along the
 // model's normal there: the same point-to-plane information, with the model's normals. A sphere
 // leaves 3 DOF, a cylinder's side 1 (its axis' rotation; the translation along it too without
 // an end), a box's faces none. Reads SceneSettings::observability_eps (the eigenvalue ratio) and
-// EvaluateSettings::d_outlier (m).
+// EvaluateSettings::d_outlier and outlier_m (m).
 #include "engine/recognition/pipeline/stages.hpp"
 
 namespace ts::inline recognition::pipeline {
@@ -45,7 +45,10 @@ class ObservabilityStage final : public Stage {
     const KdTree3& tree = resident ? geo.tree : read_tree;
     const Pose& T = h.cand.T_scene_object;
     const Pose to_object = T.inverse();
-    const double d = c.s.evaluate.d_outlier > 0.0 ? c.s.evaluate.d_outlier : std::numeric_limits<double>::infinity();
+    // Beyond the background term's cap (evaluate.outlier_m) a contact constrains nothing: it may
+    // be the seabed's or a neighbour's.
+    const double d = std::min(c.s.evaluate.d_outlier > 0.0 ? c.s.evaluate.d_outlier : std::numeric_limits<double>::infinity(),
+                              eq::background(c.s.evaluate));
     std::vector<Vec3> points, normals;
     for (const Vec3& p : c.scene.contacts.points) {
       const Neighbour nb = tree.nearest(to_object * p);
