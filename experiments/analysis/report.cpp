@@ -89,10 +89,12 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
   const std::size_t expected_col = column("plan.expected_object_information"), drop_col = column("plan.entropy_drop");
   const std::size_t fit_col = column("fit.contact_distance_m");
   const std::size_t right_col = column("attribution.right_share"), off_col = column("contacts.off_target_share");
+  const std::size_t found_col = column("support.found"), tilt_col = column("support.tilt_deg"),
+                    height_col = column("support.height_error_m");
   J rows = J::array();
   for (int k = 0; k < steps; ++k) {
     std::map<int, ClusterCounts> covered_by_object;
-    std::vector<double> set_sizes, expected, drop_planned, drop_all, fit, attributed, off_target;
+    std::vector<double> set_sizes, expected, drop_planned, drop_all, fit, attributed, off_target, found, tilt, height;
     std::size_t covered = 0, informative = 0;
     std::map<int, ClusterCounts> strict_by_object, class_by_object;
     std::vector<StepSample> samples;
@@ -125,6 +127,12 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
       if (fit_col < s.values.size() && !std::isnan(s.values[fit_col])) fit.push_back(s.values[fit_col]);
       if (right_col < s.values.size() && !std::isnan(s.values[right_col])) attributed.push_back(s.values[right_col]);
       if (off_col < s.values.size() && !std::isnan(s.values[off_col])) off_target.push_back(s.values[off_col]);
+      auto take = [&](std::size_t col, std::vector<double>& into, bool magnitude) {
+        if (col < s.values.size() && !std::isnan(s.values[col])) into.push_back(magnitude ? std::abs(s.values[col]) : s.values[col]);
+      };
+      take(found_col, found, false);
+      take(tilt_col, tilt, false);
+      take(height_col, height, true);
       // Active touch: the planner's expectation of the chosen grasp and the step's entropy drop.
       if (drop_col < s.values.size() && !std::isnan(s.values[drop_col])) {
         drop_all.push_back(s.values[drop_col]);
@@ -188,6 +196,11 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
     // step's attribution labelled right, target or not (mean over runs; null when it did not run).
     row["off_target_share_mean"] = off_target.empty() ? J(nullptr) : J(mean_t_interval(off_target).mean);
     row["attribution_accuracy_mean"] = attributed.empty() ? J(nullptr) : J(mean_t_interval(attributed).mean);
+    // The support stage on a scene: the share of runs that found a support, and against the true
+    // one under the object the found plane's tilt and |height| there (medians over those found).
+    row["support_found_share"] = found.empty() ? J(nullptr) : J(mean_t_interval(found).mean);
+    row["support_tilt_deg_median"] = opt(median(tilt));
+    row["support_height_error_m_median"] = opt(median(height));
     // The interface's keys first, then the rest.
     row["position_error_m_median"] = opt(m.position_m.median);
     row["orientation_error_deg_median"] = opt(m.orientation_rad.median, kDeg);

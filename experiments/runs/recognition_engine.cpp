@@ -478,6 +478,18 @@ class RecognitionEngine final : public RunEngine {
           if (labelled) right_share = static_cast<double>(right) / n;
         }
         s.values.insert(s.values.end(), {right_share, off_share});
+        // The support the step found against the true one under the object: found (NaN: not
+        // looked for), its tilt (degrees) and its height there (m, signed, up positive).
+        const bool looked = std::any_of(sr.stages.begin(), sr.stages.end(), [](const StageRun& x) {
+          return x.name == "support" && x.ran;
+        });
+        double found = looked ? (sr.support.found ? 1.0 : 0.0) : nan, tilt = nan, height = nan;
+        if (support && sr.support.found) {
+          const ClosestPoint under = support->closest(rec.truth.translation());
+          tilt = std::acos(std::min(1.0, std::abs(under.normal.dot(sr.support.normal)))) * 180.0 / std::numbers::pi;
+          height = sr.support.signed_distance(under.point);
+        }
+        s.values.insert(s.values.end(), {found, tilt, height});
       }
       if (truth_pose_) {
         const std::optional<Funnel>& f = sr.watched;
@@ -588,7 +600,8 @@ const std::vector<std::string>& recognition_step_values() {
     for (const std::string& stage : pipeline_stage_names()) n.push_back("ran." + stage);
     n.insert(n.end(), {"set.truth_gap_to_answer", "answer_set.size", "answer_set.covers", "answer_set.informative",
                        "plan.expected_information", "plan.expected_object_information", "plan.entropy_drop",
-                       "fit.contact_distance_m", "attribution.right_share", "contacts.off_target_share"});
+                       "fit.contact_distance_m", "attribution.right_share", "contacts.off_target_share",
+                       "support.found", "support.tilt_deg", "support.height_error_m"});
     return n;
   }();
   return names;

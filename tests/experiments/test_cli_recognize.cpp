@@ -813,7 +813,7 @@ TEST_CASE("cli seabed: simulate a scene, log info names it, recognize --support 
   // An experiment on the scene scores the attribution against the truth; without the stage
   // nothing is labelled, and the share off the target is the same.
   const std::string exp = "experiment --db db.h5 --objects box --runs 1 --steps 24 --pool 24 --set noise=ideal "
-                          "--set scene=seabed --set scene.off_target=0.4 --json ";
+                          "--set scene=seabed --set scene.off_target=0.6 --json ";
   const Run on = touchstone(dir, exp + "--set support.mode=plane --out on.h5");
   const Run off = touchstone(dir, exp + "--out off.h5");
   REQUIRE_MESSAGE(on.code == 0, on.err);
@@ -824,6 +824,12 @@ TEST_CASE("cli seabed: simulate a scene, log info names it, recognize --support 
   CHECK(s_on["off_target_share_mean"] == s_off["off_target_share_mean"]);
   CHECK(s_on["attribution_accuracy_mean"].get<double>() >= 0.95);
   CHECK(s_off["attribution_accuracy_mean"].is_null());
+  // The support found against the true one under the box: level and at its height (ideal noise).
+  CHECK(s_on["support_found_share"] == 1.0);
+  CHECK(s_on["support_tilt_deg_median"].get<double>() < 1.0);
+  CHECK(s_on["support_height_error_m_median"].get<double>() < 0.001);
+  CHECK(s_off["support_found_share"].is_null());
+  CHECK(s_off["support_tilt_deg_median"].is_null());
   // Bad scenes: one error naming the key, nothing written.
   const Run gap = touchstone(dir, "simulate --db db.h5 --object box --grasps 2 --scene seabed --scene-gap -0.01 "
                                   "--out gap.h5");
