@@ -105,6 +105,7 @@ RecognizerSettings RecognizerSettings::scaled(double f) const {
   s.icp.min_translation *= f;
   s.icp.max_correspondence *= f;
   s.evaluate.d_outlier *= f;
+  s.evaluate.outlier_m *= f;
   s.evaluate.res_free *= f;
   s.evaluate.grasp_offset_sigma *= f;
   s.evaluate.grasp_contact_sigma *= f;
@@ -116,6 +117,9 @@ RecognizerSettings RecognizerSettings::scaled(double f) const {
   s.prior.min_pair_distance *= f;
   s.sparse.distance_tolerance *= f;
   s.sparse.model_spacing *= f;
+  s.support.tolerance *= f;
+  if (s.support.free_margin > 0.0) s.support.free_margin *= f;
+  s.support.attribution *= f;
   return s;
 }
 

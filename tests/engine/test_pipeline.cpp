@@ -288,6 +288,19 @@ TEST_CASE("Pipeline: attribution labels the answer's contacts, one 5 mm off it t
   CHECK(t.attribution[n] == ContactLabel::unexplained);
 }
 
+TEST_CASE("Scaled settings scale the support's and the background term's lengths (objects of another size)") {
+  RecognizerSettings s;
+  s.evaluate.outlier_m = 0.015;
+  s.support.free_margin = 0.01;
+  const RecognizerSettings t = s.scaled(10.0);
+  CHECK(t.evaluate.outlier_m == doctest::Approx(0.15).scale(0).epsilon(1e-12));
+  CHECK(t.support.tolerance == doctest::Approx(10.0 * s.support.tolerance).scale(0).epsilon(1e-12));
+  CHECK(t.support.free_margin == doctest::Approx(0.1).scale(0).epsilon(1e-12));
+  CHECK(t.support.attribution == doctest::Approx(10.0 * s.support.attribution).scale(0).epsilon(1e-12));
+  RecognizerSettings automatic;   // free_margin < 0: automatic, stays so
+  CHECK(automatic.scaled(10.0).support.free_margin == automatic.support.free_margin);
+}
+
 TEST_CASE("Pipeline: contacts without normals have their free pose DOF judged on the answer's surface") {
   auto src = test::make_source();
   Database db(src);
