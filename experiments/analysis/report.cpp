@@ -124,14 +124,15 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
         ++by.trials;
         by.successes += c ? 1 : 0;
       }
-      if (fit_col < s.values.size() && !std::isnan(s.values[fit_col])) fit.push_back(s.values[fit_col]);
-      if (right_col < s.values.size() && !std::isnan(s.values[right_col])) attributed.push_back(s.values[right_col]);
-      if (off_col < s.values.size() && !std::isnan(s.values[off_col])) off_target.push_back(s.values[off_col]);
-      auto take = [&](std::size_t col, std::vector<double>& into, bool magnitude) {
+      // A named value of the step, when the store has it and it is not NaN.
+      auto take = [&](std::size_t col, std::vector<double>& into, bool magnitude = false) {
         if (col < s.values.size() && !std::isnan(s.values[col])) into.push_back(magnitude ? std::abs(s.values[col]) : s.values[col]);
       };
-      take(found_col, found, false);
-      take(tilt_col, tilt, false);
+      take(fit_col, fit);
+      take(right_col, attributed);
+      take(off_col, off_target);
+      take(found_col, found);
+      take(tilt_col, tilt);
       take(height_col, height, true);
       // Active touch: the planner's expectation of the chosen grasp and the step's entropy drop.
       if (drop_col < s.values.size() && !std::isnan(s.values[drop_col])) {
@@ -194,11 +195,12 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
     row["contact_distance_m_median"] = opt(median(fit));
     // Scenes: the share of contacts truly off the target (mean over runs), and the share the
     // step's attribution labelled right, target or not (mean over runs; null when it did not run).
-    row["off_target_share_mean"] = off_target.empty() ? J(nullptr) : J(mean_t_interval(off_target).mean);
-    row["attribution_accuracy_mean"] = attributed.empty() ? J(nullptr) : J(mean_t_interval(attributed).mean);
+    auto mean_or_null = [](const std::vector<double>& v) { return v.empty() ? J(nullptr) : J(mean_t_interval(v).mean); };
+    row["off_target_share_mean"] = mean_or_null(off_target);
+    row["attribution_accuracy_mean"] = mean_or_null(attributed);
     // The support stage on a scene: the share of runs that found a support, and against the true
     // one under the object the found plane's tilt and |height| there (medians over those found).
-    row["support_found_share"] = found.empty() ? J(nullptr) : J(mean_t_interval(found).mean);
+    row["support_found_share"] = mean_or_null(found);
     row["support_tilt_deg_median"] = opt(median(tilt));
     row["support_height_error_m_median"] = opt(median(height));
     // The interface's keys first, then the rest.

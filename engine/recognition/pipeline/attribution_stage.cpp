@@ -30,19 +30,19 @@ class AttributionStage final : public Stage {
     const PointCloud& in = c.contacts_world;
     std::vector<ContactLabel>& out = c.res.attribution;
     out.assign(in.size(), ContactLabel::unexplained);
+    // The support's (as the stage "support" set them aside), then the rest judged on the answer.
     const SupportPlane& sp = c.res.support;
-    for (std::size_t i = 0; i < in.size(); ++i)
-      if (sp.found && std::abs(sp.signed_distance(in.points[i])) < c.s.support.tolerance) out[i] = ContactLabel::support;
+    std::vector<Vec3> points;
+    std::vector<std::size_t> index;
+    for (std::size_t i = 0; i < in.size(); ++i) {
+      if (sp.found && std::abs(sp.signed_distance(in.points[i])) < c.s.support.tolerance)
+        out[i] = ContactLabel::support;
+      else if (std::isfinite(in.points[i].squaredNorm()))
+        points.push_back(in.points[i]), index.push_back(i);
+    }
     if (!c.res.valid) return;
     const Hypothesis& h = c.res.best;
     const GeometryRef geo = c.db.geometry(h.object);
-    std::vector<Vec3> points;
-    std::vector<std::size_t> index;
-    for (std::size_t i = 0; i < in.size(); ++i)
-      if (out[i] != ContactLabel::support && std::isfinite(in.points[i].squaredNorm())) {
-        points.push_back(in.points[i]);
-        index.push_back(i);
-      }
     std::vector<double> d(points.size());
     const Pose to_object = h.pose.inverse();
     if (!geo->field.empty()) {
