@@ -129,6 +129,36 @@ def render_case():
 
 render_case()
 
+
+def load_case():
+    """A stamp's load record: a quiet machine's mean load is stated; one above the study's own
+    threads marks its times as slowed; a stamp without one says nothing of it."""
+    global cases
+    import json
+    for mean_sum, shared in ((8.4, False), (14.0, True), (None, False)):
+        cases += 1
+        d = tree()
+        try:
+            path = d / "docs/results/demo/stamp.json"
+            st = json.loads(path.read_text())
+            st["threads"] = 2
+            st.pop("load", None)
+            if mean_sum is not None:
+                st["load"] = {"samples": 4, "sum": mean_sum, "max": 4.2, "complete": True}
+            path.write_text(json.dumps(st))
+            p = subprocess.run([sys.executable, script, "--root", d, "render", "demo"], capture_output=True, text=True)
+            text = (d / "docs/results/demo/README.md").read_text()
+            want = None if mean_sum is None else f"load average {mean_sum / 4:.1f} on average, 4.2 at most"
+            ok = p.returncode == 0 and (("machine load" in text) == (want is not None)) and \
+                (want is None or want in text) and (("the machine was shared" in text) == shared)
+            if not ok:
+                failures.append(f"load stamp {mean_sum}: exit {p.returncode}\n{p.stderr}")
+        finally:
+            shutil.rmtree(d)
+
+
+load_case()
+
 for f in failures:
     print(f"FAIL {f}", file=sys.stderr)
 print(f"{cases - len(failures)} of {cases} cases as expected")
