@@ -159,6 +159,66 @@ def load_case():
 
 load_case()
 
+
+FAKE_TOUCHSTONE = r"""#!/usr/bin/env bash
+# A stand-in for touchstone: db build and experiment write their --out, report prints a result.
+out=""; prev=""
+for a in "$@"; do [ "$prev" = "--out" ] && out="$a"; prev="$a"; done
+case "$1 $2" in
+  "db build") : > "$out" ;;
+  experiment*) sleep 0.2; [ -n "${FAKE_FAIL:-}" ] && exit 3; : > "$out" ;;
+  report*)
+    if [ "$3" = "--json" ]; then
+      echo '{"per_step": [{"step": 1, "runs": 1, "recognition_rate": 0.5}, {"step": 20, "runs": 1, "recognition_rate": 1.0}]}'
+    else
+      echo "the report"
+    fi ;;
+esac
+"""
+
+
+def run_case():
+    """A study run end to end with a stand-in touchstone: the stamp holds the load it ran under and
+    result.json does not; a failed run keeps its load and time in the ledger, and the rerun that
+    resumes it adds to them."""
+    global cases
+    import json
+    cases += 1
+    d = tree()
+    try:
+        git = ["git", "-C", str(d), "-c", "user.email=t@t", "-c", "user.name=t"]
+        for folder in ("engine", "io"):   # the database's key reads these folders' trees
+            (d / folder).mkdir()
+            (d / folder / "source.cpp").write_text("// a source\n")
+        subprocess.run(git + ["init", "-q"], check=True)
+        subprocess.run(git + ["add", "-A"], check=True)
+        subprocess.run(git + ["commit", "-q", "-m", "t"], check=True)
+        build = d / "fakebuild"
+        build.mkdir()
+        (build / "touchstone").write_text(FAKE_TOUCHSTONE)
+        (build / "touchstone").chmod(0o755)
+        (build / "CMakeCache.txt").write_text("TS_SCALABLE_MALLOC:BOOL=ON\n")
+        cmd = [sys.executable, script, "--root", d, "--build", build, "--no-build", "demo"]
+        import os
+        failed = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, FAKE_FAIL="1"))
+        ledgers = list((build / "results/runs/demo").glob("*/seconds.json"))
+        kept = json.loads(ledgers[0].read_text()) if len(ledgers) == 1 else {}
+        if failed.returncode == 0 or kept.get("load", {}).get("samples", 0) < 1 or kept.get("seconds") is None:
+            failures.append(f"a failed run keeps its load and time: exit {failed.returncode}, ledger {kept}\n{failed.stderr}")
+        p = subprocess.run(cmd, capture_output=True, text=True)
+        page = d / "docs/results/demo"
+        result = json.loads((page / "result.json").read_text()) if p.returncode == 0 else {}
+        stamp = json.loads((page / "stamp.json").read_text()) if p.returncode == 0 else {}
+        load = stamp.get("load", {})
+        if p.returncode != 0 or "_load" in result or load.get("samples", 0) < 2 or load.get("complete") is not True or \
+                "machine load while it ran" not in (page / "README.md").read_text():
+            failures.append(f"the rerun's page: exit {p.returncode}, stamp {stamp}, result keys {list(result)}\n{p.stderr}")
+    finally:
+        shutil.rmtree(d)
+
+
+run_case()
+
 for f in failures:
     print(f"FAIL {f}", file=sys.stderr)
 print(f"{cases - len(failures)} of {cases} cases as expected")
