@@ -148,6 +148,10 @@ def load_case():
             path.write_text(json.dumps(st))
             p = subprocess.run([sys.executable, script, "--root", d, "render", "demo"], capture_output=True, text=True)
             text = (d / "docs/results/demo/README.md").read_text()
+            q = subprocess.run([sys.executable, script, "--root", d, "index"], capture_output=True, text=True)
+            row = [r for r in (d / "docs/results/index.md").read_text().splitlines() if r.startswith("| [demo]")]
+            if q.returncode != 0 or len(row) != 1 or ("shared machine" in row[0]) != shared:
+                failures.append(f"load stamp {mean_sum} in the index: exit {q.returncode}, row {row}\n{q.stderr}")
             want = None if mean_sum is None else f"load average {mean_sum / 4:.1f} on average, 4.2 at most"
             ok = p.returncode == 0 and (("machine load" in text) == (want is not None)) and \
                 (want is None or want in text) and (("the machine was shared" in text) == shared)
