@@ -18,12 +18,15 @@ void require(bool ok, const std::string& key, const std::string& what) {
 }
 }  // namespace
 
-const char* to_string(SceneKind kind) { return kind == SceneKind::seabed ? "seabed" : "none"; }
+const char* to_string(SceneKind kind) {
+  return kind == SceneKind::seabed ? "seabed" : kind == SceneKind::panel ? "panel" : "none";
+}
 
 SceneKind parse_scene_kind(const std::string& word, const std::string& file, const std::string& field) {
   if (word == "none") return SceneKind::none;
   if (word == "seabed") return SceneKind::seabed;
-  throw Error("unknown scene '" + word + "' (none, seabed)", file, field);
+  if (word == "panel") return SceneKind::panel;
+  throw Error("unknown scene '" + word + "' (none, seabed, panel)", file, field);
 }
 
 void validate(const SceneSettings& s) {
@@ -38,6 +41,10 @@ void validate(const SceneSettings& s) {
           "must lie in [0, 1)");
   require(in(s.off_target_radius_m, 0, 10), "scene.off_target_radius_m", "must lie in [0, 10] m");
   require(in(s.extent_m, 0, 100), "scene.extent_m", "must lie in [0, 100] m");
+  if (s.kind == SceneKind::panel) {
+    require(s.slope_deg == 0, "scene.slope_deg", "must be 0 for a panel (it is vertical)");
+    require(s.relief_m == 0, "scene.relief_m", "must be 0 for a panel (it is flat)");
+  }
 }
 
 Support::Support(const Mesh& object_mesh, const Pose& T_world_object, const SceneSettings& s, double reach,
@@ -52,11 +59,13 @@ Support::Support(const Mesh& object_mesh, const Pose& T_world_object, const Scen
   double r = 0.0;
   for (const Vec3& v : world.vertices) r = std::max(r, (v - centre).norm());
 
-  // The plane: +z tilted by the slope about a seeded horizontal axis a; e1 = a, e2 = n x e1.
+  // The plane: +z tilted by the slope (a panel: 90 degrees) about a seeded horizontal axis a;
+  // e1 = a, e2 = n x e1.
   Rng rng(seed, kStreamScene);
   const double phi = rng.uniform(0.0, 2.0 * std::numbers::pi);
   const Vec3 a(std::cos(phi), std::sin(phi), 0.0);
-  n_ = Eigen::AngleAxisd(s.slope_deg * kDeg, a) * Vec3::UnitZ();
+  const double tilt = s.kind == SceneKind::panel ? 90.0 : s.slope_deg;
+  n_ = Eigen::AngleAxisd(tilt * kDeg, a) * Vec3::UnitZ();
   e1_ = a;
   e2_ = n_.cross(e1_);
   origin_ = centre;

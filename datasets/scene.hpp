@@ -16,6 +16,12 @@
 // blocked by the support and redrawn (the simulator's operator), so the hand comes from the open
 // side.
 //
+// `panel`: the object is mounted against a fixture, a flat vertical plate (a subsea panel, a
+// structure's side). The support is the same patch with its normal horizontal (a seeded
+// azimuth), no relief, moved along its normal until it touches the object's farthest point on
+// that side. The off-target grasps aim at the panel beside the object, approached along its
+// normal; an aim on the object's face against the panel is blocked by it and redrawn.
+//
 // The support is recorded in the log's ground truth (the mesh, world frame), so a study can tell
 // which contacts touched the target and which the seabed. The recognizer does not see it.
 #pragma once
@@ -30,16 +36,18 @@
 
 namespace ts::datasets {
 
-enum class SceneKind { none, seabed };
+enum class SceneKind { none, seabed, panel };
 
-const char* to_string(SceneKind kind);   ///< "none" / "seabed"
+const char* to_string(SceneKind kind);   ///< "none" / "seabed" / "panel"
 /// Throws ts::Error naming `file` and `field` for another word.
 SceneKind parse_scene_kind(const std::string& word, const std::string& file = {}, const std::string& field = "scene");
 
 struct SceneSettings {
   SceneKind kind = SceneKind::none;
   double slope_deg = 0.0;             ///< deg, the support's tilt from horizontal, in [0, 60]
-  double relief_m = 0.0;              ///< m, peak amplitude of the sediment relief (0: flat)
+                                      ///< (a panel: 0, it is vertical)
+  double relief_m = 0.0;              ///< m, peak amplitude of the sediment relief (0: flat; a
+                                      ///< panel: 0)
   double relief_wavelength_m = 0.12;  ///< m, wavelength of the relief's components
   double gap_m = 0.0;                 ///< m, the object's lowest point above the support (>= 0)
   double off_target = 0.0;            ///< share of grasps aimed at the support, in [0, 1)

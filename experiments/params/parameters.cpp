@@ -597,10 +597,11 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
                 "fingertips)",
                 "--tip-normals", TS_CONFIG(fingertip_params.normals_deg));
   d.push_back(named(setting("scene", S, Type::choice, "", 0, 0, "none",
-                            "What lies around the object: none (water alone) or seabed (the object rests on a "
-                            "support surface that the hand touches too, shaped by scene.*; sensing = pads or "
-                            "fingertips)"),
-                    {"none", "seabed"}, TS_CONFIG(scene)));
+                            "What lies around the object: none (water alone), seabed (the object rests on a "
+                            "support surface that the hand touches too, shaped by scene.*) or panel (it is mounted "
+                            "against a flat vertical plate, the fixture; scene.* but slope and relief); sensing = "
+                            "pads or fingertips"),
+                    {"none", "seabed", "panel"}, TS_CONFIG(scene)));
   d.back().sweepable = false;
   d.back().simulate = true;
   probe_setting("scene.slope_deg", "deg", 0, 60, "The seabed's tilt from horizontal (unset: 0; scene = seabed)",
@@ -616,8 +617,8 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
                 "intersect the object, refused; scene = seabed)",
                 "--scene-gap", TS_CONFIG(scene_params.gap_m));
   probe_setting("scene.off_target", "", 0, 0.99,
-                "Share of the grasps aimed at the seabed beside the object instead of the object (unset: 0; "
-                "scene = seabed)",
+                "Share of the grasps aimed at the seabed (or panel) beside the object instead of the object "
+                "(unset: 0; scene = seabed or panel)",
                 "--scene-off-target", TS_CONFIG(scene_params.off_target));
   probe_setting("scene.off_target_radius_m", "m", 0, 10,
                 "Those grasps aim within this of the object's footprint centre (unset, 0: 1.5 x the object's "

@@ -223,3 +223,71 @@ TEST_CASE("fingertips in a seabed scene: every contact on the object or the seab
   CHECK(on_seabed > 0);
   CHECK(on_seabed < contacts);
 }
+
+TEST_CASE("panel: a vertical plate the object is mounted against; grasps touch it from the open side") {
+  // The support's geometry: vertical (its normal horizontal), flat, touching the object's
+  // farthest point on its side; slope and relief refused naming their keys.
+  const Mesh box = test::box_mesh(Vec3(0.1, 0.07, 0.06));
+  const Pose T = tilted_pose();
+  datasets::SceneSettings ps;
+  ps.kind = datasets::SceneKind::panel;
+  const datasets::Support panel(box, T, ps, 0.15, 3);
+  CHECK(std::abs(panel.up().z()) < 1e-12);
+  CHECK(panel.up().norm() == doctest::Approx(1.0).scale(0).epsilon(1e-12));
+  REQUIRE(panel.mesh().faces.size() == 2);
+  double nearest = 1e9;
+  for (const Vec3& v : box.vertices) nearest = std::min(nearest, panel.above(T * v));
+  CHECK(std::abs(nearest) < 1e-12);   // it touches, nothing of the object behind it
+  for (const Vec3& v : panel.mesh().vertices) CHECK(std::abs(panel.above(v)) < 1e-12);
+  CHECK(std::string(datasets::to_string(datasets::SceneKind::panel)) == "panel");
+  CHECK(datasets::parse_scene_kind("panel") == datasets::SceneKind::panel);
+  for (const char* key : {"scene.slope_deg", "scene.relief_m"}) {
+    datasets::SceneSettings bad = ps;
+    (std::string(key) == "scene.slope_deg" ? bad.slope_deg : bad.relief_m) = 0.01;
+    try {
+      datasets::Support(box, T, bad, 0.15, 3);
+      FAIL("a panel accepted " << key);
+    } catch (const Error& e) {
+      CHECK(e.field() == key);
+    }
+  }
+
+  // The simulator: some contacts on the panel, the others on the object, none behind the panel;
+  // the hands and their free space in front of it.
+  const Vec3 h(0.05, 0.035, 0.03);
+  datasets::SimulatorSettings s;
+  s.grasps = 40;
+  s.noise = datasets::noise_profile("ideal");
+  s.seed = 7;
+  s.scene.kind = datasets::SceneKind::panel;
+  s.scene.off_target = 0.4;
+  const datasets::Simulator sim(test::box_mesh(2.0 * h), "box", Gripper(), s);
+  const auto res = sim.run();
+  REQUIRE(res.log.truth);
+  CHECK(res.log.truth->scene == "panel");
+  const Mesh& plate = res.log.truth->support;
+  REQUIRE(plate.faces.size() == 2);
+  const Vec3& V0 = plate.vertices[0];
+  const Vec3 n = (plate.vertices[plate.faces[0][1]] - V0).cross(plate.vertices[plate.faces[0][2]] - V0).normalized();
+  CHECK(std::abs(n.z()) < 1e-9);   // vertical
+  const Pose T_object_world = sim.object_pose().inverse();
+  std::size_t on_object = 0, on_panel = 0, contacts = 0;
+  for (std::size_t g = 0; g < res.log.grasps.size(); ++g)
+    for (const Vec3& p : grasp_contacts(res.log, g).points) {
+      ++contacts;
+      const Vec3 q = (T_object_world * p).cwiseAbs() - h;
+      const double d_object = q.maxCoeff() > 0 ? q.cwiseMax(0.0).norm() : -q.maxCoeff();
+      const double d_panel = n.dot(p - V0);
+      CHECK(d_panel > -0.0015);   // nothing sensed behind the panel
+      CHECK(std::min(d_object, std::abs(d_panel)) < 0.0015);
+      on_object += d_object < std::abs(d_panel);
+      on_panel += std::abs(d_panel) <= d_object;
+    }
+  CHECK(contacts > 100);
+  CHECK(on_panel > contacts / 10);
+  CHECK(on_object > contacts / 4);
+  for (const Pose& A : res.log.truth->arm_poses) CHECK(n.dot(A.translation() - V0) > 0);
+  Exploration ex(res.log);
+  ex.advance_to(res.log.grasps.size());
+  for (const Vec3& q : ex.free_cloud().points) CHECK(n.dot(q - V0) > -0.02 - 1e-9);
+}
