@@ -109,11 +109,30 @@ int AnswerSetCalibration::calibrated_step(int step) const {
   return std::clamp(step, 1, static_cast<int>(steps.size()));
 }
 
+const AnswerSetCalibration* Calibration::answer_sets_for(const nlohmann::ordered_json& simulation) const {
+  for (const AnswerSetCalibration& a : answer_sets)
+    if (a.simulation == simulation) return &a;
+  return nullptr;
+}
+
+const AnswerSetCalibration& Calibration::single_answer_sets(const std::string& file) const {
+  if (answer_sets.empty()) throw Error("the calibration has no answer sets", file, "answer_sets");
+  if (answer_sets.size() > 1) {
+    std::string sims;
+    for (const AnswerSetCalibration& a : answer_sets) sims += (sims.empty() ? "" : ", ") + a.simulation.dump();
+    throw Error("the calibration holds answer sets for " + std::to_string(answer_sets.size()) +
+                " simulations (" + sims + "), and these contacts name none: calibrate on runs of the one "
+                "that matches them (touchstone calibrate on a store of one variant)", file, "answer_sets");
+  }
+  return answer_sets.front();
+}
+
 nlohmann::ordered_json simulation_of(const nlohmann::ordered_json& config) {
   nlohmann::ordered_json s = nlohmann::ordered_json::object();
   if (!config.is_object()) return s;
   for (const auto& [key, value] : config.items())
-    if (key == "noise" || key.starts_with("noise.") || key == "sensing" || key == "sensors") s[key] = value;
+    if ((key == "noise" || key.starts_with("noise.") || key == "sensing" || key == "sensors") && !value.is_null())
+      s[key] = value;   // an unset override is the profile's value: as if the key did not exist
   return s;
 }
 
@@ -413,18 +432,25 @@ LogisticModel model_from(const nlohmann::ordered_json& j, const std::string& key
 
 namespace {
 /// The answer sets' part of a calibration file, every count and number checked.
-AnswerSetCalibration read_answer_sets(const nlohmann::ordered_json& s, const std::string& file) {
-  if (!s.is_object()) throw Error("expected an object or null", file, "answer_sets");
+AnswerSetCalibration read_answer_sets(const nlohmann::ordered_json& s, const std::string& file, const std::string& at) {
+  if (!s.is_object()) throw Error("expected an object", file, at);
   AnswerSetCalibration a;
   if (!s.contains("alpha") || !s["alpha"].is_number() || !(s["alpha"].get<double>() > 0.0 && s["alpha"].get<double>() < 1.0))
-    throw Error("alpha must be a number in (0, 1)", file, "answer_sets.alpha");
+    throw Error("alpha must be a number in (0, 1)", file, at + ".alpha");
   a.alpha = s["alpha"].get<double>();
-  a.simulation = s.contains("simulation") && s["simulation"].is_object() ? s["simulation"] : nlohmann::ordered_json::object();
+  if (s.contains("simulation") && !s["simulation"].is_object())
+    throw Error("expected an object (the noise, sensing and sensors settings)", file, at + ".simulation");
+  // As simulation_of gives it: unset overrides (null, written by versions 5 and 6 before
+  // noise.arm_scale) left out, so that a file stays valid when a key is added.
+  a.simulation = nlohmann::ordered_json::object();
+  if (s.contains("simulation"))
+    for (const auto& [key, value] : s["simulation"].items())
+      if (!value.is_null()) a.simulation[key] = value;
   if (!s.contains("steps") || !s["steps"].is_array() || s["steps"].empty())
-    throw Error("missing the scores per step (a non-empty array)", file, "answer_sets.steps");
+    throw Error("missing the scores per step (a non-empty array)", file, at + ".steps");
   for (std::size_t k = 0; k < s["steps"].size(); ++k) {
     const auto& r = s["steps"][k];
-    const std::string where = "answer_sets.steps[" + std::to_string(k) + "]";
+    const std::string where = at + ".steps[" + std::to_string(k) + "]";
     if (!r.is_object()) throw Error("expected an object", file, where);
     if (!r.contains("step") || !r["step"].is_number_integer() || r["step"].get<long long>() != static_cast<long long>(k + 1))
       throw Error("steps must be 1, 2, ... in order", file, where + ".step");
@@ -466,8 +492,9 @@ nlohmann::ordered_json to_json(const Calibration& c) {
     j["steps"].push_back(r);
   }
   j["open_set_threshold"] = c.open_set_threshold ? nlohmann::ordered_json(*c.open_set_threshold) : nullptr;
-  if (c.answer_sets) {
-    const AnswerSetCalibration& a = *c.answer_sets;
+  // One entry per simulation the runs were drawn with (an empty array: no answer sets).
+  j["answer_sets"] = nlohmann::ordered_json::array();
+  for (const AnswerSetCalibration& a : c.answer_sets) {
     nlohmann::ordered_json s;
     s["alpha"] = a.alpha;
     s["score"] = "log-weight gap of the true class of congruent objects to the answer (engine/recognition/answer_set.hpp)";
@@ -476,9 +503,7 @@ nlohmann::ordered_json to_json(const Calibration& c) {
     for (std::size_t k = 0; k < a.steps.size(); ++k)
       s["steps"].push_back({{"step", k + 1}, {"runs", a.steps[k].size()}, {"infinite", a.steps[k].infinite()},
                             {"gaps", a.steps[k].finite()}});
-    j["answer_sets"] = s;
-  } else {
-    j["answer_sets"] = nullptr;
+    j["answer_sets"].push_back(s);
   }
   j["provenance"] = c.provenance.is_null() ? nlohmann::ordered_json::object() : c.provenance;
   return j;
@@ -555,13 +580,26 @@ Calibration read_calibration(const std::filesystem::path& path, const std::strin
                     "steps[" + std::to_string(k) + "].in_database");
     c.open_set_threshold = t.get<double>();
   }
-  if (j.contains("answer_sets") && !j["answer_sets"].is_null()) {
+  if (j.contains("answer_sets") && !j["answer_sets"].is_null() && j["answer_sets"] != nlohmann::ordered_json::array()) {
     if (j["version"].get<long long>() < 5)
       throw Error("the answer sets of a version " + j["version"].dump() +
                   " calibration scored classes against the ln w leader, which left the truth out when the near-twin "
                   "verification chose a lighter twin; refit with `touchstone calibrate` (version 5 scores against the answer)",
                   file, "answer_sets");
-    c.answer_sets = read_answer_sets(j["answer_sets"], file);
+    const auto& s = j["answer_sets"];
+    if (j["version"].get<long long>() == 5) {   // one simulation's, an object
+      c.answer_sets.push_back(read_answer_sets(s, file, "answer_sets"));
+    } else {
+      if (!s.is_array()) throw Error("expected an array (one entry per simulation) or null", file, "answer_sets");
+      for (std::size_t k = 0; k < s.size(); ++k) {
+        const std::string at = "answer_sets[" + std::to_string(k) + "]";
+        AnswerSetCalibration a = read_answer_sets(s[k], file, at);
+        if (c.answer_sets_for(a.simulation))
+          throw Error("a second entry for the simulation " + a.simulation.dump() + ": one per simulation", file,
+                      at + ".simulation");
+        c.answer_sets.push_back(std::move(a));
+      }
+    }
   }
   c.provenance = j.contains("provenance") ? j["provenance"] : nlohmann::ordered_json::object();
   return c;

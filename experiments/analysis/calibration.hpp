@@ -95,15 +95,17 @@ struct AnswerSetCalibration {
 };
 
 /// The simulation settings an answer-set calibration records, from an experiment configuration's
-/// JSON (touchstone's config_json): noise, noise.*, sensing, sensors.
+/// JSON (touchstone's config_json): noise, noise.*, sensing, sensors; unset overrides (null) left
+/// out.
 nlohmann::ordered_json simulation_of(const nlohmann::ordered_json& config);
 
-/// The calibration file (JSON, "format": "touchstone-calibration", version 5; versions 2 (all
-/// models linear), 3 (no answer sets) and 4 (answer sets scored against the ln w leader: refused,
-/// refit) are read as well): one set of models per range of steps
-/// (how far an exploration is changes what the features mean), and the answer sets' scores.
+/// The calibration file (JSON, "format": "touchstone-calibration", version 6; versions 2 (all
+/// models linear), 3 (no answer sets), 4 (answer sets scored against the ln w leader: refused,
+/// refit) and 5 (the answer sets of one simulation, an object) are read as well): one set of
+/// models per range of steps (how far an exploration is changes what the features mean), and the
+/// answer sets' scores, one entry per simulation the calibration runs were drawn with.
 struct Calibration {
-  static constexpr int kVersion = 5;
+  static constexpr int kVersion = 6;
   static constexpr int kOldestVersion = 2;
   std::string database_fingerprint;   ///< of the database the runs explored
   std::vector<std::string> features;  ///< confidence_feature_names() when fitted
@@ -112,9 +114,16 @@ struct Calibration {
   /// (unset: every answer names an object). Chosen on calibration runs by
   /// choose_open_set_threshold; needs in_database in every range.
   std::optional<double> open_set_threshold;
-  /// Set answers (unset: a calibration fitted without them, or before version 5).
-  std::optional<AnswerSetCalibration> answer_sets;
+  /// Set answers, one entry per simulation the calibration runs were drawn with (a sweep of noise
+  /// settings gives one per variant); empty: fitted without them, or before version 5.
+  std::vector<AnswerSetCalibration> answer_sets;
   nlohmann::ordered_json provenance;  ///< what it was fitted on (stores, runs, steps, seeds)
+
+  /// The answer sets calibrated on runs simulated as `simulation` (simulation_of); nullptr: none.
+  const AnswerSetCalibration* answer_sets_for(const nlohmann::ordered_json& simulation) const;
+  /// The answer sets of a calibration of one simulation (data without a simulation to match:
+  /// `recognize`, Python). Throws ts::Error naming `file` and the key when it holds several.
+  const AnswerSetCalibration& single_answer_sets(const std::string& file) const;
 
   /// The range of a step (1-based; steps past the last range's first use the last).
   const StepModels& at(int step) const;

@@ -473,11 +473,14 @@ int run_calibrate(const CalibrateOptions& o) {
   auto object_group = [&](const std::string& name) { return groups.emplace(name, static_cast<int>(groups.size())).first->second; };
   std::vector<std::string> database_order;
   std::string fingerprint;
-  // Set answers: per step, the true class's log-weight gap of every run of a known object, and
-  // the simulation the runs share (the guarantee is for runs simulated alike).
-  std::vector<std::vector<double>> set_gaps;
-  std::size_t shortest_run = std::numeric_limits<std::size_t>::max();
-  std::optional<nlohmann::ordered_json> set_simulation;
+  // Set answers: per simulation (the guarantee is for runs simulated alike; a noise sweep's variants
+  // each have theirs) and step, the true class's log-weight gap of every run of a known object.
+  struct SetRuns {
+    nlohmann::ordered_json simulation;
+    std::vector<std::vector<double>> gaps;   ///< per step
+    std::size_t shortest_run = std::numeric_limits<std::size_t>::max();
+  };
+  std::map<std::string, SetRuns> set_runs;   // by the simulation's JSON: an order of the contents alone
   std::string no_set_reason;
   nlohmann::ordered_json sources = nlohmann::ordered_json::array();
   const RunRange range = parse_runs(run_range_of(o.runs, o.runs_old, "calibrate"));
@@ -508,25 +511,39 @@ int run_calibrate(const CalibrateOptions& o) {
     if (gap_column == c.header.step_values.end()) {
       if (no_set_reason.empty()) no_set_reason = path + " has no per-step 'set.truth_gap_to_answer' (written before set answers scored against the answer: rerun it)";
     } else {
-      const auto sim = experiments::simulation_of(config_json);
-      if (c.header.variant_labels.size() > 1)
-        throw Error("a run store of " + std::to_string(c.header.variant_labels.size()) +
-                    " variants: answer sets are calibrated on runs of one configuration", path, "/header/variant_labels");
-      if (set_simulation && *set_simulation != sim)
-        throw Error("the run store simulated " + sim.dump() + ", " + o.stores.front() + " " + set_simulation->dump() +
-                    ": answer sets are calibrated on runs simulated alike", path, "/header/config");
-      set_simulation = sim;
+      // Each variant's simulation (a sweep of noise settings: one per level). Variants that
+      // simulate alike but differ otherwise (a sweep of the method) would pool unlike runs.
+      const std::size_t variants = std::max<std::size_t>(c.header.variant_labels.size(), 1);
+      std::vector<SetRuns*> of_variant;
+      std::map<std::string, std::size_t> variant_of_sim;
+      for (std::size_t v = 0; v < variants; ++v) {
+        const auto sim = experiments::simulation_of(
+            v < c.header.variant_configs.size() ? nlohmann::ordered_json::parse(c.header.variant_configs[v], nullptr, false)
+                                                : config_json);
+        const auto [it, first] = variant_of_sim.emplace(sim.dump(), v);
+        if (!first)
+          throw Error("variants '" + c.header.variant_labels.at(it->second) + "' and '" + c.header.variant_labels.at(v) +
+                      "' simulate alike (" + sim.dump() + ") but differ otherwise: answer sets are calibrated per "
+                      "simulation on runs of one configuration; calibrate on a store of one of them", path,
+                      "/header/variant_labels");
+        SetRuns& e = set_runs[sim.dump()];
+        e.simulation = sim;
+        of_variant.push_back(&e);
+      }
       const auto col = static_cast<std::size_t>(gap_column - c.header.step_values.begin());
       for (const io::RunRecord& r : c.runs) {
         if (hidden.count(r.object)) continue;
-        shortest_run = std::min(shortest_run, r.steps.size());
-        if (set_gaps.size() < r.steps.size()) set_gaps.resize(r.steps.size());
+        if (r.variant < 0 || static_cast<std::size_t>(r.variant) >= variants)
+          throw Error("run " + std::to_string(r.run) + " has no variant " + std::to_string(r.variant), path, "/runs/variant");
+        SetRuns& e = *of_variant[static_cast<std::size_t>(r.variant)];
+        e.shortest_run = std::min(e.shortest_run, r.steps.size());
+        if (e.gaps.size() < r.steps.size()) e.gaps.resize(r.steps.size());
         for (std::size_t k = 0; k < r.steps.size(); ++k) {
           const double g = r.steps[k].values.at(col);
           if (std::isnan(g) || g < 0.0)
             throw Error("run " + std::to_string(r.run) + " of '" + c.header.objects.at(static_cast<std::size_t>(r.object)) +
                         "' has a gap that is not a number >= 0 at step " + std::to_string(k + 1), path, "/steps/values");
-          set_gaps[k].push_back(g);
+          e.gaps[k].push_back(g);
         }
       }
     }
@@ -619,20 +636,26 @@ int run_calibrate(const CalibrateOptions& o) {
   }
   // Set answers: the gaps of steps every run of a known object reached (a store without them, or
   // of hidden objects only, gives none; --alpha then is an error).
-  if (!no_set_reason.empty()) set_gaps.clear();
-  if (set_gaps.empty() && no_set_reason.empty()) no_set_reason = "no runs of known objects";
-  if (!set_gaps.empty()) {
-    set_gaps.resize(std::min(set_gaps.size(), shortest_run));
-    experiments::AnswerSetCalibration a;
-    a.alpha = o.alpha.value_or(0.05);
-    a.simulation = *set_simulation;
-    for (auto& g : set_gaps) a.steps.emplace_back(std::move(g));
-    cal.answer_sets = std::move(a);
-    cal.provenance["answer_sets"] = {{"runs_per_step", cal.answer_sets->steps.front().size()},
-                                     {"steps", cal.answer_sets->steps.size()},
-                                     {"assumes", "a run is drawn as the calibration runs were (its object, pose and "
-                                                 "grasps alike); runs of one object are not independent, so the "
-                                                 "coverage is marginal over objects: check it on held-out runs"}};
+  if (!no_set_reason.empty()) set_runs.clear();
+  std::erase_if(set_runs, [](const auto& e) { return e.second.gaps.empty(); });   // hidden objects' runs only
+  if (set_runs.empty() && no_set_reason.empty()) no_set_reason = "no runs of known objects";
+  if (!set_runs.empty()) {
+    nlohmann::ordered_json per_simulation = nlohmann::ordered_json::array();
+    for (auto& [key, e] : set_runs) {
+      e.gaps.resize(std::min(e.gaps.size(), e.shortest_run));
+      experiments::AnswerSetCalibration a;
+      a.alpha = o.alpha.value_or(0.05);
+      a.simulation = e.simulation;
+      for (auto& g : e.gaps) a.steps.emplace_back(std::move(g));
+      per_simulation.push_back({{"simulation", a.simulation}, {"runs_per_step", a.steps.front().size()},
+                                {"steps", a.steps.size()}});
+      cal.answer_sets.push_back(std::move(a));
+    }
+    cal.provenance["answer_sets"] = {{"per_simulation", per_simulation},
+                                     {"assumes", "a run is drawn as the calibration runs of its simulation were (its "
+                                                 "object, pose and grasps alike); runs of one object are not "
+                                                 "independent, so the coverage is marginal over objects: check it on "
+                                                 "held-out runs"}};
   } else if (o.alpha) {
     throw Error("answer sets need the true class's gap at every step: " + no_set_reason, o.stores.front(), "--alpha");
   }
@@ -667,11 +690,13 @@ int run_calibrate(const CalibrateOptions& o) {
                 << " % of resamples of the explored objects)" << std::setprecision(3);
     else
       std::cout << "; no open-set score (no runs of hidden objects)";
-    if (cal.answer_sets) {
-      const auto& a = *cal.answer_sets;
-      std::cout << "; answer sets at alpha " << std::setprecision(2) << a.alpha << " over " << a.steps.size()
-                << " steps of " << a.steps.front().size() << " runs (the gap admitted at step " << a.steps.size() << ": "
-                << std::setprecision(3) << a.steps.back().threshold(a.alpha) << ")";
+    if (!cal.answer_sets.empty()) {
+      for (const auto& a : cal.answer_sets)
+        std::cout << "; answer sets at alpha " << std::setprecision(2) << a.alpha << " over " << a.steps.size()
+                  << " steps of " << a.steps.front().size() << " runs"
+                  << (cal.answer_sets.size() > 1 ? " simulated with " + a.simulation.dump() : std::string())
+                  << " (the gap admitted at step " << a.steps.size() << ": " << std::setprecision(3)
+                  << a.steps.back().threshold(a.alpha) << ")";
     } else {
       std::cout << "; no answer sets (" << no_set_reason << ")";
     }

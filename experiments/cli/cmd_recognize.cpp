@@ -197,7 +197,7 @@ struct StepSet {
 };
 
 StepSet step_set(const Context& c, const StepResult& r) {
-  const experiments::AnswerSetCalibration& a = *c.calibration->answer_sets;
+  const experiments::AnswerSetCalibration& a = c.calibration->answer_sets.front();   // one: checked on reading
   StepSet s{class_log_weight_gaps(r, c.class_of, c.classes), &a.at(r.step), a.calibrated_step(r.step), {}};
   s.set = conformal_set(s.gaps, *s.scores, c.o.alpha.value_or(a.alpha));
   return s;
@@ -365,7 +365,7 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
                                    : std::nullopt));
     run.stored.push_back(io::to_result_step(r, truth_object, run.truth_pose, sym));
     if (run.truth_outside) run.stored.back().correct = !r.valid;
-    if (c.calibration && c.calibration->answer_sets) {
+    if (c.calibration && !c.calibration->answer_sets.empty()) {
       run.sets.push_back(step_set(c, r));
       run.stored.back().answer_set = stored_answer_set(c, run.sets.back());
     }
@@ -438,8 +438,8 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
     h.truth_object = run.truth_name;
     h.truth_pose = run.truth_pose;
     h.params = params_of(c.rs, o);
-    if (c.calibration && c.calibration->answer_sets) {
-      h.answer_set_alpha = o.alpha.value_or(c.calibration->answer_sets->alpha);
+    if (c.calibration && !c.calibration->answer_sets.empty()) {
+      h.answer_set_alpha = o.alpha.value_or(c.calibration->answer_sets.front().alpha);
       h.calibration = o.calibration;
     }
     io::write_result(out, h, run.stored);
@@ -913,7 +913,9 @@ int run_recognize(const RecognizeOptions& o) {
   if (calibration && o.open_set_threshold && !calibration->in_database(1, std::vector<double>(calibration->features.size(), 0.0)))
     throw Error("the calibration has no open-set (in-database) model: fit it with leave-one-out runs too",
                 o.calibration, "steps[0].in_database");
-  if (o.alpha && (!calibration || !calibration->answer_sets))
+  if (calibration && !calibration->answer_sets.empty())
+    calibration->single_answer_sets(o.calibration);   // a sweep's calibration: which level is for these contacts?
+  if (o.alpha && (!calibration || calibration->answer_sets.empty()))
     throw Error(calibration ? "the calibration has no answer sets: fit it with `touchstone calibrate` on run stores "
                               "of this version"
                             : "set answers need a calibration (--calibration)",

@@ -28,6 +28,7 @@ namespace ts::experiments {
 struct NoiseOverrides {
   std::optional<double> arm_position_sigma_m;    ///< m per axis, per grasp
   std::optional<double> arm_rotation_sigma_deg;  ///< deg, per grasp
+  std::optional<double> arm_scale;               ///< times both arm errors (0: none; sweeps the error's size)
   std::optional<double> sensel_noise;            ///< fraction of the signal (0.05 = 5 %)
   std::optional<double> force_noise;             ///< fraction of the force (deep sea: 0.5)
   std::optional<double> contact_sigma_m;         ///< m, contact position noise (Q = diag)

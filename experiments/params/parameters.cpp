@@ -545,6 +545,10 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
               {"--arm-position-sigma"}, TS_CONFIG(noise_params.arm_position_sigma_m));
   override_of("noise.arm_rotation_sigma_deg", "deg", 90, "Arm rotation error per grasp (unset: the profile's)",
               {"--arm-rotation-sigma"}, TS_CONFIG(noise_params.arm_rotation_sigma_deg));
+  override_of("noise.arm_scale", "", 10,
+              "Times the arm's position and rotation errors, after the profile and the two keys above "
+              "(unset: 1; 0: no arm error; a sweep of it is the arm error's size at a fixed ratio)",
+              {"--arm-scale"}, TS_CONFIG(noise_params.arm_scale));
   override_of("noise.sensel_noise", "", 10, "Sensel signal noise, a share of the signal (unset: the profile's)",
               {"--signal-noise"}, TS_CONFIG(noise_params.sensel_noise));
   override_of("noise.force_noise", "", 10, "Force-resolution noise of contacted sensels, a share (unset: the profile's)",

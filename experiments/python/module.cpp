@@ -398,9 +398,10 @@ class PyRecognizer {
     // Set answers (as `recognize --calibration FILE --alpha A`): the calibration's answer sets.
     if (calibration) {
       calibration_ = experiments::read_calibration(*calibration, experiments::file_fingerprint(*d_->reader));
-      if (!calibration_->answer_sets)
+      if (calibration_->answer_sets.empty())
         throw Error("the calibration has no answer sets: fit it with `touchstone calibrate` on run stores of this "
                     "version", *calibration, "answer_sets");
+      calibration_->single_answer_sets(*calibration);   // a sweep's calibration: which level is for these contacts?
     } else if (alpha) {
       throw Error("set answers need a calibration", {}, "alpha");
     }
@@ -444,7 +445,7 @@ class PyRecognizer {
   /// The step's set answer (None without a calibration), as `recognize --json` gives it.
   py::object answer_set(const StepResult& r) const {
     if (!calibration_) return py::none();
-    const experiments::AnswerSetCalibration& a = *calibration_->answer_sets;
+    const experiments::AnswerSetCalibration& a = calibration_->answer_sets.front();   // one: checked on reading
     const double alpha = alpha_.value_or(a.alpha);
     const AnswerSet set = conformal_set(class_log_weight_gaps(r, class_of_, classes_), a.at(r.step), alpha);
     py::dict o;

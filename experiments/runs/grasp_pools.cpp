@@ -26,6 +26,10 @@ datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
   const NoiseOverrides& n = c.noise_params;
   take(n.arm_position_sigma_m, s.noise.arm_position_sigma);
   take(n.arm_rotation_sigma_deg, s.noise.arm_rotation_sigma_deg);
+  if (n.arm_scale) {
+    s.noise.arm_position_sigma *= *n.arm_scale;
+    s.noise.arm_rotation_sigma_deg *= *n.arm_scale;
+  }
   take(n.sensel_noise, s.noise.signal_noise);
   take(n.force_noise, s.noise.force_noise);
   take(n.contact_sigma_m, s.noise.lateral_sigma);

@@ -62,6 +62,8 @@ struct VariantData {
   ActiveSettings planner;                      ///< the next-grasp planner's settings
   bool truth_pose = false;                     ///< diagnostics.truth_pose
   double oracle_belief = 0.0;                  ///< diagnostics.oracle_belief
+  /// The calibration's answer sets for this variant's simulation (nullptr: no set answers).
+  const AnswerSetCalibration* answer_sets = nullptr;
 };
 
 std::size_t index_of(const std::vector<std::string>& names, const std::string& name) {
@@ -169,13 +171,20 @@ class RecognitionEngine final : public RunEngine {
     if (!config.calibration.empty()) {
       calibration_ = read_calibration(config.calibration, db["fingerprint"].get<std::string>());
       // Set answers hold for runs simulated as the calibration runs were.
-      if (calibration_->answer_sets)
+      // Set answers hold for runs simulated as the calibration runs were: each variant takes the
+      // entry of its simulation (a calibration fitted on a noise sweep holds one per level).
+      if (!calibration_->answer_sets.empty())
         for (std::size_t k = 0; k < variants_.size(); ++k) {
           const auto sim = simulation_of(nlohmann::ordered_json::parse(configs_[k]));
-          if (sim != calibration_->answer_sets->simulation)
-            throw Error("the calibration's answer sets were calibrated on runs simulated with " +
-                        calibration_->answer_sets->simulation.dump() + ", variant '" + labels_[k] + "' simulates " +
-                        sim.dump() + ": calibrate on runs like these", config.calibration, "answer_sets.simulation");
+          variants_[k].answer_sets = calibration_->answer_sets_for(sim);
+          if (!variants_[k].answer_sets) {
+            std::string sims;
+            for (const AnswerSetCalibration& a : calibration_->answer_sets)
+              sims += (sims.empty() ? "" : ", ") + a.simulation.dump();
+            throw Error("the calibration's answer sets were calibrated on runs simulated with " + sims + ", variant '" +
+                        labels_[k] + "' simulates " + sim.dump() + ": calibrate on runs like these",
+                        config.calibration, "answer_sets.simulation");
+          }
         }
     }
     header_.database_json = db.dump();
@@ -439,8 +448,8 @@ class RecognitionEngine final : public RunEngine {
       // object), and with a calibration's answer sets the set's size and whether it holds the truth.
       const std::vector<double> gaps = class_log_weight_gaps(sr, group.class_of, group.classes);
       s.values.push_back(hidden ? nan : gaps.at(group.class_of.at(local_true)));
-      if (calibration_ && calibration_->answer_sets) {
-        const AnswerSetCalibration& a = *calibration_->answer_sets;
+      if (v.answer_sets) {
+        const AnswerSetCalibration& a = *v.answer_sets;
         const AnswerSet set = conformal_set(gaps, a.at(k), a.alpha);
         const bool covers = set.informative ? std::any_of(set.members.begin(), set.members.end(), [&](const AnswerSetMember& m) {
           return !hidden && m.cls == group.class_of.at(local_true);

@@ -192,7 +192,7 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   CHECK(qback.object_confidence(1, x) == back.object_confidence(1, x));
   CHECK_THROWS_AS(q.predict(std::vector<double>(2 * f, 0.0)), Error);   // terms given as features
   auto qj = to_json(qc);
-  CHECK(qj["version"] == 5);
+  CHECK(qj["version"] == 6);
   CHECK(qj["steps"][1]["object"]["terms"] == "quadratic");
   auto short_q = qj;   // quadratic, but the coefficients of a linear model
   short_q["steps"][1]["object"]["coef"] = j["steps"][1]["object"]["coef"];
@@ -215,9 +215,9 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   v3["version"] = 3;
   v3.erase("answer_sets");
   std::ofstream(dir / "v3.json") << v3.dump();
-  CHECK_FALSE(read_calibration(dir / "v3.json", "abc123").answer_sets);
+  CHECK(read_calibration(dir / "v3.json", "abc123").answer_sets.empty());
   auto newer = qj;
-  newer["version"] = 6;
+  newer["version"] = 7;
   CHECK(error_of(newer.dump(), "abc123") == "version");
   // The clamp of standardized terms: written, read back, applied (the pose model, mean 0 and
   // scale 1: z = -0.5 - 0.5 * sum(clamp(t)), t = 10 clamped to 4 in every term).
@@ -548,21 +548,23 @@ TEST_CASE("Calibration files: answer sets round trip, and every bad count or num
   const double inf = std::numeric_limits<double>::infinity();
   a.steps.emplace_back(std::vector<double>{inf, 0.5, 0.0, inf});
   a.steps.emplace_back(std::vector<double>{0.25, 0.0, 0.0, 0.125});
-  c.answer_sets = a;
+  c.answer_sets = {a};
   write_calibration(dir / "sets.json", c);
   const Calibration back = read_calibration(dir / "sets.json", "f");
-  REQUIRE(back.answer_sets);
-  CHECK(back.answer_sets->alpha == 0.1);
-  CHECK(back.answer_sets->simulation == a.simulation);
-  REQUIRE(back.answer_sets->steps.size() == 2);
-  CHECK(back.answer_sets->steps[0].infinite() == 2);
-  CHECK(back.answer_sets->steps[0].finite() == std::vector<double>{0.0, 0.5});
-  CHECK(back.answer_sets->steps[1].finite() == std::vector<double>{0.0, 0.0, 0.125, 0.25});
+  REQUIRE(back.answer_sets.size() == 1);
+  CHECK(back.answer_sets_for(a.simulation) == &back.answer_sets[0]);
+  CHECK(&back.single_answer_sets("sets.json") == &back.answer_sets[0]);
+  CHECK(back.answer_sets[0].alpha == 0.1);
+  CHECK(back.answer_sets[0].simulation == a.simulation);
+  REQUIRE(back.answer_sets[0].steps.size() == 2);
+  CHECK(back.answer_sets[0].steps[0].infinite() == 2);
+  CHECK(back.answer_sets[0].steps[0].finite() == std::vector<double>{0.0, 0.5});
+  CHECK(back.answer_sets[0].steps[1].finite() == std::vector<double>{0.0, 0.0, 0.125, 0.25});
   // Steps past the last calibrated one use the last.
-  CHECK(back.answer_sets->calibrated_step(1) == 1);
-  CHECK(back.answer_sets->calibrated_step(9) == 2);
-  CHECK(back.answer_sets->at(9).finite() == back.answer_sets->steps[1].finite());
-  CHECK(back.answer_sets->at(1).p_value(0.5) == doctest::Approx(4.0 / 5.0));   // 0.5 and two infinite
+  CHECK(back.answer_sets[0].calibrated_step(1) == 1);
+  CHECK(back.answer_sets[0].calibrated_step(9) == 2);
+  CHECK(back.answer_sets[0].at(9).finite() == back.answer_sets[0].steps[1].finite());
+  CHECK(back.answer_sets[0].at(1).p_value(0.5) == doctest::Approx(4.0 / 5.0));   // 0.5 and two infinite
 
   auto error_of = [&](const nlohmann::ordered_json& j) {
     const auto p = dir / "bad.json";
@@ -579,15 +581,15 @@ TEST_CASE("Calibration files: answer sets round trip, and every bad count or num
   const auto j = to_json(c);
   for (double alpha : {0.0, 1.0, -0.2, 3.0}) {
     auto bad = j;
-    bad["answer_sets"]["alpha"] = alpha;
-    CHECK(error_of(bad) == "answer_sets.alpha");
+    bad["answer_sets"][0]["alpha"] = alpha;
+    CHECK(error_of(bad) == "answer_sets[0].alpha");
   }
   auto runs = j;   // a count that disagrees with the gaps
-  runs["answer_sets"]["steps"][1]["runs"] = 40000000000ULL;
-  CHECK(error_of(runs) == "answer_sets.steps[1].runs");
+  runs["answer_sets"][0]["steps"][1]["runs"] = 40000000000ULL;
+  CHECK(error_of(runs) == "answer_sets[0].steps[1].runs");
   auto infinite = j;
-  infinite["answer_sets"]["steps"][0]["infinite"] = -1;
-  CHECK(error_of(infinite) == "answer_sets.steps[0].infinite");
+  infinite["answer_sets"][0]["steps"][0]["infinite"] = -1;
+  CHECK(error_of(infinite) == "answer_sets[0].steps[0].infinite");
   // Version 4's answer sets were scored against the ln w leader: refused (refit), its models not.
   auto v4 = j;
   v4["version"] = 4;
@@ -595,47 +597,119 @@ TEST_CASE("Calibration files: answer sets round trip, and every bad count or num
   v4["answer_sets"] = nullptr;
   {
     std::ofstream(dir / "v4.json") << v4.dump();
-    CHECK_FALSE(read_calibration(dir / "v4.json", "f").answer_sets);
+    CHECK(read_calibration(dir / "v4.json", "f").answer_sets.empty());
   }
   // A huge count that agrees with itself is read without allocating by it.
   auto huge = j;
-  huge["answer_sets"]["steps"][0]["gaps"] = nlohmann::ordered_json::array();
-  huge["answer_sets"]["steps"][0]["infinite"] = 1ULL << 62;
-  huge["answer_sets"]["steps"][0]["runs"] = 1ULL << 62;
+  huge["answer_sets"][0]["steps"][0]["gaps"] = nlohmann::ordered_json::array();
+  huge["answer_sets"][0]["steps"][0]["infinite"] = 1ULL << 62;
+  huge["answer_sets"][0]["steps"][0]["runs"] = 1ULL << 62;
   {
     std::ofstream(dir / "huge.json") << huge.dump();
     const Calibration h = read_calibration(dir / "huge.json", "f");
-    CHECK(h.answer_sets->steps[0].size() == (1ULL << 62));
-    CHECK(h.answer_sets->steps[0].threshold(0.05) == inf);
+    CHECK(h.answer_sets[0].steps[0].size() == (1ULL << 62));
+    CHECK(h.answer_sets[0].steps[0].threshold(0.05) == inf);
   }
   auto negative = j;
-  negative["answer_sets"]["steps"][1]["gaps"][0] = -0.5;
-  CHECK(error_of(negative) == "answer_sets.steps[1].gaps");
+  negative["answer_sets"][0]["steps"][1]["gaps"][0] = -0.5;
+  CHECK(error_of(negative) == "answer_sets[0].steps[1].gaps");
   auto text = j;
-  text["answer_sets"]["steps"][1]["gaps"][0] = "x";
-  CHECK(error_of(text) == "answer_sets.steps[1].gaps");
+  text["answer_sets"][0]["steps"][1]["gaps"][0] = "x";
+  CHECK(error_of(text) == "answer_sets[0].steps[1].gaps");
   auto order = j;
-  order["answer_sets"]["steps"][1]["step"] = 3;
-  CHECK(error_of(order) == "answer_sets.steps[1].step");
+  order["answer_sets"][0]["steps"][1]["step"] = 3;
+  CHECK(error_of(order) == "answer_sets[0].steps[1].step");
   auto empty = j;
-  empty["answer_sets"]["steps"] = nlohmann::ordered_json::array();
-  CHECK(error_of(empty) == "answer_sets.steps");
+  empty["answer_sets"][0]["steps"] = nlohmann::ordered_json::array();
+  CHECK(error_of(empty) == "answer_sets[0].steps");
   auto none = j;
-  none["answer_sets"]["steps"][0]["gaps"] = nlohmann::ordered_json::array();
-  none["answer_sets"]["steps"][0]["infinite"] = 0;
-  none["answer_sets"]["steps"][0]["runs"] = 0;
-  CHECK(error_of(none) == "answer_sets.steps[0].runs");
+  none["answer_sets"][0]["steps"][0]["gaps"] = nlohmann::ordered_json::array();
+  none["answer_sets"][0]["steps"][0]["infinite"] = 0;
+  none["answer_sets"][0]["steps"][0]["runs"] = 0;
+  CHECK(error_of(none) == "answer_sets[0].steps[0].runs");
   auto kind = j;
   kind["answer_sets"] = 5;
   CHECK(error_of(kind) == "answer_sets");
+  kind["answer_sets"] = nlohmann::ordered_json::array({5});
+  CHECK(error_of(kind) == "answer_sets[0]");
+  auto simulation = j;
+  simulation["answer_sets"][0]["simulation"] = "underwater";
+  CHECK(error_of(simulation) == "answer_sets[0].simulation");
+  // Version 5 held one simulation's sets, an object: read as the one entry.
+  auto v5 = j;
+  v5["version"] = 5;
+  v5["answer_sets"] = j["answer_sets"][0];
+  {
+    std::ofstream(dir / "v5.json") << v5.dump();
+    const Calibration r = read_calibration(dir / "v5.json", "f");
+    REQUIRE(r.answer_sets.size() == 1);
+    CHECK(r.answer_sets[0].simulation == a.simulation);
+    CHECK(r.answer_sets[0].steps[1].finite() == back.answer_sets[0].steps[1].finite());
+  }
+  v5["answer_sets"]["alpha"] = 2.0;
+  CHECK(error_of(v5) == "answer_sets.alpha");
+}
+
+TEST_CASE("Calibration files: a noise sweep's answer sets, one entry per simulation, each found by its own") {
+  test::TempDir dir("calibration_sweep");
+  Calibration c = flat_calibration("f");
+  std::vector<AnswerSetCalibration> levels(3);
+  for (std::size_t k = 0; k < levels.size(); ++k) {
+    levels[k].simulation = {{"noise", "underwater"}, {"noise.arm_scale", 0.5 * static_cast<double>(k)}};
+    levels[k].steps.emplace_back(std::vector<double>{0.0, 1.0 + static_cast<double>(k)});
+  }
+  c.answer_sets = levels;
+  write_calibration(dir / "sweep.json", c);
+  const Calibration back = read_calibration(dir / "sweep.json", "f");
+  REQUIRE(back.answer_sets.size() == 3);
+  for (std::size_t k = 0; k < levels.size(); ++k) {
+    const AnswerSetCalibration* found = back.answer_sets_for(levels[k].simulation);
+    REQUIRE(found != nullptr);
+    CHECK(found->steps[0].finite() == std::vector<double>{0.0, 1.0 + static_cast<double>(k)});
+  }
+  CHECK(back.answer_sets_for({{"noise", "underwater"}, {"noise.arm_scale", 0.25}}) == nullptr);
+  CHECK(back.answer_sets_for({{"noise", "deepsea"}}) == nullptr);
+  // Data without a simulation to match (recognize, Python) cannot choose a level: one error.
+  try {
+    (void)back.single_answer_sets("sweep.json");
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.file() == "sweep.json");
+    CHECK(e.field() == "answer_sets");
+    CHECK(std::string(e.what()).find("3 simulations") != std::string::npos);
+  }
+  // Two entries for one simulation: which one holds?
+  auto j = to_json(c);
+  j["answer_sets"][2]["simulation"] = j["answer_sets"][0]["simulation"];
+  std::ofstream(dir / "twice.json") << j.dump();
+  try {
+    (void)read_calibration(dir / "twice.json", "f");
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.field() == "answer_sets[2].simulation");
+  }
+  const Calibration none = flat_calibration("f");
+  CHECK_THROWS_AS((void)none.single_answer_sets("x.json"), Error);
 }
 
 TEST_CASE("The simulation an answer-set calibration holds for: noise, its overrides, sensing and sensors alone") {
   const auto config = nlohmann::ordered_json::parse(
       R"({"seed": 3, "runs": 4, "noise": "deep_sea", "noise.arm_position_sigma_m": 0.002, "sensing": "pads",
-          "sensors": 2, "method": "bricpsf", "calibration": "x.json"})");
+          "sensors": 2, "method": "bricpsf", "calibration": "x.json", "noise.arm_scale": null})");
   const auto sim = simulation_of(config);
   CHECK(sim == nlohmann::ordered_json::parse(
                    R"({"noise": "deep_sea", "noise.arm_position_sigma_m": 0.002, "sensing": "pads", "sensors": 2})"));
   CHECK(simulation_of(nlohmann::ordered_json("text")).empty());
+  // An unset override (null) is the profile's value, as if absent: a calibration written before a
+  // key existed still matches runs of a build that has it. Read from a file alike.
+  test::TempDir dir("calibration_nulls");
+  Calibration c = flat_calibration("f");
+  AnswerSetCalibration a;
+  a.simulation = nlohmann::ordered_json::parse(R"({"noise": "underwater", "noise.joint_sigma_deg": null, "sensors": 1})");
+  a.steps.emplace_back(std::vector<double>{0.0});
+  c.answer_sets = {a};
+  write_calibration(dir / "nulls.json", c);
+  const Calibration back = read_calibration(dir / "nulls.json", "f");
+  CHECK(back.answer_sets_for(nlohmann::ordered_json::parse(R"({"noise": "underwater", "sensors": 1})")) != nullptr);
+  CHECK(back.answer_sets_for(a.simulation) == nullptr);   // the nulls are gone
 }

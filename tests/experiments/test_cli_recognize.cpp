@@ -959,6 +959,7 @@ TEST_CASE("cli params --json: every method parameter is a recognize flag (and ea
       {"noise", {"ideal", {{"noise", "ideal"}}}},
       {"noise.arm_position_sigma_m", {"0.001", {{"noise.arm_position_sigma_m", 0.001}}}},
       {"noise.arm_rotation_sigma_deg", {"0.5", {{"noise.arm_rotation_sigma_deg", 0.5}}}},
+      {"noise.arm_scale", {"0.5", {{"noise.arm_scale", 0.5}}}},
       {"noise.sensel_noise", {"0.02", {{"noise.sensel_noise", 0.02}}}},
       {"noise.force_noise", {"0.3", {{"noise.force_noise", 0.3}}}},
       {"noise.contact_sigma_m", {"0.0005", {{"noise.contact_sigma_m", 0.0005}}}},
@@ -1368,6 +1369,31 @@ TEST_CASE("Scene: objects ranked by their posterior, the answer always drawn, it
   CHECK(empty["hypotheses"].empty());
 }
 
+/// The variants of an experiment's store (run with calibration `cal`) whose informative sets were
+/// checked: each holds the truth exactly when the truth's gap has a p-value above alpha under the
+/// calibration's entry for the variant's simulation.
+std::set<int> variants_whose_sets_hold_their_p_values(const fs::path& path, const fs::path& cal_path, double alpha) {
+  const experiments::Calibration cal = experiments::read_calibration(cal_path, "");
+  const io::RunStoreContents store = io::RunStore::read(path);
+  const auto& v = store.header.step_values;
+  auto col = [&](const char* name) { return static_cast<std::size_t>(std::find(v.begin(), v.end(), name) - v.begin()); };
+  const std::size_t gap = col("set.truth_gap_to_answer"), covers = col("answer_set.covers"), informative = col("answer_set.informative");
+  REQUIRE(informative < v.size());
+  std::set<int> checked;
+  for (const auto& r : store.runs) {
+    const auto* a = cal.answer_sets_for(experiments::simulation_of(
+        nlohmann::ordered_json::parse(store.header.variant_configs.at(static_cast<std::size_t>(r.variant)))));
+    REQUIRE(a != nullptr);
+    for (std::size_t k = 0; k < r.steps.size(); ++k) {
+      const auto& x = r.steps[k].values;
+      if (x[informative] != 1.0) continue;
+      CHECK((x[covers] == 1.0) == (a->at(int(k) + 1).p_value(x[gap]) > alpha));
+      checked.insert(r.variant);
+    }
+  }
+  return checked;
+}
+
 TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the order they are given in") {
   test::TempDir dir("cli_calibrate");
   make_db(dir);
@@ -1398,12 +1424,12 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
   CHECK(jab["provenance"]["step_answers"] == 2 * 4 * 3 * 2);
   // Set answers: the true class's gap at each of the 3 steps on the 8 runs of known objects (the
   // hidden store's runs have no true class in the database), whatever the order of the stores.
-  REQUIRE(jab["answer_sets"].is_object());
+  REQUIRE(jab["answer_sets"].size() == 1);   // one simulation
   CHECK(jab["answer_sets"] == jba["answer_sets"]);
-  CHECK(jab["answer_sets"]["alpha"] == 0.05);
-  REQUIRE(jab["answer_sets"]["steps"].size() == 3);
-  for (const auto& st : jab["answer_sets"]["steps"]) CHECK(st["runs"] == 8);
-  CHECK(jab["answer_sets"]["simulation"]["noise"] == "underwater");
+  CHECK(jab["answer_sets"][0]["alpha"] == 0.05);
+  REQUIRE(jab["answer_sets"][0]["steps"].size() == 3);
+  for (const auto& st : jab["answer_sets"][0]["steps"]) CHECK(st["runs"] == 8);
+  CHECK(jab["answer_sets"][0]["simulation"]["noise"] == "underwater");
   const Run bad_alpha = touchstone(dir, "calibrate known.h5 --step-ranges 1,3 --alpha 1.5 --out bad.json");
   CHECK(bad_alpha.code != 0);
   CHECK(bad_alpha.err.find("--alpha") != std::string::npos);
@@ -1516,27 +1542,51 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
     CHECK(row["set_size_median"].get<double>() <= double(objects));
     if (row["set_informative_share"] == 0.0) CHECK(coverage == 1.0);   // "any object" holds the truth
   }
-  {  // Each informative set holds the truth exactly when the truth's gap has a p-value above alpha.
-    const experiments::Calibration cal = experiments::read_calibration(dir / "half.json", "");
-    const io::RunStoreContents store = io::RunStore::read(dir / "sets.h5");
-    const auto& v = store.header.step_values;
-    auto col = [&](const char* name) { return static_cast<std::size_t>(std::find(v.begin(), v.end(), name) - v.begin()); };
-    const std::size_t gap = col("set.truth_gap_to_answer"), covers = col("answer_set.covers"), informative = col("answer_set.informative");
-    REQUIRE(informative < v.size());
-    std::size_t checked = 0;
-    for (const auto& r : store.runs)
-      for (std::size_t k = 0; k < r.steps.size(); ++k) {
-        const auto& x = r.steps[k].values;
-        if (x[informative] != 1.0) continue;
-        CHECK((x[covers] == 1.0) == (cal.answer_sets->at(int(k) + 1).p_value(x[gap]) > 0.5));
-        ++checked;
-      }
-    CHECK(checked > 0);
-  }
+  // Each informative set holds the truth exactly when the truth's gap has a p-value above alpha.
+  CHECK(variants_whose_sets_hold_their_p_values(dir / "sets.h5", dir / "half.json", 0.5).size() == 1);
   CHECK(touchstone(dir, "report sets.h5").out.find("Set answers") != std::string::npos);
   const Run other = touchstone(dir, "experiment --db db.h5 --objects box --noise ideal --out other.h5"
                                     " --set calibration=half.json" + fast);
   CHECK(other.code != 0);
   CHECK(other.err.find("answer_sets.simulation") != std::string::npos);
   CHECK(other.err.find("half.json") != std::string::npos);
+
+  // A noise sweep: one entry per level of the arm's error, each variant's sets from its own.
+  const Run sweep = touchstone(dir, "experiment --db db.h5 --objects box,nut,ball,wedge --seed 6 --out sweep.h5"
+                                    " --set sweep.noise.arm_scale=0,2" + fast);
+  REQUIRE_MESSAGE(sweep.code == 0, sweep.err);
+  const Run two = touchstone(dir, "calibrate sweep.h5 --step-ranges 1,3 --alpha 0.5 --out sweep.json");
+  REQUIRE_MESSAGE(two.code == 0, two.err);
+  const auto jw = nlohmann::json::parse(test::read_bytes(dir / "sweep.json"));
+  REQUIRE(jw["answer_sets"].size() == 2);
+  std::set<double> scales;
+  for (const auto& e : jw["answer_sets"]) {
+    scales.insert(e["simulation"]["noise.arm_scale"].get<double>());
+    for (const auto& st : e["steps"]) CHECK(st["runs"] == 8);   // 4 objects x 2 runs of its level alone
+  }
+  CHECK(scales == std::set<double>{0.0, 2.0});
+  // The levels' runs differ (an arm error of 0 against 6 mm): so do their scores.
+  CHECK(jw["answer_sets"][0]["steps"] != jw["answer_sets"][1]["steps"]);
+  const Run judged = touchstone(dir, "experiment --db db.h5 --objects box,nut,ball,wedge --seed 7 --out judged.h5"
+                                     " --set sweep.noise.arm_scale=0,2 --set calibration=sweep.json" + fast);
+  REQUIRE_MESSAGE(judged.code == 0, judged.err);
+  CHECK(variants_whose_sets_hold_their_p_values(dir / "judged.h5", dir / "sweep.json", 0.5).size() == 2);
+  // A level the calibration has no entry for, and data without a simulation, are refused.
+  const Run third = touchstone(dir, "experiment --db db.h5 --objects box --out third.h5"
+                                    " --set sweep.noise.arm_scale=0,1 --set calibration=sweep.json" + fast);
+  CHECK(third.code != 0);
+  CHECK(third.err.find("answer_sets.simulation") != std::string::npos);
+  CHECK_FALSE(fs::exists(dir / "third.h5"));
+  const Run log_sets = touchstone(dir, "recognize --db db.h5 --log log.h5 --calibration sweep.json" + kFastFlags);
+  CHECK(log_sets.code != 0);
+  CHECK(log_sets.err.find("2 simulations") != std::string::npos);
+  // Variants that simulate alike but differ otherwise would pool unlike runs: refused.
+  const Run method = touchstone(dir, "experiment --db db.h5 --objects box,nut --seed 8 --out method.h5"
+                                     " --set sweep.bricpsf.hypotheses=10,20" + fast);
+  REQUIRE_MESSAGE(method.code == 0, method.err);
+  const Run pooled = touchstone(dir, "calibrate method.h5 --out method.json");
+  CHECK(pooled.code != 0);
+  CHECK(pooled.err.find("simulate alike") != std::string::npos);
+  CHECK(pooled.err.find("/header/variant_labels") != std::string::npos);
+  CHECK_FALSE(fs::exists(dir / "method.json"));
 }

@@ -201,6 +201,33 @@ TEST_CASE("Parameters: the noise overrides reach the simulator (simulate's flags
   CHECK(probe.noise.joint_sigma_deg == 0.5);
 }
 
+TEST_CASE("Parameters: noise.arm_scale multiplies both arm errors, after the profile and their own keys") {
+  ExperimentConfig c;   // underwater: 3 mm and 1 degree
+  const datasets::SimulatorSettings profile = simulation_settings(c);
+  REQUIRE(profile.noise.arm_position_sigma == 0.003);
+  REQUIRE(profile.noise.arm_rotation_sigma_deg == 1.0);
+  set_key(c, "noise.arm_scale", {"0.5"}, "study.toml");
+  const datasets::SimulatorSettings half = simulation_settings(c);
+  CHECK(half.noise.arm_position_sigma == doctest::Approx(0.0015).scale(0).epsilon(1e-12));
+  CHECK(half.noise.arm_rotation_sigma_deg == doctest::Approx(0.5).scale(0).epsilon(1e-12));
+  CHECK(half.noise.lateral_sigma == profile.noise.lateral_sigma);   // the sensors' noise stays
+  CHECK(pool_key(half) != pool_key(profile));                      // its own grasp pools
+  set_key(c, "noise.arm_position_sigma_m", {"0.002"}, "study.toml");
+  const datasets::SimulatorSettings both = simulation_settings(c);
+  CHECK(both.noise.arm_position_sigma == doctest::Approx(0.001).scale(0).epsilon(1e-12));
+  CHECK(both.noise.arm_rotation_sigma_deg == doctest::Approx(0.5).scale(0).epsilon(1e-12));
+  set_key(c, "noise.arm_scale", {"0"}, "study.toml");
+  const datasets::SimulatorSettings none = simulation_settings(c);
+  CHECK(none.noise.arm_position_sigma == 0.0);
+  CHECK(none.noise.arm_rotation_sigma_deg == 0.0);
+  try {
+    set_key(c, "noise.arm_scale", {"-1"}, "study.toml");
+    FAIL("no error");
+  } catch (const Error& e) {
+    CHECK(e.field() == "noise.arm_scale");
+  }
+}
+
 TEST_CASE("Parameters: the probe overrides reach the simulator; unset, its defaults stay") {
   ExperimentConfig c;
   c.sensing = "probe";

@@ -150,9 +150,9 @@ bool calibration(std::span<const std::uint8_t> b) {
     for (int step : {1, 7, 1000}) {
       (void)c.object_confidence(step, features);
       (void)c.in_database(step, features);
-      if (c.answer_sets) {
+      for (const auto& a : c.answer_sets) {
         const std::vector<double> gaps{0.0, 1e-5, 0.01, std::numeric_limits<double>::infinity()};
-        (void)conformal_set(gaps, c.answer_sets->at(step), c.answer_sets->alpha);
+        (void)conformal_set(gaps, a.at(step), a.alpha);
       }
     }
   });
