@@ -19,14 +19,15 @@ void require(bool ok, const std::string& key, const std::string& what) {
 }  // namespace
 
 const char* to_string(SceneKind kind) {
-  return kind == SceneKind::seabed ? "seabed" : kind == SceneKind::panel ? "panel" : "none";
+  return kind == SceneKind::seabed ? "seabed" : kind == SceneKind::panel ? "panel" : kind == SceneKind::pipe ? "pipe" : "none";
 }
 
 SceneKind parse_scene_kind(const std::string& word, const std::string& file, const std::string& field) {
   if (word == "none") return SceneKind::none;
   if (word == "seabed") return SceneKind::seabed;
   if (word == "panel") return SceneKind::panel;
-  throw Error("unknown scene '" + word + "' (none, seabed, panel)", file, field);
+  if (word == "pipe") return SceneKind::pipe;
+  throw Error("unknown scene '" + word + "' (none, seabed, panel, pipe)", file, field);
 }
 
 void validate(const SceneSettings& s) {
@@ -41,9 +42,16 @@ void validate(const SceneSettings& s) {
           "must lie in [0, 1)");
   require(in(s.off_target_radius_m, 0, 10), "scene.off_target_radius_m", "must lie in [0, 10] m");
   require(in(s.extent_m, 0, 100), "scene.extent_m", "must lie in [0, 100] m");
+  require(in(s.pipe_radius_m, 0, 5), "scene.pipe_radius_m", "must lie in [0, 5] m");
   if (s.kind == SceneKind::panel) {
     require(s.slope_deg == 0, "scene.slope_deg", "must be 0 for a panel (it is vertical)");
     require(s.relief_m == 0, "scene.relief_m", "must be 0 for a panel (it is flat)");
+  }
+  if (s.kind == SceneKind::pipe) {
+    require(s.slope_deg == 0, "scene.slope_deg", "must be 0 for a pipe (it is horizontal)");
+    require(s.relief_m == 0, "scene.relief_m", "must be 0 for a pipe (it is smooth)");
+  } else if (s.kind != SceneKind::none) {   // (scene none ignores every scene.* key)
+    require(s.pipe_radius_m == 0, "scene.pipe_radius_m", "is only for scene = pipe");
   }
 }
 
@@ -71,6 +79,12 @@ Support::Support(const Mesh& object_mesh, const Pose& T_world_object, const Scen
   origin_ = centre;
   half_ = s.extent_m > 0 ? s.extent_m : r + reach + 0.05;
   radius_ = std::min(s.off_target_radius_m > 0 ? s.off_target_radius_m : 1.5 * r, 0.9 * half_);
+  if (s.kind == SceneKind::pipe) {
+    n_ = Vec3::UnitZ();
+    e2_ = n_.cross(e1_);
+    place_pipe(world, centre, r, s);
+    return;
+  }
 
   // Heights on the grid: the relief (three seeded sinusoids), 0 when flat.
   cells_ = 1;
@@ -136,6 +150,49 @@ double Support::clearance(const Mesh& world, double r, bool relief) const {
   return lift;
 }
 
+void Support::place_pipe(const Mesh& world, const Vec3& centre, double r, const SceneSettings& s) {
+  const double R = s.pipe_radius_m > 0 ? s.pipe_radius_m : std::max(0.05, r);
+  pipe_radius_ = R;
+  // The axis' height below the centre (along n): the highest at which no point of the object lies
+  // inside the cylinder. A point d (from the centre) across the axis by |d.e2| < R must lie at
+  // least sqrt(R^2 - (d.e2)^2) above it; one beside the pipe constrains nothing (a straddling
+  // object). Checked at the vertices and along the edges (every 1 mm or R / 20).
+  // With a gap, the same for a cylinder of radius R + gap: the pipe's clearance is then the gap.
+  const double Rg = R + s.gap_m;
+  double axis = std::numeric_limits<double>::infinity();
+  auto constrain = [&](const Vec3& x) {
+    const Vec3 d = x - centre;
+    const double w = d.dot(e2_);
+    if (std::abs(w) < Rg) axis = std::min(axis, d.dot(n_) - std::sqrt(Rg * Rg - w * w));
+  };
+  for (const Vec3& x : world.vertices) constrain(x);
+  const double step = std::min(0.001, Rg / 20);
+  for (const auto& f : world.faces)
+    for (int e = 0; e < 3; ++e) {
+      const Vec3 &a = world.vertices[f[e]], &b = world.vertices[f[(e + 1) % 3]];
+      const int n = std::min(256, static_cast<int>(std::ceil((b - a).norm() / step)));
+      for (int k = 1; k < n; ++k) constrain(a + (b - a) * (static_cast<double>(k) / n));
+    }
+  if (!std::isfinite(axis)) axis = -r - Rg;   // nothing above the pipe's width: under the object
+  origin_ = centre + axis * n_;
+  // The cylinder: rings of `sides` vertices at both ends (chords at most 0.2 mm inside the
+  // circle), faces wound outward.
+  const int sides = std::clamp(static_cast<int>(std::ceil(std::numbers::pi / std::acos(1.0 - std::min(0.0002 / R, 1.0)))),
+                               16, 512);
+  for (int end = 0; end < 2; ++end)
+    for (int k = 0; k < sides; ++k) {
+      const double t = 2.0 * std::numbers::pi * k / sides;
+      mesh_.vertices.push_back(origin_ + (end == 0 ? -half_ : half_) * e1_ + R * (std::cos(t) * e2_ + std::sin(t) * n_));
+    }
+  for (int k = 0; k < sides; ++k) {
+    const int a = k, b = (k + 1) % sides, c = sides + (k + 1) % sides, d = sides + k;
+    // (b - a) runs along the circle (increasing t), (d - a) along e1: (b - a) x (c - a) points
+    // outward (at t = 0 the tangent is n, and n x e1 = e2, the outward normal there).
+    mesh_.faces.emplace_back(a, b, c);
+    mesh_.faces.emplace_back(a, c, d);
+  }
+}
+
 void Support::triangulate() {
   const int N = cells_ + 1;
   for (int i = 0; i < N; ++i)
@@ -173,14 +230,25 @@ Vec3 Support::face_normal(double u, double v) const {
   return (n_ - du * e1_ - dv * e2_).normalized();
 }
 
-Vec3 Support::point(double u, double v) const { return origin_ + u * e1_ + v * e2_ + height(u, v) * n_; }
+Vec3 Support::point(double u, double v) const {
+  if (pipe_radius_ > 0)   // the pipe's top: its height over the axis at v across it (0 beside it)
+    return origin_ + u * e1_ + v * e2_ + std::sqrt(std::max(0.0, pipe_radius_ * pipe_radius_ - v * v)) * n_;
+  return origin_ + u * e1_ + v * e2_ + height(u, v) * n_;
+}
 
 double Support::above(const Vec3& x) const {
   const Vec3 d = x - origin_;
+  if (pipe_radius_ > 0) return (d - d.dot(e1_) * e1_).norm() - pipe_radius_;
   return d.dot(n_) - height(d.dot(e1_), d.dot(e2_));
 }
 
 std::pair<Vec3, Vec3> Support::aim(Rng& rng) const {
+  if (pipe_radius_ > 0) {   // the upper half, within radius_ of the object along the axis
+    const double u = rng.uniform(-radius_, radius_);
+    const double t = rng.uniform(0.0, std::numbers::pi);
+    const Vec3 normal = std::cos(t) * e2_ + std::sin(t) * n_;
+    return {origin_ + u * e1_ + pipe_radius_ * normal, normal};
+  }
   const double rho = radius_ * std::sqrt(rng.uniform());
   const double theta = rng.uniform(0.0, 2.0 * std::numbers::pi);
   const double u = rho * std::cos(theta), v = rho * std::sin(theta);

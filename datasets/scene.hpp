@@ -22,6 +22,13 @@
 // that side. The off-target grasps aim at the panel beside the object, approached along its
 // normal; an aim on the object's face against the panel is blocked by it and redrawn.
 //
+// `pipe`: the object rests on a pipe, a horizontal cylinder of radius `pipe_radius_m` (0: the
+// object's bounding radius, at least 5 cm) along a seeded azimuth, under the object's centre,
+// raised until it touches the object's lowest point above it (vertices and edges; with `gap_m`,
+// until the object's nearest point is that far from it). The object may straddle it (a clamp, a bracelet). The off-target grasps aim at the pipe's
+// upper half within `off_target_radius_m` of the object along its axis, approached along the
+// surface normal; the pipe is triangulated with chords at most 0.2 mm inside the circle.
+//
 // The support is recorded in the log's ground truth (the mesh, world frame), so a study can tell
 // which contacts touched the target and which the seabed. The recognizer does not see it.
 #pragma once
@@ -36,9 +43,9 @@
 
 namespace ts::datasets {
 
-enum class SceneKind { none, seabed, panel };
+enum class SceneKind { none, seabed, panel, pipe };
 
-const char* to_string(SceneKind kind);   ///< "none" / "seabed" / "panel"
+const char* to_string(SceneKind kind);   ///< "none" / "seabed" / "panel" / "pipe"
 /// Throws ts::Error naming `file` and `field` for another word.
 SceneKind parse_scene_kind(const std::string& word, const std::string& file = {}, const std::string& field = "scene");
 
@@ -55,7 +62,10 @@ struct SceneSettings {
                                       ///< footprint centre (0: 1.5 x the object's radius)
   double extent_m = 0.0;              ///< m, half-size of the support patch about the object
                                       ///< (0: the object's radius + `reach` + 5 cm, so the hand
-                                      ///< meets the support wherever it goes down)
+                                      ///< meets the support wherever it goes down); a pipe: its
+                                      ///< half-length
+  double pipe_radius_m = 0.0;         ///< m, a pipe's radius (0: the object's bounding radius,
+                                      ///< at least 5 cm); only for a pipe
 };
 
 /// Throws ts::Error naming the key ("scene.slope_deg", ...) of a setting out of range.
@@ -71,14 +81,22 @@ class Support {
 
   /// World frame; faces wound so that their normals point up (away from the sediment).
   const Mesh& mesh() const { return mesh_; }
-  /// Unit upward normal of the support's plane (before relief), world frame.
+  /// Unit upward normal of the support's plane (before relief), world frame; a pipe: +z, the
+  /// side the object rests on.
   const Vec3& up() const { return n_; }
-  /// The support's point above the plane point origin + u e1 + v e2 (on its triangulated surface).
+  /// A pipe's axis (unit, horizontal) and radius; the axis passes through axis_point().
+  const Vec3& axis() const { return e1_; }
+  const Vec3& axis_point() const { return origin_; }
+  double pipe_radius() const { return pipe_radius_; }
+  /// The support's point above the plane point origin + u e1 + v e2 (on its triangulated surface;
+  /// a pipe: on its top, u along the axis and v across it, on the axis' level beside it).
   Vec3 point(double u, double v) const;
-  /// How far world point x lies above the support, along up() (negative: below it).
+  /// How far world point x lies above the support, along up() (negative: below it); a pipe:
+  /// its distance from the pipe's surface (negative: inside it).
   double above(const Vec3& x) const;
   /// An aim of an off-target grasp: a point of the support within off_target_radius of the
-  /// object's footprint centre (uniform over the disc) and the upward normal of the face under it.
+  /// object's footprint centre (uniform over the disc) and the upward normal of the face under it;
+  /// a pipe: a point of its upper half within off_target_radius along its axis, and its normal.
   std::pair<Vec3, Vec3> aim(Rng& rng) const;
 
  private:
@@ -93,10 +111,13 @@ class Support {
   /// bounding radius r about origin_); with relief, also along edges and at grid vertices.
   double clearance(const Mesh& world, double r, bool relief) const;
   void triangulate();                        ///< mesh_ from the grid
+  /// A pipe: origin_ on its axis under the object's centre, raised until the object (`world`,
+  /// bounding radius r about `centre`) is the gap from it; mesh_ its cylinder.
+  void place_pipe(const Mesh& world, const Vec3& centre, double r, const SceneSettings& s);
   Vec3 face_normal(double u, double v) const;
 
   Vec3 origin_, e1_, e2_, n_;
-  double half_ = 0.0, spacing_ = 0.0, radius_ = 0.0;
+  double half_ = 0.0, spacing_ = 0.0, radius_ = 0.0, pipe_radius_ = 0.0;
   int cells_ = 1;
   std::vector<double> h_;                     ///< (cells + 1)^2 heights, row-major in (i: u, j: v)
   Mesh mesh_;

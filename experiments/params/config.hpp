@@ -49,7 +49,8 @@ struct FingertipOverrides {
   std::optional<double> normals_deg;             ///< deg, normal noise; unset: no normals
 };
 
-/// Overrides of the simulated scene (scene = "seabed"; unset: datasets::SceneSettings' default).
+/// Overrides of the simulated scene (scene = "seabed", "panel" or "pipe"; unset:
+/// datasets::SceneSettings' default).
 struct SceneOverrides {
   std::optional<double> slope_deg;               ///< deg, the support's tilt
   std::optional<double> relief_m;                ///< m, sediment relief amplitude
@@ -58,6 +59,7 @@ struct SceneOverrides {
   std::optional<double> off_target;              ///< share of grasps aimed at the support
   std::optional<double> off_target_radius_m;     ///< m, how far from the object those aim
   std::optional<double> extent_m;                ///< m, half-size of the support patch
+  std::optional<double> pipe_radius_m;           ///< m, a pipe's radius (scene = pipe)
 };
 
 struct SweepAxis {
@@ -85,7 +87,7 @@ struct ExperimentConfig {
   NoiseOverrides noise_params;
   ProbeOverrides probe_params;
   FingertipOverrides fingertip_params;
-  std::string scene = "none";           ///< none | seabed (datasets::SceneSettings)
+  std::string scene = "none";           ///< none | seabed | panel | pipe (datasets::SceneSettings)
   SceneOverrides scene_params;
   int sensors = 1;
   std::string sensing = "pads";         ///< pads | probe (datasets::ProbeSettings) | fingertips

@@ -602,10 +602,10 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
                 "--tip-normals", TS_CONFIG(fingertip_params.normals_deg));
   d.push_back(named(setting("scene", S, Type::choice, "", 0, 0, "none",
                             "What lies around the object: none (water alone), seabed (the object rests on a "
-                            "support surface that the hand touches too, shaped by scene.*) or panel (it is mounted "
-                            "against a flat vertical plate, the fixture; scene.* but slope and relief); sensing = "
-                            "pads or fingertips"),
-                    {"none", "seabed", "panel"}, TS_CONFIG(scene)));
+                            "support surface that the hand touches too, shaped by scene.*), panel (it is mounted "
+                            "against a flat vertical plate, the fixture; scene.* but slope and relief) or pipe (it "
+                            "rests on a horizontal pipe; scene.* but slope and relief); sensing = pads or fingertips"),
+                    {"none", "seabed", "panel", "pipe"}, TS_CONFIG(scene)));
   d.back().sweepable = false;
   d.back().simulate = true;
   probe_setting("scene.slope_deg", "deg", 0, 60, "The seabed's tilt from horizontal (unset: 0; scene = seabed)",
@@ -621,17 +621,21 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
                 "intersect the object, refused; scene = seabed)",
                 "--scene-gap", TS_CONFIG(scene_params.gap_m));
   probe_setting("scene.off_target", "", 0, 0.99,
-                "Share of the grasps aimed at the seabed (or panel) beside the object instead of the object "
-                "(unset: 0; scene = seabed or panel)",
+                "Share of the grasps aimed at the seabed (or panel, or pipe) beside the object instead of the "
+                "object (unset: 0; scene = seabed, panel or pipe)",
                 "--scene-off-target", TS_CONFIG(scene_params.off_target));
   probe_setting("scene.off_target_radius_m", "m", 0, 10,
-                "Those grasps aim within this of the object's footprint centre (unset, 0: 1.5 x the object's "
-                "radius; scene = seabed)",
+                "Those grasps aim within this of the object's footprint centre (a pipe: along its axis) (unset, "
+                "0: 1.5 x the object's radius; scene = seabed, panel or pipe)",
                 "--scene-off-target-radius", TS_CONFIG(scene_params.off_target_radius_m));
   probe_setting("scene.extent_m", "m", 0, 100,
-                "Half-size of the seabed patch about the object (unset, 0: the object's radius + the hand's reach "
-                "+ 5 cm; scene = seabed)",
+                "Half-size of the seabed patch about the object, a pipe's half-length (unset, 0: the object's "
+                "radius + the hand's reach + 5 cm; scene = seabed, panel or pipe)",
                 "--scene-extent", TS_CONFIG(scene_params.extent_m));
+  probe_setting("scene.pipe_radius_m", "m", 0, 5,
+                "The pipe's radius (unset, 0: the object's bounding radius, at least 5 cm; scene = pipe, refused "
+                "for a seabed or a panel)",
+                "--scene-pipe-radius", TS_CONFIG(scene_params.pipe_radius_m));
   {
     Parameter p = setting("seed", E, Type::integer, "", 0, kInf, "", "Seed of every random draw (unsigned integer)");
     p.set_config = [](ExperimentConfig& c, const Inputs& in, const std::string& file, const std::string& name) {

@@ -56,6 +56,7 @@ datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
   take(sc.off_target, s.scene.off_target);
   take(sc.off_target_radius_m, s.scene.off_target_radius_m);
   take(sc.extent_m, s.scene.extent_m);
+  take(sc.pipe_radius_m, s.scene.pipe_radius_m);
   s.grasps = static_cast<std::size_t>(c.pool);
   return s;
 }
@@ -75,6 +76,7 @@ std::string pool_key(const datasets::SimulatorSettings& s) {
     k << "|scene " << to_string(sc.kind) << '|' << sc.slope_deg << '|' << sc.relief_m << '|'
       << sc.relief_wavelength_m << '|' << sc.gap_m << '|' << sc.off_target << '|' << sc.off_target_radius_m << '|'
       << sc.extent_m;
+    if (sc.kind == datasets::SceneKind::pipe) k << '|' << sc.pipe_radius_m;   // (other scenes' keys as before)
   }
   return k.str();
 }

@@ -14,6 +14,8 @@
 #include <tbb/task_arena.h>
 
 #include <cmath>
+#include <optional>
+#include <utility>
 
 using namespace ts;
 
@@ -39,6 +41,41 @@ Pose tilted_pose() {
   T.translation() = Vec3(0.1, -0.05, 0.3);
   return T;
 }
+
+/// A box of half-size h explored in a scene of `kind` (40 ideal grasps, 40 % aimed off the target).
+struct BoxInScene {
+  Vec3 h{0.05, 0.035, 0.03};
+  datasets::SimulatorSettings settings;
+  std::optional<datasets::Simulator> sim;
+  datasets::SimulationResult res;
+  explicit BoxInScene(datasets::SceneKind kind) {
+    settings.grasps = 40;
+    settings.noise = datasets::noise_profile("ideal");
+    settings.seed = 7;
+    settings.scene.kind = kind;
+    settings.scene.off_target = 0.4;
+    sim.emplace(test::box_mesh(2.0 * h), "box", Gripper(), settings);
+    res = sim->run();
+  }
+  /// Every contact lies within 1.5 mm of the box or the support (signed distance `to_support`,
+  /// never below -1.5 mm: nothing sensed behind or inside it); counts of those nearer each.
+  template <class Distance>
+  std::pair<std::size_t, std::size_t> contacts_on_object_and_support(Distance to_support) const {
+    const Pose T_object_world = sim->object_pose().inverse();
+    std::size_t on_object = 0, on_support = 0;
+    for (std::size_t g = 0; g < res.log.grasps.size(); ++g)
+      for (const Vec3& p : grasp_contacts(res.log, g).points) {
+        const Vec3 q = (T_object_world * p).cwiseAbs() - h;
+        const double d_object = q.maxCoeff() > 0 ? q.cwiseMax(0.0).norm() : -q.maxCoeff();
+        const double d_support = to_support(p);
+        CHECK(d_support > -0.0015);
+        CHECK(std::min(d_object, std::abs(d_support)) < 0.0015);
+        on_object += d_object < std::abs(d_support);
+        on_support += std::abs(d_support) <= d_object;
+      }
+    return {on_object, on_support};
+  }
+};
 
 }  // namespace
 
@@ -250,15 +287,8 @@ TEST_CASE("panel: a vertical plate the object is mounted against; grasps touch i
 
   // The simulator: some contacts on the panel, the others on the object, none behind the panel;
   // the hands and their free space in front of it.
-  const Vec3 h(0.05, 0.035, 0.03);
-  datasets::SimulatorSettings s;
-  s.grasps = 40;
-  s.noise = datasets::noise_profile("ideal");
-  s.seed = 7;
-  s.scene.kind = datasets::SceneKind::panel;
-  s.scene.off_target = 0.4;
-  const datasets::Simulator sim(test::box_mesh(2.0 * h), "box", Gripper(), s);
-  const auto res = sim.run();
+  const BoxInScene b(datasets::SceneKind::panel);
+  const auto& res = b.res;
   REQUIRE(res.log.truth);
   CHECK(res.log.truth->scene == "panel");
   const Mesh& plate = res.log.truth->support;
@@ -266,19 +296,8 @@ TEST_CASE("panel: a vertical plate the object is mounted against; grasps touch i
   const Vec3& V0 = plate.vertices[0];
   const Vec3 n = (plate.vertices[plate.faces[0][1]] - V0).cross(plate.vertices[plate.faces[0][2]] - V0).normalized();
   CHECK(std::abs(n.z()) < 1e-9);   // vertical
-  const Pose T_object_world = sim.object_pose().inverse();
-  std::size_t on_object = 0, on_panel = 0, contacts = 0;
-  for (std::size_t g = 0; g < res.log.grasps.size(); ++g)
-    for (const Vec3& p : grasp_contacts(res.log, g).points) {
-      ++contacts;
-      const Vec3 q = (T_object_world * p).cwiseAbs() - h;
-      const double d_object = q.maxCoeff() > 0 ? q.cwiseMax(0.0).norm() : -q.maxCoeff();
-      const double d_panel = n.dot(p - V0);
-      CHECK(d_panel > -0.0015);   // nothing sensed behind the panel
-      CHECK(std::min(d_object, std::abs(d_panel)) < 0.0015);
-      on_object += d_object < std::abs(d_panel);
-      on_panel += std::abs(d_panel) <= d_object;
-    }
+  const auto [on_object, on_panel] = b.contacts_on_object_and_support([&](const Vec3& p) { return n.dot(p - V0); });
+  const std::size_t contacts = on_object + on_panel;
   CHECK(contacts > 100);
   CHECK(on_panel > contacts / 10);
   CHECK(on_object > contacts / 4);
@@ -286,4 +305,70 @@ TEST_CASE("panel: a vertical plate the object is mounted against; grasps touch i
   Exploration ex(res.log);
   ex.advance_to(res.log.grasps.size());
   for (const Vec3& q : ex.free_cloud().points) CHECK(n.dot(q - V0) > -0.02 - 1e-9);
+}
+
+TEST_CASE("pipe: a horizontal cylinder the object rests on; grasps touch it and the object, none inside it") {
+  // The support's geometry: a horizontal axis under the object, the object's lowest point over the
+  // pipe touching it (vertices and edges), the gap above that, the mesh on the circle.
+  const Mesh box = test::box_mesh(Vec3(0.1, 0.07, 0.06));
+  const Pose T = tilted_pose();
+  datasets::SceneSettings ps;
+  ps.kind = datasets::SceneKind::pipe;
+  auto nearest_of = [&](const datasets::Support& p) {   // over vertices and edges every 0.1 mm
+    double nearest = 1e9;
+    for (const auto& f : box.faces)
+      for (int e = 0; e < 3; ++e) {
+        const Vec3 a = T * box.vertices[f[e]], b = T * box.vertices[f[(e + 1) % 3]];
+        const int n = static_cast<int>(std::ceil((b - a).norm() / 1e-4));
+        for (int k = 0; k <= n; ++k) nearest = std::min(nearest, p.above(a + (b - a) * (double(k) / n)));
+      }
+    return nearest;
+  };
+  const datasets::Support pipe(box, T, ps, 0.15, 3);
+  const double r = std::sqrt(0.05 * 0.05 + 0.035 * 0.035 + 0.03 * 0.03);   // the box's bounding radius
+  CHECK(pipe.pipe_radius() == doctest::Approx(r).scale(0).epsilon(1e-9));
+  CHECK(std::abs(pipe.axis().z()) < 1e-12);
+  CHECK(pipe.up() == Vec3::UnitZ());
+  CHECK(std::abs(nearest_of(pipe)) < 1e-5);   // it touches; nothing of the object inside it
+  CHECK((pipe.axis_point() - T.translation()).dot(Vec3::UnitZ()) < -r);   // under the object
+  for (const Vec3& v : pipe.mesh().vertices) CHECK(std::abs(pipe.above(v)) < 1e-12);
+  {  // outward faces: each face's normal points away from the axis
+    const Mesh& m = pipe.mesh();
+    for (const auto& f : m.faces) {
+      const Vec3 c = (m.vertices[f[0]] + m.vertices[f[1]] + m.vertices[f[2]]) / 3.0;
+      const Vec3 n = (m.vertices[f[1]] - m.vertices[f[0]]).cross(m.vertices[f[2]] - m.vertices[f[0]]);
+      const Vec3 d = c - pipe.axis_point();
+      CHECK(n.dot(d - d.dot(pipe.axis()) * pipe.axis()) > 0);
+    }
+  }
+  ps.gap_m = 0.01;
+  ps.pipe_radius_m = 0.2;
+  const datasets::Support raised(box, T, ps, 0.15, 3);
+  CHECK(raised.pipe_radius() == 0.2);
+  CHECK(nearest_of(raised) == doctest::Approx(0.01).scale(0).epsilon(1e-5));
+  CHECK(std::string(datasets::to_string(datasets::SceneKind::pipe)) == "pipe");
+  CHECK(datasets::parse_scene_kind("pipe") == datasets::SceneKind::pipe);
+  refused(box, T, ps.kind, [](auto& b) { b.slope_deg = 5; }, "scene.slope_deg");
+  refused(box, T, ps.kind, [](auto& b) { b.relief_m = 0.01; }, "scene.relief_m");
+  refused(box, T, ps.kind, [](auto& b) { b.pipe_radius_m = 6; }, "scene.pipe_radius_m");
+  refused(box, T, datasets::SceneKind::seabed, [](auto& b) { b.pipe_radius_m = 0.1; }, "scene.pipe_radius_m");
+  refused(box, T, datasets::SceneKind::panel, [](auto& b) { b.pipe_radius_m = 0.1; }, "scene.pipe_radius_m");
+
+  // The simulator: the log's support is this pipe; contacts on the pipe or the object, none
+  // inside the pipe; the hands outside it.
+  const BoxInScene b(datasets::SceneKind::pipe);
+  const auto& res = b.res;
+  REQUIRE(res.log.truth);
+  CHECK(res.log.truth->scene == "pipe");
+  const datasets::Support same(test::box_mesh(2.0 * b.h), b.sim->object_pose(), b.settings.scene, Gripper().reach(),
+                               b.settings.seed);
+  REQUIRE(res.log.truth->support.vertices.size() == same.mesh().vertices.size());
+  for (std::size_t i = 0; i < same.mesh().vertices.size(); ++i)
+    CHECK((res.log.truth->support.vertices[i] - same.mesh().vertices[i]).norm() < 1e-12);
+  const auto [on_object, on_pipe] = b.contacts_on_object_and_support([&](const Vec3& p) { return same.above(p); });
+  const std::size_t contacts = on_object + on_pipe;
+  CHECK(contacts > 100);
+  CHECK(on_pipe > contacts / 10);
+  CHECK(on_object > contacts / 4);
+  for (const Pose& A : res.log.truth->arm_poses) CHECK(same.above(A.translation()) > 0);
 }

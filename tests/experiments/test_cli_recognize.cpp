@@ -979,6 +979,7 @@ TEST_CASE("cli params --json: every method parameter is a recognize flag (and ea
       {"scene.off_target", {"0.25", {{"scene.off_target", 0.25}}}},
       {"scene.off_target_radius_m", {"0.2", {{"scene.off_target_radius_m", 0.2}}}},
       {"scene.extent_m", {"0.5", {{"scene.extent_m", 0.5}}}},
+      {"scene.pipe_radius_m", {"0.1", {{"scene.pipe_radius_m", 0.1}}}},
       {"seed", {"7", {{"seed", 7}}}},
       {"ransac.samples", {"3x20", {{"ransac.triplets", 3}, {"ransac.registrations", 20}}}},
       {"memory_budget_mb", {"64", {{"memory_budget_mb", 64.0}}}},
