@@ -170,7 +170,7 @@ void Support::place_pipe(const Mesh& world, const Vec3& centre, double r, const 
   for (const auto& f : world.faces)
     for (int e = 0; e < 3; ++e) {
       const Vec3 &a = world.vertices[f[e]], &b = world.vertices[f[(e + 1) % 3]];
-      const int n = std::min(256, static_cast<int>(std::ceil((b - a).norm() / step)));
+      const int n = std::min(1 << 16, static_cast<int>(std::ceil((b - a).norm() / step)));
       for (int k = 1; k < n; ++k) constrain(a + (b - a) * (static_cast<double>(k) / n));
     }
   if (!std::isfinite(axis)) axis = -r - Rg;   // nothing above the pipe's width: under the object
@@ -243,9 +243,11 @@ double Support::above(const Vec3& x) const {
 }
 
 std::pair<Vec3, Vec3> Support::aim(Rng& rng) const {
-  if (pipe_radius_ > 0) {   // the upper half, within radius_ of the object along the axis
+  if (pipe_radius_ > 0) {   // the upper half, within radius_ of the object along the axis and
+                            // around the top (the whole upper half of a pipe narrower than that)
     const double u = rng.uniform(-radius_, radius_);
-    const double t = rng.uniform(0.0, std::numbers::pi);
+    const double arc = std::min(std::numbers::pi / 2, radius_ / pipe_radius_);
+    const double t = rng.uniform(std::numbers::pi / 2 - arc, std::numbers::pi / 2 + arc);
     const Vec3 normal = std::cos(t) * e2_ + std::sin(t) * n_;
     return {origin_ + u * e1_ + pipe_radius_ * normal, normal};
   }

@@ -25,9 +25,11 @@
 // `pipe`: the object rests on a pipe, a horizontal cylinder of radius `pipe_radius_m` (0: the
 // object's bounding radius, at least 5 cm) along a seeded azimuth, under the object's centre,
 // raised until it touches the object's lowest point above it (vertices and edges; with `gap_m`,
-// until the object's nearest point is that far from it). The object may straddle it (a clamp, a bracelet). The off-target grasps aim at the pipe's
-// upper half within `off_target_radius_m` of the object along its axis, approached along the
-// surface normal; the pipe is triangulated with chords at most 0.2 mm inside the circle.
+// until the object's nearest point is that far from it). The object may straddle it (a clamp, a
+// bracelet). The off-target grasps aim at the pipe's upper half within `off_target_radius_m` of
+// the object along its axis and of its top around it, approached along the surface normal; the
+// pipe is triangulated with chords at most 0.2 mm inside the circle. above() treats the pipe as
+// unbounded along its axis (its mesh is `extent_m` each side of the object).
 //
 // The support is recorded in the log's ground truth (the mesh, world frame), so a study can tell
 // which contacts touched the target and which the seabed. The recognizer does not see it.

@@ -128,12 +128,19 @@ const AnswerSetCalibration& Calibration::single_answer_sets(const std::string& f
 }
 
 nlohmann::ordered_json simulation_of(const nlohmann::ordered_json& config) {
-  nlohmann::ordered_json s = nlohmann::ordered_json::object();
-  if (!config.is_object()) return s;
-  for (const auto& [key, value] : config.items())
-    if ((key == "noise" || key.starts_with("noise.") || key == "sensing" || key == "sensors") && !value.is_null())
-      s[key] = value;   // an unset override is the profile's value: as if the key did not exist
-  return s;
+  if (!config.is_object()) return nlohmann::ordered_json::object();
+  // Sorted by key (nlohmann::json's std::map), so that two simulations compare and print alike
+  // whatever order their keys were declared or written in.
+  nlohmann::json s = nlohmann::json::object();
+  for (const auto& [key, value] : config.items()) {
+    const bool simulated = key == "noise" || key.starts_with("noise.") || key == "sensing" || key == "sensors" ||
+                           key == "scene" || key.starts_with("scene.") || key.starts_with("probe.") ||
+                           key.starts_with("fingertips.");
+    // An unset override is the profile's value, and no scene is water alone: as if the key did
+    // not exist (a file written before a key existed stays valid).
+    if (simulated && !value.is_null() && !(key == "scene" && value == "none")) s[key] = value;
+  }
+  return nlohmann::ordered_json(s);
 }
 
 namespace {
@@ -440,12 +447,9 @@ AnswerSetCalibration read_answer_sets(const nlohmann::ordered_json& s, const std
   a.alpha = s["alpha"].get<double>();
   if (s.contains("simulation") && !s["simulation"].is_object())
     throw Error("expected an object (the noise, sensing and sensors settings)", file, at + ".simulation");
-  // As simulation_of gives it: unset overrides (null, written by versions 5 and 6 before
-  // noise.arm_scale) left out, so that a file stays valid when a key is added.
-  a.simulation = nlohmann::ordered_json::object();
-  if (s.contains("simulation"))
-    for (const auto& [key, value] : s["simulation"].items())
-      if (!value.is_null()) a.simulation[key] = value;
+  // As simulation_of gives it: sorted, unset overrides (null, as version 5 wrote them) left out,
+  // so that a file stays valid when a key is added.
+  a.simulation = s.contains("simulation") ? simulation_of(s["simulation"]) : nlohmann::ordered_json::object();
   if (!s.contains("steps") || !s["steps"].is_array() || s["steps"].empty())
     throw Error("missing the scores per step (a non-empty array)", file, at + ".steps");
   for (std::size_t k = 0; k < s["steps"].size(); ++k) {

@@ -86,7 +86,7 @@ struct StepModels {
 /// runs drawn alike).
 struct AnswerSetCalibration {
   double alpha = 0.05;                     ///< the level sets are answered at by default
-  nlohmann::ordered_json simulation;       ///< noise profile, its overrides, sensing, sensors
+  nlohmann::ordered_json simulation;       ///< simulation_of the runs' configuration
   std::vector<ConformalScores> steps;      ///< step k at [k - 1]
   /// The scores of a step (1-based); steps past the last calibrated one use the last.
   const ConformalScores& at(int step) const;
@@ -95,8 +95,8 @@ struct AnswerSetCalibration {
 };
 
 /// The simulation settings an answer-set calibration records, from an experiment configuration's
-/// JSON (touchstone's config_json): noise, noise.*, sensing, sensors; unset overrides (null) left
-/// out.
+/// JSON (touchstone's config_json): noise, noise.*, sensing, sensors, scene, scene.*, probe.*,
+/// fingertips.*, sorted by key; unset overrides (null) and scene "none" left out.
 nlohmann::ordered_json simulation_of(const nlohmann::ordered_json& config);
 
 /// The calibration file (JSON, "format": "touchstone-calibration", version 6; versions 2 (all

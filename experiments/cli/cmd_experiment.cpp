@@ -517,9 +517,13 @@ int run_calibrate(const CalibrateOptions& o) {
       std::vector<SetRuns*> of_variant;
       std::map<std::string, std::size_t> variant_of_sim;
       for (std::size_t v = 0; v < variants; ++v) {
-        const auto sim = experiments::simulation_of(
-            v < c.header.variant_configs.size() ? nlohmann::ordered_json::parse(c.header.variant_configs[v], nullptr, false)
-                                                : config_json);
+        const auto variant_json = v < c.header.variant_configs.size()
+                                      ? nlohmann::ordered_json::parse(c.header.variant_configs[v], nullptr, false)
+                                      : config_json;
+        if (!variant_json.is_object())
+          throw Error("the configuration of variant " + std::to_string(v) + " is not a JSON object", path,
+                      "/header/variant_configs");
+        const auto sim = experiments::simulation_of(variant_json);
         const auto [it, first] = variant_of_sim.emplace(sim.dump(), v);
         if (!first)
           throw Error("variants '" + c.header.variant_labels.at(it->second) + "' and '" + c.header.variant_labels.at(v) +

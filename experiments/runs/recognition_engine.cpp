@@ -183,7 +183,7 @@ class RecognitionEngine final : public RunEngine {
               sims += (sims.empty() ? "" : ", ") + a.simulation.dump();
             throw Error("the calibration's answer sets were calibrated on runs simulated with " + sims + ", variant '" +
                         labels_[k] + "' simulates " + sim.dump() + ": calibrate on runs like these",
-                        config.calibration, "answer_sets.simulation");
+                        config.calibration, "answer_sets");
           }
         }
     }

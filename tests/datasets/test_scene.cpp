@@ -328,7 +328,24 @@ TEST_CASE("pipe: a horizontal cylinder the object rests on; grasps touch it and 
   const double r = std::sqrt(0.05 * 0.05 + 0.035 * 0.035 + 0.03 * 0.03);   // the box's bounding radius
   CHECK(pipe.pipe_radius() == doctest::Approx(r).scale(0).epsilon(1e-9));
   CHECK(std::abs(pipe.axis().z()) < 1e-12);
-  CHECK(pipe.up() == Vec3::UnitZ());
+  {  // Aims: on the pipe's upper half, near the object along the axis and (a wide pipe) its top.
+    Rng rng(5);
+    for (int k = 0; k < 200; ++k) {
+      const auto [x, normal] = pipe.aim(rng);
+      CHECK(std::abs(pipe.above(x)) < 1e-12);
+      CHECK(normal.z() >= -1e-12);
+      CHECK(std::abs(normal.dot(pipe.axis())) < 1e-12);
+      CHECK(std::abs((x - pipe.axis_point()).dot(pipe.axis())) <= 1.5 * r + 1e-12);
+    }
+    datasets::SceneSettings wide = ps;
+    wide.pipe_radius_m = 2.0;
+    const datasets::Support big(box, T, wide, 0.15, 3);
+    for (int k = 0; k < 200; ++k) {
+      const auto [x, normal] = big.aim(rng);
+      CHECK(std::abs(big.above(x)) < 1e-9);
+      CHECK(std::acos(std::min(1.0, normal.z())) <= 1.5 * r / 2.0 + 1e-9);   // within 1.5 r of the top
+    }
+  }
   CHECK(std::abs(nearest_of(pipe)) < 1e-5);   // it touches; nothing of the object inside it
   CHECK((pipe.axis_point() - T.translation()).dot(Vec3::UnitZ()) < -r);   // under the object
   for (const Vec3& v : pipe.mesh().vertices) CHECK(std::abs(pipe.above(v)) < 1e-12);

@@ -639,11 +639,13 @@ TEST_CASE("Calibration files: answer sets round trip, and every bad count or num
   auto v5 = j;
   v5["version"] = 5;
   v5["answer_sets"] = j["answer_sets"][0];
+  v5["answer_sets"]["simulation"]["noise.joint_sigma_deg"] = nullptr;   // version 5 wrote unset keys as null
   {
     std::ofstream(dir / "v5.json") << v5.dump();
     const Calibration r = read_calibration(dir / "v5.json", "f");
     REQUIRE(r.answer_sets.size() == 1);
     CHECK(r.answer_sets[0].simulation == a.simulation);
+    CHECK(r.answer_sets_for(a.simulation) == &r.answer_sets[0]);   // runs of today's builds match it
     CHECK(r.answer_sets[0].steps[1].finite() == back.answer_sets[0].steps[1].finite());
   }
   v5["answer_sets"]["alpha"] = 2.0;
@@ -700,6 +702,14 @@ TEST_CASE("The simulation an answer-set calibration holds for: noise, its overri
   CHECK(sim == nlohmann::ordered_json::parse(
                    R"({"noise": "deep_sea", "noise.arm_position_sigma_m": 0.002, "sensing": "pads", "sensors": 2})"));
   CHECK(simulation_of(nlohmann::ordered_json("text")).empty());
+  // The scene and the probe's and fingertips' keys are the simulation's too; "none" is no scene.
+  // Sorted: the order keys come in does not matter.
+  const auto scene = nlohmann::ordered_json::parse(
+      R"({"sensors": 1, "scene.pipe_radius_m": 0.1, "noise": "underwater", "scene": "pipe", "probe.tilt_deg": null,
+          "fingertips.quantization_m": 0.001, "runs": 2})");
+  CHECK(simulation_of(scene).dump() ==
+        R"({"fingertips.quantization_m":0.001,"noise":"underwater","scene":"pipe","scene.pipe_radius_m":0.1,"sensors":1})");
+  CHECK(simulation_of(nlohmann::ordered_json::parse(R"({"scene": "none", "noise": "ideal"})")).dump() == R"({"noise":"ideal"})");
   // An unset override (null) is the profile's value, as if absent: a calibration written before a
   // key existed still matches runs of a build that has it. Read from a file alike.
   test::TempDir dir("calibration_nulls");

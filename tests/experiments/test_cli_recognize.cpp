@@ -1372,8 +1372,10 @@ TEST_CASE("Scene: objects ranked by their posterior, the answer always drawn, it
 
 /// The variants of an experiment's store (run with calibration `cal`) whose informative sets were
 /// checked: each holds the truth exactly when the truth's gap has a p-value above alpha under the
-/// calibration's entry for the variant's simulation.
-std::set<int> variants_whose_sets_hold_their_p_values(const fs::path& path, const fs::path& cal_path, double alpha) {
+/// calibration's entry for the variant's simulation. `decided`: the rows another entry of the
+/// calibration would have judged otherwise (the variant's own entry decided them).
+std::set<int> variants_whose_sets_hold_their_p_values(const fs::path& path, const fs::path& cal_path, double alpha,
+                                                      std::size_t* decided = nullptr) {
   const experiments::Calibration cal = experiments::read_calibration(cal_path, "");
   const io::RunStoreContents store = io::RunStore::read(path);
   const auto& v = store.header.step_values;
@@ -1388,8 +1390,15 @@ std::set<int> variants_whose_sets_hold_their_p_values(const fs::path& path, cons
     for (std::size_t k = 0; k < r.steps.size(); ++k) {
       const auto& x = r.steps[k].values;
       if (x[informative] != 1.0) continue;
-      CHECK((x[covers] == 1.0) == (a->at(int(k) + 1).p_value(x[gap]) > alpha));
+      const bool holds = a->at(int(k) + 1).p_value(x[gap]) > alpha;
+      CHECK((x[covers] == 1.0) == holds);
       checked.insert(r.variant);
+      if (decided)
+        for (const auto& other : cal.answer_sets)
+          if ((other.at(int(k) + 1).p_value(x[gap]) > alpha) != holds) {
+            ++*decided;
+            break;
+          }
     }
   }
   return checked;
@@ -1549,7 +1558,8 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
   const Run other = touchstone(dir, "experiment --db db.h5 --objects box --noise ideal --out other.h5"
                                     " --set calibration=half.json" + fast);
   CHECK(other.code != 0);
-  CHECK(other.err.find("answer_sets.simulation") != std::string::npos);
+  CHECK(other.err.find("calibrate on runs like these") != std::string::npos);
+  CHECK(other.err.find("answer_sets") != std::string::npos);
   CHECK(other.err.find("half.json") != std::string::npos);
 
   // A noise sweep: one entry per level of the arm's error, each variant's sets from its own.
@@ -1571,12 +1581,14 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
   const Run judged = touchstone(dir, "experiment --db db.h5 --objects box,nut,ball,wedge --seed 7 --out judged.h5"
                                      " --set sweep.noise.arm_scale=0,2 --set calibration=sweep.json" + fast);
   REQUIRE_MESSAGE(judged.code == 0, judged.err);
-  CHECK(variants_whose_sets_hold_their_p_values(dir / "judged.h5", dir / "sweep.json", 0.5).size() == 2);
+  std::size_t decided = 0;   // rows where the other level's entry would have judged otherwise
+  CHECK(variants_whose_sets_hold_their_p_values(dir / "judged.h5", dir / "sweep.json", 0.5, &decided).size() == 2);
+  CHECK(decided > 0);
   // A level the calibration has no entry for, and data without a simulation, are refused.
   const Run third = touchstone(dir, "experiment --db db.h5 --objects box --out third.h5"
                                     " --set sweep.noise.arm_scale=0,1 --set calibration=sweep.json" + fast);
   CHECK(third.code != 0);
-  CHECK(third.err.find("answer_sets.simulation") != std::string::npos);
+  CHECK(third.err.find("calibrate on runs like these") != std::string::npos);
   CHECK_FALSE(fs::exists(dir / "third.h5"));
   const Run log_sets = touchstone(dir, "recognize --db db.h5 --log log.h5 --calibration sweep.json" + kFastFlags);
   CHECK(log_sets.code != 0);
