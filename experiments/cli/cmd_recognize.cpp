@@ -175,6 +175,9 @@ struct Context {
   SymmetryCache& symmetries;     ///< thread-safe
   const io::CongruenceRecord* congruence = nullptr;   ///< the database's classes (null: not known)
   const experiments::Calibration* calibration = nullptr;  ///< --calibration (null: none)
+  /// The calibration's answer sets for these contacts (null: no set answers; a calibration of
+  /// several simulations names none for a log or a cloud).
+  const experiments::AnswerSetCalibration* sets = nullptr;
   std::vector<std::uint32_t> class_of = {};  ///< object -> class of congruent objects (answer sets)
   std::size_t classes = 0;
 };
@@ -197,7 +200,7 @@ struct StepSet {
 };
 
 StepSet step_set(const Context& c, const StepResult& r) {
-  const experiments::AnswerSetCalibration& a = c.calibration->answer_sets.front();   // one: checked on reading
+  const experiments::AnswerSetCalibration& a = *c.sets;
   StepSet s{class_log_weight_gaps(r, c.class_of, c.classes), &a.at(r.step), a.calibrated_step(r.step), {}};
   s.set = conformal_set(s.gaps, *s.scores, c.o.alpha.value_or(a.alpha));
   return s;
@@ -365,7 +368,7 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
                                    : std::nullopt));
     run.stored.push_back(io::to_result_step(r, truth_object, run.truth_pose, sym));
     if (run.truth_outside) run.stored.back().correct = !r.valid;
-    if (c.calibration && !c.calibration->answer_sets.empty()) {
+    if (c.sets) {
       run.sets.push_back(step_set(c, r));
       run.stored.back().answer_set = stored_answer_set(c, run.sets.back());
     }
@@ -438,8 +441,8 @@ InputRun recognize_one(const Context& c, const Input& in, const std::string& out
     h.truth_object = run.truth_name;
     h.truth_pose = run.truth_pose;
     h.params = params_of(c.rs, o);
-    if (c.calibration && !c.calibration->answer_sets.empty()) {
-      h.answer_set_alpha = o.alpha.value_or(c.calibration->answer_sets.front().alpha);
+    if (c.sets) {
+      h.answer_set_alpha = o.alpha.value_or(c.sets->alpha);
       h.calibration = o.calibration;
     }
     io::write_result(out, h, run.stored);
@@ -913,14 +916,22 @@ int run_recognize(const RecognizeOptions& o) {
   if (calibration && o.open_set_threshold && !calibration->in_database(1, std::vector<double>(calibration->features.size(), 0.0)))
     throw Error("the calibration has no open-set (in-database) model: fit it with leave-one-out runs too",
                 o.calibration, "steps[0].in_database");
-  if (calibration && !calibration->answer_sets.empty())
-    calibration->single_answer_sets(o.calibration);   // a sweep's calibration: which level is for these contacts?
+  // Set answers: the calibration's one simulation's. A calibration of several (a noise sweep's)
+  // names none for these contacts: an error with --alpha, else its confidences without sets.
+  const experiments::AnswerSetCalibration* sets = nullptr;
+  if (calibration && calibration->answer_sets.size() == 1) sets = &calibration->answer_sets.front();
+  if (calibration && calibration->answer_sets.size() > 1) {
+    if (o.alpha) calibration->single_answer_sets(o.calibration);   // throws, naming the simulations
+    std::cerr << "touchstone: note: " << o.calibration << " holds answer sets for "
+              << calibration->answer_sets.size()
+              << " simulations and these contacts name none: no set answers (its confidences are used)\n";
+  }
   if (o.alpha && (!calibration || calibration->answer_sets.empty()))
     throw Error(calibration ? "the calibration has no answer sets: fit it with `touchstone calibrate` on run stores "
                               "of this version"
                             : "set answers need a calibration (--calibration)",
                 calibration ? o.calibration : std::string(), calibration ? "answer_sets" : "--alpha");
-  Context c{o, rs, db, largest, symmetries, source->congruence(), calibration ? &*calibration : nullptr};
+  Context c{o, rs, db, largest, symmetries, source->congruence(), calibration ? &*calibration : nullptr, sets};
   c.class_of = class_indices(db.size(), source->congruence() ? source->congruence()->classes()
                                                              : std::vector<std::vector<std::size_t>>{}, c.classes);
   if (many) return recognize_many(c, inputs, outs);

@@ -1590,9 +1590,21 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
   CHECK(third.code != 0);
   CHECK(third.err.find("calibrate on runs like these") != std::string::npos);
   CHECK_FALSE(fs::exists(dir / "third.h5"));
-  const Run log_sets = touchstone(dir, "recognize --db db.h5 --log log.h5 --calibration sweep.json" + kFastFlags);
+  // recognize: a log names no simulation. With --alpha, an error naming the simulations; without,
+  // the calibration's confidences and no sets, said so.
+  const Run log_sets = touchstone(dir, "recognize --db db.h5 --log log.h5 --calibration sweep.json --alpha 0.5" + kFastFlags);
   CHECK(log_sets.code != 0);
   CHECK(log_sets.err.find("2 simulations") != std::string::npos);
+  CHECK(log_sets.err.find("noise.arm_scale") != std::string::npos);
+  const Run no_sets = touchstone(dir, "recognize --db db.h5 --log log.h5 --json --calibration sweep.json" + kFastFlags);
+  REQUIRE_MESSAGE(no_sets.code == 0, no_sets.err);
+  CHECK(no_sets.err.find("no set answers") != std::string::npos);
+  const auto jn = nlohmann::json::parse(no_sets.out);
+  REQUIRE(jn["steps"].size() == 3);
+  for (const auto& st : jn["steps"]) {
+    CHECK(st["answer_set"].is_null());
+    CHECK(st["confidence"]["object"].is_number());
+  }
   // Variants that simulate alike but differ otherwise would pool unlike runs: refused.
   const Run method = touchstone(dir, "experiment --db db.h5 --objects box,nut --seed 8 --out method.h5"
                                      " --set sweep.bricpsf.hypotheses=10,20" + fast);
