@@ -83,8 +83,17 @@ ConformalScores::ConformalScores(std::vector<double> finite_gaps, std::size_t in
   infinite_ = infinite;
 }
 
+ConformalScores& ConformalScores::set_tie(double nats) {
+  if (!(std::isfinite(nats) && nats >= 0.0)) throw Error("the tie must be a finite number >= 0", {}, "answer_sets.tie_nats");
+  tie_ = nats;
+  return *this;
+}
+
 double ConformalScores::p_value(double gap) const {
-  // Calibration gaps >= gap: every infinite one, and the finite ones from the first >= gap.
+  // Scored 0 below the tie: every calibration score is >= 0.
+  if (gap < tie_) return 1.0;
+  // Calibration scores >= gap (>= the tie, so a score is its gap): every infinite one, and the
+  // finite ones from the first >= gap.
   const std::size_t at_least =
       infinite_ + (std::isinf(gap) ? 0 : static_cast<std::size_t>(finite_.end() - std::lower_bound(finite_.begin(), finite_.end(), gap)));
   return static_cast<double>(1 + at_least) / static_cast<double>(size() + 1);
@@ -99,7 +108,7 @@ double ConformalScores::threshold(double alpha) const {
   const auto k = static_cast<std::size_t>(std::ceil(exact - 1e-9 * (n + 1.0)));
   if (k == 0) return 0.0;
   if (k > finite_.size()) return kInf;   // beyond n, or on an infinite gap
-  return finite_[k - 1];
+  return finite_[k - 1] < tie_ ? 0.0 : finite_[k - 1];
 }
 
 AnswerSet conformal_set(std::span<const double> gaps, const ConformalScores& scores, double alpha) {

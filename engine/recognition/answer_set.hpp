@@ -58,16 +58,24 @@ class ConformalScores {
   std::size_t size() const { return finite_.size() + infinite_; }
   const std::vector<double>& finite() const { return finite_; }   ///< ascending
   std::size_t infinite() const { return infinite_; }
-  /// (1 + #{calibration gaps >= gap}) / (n + 1).
+  /// Near-ties: a gap below `nats` scores 0, as the answer's own class does (near-twins whose
+  /// weights differ by less than the evaluation can tell: their gaps are 1e-6 to 1e-2 nats while a
+  /// mostly right calibration admits no gap above 0). The score is a fixed function of the gap,
+  /// used alike on the calibration runs and the step, so the guarantee holds as before. Throws
+  /// ts::Error (key "answer_sets.tie_nats") for a value that is not finite and >= 0.
+  ConformalScores& set_tie(double nats);
+  double tie() const { return tie_; }
+  /// (1 + #{calibration scores >= the gap's score}) / (n + 1); 1 for a gap below the tie.
   double p_value(double gap) const;
-  /// The largest gap a set at level alpha admits: the ceil((n + 1)(1 - alpha))-th smallest
-  /// calibration gap, +inf when that rank exceeds n or falls on an infinite gap. Throws
-  /// ts::Error for alpha outside (0, 1).
+  /// The largest score a set at level alpha admits: the ceil((n + 1)(1 - alpha))-th smallest
+  /// calibration score (0 when that gap is below the tie), +inf when that rank exceeds n or
+  /// falls on an infinite gap. Throws ts::Error for alpha outside (0, 1).
   double threshold(double alpha) const;
 
  private:
-  std::vector<double> finite_;
+  std::vector<double> finite_;   ///< the gaps themselves, ascending (the tie applies when scored)
   std::size_t infinite_ = 0;
+  double tie_ = 0.0;
 };
 
 struct AnswerSetMember {

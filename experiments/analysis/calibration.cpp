@@ -445,6 +445,10 @@ AnswerSetCalibration read_answer_sets(const nlohmann::ordered_json& s, const std
   if (!s.contains("alpha") || !s["alpha"].is_number() || !(s["alpha"].get<double>() > 0.0 && s["alpha"].get<double>() < 1.0))
     throw Error("alpha must be a number in (0, 1)", file, at + ".alpha");
   a.alpha = s["alpha"].get<double>();
+  if (s.contains("tie_nats") && !(s["tie_nats"].is_number() && std::isfinite(s["tie_nats"].get<double>()) &&
+                                  s["tie_nats"].get<double>() >= 0.0 && s["tie_nats"].get<double>() <= 100.0))
+    throw Error("tie_nats must be a number in [0, 100]", file, at + ".tie_nats");
+  a.tie_nats = s.contains("tie_nats") ? s["tie_nats"].get<double>() : 0.0;
   if (s.contains("simulation") && !s["simulation"].is_object())
     throw Error("expected an object (the noise, sensing and sensors settings)", file, at + ".simulation");
   // As simulation_of gives it: sorted, unset overrides (null, as version 5 wrote them) left out,
@@ -474,6 +478,7 @@ AnswerSetCalibration read_answer_sets(const nlohmann::ordered_json& s, const std
       gaps.push_back(g.get<double>());
     }
     a.steps.emplace_back(std::move(gaps), infinite);
+    a.steps.back().set_tie(a.tie_nats);
   }
   return a;
 }
@@ -502,6 +507,7 @@ nlohmann::ordered_json to_json(const Calibration& c) {
     nlohmann::ordered_json s;
     s["alpha"] = a.alpha;
     s["score"] = "log-weight gap of the true class of congruent objects to the answer (engine/recognition/answer_set.hpp)";
+    s["tie_nats"] = a.tie_nats;
     s["simulation"] = a.simulation;
     s["steps"] = nlohmann::ordered_json::array();
     for (std::size_t k = 0; k < a.steps.size(); ++k)

@@ -86,6 +86,7 @@ struct StepModels {
 /// runs drawn alike).
 struct AnswerSetCalibration {
   double alpha = 0.05;                     ///< the level sets are answered at by default
+  double tie_nats = 0.0;                   ///< gaps below this score 0 (ConformalScores::set_tie)
   nlohmann::ordered_json simulation;       ///< simulation_of the runs' configuration
   std::vector<ConformalScores> steps;      ///< step k at [k - 1]
   /// The scores of a step (1-based); steps past the last calibrated one use the last.

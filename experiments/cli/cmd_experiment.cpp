@@ -70,6 +70,7 @@ struct CalibrateOptions {
   int open_set_step = 20;        ///< at this step (the last when the runs are shorter)
   std::string step_ranges;       ///< first steps of the ranges, "1,2,3,..." ("": the default)
   std::optional<double> alpha;   ///< --alpha: the answer sets' level (unset: 0.05 when the stores allow)
+  double tie_nats = 0.0;         ///< --tie-nats: gaps below this score as the answer's class
   ProgressOptions progress;
 };
 
@@ -649,8 +650,9 @@ int run_calibrate(const CalibrateOptions& o) {
       e.gaps.resize(std::min(e.gaps.size(), e.shortest_run));
       experiments::AnswerSetCalibration a;
       a.alpha = o.alpha.value_or(0.05);
+      a.tie_nats = o.tie_nats;
       a.simulation = e.simulation;
-      for (auto& g : e.gaps) a.steps.emplace_back(std::move(g));
+      for (auto& g : e.gaps) a.steps.emplace_back(std::move(g)).set_tie(a.tie_nats);
       per_simulation.push_back({{"simulation", a.simulation}, {"runs_per_step", a.steps.front().size()},
                                 {"steps", a.steps.size()}});
       cal.answer_sets.push_back(std::move(a));
@@ -792,6 +794,11 @@ void register_experiment(CLI::App& app) {
                  "Set answers: the level their coverage guarantee is for (the set holds the truth with "
                  "probability at least 1 - alpha; default 0.05; recognize --alpha overrides it)")
       ->check(CLI::Range(1e-9, 1.0 - 1e-9));
+  cb->add_option("--tie-nats", co->tie_nats,
+                 "Set answers: a class whose log-weight gap to the answer is below this (nats) scores 0, as the "
+                 "answer's own does, on the calibration runs and the step alike (near-twins the weights cannot "
+                 "split; default 0)")
+      ->check(CLI::Range(0.0, 100.0));
   cb->add_option("--open-set-step", co->open_set_step,
                  "Open set: ... at this step (default 20; the last when runs are shorter)")
       ->check(CLI::PositiveNumber);

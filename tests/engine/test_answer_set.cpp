@@ -173,3 +173,39 @@ TEST_CASE("Coverage of conformal sets: the exact finite-sample rate k / (n + 1) 
     CHECK(size / total < 6.0);   // the sets exclude classes
   }
 }
+
+TEST_CASE("Conformal sets with a tie: gaps below it score as the answer's class, on both sides alike") {
+  // 20 calibration runs, 19 of them right (gap 0) and one a near-twin miss (gap 1e-6): without a
+  // tie the 95 % threshold is the 20th smallest, 1e-6, and a step's near-twin at 1e-5 is left out.
+  std::vector<double> cal(20, 0.0);
+  cal[7] = 1e-6;
+  const ConformalScores plain(cal);
+  CHECK(plain.threshold(0.05) == 1e-6);
+  const std::vector<double> gaps{0.0, 1e-5, 0.3, kInf};   // the answer, a near-twin, a rival, none
+  const AnswerSet without = conformal_set(gaps, plain, 0.05);
+  REQUIRE(without.informative);
+  CHECK(without.size == 1);
+  // With a tie of 0.01 nats the near-twin scores 0: in the set, its p-value 1; the rival at 0.3
+  // (above the tie, scored as its gap) stays out; the reported gap stays the gap.
+  ConformalScores tied(cal);
+  tied.set_tie(0.01);
+  CHECK(tied.tie() == 0.01);
+  CHECK(tied.threshold(0.05) == 0.0);   // every calibration score is 0
+  CHECK(tied.p_value(1e-5) == 1.0);
+  CHECK(tied.p_value(0.3) == doctest::Approx(1.0 / 21.0));
+  const AnswerSet with = conformal_set(gaps, tied, 0.05);
+  REQUIRE(with.informative);
+  REQUIRE(with.size == 2);
+  CHECK(with.members[1].cls == 1);
+  CHECK(with.members[1].gap == 1e-5);
+  // Calibration gaps above the tie keep their scores: a threshold between them is unchanged.
+  std::vector<double> spread(20);
+  for (std::size_t i = 0; i < spread.size(); ++i) spread[i] = 0.1 * double(i);
+  ConformalScores s(spread);
+  const double before = s.threshold(0.1);
+  s.set_tie(0.05);
+  CHECK(s.threshold(0.1) == before);
+  CHECK(s.p_value(0.04) == 1.0);
+  CHECK(s.p_value(0.15) == doctest::Approx(19.0 / 21.0));   // 1 + the 18 gaps 0.2 ... 1.9
+  for (double bad : {-0.1, kInf, std::nan("")}) CHECK_THROWS_AS(s.set_tie(bad), Error);
+}

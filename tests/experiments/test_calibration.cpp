@@ -650,6 +650,23 @@ TEST_CASE("Calibration files: answer sets round trip, and every bad count or num
   }
   v5["answer_sets"]["alpha"] = 2.0;
   CHECK(error_of(v5) == "answer_sets.alpha");
+  // The tie: written, read back into every step's scores; a bad one named.
+  {
+    Calibration t = c;
+    t.answer_sets[0].tie_nats = 0.01;
+    write_calibration(dir / "tie.json", t);
+    const Calibration r = read_calibration(dir / "tie.json", "f");
+    CHECK(r.answer_sets[0].tie_nats == 0.01);
+    for (const auto& st : r.answer_sets[0].steps) CHECK(st.tie() == 0.01);
+    CHECK(back.answer_sets[0].tie_nats == 0.0);   // none by default
+    CHECK(back.answer_sets[0].steps[0].tie() == 0.0);
+  }
+  for (const nlohmann::ordered_json& bad : {nlohmann::ordered_json(-0.5), nlohmann::ordered_json("x"),
+                                            nlohmann::ordered_json(1000.0)}) {
+    auto t = j;
+    t["answer_sets"][0]["tie_nats"] = bad;
+    CHECK(error_of(t) == "answer_sets[0].tie_nats");
+  }
 }
 
 TEST_CASE("Calibration files: a noise sweep's answer sets, one entry per simulation, each found by its own") {

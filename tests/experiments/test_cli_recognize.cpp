@@ -1576,6 +1576,17 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
     for (const auto& st : e["steps"]) CHECK(st["runs"] == 8);   // 4 objects x 2 runs of its level alone
   }
   CHECK(scales == std::set<double>{0.0, 2.0});
+  for (const auto& e : jw["answer_sets"]) CHECK(e["tie_nats"] == 0.0);   // none by default
+  const Run tie = touchstone(dir, "calibrate sweep.h5 --step-ranges 1,3 --alpha 0.5 --tie-nats 0.001 --out tie.json");
+  REQUIRE_MESSAGE(tie.code == 0, tie.err);
+  const auto jt2 = nlohmann::json::parse(test::read_bytes(dir / "tie.json"));
+  for (const auto& e : jt2["answer_sets"]) CHECK(e["tie_nats"] == 0.001);   // each entry
+  const Run tied = touchstone(dir, "experiment --db db.h5 --objects box,nut,ball,wedge --seed 7 --out tied.h5"
+                                   " --set sweep.noise.arm_scale=0,2 --set calibration=tie.json" + fast);
+  REQUIRE_MESSAGE(tied.code == 0, tied.err);   // its sets as the tie scores them
+  CHECK(variants_whose_sets_hold_their_p_values(dir / "tied.h5", dir / "tie.json", 0.5).size() == 2);
+  CHECK(touchstone(dir, "calibrate sweep.h5 --tie-nats -1 --out bad_tie.json").code != 0);
+  CHECK_FALSE(fs::exists(dir / "bad_tie.json"));
   // The levels' runs differ (an arm error of 0 against 6 mm): so do their scores.
   CHECK(jw["answer_sets"][0]["steps"] != jw["answer_sets"][1]["steps"]);
   const Run judged = touchstone(dir, "experiment --db db.h5 --objects box,nut,ball,wedge --seed 7 --out judged.h5"
