@@ -110,8 +110,9 @@ int AnswerSetCalibration::calibrated_step(int step) const {
 }
 
 const AnswerSetCalibration* Calibration::answer_sets_for(const nlohmann::ordered_json& simulation) const {
+  const nlohmann::ordered_json key = simulation_of(simulation);   // (idempotent: as the entries were read)
   for (const AnswerSetCalibration& a : answer_sets)
-    if (a.simulation == simulation) return &a;
+    if (simulation_of(a.simulation) == key) return &a;
   return nullptr;
 }
 
@@ -136,9 +137,12 @@ nlohmann::ordered_json simulation_of(const nlohmann::ordered_json& config) {
     const bool simulated = key == "noise" || key.starts_with("noise.") || key == "sensing" || key == "sensors" ||
                            key == "scene" || key.starts_with("scene.") || key.starts_with("probe.") ||
                            key.starts_with("fingertips.");
-    // An unset override is the profile's value, and no scene is water alone: as if the key did
-    // not exist (a file written before a key existed stays valid).
-    if (simulated && !value.is_null() && !(key == "scene" && value == "none")) s[key] = value;
+    // An unset override is the profile's value, no scene is water alone, and an arm scale of 1 is
+    // the profile's arm: as if the key did not exist (a file written before a key existed stays
+    // valid; a sweep's level 1 is the runs without the key).
+    // noise.arm_scale = 1 is its unset value, the arm as the profile has it.
+    const bool neutral = (key == "scene" && value == "none") || (key == "noise.arm_scale" && value == 1.0);
+    if (simulated && !value.is_null() && !neutral) s[key] = value;
   }
   return nlohmann::ordered_json(s);
 }

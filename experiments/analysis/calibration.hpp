@@ -97,7 +97,8 @@ struct AnswerSetCalibration {
 
 /// The simulation settings an answer-set calibration records, from an experiment configuration's
 /// JSON (touchstone's config_json): noise, noise.*, sensing, sensors, scene, scene.*, probe.*,
-/// fingertips.*, sorted by key; unset overrides (null) and scene "none" left out.
+/// fingertips.*, sorted by key; unset overrides (null), scene "none" and noise.arm_scale 1 left
+/// out.
 nlohmann::ordered_json simulation_of(const nlohmann::ordered_json& config);
 
 /// The calibration file (JSON, "format": "touchstone-calibration", version 6; versions 2 (all

@@ -727,6 +727,11 @@ TEST_CASE("The simulation an answer-set calibration holds for: noise, its overri
   CHECK(simulation_of(scene).dump() ==
         R"({"fingertips.quantization_m":0.001,"noise":"underwater","scene":"pipe","scene.pipe_radius_m":0.1,"sensors":1})");
   CHECK(simulation_of(nlohmann::ordered_json::parse(R"({"scene": "none", "noise": "ideal"})")).dump() == R"({"noise":"ideal"})");
+  // An arm scale of 1 is the profile's arm: a sweep's level 1 is the runs without the key.
+  CHECK(simulation_of(nlohmann::ordered_json::parse(R"({"noise.arm_scale": 1.0, "noise": "ideal"})")).dump() ==
+        R"({"noise":"ideal"})");
+  CHECK(simulation_of(nlohmann::ordered_json::parse(R"({"noise.arm_scale": 0.5, "noise": "ideal"})")).dump() ==
+        R"({"noise":"ideal","noise.arm_scale":0.5})");
   // An unset override (null) is the profile's value, as if absent: a calibration written before a
   // key existed still matches runs of a build that has it. Read from a file alike.
   test::TempDir dir("calibration_nulls");
@@ -738,5 +743,6 @@ TEST_CASE("The simulation an answer-set calibration holds for: noise, its overri
   write_calibration(dir / "nulls.json", c);
   const Calibration back = read_calibration(dir / "nulls.json", "f");
   CHECK(back.answer_sets_for(nlohmann::ordered_json::parse(R"({"noise": "underwater", "sensors": 1})")) != nullptr);
-  CHECK(back.answer_sets_for(a.simulation) == nullptr);   // the nulls are gone
+  CHECK(back.answer_sets[0].simulation == nlohmann::ordered_json::parse(R"({"noise": "underwater", "sensors": 1})"));
+  CHECK(back.answer_sets_for(a.simulation) == &back.answer_sets[0]);   // a lookup with nulls alike
 }
