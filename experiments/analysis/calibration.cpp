@@ -116,15 +116,18 @@ const AnswerSetCalibration* Calibration::answer_sets_for(const nlohmann::ordered
   return nullptr;
 }
 
+std::string Calibration::answer_set_simulations() const {
+  std::string sims;
+  for (const AnswerSetCalibration& a : answer_sets) sims += (sims.empty() ? "" : ", ") + a.simulation.dump();
+  return sims;
+}
+
 const AnswerSetCalibration& Calibration::single_answer_sets(const std::string& file) const {
   if (answer_sets.empty()) throw Error("the calibration has no answer sets", file, "answer_sets");
-  if (answer_sets.size() > 1) {
-    std::string sims;
-    for (const AnswerSetCalibration& a : answer_sets) sims += (sims.empty() ? "" : ", ") + a.simulation.dump();
+  if (answer_sets.size() > 1)
     throw Error("the calibration holds answer sets for " + std::to_string(answer_sets.size()) +
-                " simulations (" + sims + "), and these contacts name none: calibrate on runs of the one "
+                " simulations (" + answer_set_simulations() + "), and these contacts name none: calibrate on runs of the one "
                 "that matches them (touchstone calibrate on a store of one variant)", file, "answer_sets");
-  }
   return answer_sets.front();
 }
 

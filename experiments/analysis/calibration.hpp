@@ -126,6 +126,8 @@ struct Calibration {
   /// The answer sets of a calibration of one simulation (data without a simulation to match:
   /// `recognize`, Python). Throws ts::Error naming `file` and the key when it holds several.
   const AnswerSetCalibration& single_answer_sets(const std::string& file) const;
+  /// The simulations the answer sets hold for, for messages: "{...}, {...}".
+  std::string answer_set_simulations() const;
 
   /// The range of a step (1-based; steps past the last range's first use the last).
   const StepModels& at(int step) const;

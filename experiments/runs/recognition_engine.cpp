@@ -178,10 +178,8 @@ class RecognitionEngine final : public RunEngine {
           const auto sim = simulation_of(nlohmann::ordered_json::parse(configs_[k]));
           variants_[k].answer_sets = calibration_->answer_sets_for(sim);
           if (!variants_[k].answer_sets) {
-            std::string sims;
-            for (const AnswerSetCalibration& a : calibration_->answer_sets)
-              sims += (sims.empty() ? "" : ", ") + a.simulation.dump();
-            throw Error("the calibration's answer sets were calibrated on runs simulated with " + sims + ", variant '" +
+            throw Error("the calibration's answer sets were calibrated on runs simulated with " +
+                        calibration_->answer_set_simulations() + ", variant '" +
                         labels_[k] + "' simulates " + sim.dump() + ": calibrate on runs like these",
                         config.calibration, "answer_sets");
           }
