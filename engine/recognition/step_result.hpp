@@ -145,7 +145,7 @@ struct StepResult {
   std::vector<Hypothesis> hypotheses;  ///< the state S_t, best first
   std::vector<double> posteriors;   ///< per database object: weights summed, normalized
   std::size_t contacts = 0, free_points = 0;
-  SupportPlane support;             ///< the support the step found (found = false: none, or
+  SupportSurface support;           ///< the support the step found (found = false: none, or
                                     ///< not looked for); its contacts are not in `contacts`
   std::vector<ContactLabel> attribution;  ///< per input contact, in its order (stage
                                           ///< "attribution"; empty when it did not run)

@@ -1,7 +1,9 @@
 // The support under the object (issue 58): a seabed, a deck or a bench the hand touches as often
-// as the object, whose contacts belong to no database object. Estimated per step from the
-// contacts and free space as a plane, and its contacts set aside before recognition.
+// as the object, whose contacts belong to no database object; or the pipe it sits on. Estimated
+// per step from the contacts and free space as a plane (support.mode = plane) or a cylinder
+// (support.mode = cylinder), and its contacts set aside before recognition.
 //
+// Plane:
 // Candidates: the plane of each grasp's patch (its contacts' PCA, when flat within the tolerance),
 // or, without grasp groups (a points-only cloud), planes through seeded triplets of contacts;
 // each refitted to the contacts within `tolerance` of it. Up is the free side: where the hands
@@ -19,7 +21,20 @@
 // object explored from one side only (an L-bracket's inner face) can pass both tests: that is why
 // the support is looked for only when the user says the scene has one (support.mode = plane).
 //
-// Deterministic: candidates in grasp order, triplets from Rng(seed, step).
+// Cylinder (a pipe): candidate axes from pairs of grasp patches whose planes meet at more than
+// 15 degrees (the axis along their normals' cross product, through the point where their normal
+// lines meet, the radius their mean distance from it; the two radii within twice the tolerance
+// of each other), or without grasp groups from seeded pairs of contacts with normals. Each is
+// refitted to the contacts within the tolerance (axis: the direction least along their
+// patches' normals; then the circle of their projections, Gauss-Newton) and judged as the plane
+// is, with "above" read as outside: the free side is outside it, the other contacts lie
+// outside it, and no free space lies inside it along the stretch its contacts span. The 16
+// candidates with the most contacts on them are judged; the radius must lie within
+// [max(min_radius, 2 x tolerance), 10 m] (a finger, a bar or a bone's shaft is no pipe); the
+// one chosen has the most grasps on it, then the most contacts. A contact with a normal, or a grasp's patch, counts as on it only when
+// its normal lies within 25 degrees of the cylinder's there (a face it merely grazes does not).
+//
+// Deterministic: candidates in grasp order, triplets and pairs from Rng(seed, step).
 #pragma once
 
 #include "engine/core.hpp"
@@ -30,8 +45,11 @@
 namespace ts {
 inline namespace recognition {
 
+enum class SupportMode : int { off = 0, plane = 1, cylinder = 2 };   ///< support.mode, in its order
+
 struct SupportSettings {
-  bool enabled = false;              ///< support.mode: off | plane
+  SupportMode mode = SupportMode::off;   ///< support.mode: off | plane | cylinder
+  bool enabled() const { return mode != SupportMode::off; }
   double tolerance = 0.006;          ///< m, a contact nearer the plane than this is the support's
   std::size_t min_contacts = 12;     ///< contacts on the plane, and off it, needed to decide
   std::size_t min_grasps = 2;        ///< grasps whose patch lies on it (with grasp groups)
@@ -41,32 +59,55 @@ struct SupportSettings {
                                      ///< of Eq. 8, half the free-space resolution, as a free
                                      ///< voxel's centre may lie that far from the volume the hand
                                      ///< swept; estimate_support alone, the tolerance)
-  std::size_t triplets = 256;        ///< candidate planes without grasp groups
+  std::size_t triplets = 256;        ///< candidates without grasp groups (triplets, or pairs of
+                                     ///< contacts for a cylinder)
+  double min_radius = 0.04;          ///< m, the thinnest cylinder taken for a pipe
   double attribution = 0.01;         ///< m, a contact this near the answer's surface is the
                                      ///< object's (stage "attribution")
 };
 
-struct SupportPlane {
+/// The support a step found: a plane or a cylinder, world frame.
+struct SupportSurface {
+  enum class Shape { plane, cylinder };
   bool found = false;
-  Vec3 normal = Vec3::UnitZ();       ///< unit, up (the free side), world frame
-  double offset = 0.0;               ///< the plane: normal . x = offset
+  Shape shape = Shape::plane;
+  Vec3 normal = Vec3::UnitZ();       ///< plane: unit, up (the free side)
+  double offset = 0.0;               ///< plane: normal . x = offset
+  Vec3 axis = Vec3::UnitX();         ///< cylinder: unit, along its axis
+  Vec3 point = Vec3::Zero();         ///< cylinder: the point of its axis nearest its contacts' centroid
+  double radius = 0.0;               ///< cylinder: m
   std::size_t contacts_on = 0;       ///< input contacts within the tolerance
-  std::size_t contacts_above = 0;    ///< input contacts above it (beyond the tolerance)
+  std::size_t contacts_above = 0;    ///< input contacts above it (outside a cylinder) beyond the tolerance
   std::size_t grasps_on = 0;         ///< grasps whose patch lies on it
-  std::size_t candidates = 0;        ///< planes examined
+  std::size_t candidates = 0;        ///< candidates examined
 
-  double signed_distance(const Vec3& x) const { return normal.dot(x) - offset; }
+  /// Positive on the free side: above the plane, outside the cylinder.
+  double signed_distance(const Vec3& x) const {
+    if (shape == Shape::plane) return normal.dot(x) - offset;
+    const Vec3 d = x - point;
+    return (d - axis.dot(d) * axis).norm() - radius;
+  }
+  /// The unit normal towards the free side at the surface point nearest x (on a cylinder's axis:
+  /// any direction across it).
+  Vec3 normal_at(const Vec3& x) const {
+    if (shape == Shape::plane) return normal;
+    const Vec3 d = x - point;
+    const Vec3 r = d - axis.dot(d) * axis;
+    if (r.norm() > 0.0) return r.normalized();
+    return (std::abs(axis.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY()).cross(axis).normalized();
+  }
 };
 
-/// The support of one step's contacts (world frame), or found = false. Throws ts::Error naming
+/// The support of one step's contacts (world frame), of settings.mode's shape, or found = false
+/// (also with mode off). Throws ts::Error naming
 /// the field ("support.tolerance", ...) on settings out of range.
-SupportPlane estimate_support(const PointCloud& contacts, const GraspGroups& grasps, const std::vector<Vec3>& free,
+SupportSurface estimate_support(const PointCloud& contacts, const GraspGroups& grasps, const std::vector<Vec3>& free,
                               const SupportSettings& settings, std::uint64_t seed, std::uint64_t step);
 
 /// `contacts` without the points the support explains (within its tolerance); `grasps` likewise
 /// (their free points and pivots kept, grasps left empty kept empty).
-PointCloud without_support(const PointCloud& contacts, const SupportPlane& plane, double tolerance);
-GraspGroups without_support(const GraspGroups& grasps, const SupportPlane& plane, double tolerance);
+PointCloud without_support(const PointCloud& contacts, const SupportSurface& support, double tolerance);
+GraspGroups without_support(const GraspGroups& grasps, const SupportSurface& support, double tolerance);
 
 }  // namespace recognition
 }  // namespace ts

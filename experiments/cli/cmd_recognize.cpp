@@ -131,6 +131,26 @@ nlohmann::ordered_json pose_json(const Pose& T) {
   return {{"t", {t.x(), t.y(), t.z()}}, {"q", {q.w(), q.x(), q.y(), q.z()}}};
 }
 
+/// The support a step found: its shape (a plane: normal . x = offset_m, normal up; a cylinder:
+/// its axis, a point of it and its radius), the contacts and grasps it explains; null: none.
+nlohmann::ordered_json support_json(const SupportSurface& u) {
+  if (!u.found) return nullptr;
+  nlohmann::ordered_json j;
+  if (u.shape == SupportSurface::Shape::plane) {
+    j["shape"] = "plane";
+    j["normal"] = {u.normal.x(), u.normal.y(), u.normal.z()};
+    j["offset_m"] = u.offset;
+  } else {
+    j["shape"] = "cylinder";
+    j["axis"] = {u.axis.x(), u.axis.y(), u.axis.z()};
+    j["point"] = {u.point.x(), u.point.y(), u.point.z()};
+    j["radius_m"] = u.radius;
+  }
+  j["contacts"] = u.contacts_on;
+  j["grasps"] = u.grasps_on;
+  return j;
+}
+
 /// A step's attribution: counts, and the labels as one character a contact in the order of the
 /// step's contact cloud (o: the object's, s: the support's, u: unexplained); null when the stage
 /// "attribution" did not run.
@@ -581,13 +601,9 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     st["log_weight"] = r.valid ? nlohmann::ordered_json(r.best.log_weight) : nullptr;
     st["contacts"] = r.contacts;
     st["free_points"] = r.free_points;
-    // The support under the object (support.mode = plane): its plane and the contacts set aside.
-    st["support"] = r.support.found ? nlohmann::ordered_json{{"normal", {r.support.normal.x(), r.support.normal.y(),
-                                                                          r.support.normal.z()}},
-                                                              {"offset_m", r.support.offset},
-                                                              {"contacts", r.support.contacts_on},
-                                                              {"grasps", r.support.grasps_on}}
-                                    : nlohmann::ordered_json(nullptr);
+    // The support under the object (support.mode plane or cylinder): its surface and the
+    // contacts set aside.
+    st["support"] = support_json(r.support);
     // What explains each contact (stage "attribution"): the answer, the support, or nothing.
     st["attribution"] = attribution_json(r.attribution);
     st["unobservable_dof"] = r.unobservable_dof;

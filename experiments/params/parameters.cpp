@@ -283,27 +283,33 @@ std::vector<Parameter> declaration() {
                    "least recently wanted are dropped and rebuilt when wanted again. Never changes results",
                    {"--sparse-table-budget", "sparse_table_budget"}, TS_FIELD(recognizer.sparse.table_budget_mb)));
   // The support under the object (engine/recognition/support.hpp).
-  d.push_back(choice("support.mode", {"off", "plane"}, "",
-                     "The support under the object (a seabed, a deck): off, or plane (looked for among the "
-                     "contacts each step; its contacts are set aside and the object matched to the rest)",
-                     {"--support"}, TS_FIELD(recognizer.support.enabled)));
+  d.push_back(choice("support.mode", {"off", "plane", "cylinder"}, "",
+                     "The support under the object: off, plane (a seabed, a deck) or cylinder (a pipe it sits "
+                     "on), looked for among the contacts each step; its contacts are set aside and the object "
+                     "matched to the rest",
+                     {"--support"}, TS_FIELD(recognizer.support.mode)));
   d.push_back(real("support.tolerance_m", "m", 1e-4, 0.1, "",
-                   "Support: a contact nearer its plane than this is the support's",
+                   "Support: a contact nearer its plane or cylinder than this is the support's",
                    {"--support-tolerance"}, TS_FIELD(recognizer.support.tolerance)));
   d.push_back(integer("support.min_contacts", 3, kLarge, "",
-                      "Support: contacts on the plane, and off it, needed to decide",
+                      "Support: contacts on the plane or cylinder, and off it, needed to decide",
                       {"--support-min-contacts"}, TS_FIELD(recognizer.support.min_contacts)));
   d.push_back(real("support.above_share", "", 0.51, 1, "",
-                   "Support: of the contacts off the plane, the share that must lie above it (the object rests "
-                   "on its support; a face of the object has the object behind it)",
+                   "Support: of the contacts off the plane or cylinder, the share that must lie above or outside "
+                   "it (the object rests on its support; a face of the object has the object behind it)",
                    {"--support-above-share"}, TS_FIELD(recognizer.support.above_share)));
   d.push_back(real("support.free_margin_m", "m", -1, 1, "",
-                   "Support: free space deeper than this below the plane refutes it (< 0: the tolerance plus "
+                   "Support: free space deeper than this below the plane (inside the cylinder) refutes it (< 0: "
+                   "the tolerance plus "
                    "half the free-space resolution)",
                    {"--support-free-margin"}, TS_FIELD(recognizer.support.free_margin)));
+  d.push_back(real("support.min_radius_m", "m", 1e-3, 10, "",
+                   "Support: the thinnest cylinder taken for a pipe (support.mode = cylinder); the object's own "
+                   "thinner round parts (a finger, a bar, a bone's shaft) are not",
+                   {"--support-min-radius"}, TS_FIELD(recognizer.support.min_radius)));
   d.push_back(real("support.attribution_m", "m", 1e-4, 1, "",
                    "A contact this near the answer's surface is the object's; the others are the support's "
-                   "or unexplained (the step's attribution; with support.mode = plane or evaluate.outlier_m > 0)",
+                   "or unexplained (the step's attribution; with support.mode on or evaluate.outlier_m > 0)",
                    {"--attribution"}, TS_FIELD(recognizer.support.attribution)));
   d.push_back(integer("prior.angle_bins", 1, 64, "", "Shape prior: bins of each angle term",
                       {"--prior-angle-bins"}, TS_FIELD(recognizer.prior.angle_bins)));

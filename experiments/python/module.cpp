@@ -309,8 +309,17 @@ py::dict step_dict(const Database& db, const StepResult& r, const std::optional<
   o["free_points"] = r.free_points;
   if (r.support.found) {
     py::dict sp;
-    sp["normal"] = vector_of(std::vector<double>{r.support.normal.x(), r.support.normal.y(), r.support.normal.z()});
-    sp["offset_m"] = r.support.offset;
+    const SupportSurface& u = r.support;
+    if (u.shape == SupportSurface::Shape::plane) {
+      sp["shape"] = "plane";
+      sp["normal"] = vector_of(std::vector<double>{u.normal.x(), u.normal.y(), u.normal.z()});
+      sp["offset_m"] = u.offset;
+    } else {
+      sp["shape"] = "cylinder";
+      sp["axis"] = vector_of(std::vector<double>{u.axis.x(), u.axis.y(), u.axis.z()});
+      sp["point"] = vector_of(std::vector<double>{u.point.x(), u.point.y(), u.point.z()});
+      sp["radius_m"] = u.radius;
+    }
     sp["contacts"] = r.support.contacts_on;
     sp["grasps"] = r.support.grasps_on;
     o["support"] = sp;

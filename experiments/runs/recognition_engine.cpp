@@ -493,7 +493,8 @@ class RecognitionEngine final : public RunEngine {
         double found = looked ? (sr.support.found ? 1.0 : 0.0) : nan, tilt = nan, height = nan;
         if (support && sr.support.found) {
           const ClosestPoint under = support->closest(rec.truth.translation());
-          tilt = std::acos(std::min(1.0, std::abs(under.normal.dot(sr.support.normal)))) * 180.0 / std::numbers::pi;
+          const Vec3 found_normal = sr.support.normal_at(under.point);
+          tilt = std::acos(std::min(1.0, std::abs(under.normal.dot(found_normal)))) * 180.0 / std::numbers::pi;
           height = sr.support.signed_distance(under.point);
         }
         s.values.insert(s.values.end(), {found, tilt, height});

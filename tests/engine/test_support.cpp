@@ -7,6 +7,8 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <utility>
+#include <vector>
 
 using namespace ts;
 
@@ -63,8 +65,8 @@ TEST_CASE("support: a box on a seabed; its plane, the contacts set aside") {
     patch(g, cloud, c, Vec3::UnitZ());
   const std::vector<Vec3> free = free_above(h);
   SupportSettings s;
-  s.enabled = true;
-  const SupportPlane p = estimate_support(cloud, g, free, s, 1, 1);
+  s.mode = SupportMode::plane;
+  const SupportSurface p = estimate_support(cloud, g, free, s, 1, 1);
   REQUIRE(p.found);
   CHECK(p.normal.dot(Vec3::UnitZ()) > std::cos(0.5 * 3.14159265 / 180));
   CHECK(std::abs(p.offset) < 1e-9);
@@ -90,13 +92,13 @@ TEST_CASE("support: a box on a seabed; its plane, the contacts set aside") {
   for (Vec3& q : mg.free) q = T * q;
   std::vector<Vec3> mfree = free;
   for (Vec3& q : mfree) q = T * q;
-  const SupportPlane tp = estimate_support(moved, mg, mfree, s, 1, 1);
+  const SupportSurface tp = estimate_support(moved, mg, mfree, s, 1, 1);
   REQUIRE(tp.found);
   CHECK(tp.normal.dot(T.linear() * Vec3::UnitZ()) > std::cos(0.5 * 3.14159265 / 180));
   CHECK(std::abs(tp.signed_distance(T.translation())) < 1e-9);
 
   // Without grasp groups (a points-only cloud): seeded triplets find it too.
-  const SupportPlane pts = estimate_support(cloud, {}, free, s, 1, 1);
+  const SupportSurface pts = estimate_support(cloud, {}, free, s, 1, 1);
   REQUIRE(pts.found);
   CHECK(pts.normal.dot(Vec3::UnitZ()) > std::cos(0.5 * 3.14159265 / 180));
   CHECK(pts.contacts_on == 75);
@@ -113,7 +115,7 @@ TEST_CASE("support: a box alone, and a block on a plate the hand went round, hav
   patch(g, cloud, Vec3(-0.02, 0.01, 0.0), -Vec3::UnitZ());
   patch(g, cloud, Vec3(0.02, -0.01, 0.0), -Vec3::UnitZ());
   SupportSettings s;
-  s.enabled = true;
+  s.mode = SupportMode::plane;
   std::vector<Vec3> free = free_above(h, -0.2);
   CHECK_FALSE(estimate_support(cloud, g, free, s, 1, 1).found);
 
@@ -132,6 +134,104 @@ TEST_CASE("support: a box alone, and a block on a plate the hand went round, hav
   // Touched on its underside too (contacts below the plane): no support.
   for (const Vec3& c : {Vec3(0.08, 0.0, -0.02), Vec3(-0.05, 0.05, -0.02)}) patch(pg, plate, c, -Vec3::UnitZ());
   CHECK_FALSE(estimate_support(plate, pg, free_above(h), s, 1, 1).found);
+}
+
+namespace {
+
+// A pipe along x (radius r, its top along z = 0): patches on it at the given angles from its top
+// (radians, about x) and positions along it.
+void pipe_patches(GraspGroups& g, PointCloud& cloud, double r, const std::vector<std::pair<double, double>>& at) {
+  for (const auto& [angle, x] : at) {
+    const Vec3 n(0, std::sin(angle), std::cos(angle));
+    patch(g, cloud, Vec3(x, 0, -r) + r * n, n);
+  }
+}
+
+// Free space: a lattice round a box on the pipe, outside both (and inside the pipe too when
+// `inside`), 2 cm apart.
+std::vector<Vec3> free_round_pipe(const Vec3& h, double r, bool inside = false) {
+  std::vector<Vec3> out;
+  for (double x = -0.2; x <= 0.2; x += 0.02)
+    for (double y = -0.2; y <= 0.2; y += 0.02)
+      for (double z = -0.25; z <= 0.2; z += 0.02) {
+        const bool in_box = std::abs(x) < h.x() + 0.005 && std::abs(y) < h.y() + 0.005 && z > -0.005 && z < 2 * h.z() + 0.005;
+        const double axis = std::hypot(y, z + r);
+        if (in_box || (axis < r + 0.005 && !(inside && axis < 0.5 * r))) continue;
+        out.emplace_back(x, y, z);
+      }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("support: a box on a pipe; its cylinder (axis, radius), the contacts set aside") {
+  const Vec3 h(0.05, 0.04, 0.03);
+  const double r = 0.08;
+  GraspGroups g;
+  PointCloud cloud;
+  box_on_floor(g, cloud, h);
+  const std::size_t object_contacts = cloud.points.size();
+  pipe_patches(g, cloud, r, {{0.6, 0.1}, {-0.7, -0.08}, {0.9, -0.12}, {-0.4, 0.14}});
+  SupportSettings s;
+  s.mode = SupportMode::cylinder;
+  const std::vector<Vec3> free = free_round_pipe(h, r);
+  const SupportSurface c = estimate_support(cloud, g, free, s, 1, 1);
+  REQUIRE(c.found);
+  CHECK(c.shape == SupportSurface::Shape::cylinder);
+  CHECK(std::abs(c.axis.dot(Vec3::UnitX())) > std::cos(1.0 * 3.14159265 / 180));
+  CHECK(std::abs(c.radius - r) < 5e-4);
+  const Vec3 off = c.point - Vec3(0, 0, -r);   // from the true axis, across it
+  CHECK((off - off.dot(Vec3::UnitX()) * Vec3::UnitX()).norm() < 5e-4);
+  CHECK(c.grasps_on == 4);
+  CHECK(c.contacts_on == 100);
+  CHECK(c.contacts_above == object_contacts);
+  CHECK(std::abs(c.signed_distance(Vec3(0, 0, 0.05)) - 0.05) < 5e-4);
+  CHECK(c.normal_at(Vec3(0.3, 0, 0.05)).dot(Vec3::UnitZ()) > 0.999);
+  const PointCloud rest = without_support(cloud, c, s.tolerance);
+  CHECK(rest.points.size() == object_contacts);
+
+  // The plane finds no seabed there: the pipe's patches are not one plane with the rest above.
+  s.mode = SupportMode::plane;
+  CHECK_FALSE(estimate_support(cloud, g, free, s, 1, 1).found);
+  s.mode = SupportMode::cylinder;
+
+  // Without grasp groups (points with normals): seeded pairs of contacts find it too.
+  const SupportSurface pts = estimate_support(cloud, {}, free, s, 1, 1);
+  REQUIRE(pts.found);
+  CHECK(std::abs(pts.radius - r) < 5e-4);
+  CHECK(pts.contacts_on == 100);
+
+  // Free space inside it (the hand went through): no pipe.
+  CHECK_FALSE(estimate_support(cloud, g, free_round_pipe(h, r, true), s, 1, 1).found);
+}
+
+TEST_CASE("support: a bar alone, touched round and on its ends, is no pipe") {
+  // An anode bar along x (radius 3 cm, ends at x = +-0.1): its round face is a cylinder, but its
+  // ends' contacts lie inside it (the object behind the face).
+  const double r = 0.03;
+  GraspGroups g;
+  PointCloud cloud;
+  for (const auto& [angle, x] : std::vector<std::pair<double, double>>{{0.3, 0.05}, {1.4, -0.04}, {2.6, 0.0}, {-1.0, 0.07}}) {
+    const Vec3 n(0, std::sin(angle), std::cos(angle));
+    patch(g, cloud, Vec3(x, 0, 0) + r * n, n);
+  }
+  for (int e : {-1, 1}) patch(g, cloud, Vec3(e * 0.1, 0.005, -0.004), Vec3(e, 0, 0));
+  std::vector<Vec3> free;
+  for (double x = -0.2; x <= 0.2; x += 0.02)
+    for (double y = -0.1; y <= 0.1; y += 0.02)
+      for (double z = -0.1; z <= 0.1; z += 0.02)
+        if (std::abs(x) > 0.105 || std::hypot(y, z) > r + 0.005) free.emplace_back(x, y, z);
+  SupportSettings s;
+  s.mode = SupportMode::cylinder;
+  CHECK_FALSE(estimate_support(cloud, g, free, s, 1, 1).found);
+  // Its round face alone says nothing either way: too few contacts off it to decide.
+  GraspGroups round;
+  PointCloud round_cloud;
+  for (double angle : {0.3, 1.4, 2.6, -1.0}) {
+    const Vec3 n(0, std::sin(angle), std::cos(angle));
+    patch(round, round_cloud, r * n, n);
+  }
+  CHECK_FALSE(estimate_support(round_cloud, round, free, s, 1, 1).found);
 }
 
 TEST_CASE("support: settings out of range are named") {

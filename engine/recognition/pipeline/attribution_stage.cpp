@@ -1,9 +1,9 @@
 // Stage "attribution": what explains each of the step's contacts (issue 58). A contact is the
-// support's when the stage "support" set it aside (within its tolerance of the plane), the
+// support's when the stage "support" set it aside (within its tolerance of the support), the
 // object's when it lies within support.attribution_m of the answer's surface at the answer's
 // pose, and unexplained otherwise (something else was touched: a neighbour, a fixture; or the
 // answer is wrong). StepResult::attribution, one label per input contact in its order. Left out
-// unless the support is looked for (support.mode = plane) or the background term is on
+// unless the support is looked for (support.mode plane or cylinder) or the background term is on
 // (evaluate.outlier_m > 0): it is what those users ask of the answer.
 #include "engine/recognition/pipeline/stages.hpp"
 
@@ -19,7 +19,7 @@ class AttributionStage final : public Stage {
   std::string_view name() const override { return "attribution"; }
 
   std::string skip_reason(const StepContext& c) const override {
-    if (!c.s.support.enabled && !(c.s.evaluate.outlier_m > 0.0)) return "support.mode off, evaluate.outlier_m 0";
+    if (!c.s.support.enabled() && !(c.s.evaluate.outlier_m > 0.0)) return "support.mode off, evaluate.outlier_m 0";
     return {};
   }
 
@@ -31,7 +31,7 @@ class AttributionStage final : public Stage {
     std::vector<ContactLabel>& out = c.res.attribution;
     out.assign(in.size(), ContactLabel::unexplained);
     // The support's (as the stage "support" set them aside), then the rest judged on the answer.
-    const SupportPlane& sp = c.res.support;
+    const SupportSurface& sp = c.res.support;
     std::vector<Vec3> points;
     std::vector<std::size_t> index;
     for (std::size_t i = 0; i < in.size(); ++i) {

@@ -1,6 +1,7 @@
-// Stage "support": the plane under the object (a seabed) from the step's contacts and free space,
-// and the inputs without the contacts it explains (support.hpp). Reads RecognizerSettings::support;
-// left out unless support.mode = plane.
+// Stage "support": the plane under the object (a seabed) or the cylinder it sits on (a pipe) from
+// the step's contacts and free space, and the inputs without the contacts it explains
+// (support.hpp). Reads RecognizerSettings::support; left out unless support.mode is plane or
+// cylinder.
 #include "engine/recognition/pipeline/stages.hpp"
 
 #include "engine/detail.hpp"
@@ -14,7 +15,7 @@ class SupportStage final : public Stage {
   std::string_view name() const override { return "support"; }
 
   std::string skip_reason(const StepContext& c) const override {
-    return c.s.support.enabled ? std::string() : std::string("support.mode off");
+    return c.s.support.enabled() ? std::string() : std::string("support.mode off");
   }
 
   void run(StepContext& c) const override {
