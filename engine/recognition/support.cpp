@@ -197,9 +197,10 @@ bool cylinder_through(const Vec3& c1, const Vec3& n1, const Vec3& c2, const Vec3
 }
 
 /// The circle (centre, radius) of `q` (2-D points), refined from `c`, `r` by Gauss-Newton on
-/// the distances; false when it does not converge to a finite circle.
+/// the distances; false when it does not converge (a step under 1e-9 m within 20) to a finite
+/// circle, e.g. points all at one place.
 bool fit_circle(const std::vector<Eigen::Vector2d>& q, Eigen::Vector2d& c, double& r) {
-  for (int it = 0; it < 10; ++it) {
+  for (int it = 0; it < 20; ++it) {
     Mat3 JtJ = Mat3::Zero();
     Vec3 Jtr = Vec3::Zero();
     for (const Eigen::Vector2d& x : q) {
@@ -217,9 +218,9 @@ bool fit_circle(const std::vector<Eigen::Vector2d>& q, Eigen::Vector2d& c, doubl
     if (!step.allFinite()) return false;
     c += step.head<2>();
     r += step.z();
-    if (step.norm() < 1e-9) break;
+    if (step.norm() < 1e-9) return std::isfinite(r) && r > 0.0;
   }
-  return std::isfinite(r) && r > 0.0;
+  return false;
 }
 
 struct CylinderJudge {
@@ -240,8 +241,8 @@ struct CylinderJudge {
     return std::abs(r.dot(n)) > std::cos(25.0 * std::numbers::pi / 180.0) * r.norm() * n.norm();
   }
 
-  /// The contacts on `c`: within the tolerance, and with their normals (when they have them)
-  /// across it.
+  /// The contacts on `c` that decide and fit it: within the tolerance, and with their normals
+  /// (when they have them) across it. (Set aside are all within the tolerance, as for a plane.)
   std::vector<std::size_t> on(const Cylinder& c) const {
     std::vector<std::size_t> out;
     for (std::size_t i = 0; i < contacts.points.size(); ++i)
@@ -356,7 +357,8 @@ struct CylinderJudge {
     out.axis = c.a;
     out.point = c.p;
     out.radius = c.r;
-    out.contacts_on = idx.size();
+    out.contacts_on = static_cast<std::size_t>(std::count_if(contacts.points.begin(), contacts.points.end(),
+                                                             [&](const Vec3& p) { return std::abs(c.distance(p)) < tol; }));
     out.contacts_above = *above;
     out.grasps_on = on_grasps.size();
     return out;
@@ -382,7 +384,8 @@ SupportSurface estimate_cylinder(const PointCloud& contacts, const GraspGroups& 
       if (cylinder_through(patches[g].point, patches[g].normal, patches[h].point, patches[h].normal, agree, c))
         candidates.push_back(c);
     }
-  if (grasps.empty() && contacts.has_normals() && contacts.points.size() >= 2) {
+  if (candidates.empty() && contacts.has_normals() && contacts.points.size() >= 2) {   // no grasp groups, or
+                                                                                      // fewer than two flat patches
     Rng rng(seed, kStreamSupport, step);
     const std::size_t n = contacts.points.size();
     for (std::size_t k = 0; k < s.triplets; ++k) {

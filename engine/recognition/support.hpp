@@ -24,7 +24,8 @@
 // Cylinder (a pipe): candidate axes from pairs of grasp patches whose planes meet at more than
 // 15 degrees (the axis along their normals' cross product, through the point where their normal
 // lines meet, the radius their mean distance from it; the two radii within twice the tolerance
-// of each other), or without grasp groups from seeded pairs of contacts with normals. Each is
+// of each other), or (without grasp groups, or no such pair) from seeded pairs of contacts with
+// normals. Each is
 // refitted to the contacts within the tolerance (axis: the direction least along their
 // patches' normals; then the circle of their projections, Gauss-Newton) and judged as the plane
 // is, with "above" read as outside: the free side is outside it, the other contacts lie

@@ -199,6 +199,9 @@ TEST_CASE("support: a box on a pipe; its cylinder (axis, radius), the contacts s
   const SupportSurface pts = estimate_support(cloud, {}, free, s, 1, 1);
   REQUIRE(pts.found);
   CHECK(std::abs(pts.radius - r) < 5e-4);
+  CHECK(std::abs(pts.axis.dot(Vec3::UnitX())) > std::cos(1.0 * 3.14159265 / 180));
+  const Vec3 pts_off = pts.point - Vec3(0, 0, -r);
+  CHECK((pts_off - pts_off.dot(Vec3::UnitX()) * Vec3::UnitX()).norm() < 5e-4);
   CHECK(pts.contacts_on == 100);
 
   // Free space inside it (the hand went through): no pipe.
@@ -223,6 +226,7 @@ TEST_CASE("support: a bar alone, touched round and on its ends, is no pipe") {
         if (std::abs(x) > 0.105 || std::hypot(y, z) > r + 0.005) free.emplace_back(x, y, z);
   SupportSettings s;
   s.mode = SupportMode::cylinder;
+  s.min_radius = 0.02;   // (the default, 4 cm, would refuse the bar for its radius alone)
   CHECK_FALSE(estimate_support(cloud, g, free, s, 1, 1).found);
   // Its round face alone says nothing either way: too few contacts off it to decide.
   GraspGroups round;
@@ -246,6 +250,14 @@ TEST_CASE("support: settings out of range are named") {
   s = {};
   s.above_share = 0.4;
   CHECK_THROWS_AS(estimate_support({}, {}, {}, s, 1, 1), Error);
+  s = {};
+  s.min_radius = 0;
+  try {
+    estimate_support({}, {}, {}, s, 1, 1);
+    FAIL("accepted min_radius 0");
+  } catch (const Error& e) {
+    CHECK(e.field() == "support.min_radius");
+  }
   s = {};
   CHECK_FALSE(estimate_support({}, {}, {}, s, 1, 1).found);   // nothing to decide on
 }

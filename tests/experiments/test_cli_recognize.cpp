@@ -858,7 +858,6 @@ TEST_CASE("cli pipe: recognize --support cylinder finds the pipe under the box a
   CHECK(last["support"]["shape"] == "cylinder");
   CHECK(std::abs(last["support"]["radius_m"].get<double>() - radius) < 0.002);
   CHECK(std::abs(last["support"]["axis"][2].get<double>()) < std::sin(2.0 * 3.14159265 / 180));   // horizontal
-  CHECK(last["support"]["contacts"].get<int>() >= 12);
   CHECK(last["attribution"]["support"] == last["support"]["contacts"]);
   // The true pipe's axis: its mesh's centroid and longest direction (it is longer than wide).
   const Mesh pipe = io::read_log(dir / "pipe.h5").truth->support;
@@ -880,13 +879,17 @@ TEST_CASE("cli pipe: recognize --support cylinder finds the pipe under the box a
   REQUIRE(touchstone(dir, "log export pipe.h5 --out cloud.ply").code == 0);
   const PointCloud cloud = io::read_cloud(dir / "cloud.ply");
   REQUIRE(cloud.size() == labels.size());
-  std::size_t set_aside = 0;
+  std::size_t set_aside = 0, on_pipe = 0, missed = 0;
   for (std::size_t i = 0; i < cloud.size(); ++i) {
+    const bool on = std::abs(from_axis(cloud.points[i]) - radius) < 0.001;   // truly on it (ideal noise)
+    on_pipe += on;
+    missed += on && labels[i] != 's';
     if (labels[i] != 's') continue;
     ++set_aside;
     CHECK(std::abs(from_axis(cloud.points[i]) - radius) < 0.006);
   }
-  CHECK(set_aside >= 12);
+  CHECK(on_pipe >= 24);      // (the off-target grasps touched it)
+  CHECK(missed == 0);        // every contact on the pipe set aside
   // An experiment: the pipe found in the step's runs, level with the true one and at its height.
   const Run e = touchstone(dir, "experiment --db db.h5 --objects box --runs 1 --steps 24 --pool 24 --set noise=ideal "
                                 "--set scene=pipe --set scene.pipe_radius_m=0.08 --set scene.off_target=0.5 "

@@ -346,6 +346,31 @@ def test_attribution_is_the_commands(built, db, tmp_path):
     assert (last.attribution == 0).mean() > 0.95   # no scene: the right answer explains its contacts
 
 
+def test_support_is_the_commands(built, db, tmp_path):
+    # The object on a pipe: support.mode = cylinder finds it in Python as the command does.
+    root, names = built
+    log = ts.simulate(db, names[1], grasps=20, noise="ideal", seed=5,
+                      params={"scene": "pipe", "scene.pipe_radius_m": 0.08, "scene.off_target": 0.4})
+    path = tmp_path / "pipe.h5"
+    log.write(str(path))
+    cli = json.loads(run("recognize", "--db", root / "db.h5", "--log", path, "--json", "--seed", 2,
+                         "--support", "cylinder"))
+    steps = ts.Recognizer(db, seed=2, params={"support.mode": "cylinder"}).recognize_log(ts.read_log(str(path)))
+    found = 0
+    for py, c in zip(steps, cli["steps"]):
+        assert (py.support is None) == (c["support"] is None)
+        if py.support is None:
+            continue
+        found += 1
+        assert py.support["shape"] == c["support"]["shape"] == "cylinder"
+        np.testing.assert_array_equal(py.support["axis"], c["support"]["axis"])
+        np.testing.assert_array_equal(py.support["point"], c["support"]["point"])
+        assert py.support["radius_m"] == c["support"]["radius_m"]
+        assert py.support["contacts"] == c["support"]["contacts"]
+    assert found > 0
+    assert abs(steps[-1].support["radius_m"] - 0.08) < 0.002
+
+
 def test_explain_is_the_commands_and_changes_no_answer(built, db, tmp_path):
     root, names = built
     log = ts.simulate(db, names[1], grasps=6, seed=5)

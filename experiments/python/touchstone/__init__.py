@@ -86,11 +86,12 @@ class StepResult:
     position_error_m: Optional[float] = None
     orientation_error_deg: Optional[float] = None
     symmetric_orientation_error_deg: Optional[float] = None
-    # The support under the object (params={"support.mode": "plane"}): {"normal" (unit, up, world),
-    # "offset_m" (the plane normal . x = offset_m), "contacts", "grasps"} it explains and were set
-    # aside; None: none found or not looked for
+    # The support under the object (params={"support.mode": "plane"} or "cylinder"): {"shape":
+    # "plane", "normal" (unit, up, world), "offset_m" (the plane normal . x = offset_m)} or
+    # {"shape": "cylinder", "axis" (unit), "point" (on the axis), "radius_m"}, with the "contacts"
+    # and "grasps" it explains, set aside; None: none found or not looked for
     support: Optional[Dict[str, Any]] = None
-    # What explains each contact of the step's cloud (support.mode = "plane" or evaluate.outlier_m > 0),
+    # What explains each contact of the step's cloud (support.mode on or evaluate.outlier_m > 0),
     # one uint8 a contact: 0 the answer's, 1 the support's, 2 unexplained; None: not labelled
     attribution: Optional[Any] = None
     # The set answer with a calibration (Recognizer(calibration=...)): {"alpha", "informative",
