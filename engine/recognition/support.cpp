@@ -38,6 +38,24 @@ bool fit_plane(const std::vector<Vec3>& points, Plane& out) {
   return true;
 }
 
+/// Per grasp, the plane of its patch when flat within half the tolerance (RMS), else a plane
+/// with a zero normal.
+std::vector<Plane> flat_patches(const GraspGroups& grasps, double tolerance) {
+  std::vector<Plane> out(grasps.grasps(), Plane{Vec3::Zero(), Vec3::Zero(), 0.0});
+  for (std::size_t g = 0; g < grasps.grasps(); ++g) {
+    const std::vector<Vec3> patch(grasps.points.begin() + grasps.first[g], grasps.points.begin() + grasps.first[g + 1]);
+    Plane p;
+    if (fit_plane(patch, p) && p.rms < 0.5 * tolerance) out[g] = p;
+  }
+  return out;
+}
+
+/// Appends the free points of grasp g's hand (none when unknown) to `out`.
+void add_hand_free_points(const GraspGroups& grasps, std::size_t g, std::vector<const Vec3*>& out) {
+  if (g + 1 < grasps.free_first.size())
+    for (std::uint32_t i = grasps.free_first[g]; i < grasps.free_first[g + 1]; ++i) out.push_back(&grasps.free[i]);
+}
+
 void check(const SupportSettings& s) {
   auto require = [](bool ok, const char* key, const char* what) {
     if (!ok) throw Error(std::string(key) + " " + what, {}, key);
@@ -126,9 +144,7 @@ struct Judge {
       for (std::uint32_t i = a; i < b; ++i) near += std::abs(plane.normal.dot(grasps.points[i] - c)) < tol;
       if (10 * near < 8 * (b - a)) continue;   // 80 % of the patch on the plane
       ++grasps_on;
-      if (g + 1 < grasps.free_first.size())
-        for (std::uint32_t i = grasps.free_first[g]; i < grasps.free_first[g + 1]; ++i)
-          witnesses.push_back(&grasps.free[i]);
+      add_hand_free_points(grasps, g, witnesses);
     }
     if (!grasps.empty() && grasps_on < s.min_grasps) return out;
     const double reach = radius + 0.05;
@@ -324,9 +340,7 @@ struct CylinderJudge {
     // The free side is outside: the hands that touched it, or the free space near it, with
     // one in 20 inside at most (a cylinder through the object's faces has hands inside it).
     std::vector<const Vec3*> witnesses;
-    for (std::size_t g : on_grasps)
-      if (g + 1 < grasps.free_first.size())
-        for (std::uint32_t i = grasps.free_first[g]; i < grasps.free_first[g + 1]; ++i) witnesses.push_back(&grasps.free[i]);
+    for (std::size_t g : on_grasps) add_hand_free_points(grasps, g, witnesses);
     if (witnesses.empty())
       for (const Vec3& q : free)
         if (std::abs(c.distance(q)) < 0.05 && c.a.dot(q - c.p) > lo - 0.05 && c.a.dot(q - c.p) < hi + 0.05)
@@ -369,12 +383,7 @@ SupportSurface estimate_cylinder(const PointCloud& contacts, const GraspGroups& 
                                  const SupportSettings& s, std::uint64_t seed, std::uint64_t step) {
   // Surface elements: each grasp's patch (when flat within the tolerance), or without grasp
   // groups seeded contacts with their normals.
-  std::vector<Plane> patches(grasps.grasps(), Plane{Vec3::Zero(), Vec3::Zero(), 0.0});
-  for (std::size_t g = 0; g < grasps.grasps(); ++g) {
-    const std::vector<Vec3> patch(grasps.points.begin() + grasps.first[g], grasps.points.begin() + grasps.first[g + 1]);
-    Plane p;
-    if (fit_plane(patch, p) && p.rms < 0.5 * s.tolerance) patches[g] = p;
-  }
+  const std::vector<Plane> patches = flat_patches(grasps, s.tolerance);
   const double agree = 2.0 * s.tolerance;
   std::vector<Cylinder> candidates;
   for (std::size_t g = 0; g < patches.size(); ++g)
@@ -421,11 +430,8 @@ SupportSurface estimate_support(const PointCloud& contacts, const GraspGroups& g
   if (s.mode == SupportMode::off) return {};
   if (s.mode == SupportMode::cylinder) return estimate_cylinder(contacts, grasps, free, s, seed, step);
   std::vector<Plane> candidates;
-  for (std::size_t g = 0; g < grasps.grasps(); ++g) {
-    const std::vector<Vec3> patch(grasps.points.begin() + grasps.first[g], grasps.points.begin() + grasps.first[g + 1]);
-    Plane p;
-    if (fit_plane(patch, p) && p.rms < 0.5 * s.tolerance) candidates.push_back(p);
-  }
+  for (const Plane& p : flat_patches(grasps, s.tolerance))
+    if (p.normal.squaredNorm() > 0.0) candidates.push_back(p);
   if (grasps.empty() && contacts.points.size() >= 3) {
     Rng rng(seed, kStreamSupport, step);
     const std::size_t n = contacts.points.size();

@@ -143,7 +143,6 @@ nlohmann::ordered_json simulation_of(const nlohmann::ordered_json& config) {
     // An unset override is the profile's value, no scene is water alone, and an arm scale of 1 is
     // the profile's arm: as if the key did not exist (a file written before a key existed stays
     // valid; a sweep's level 1 is the runs without the key).
-    // noise.arm_scale = 1 is its unset value, the arm as the profile has it.
     const bool neutral = (key == "scene" && value == "none") || (key == "noise.arm_scale" && value == 1.0);
     if (simulated && !value.is_null() && !neutral) s[key] = value;
   }
