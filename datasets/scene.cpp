@@ -10,6 +10,7 @@ namespace ts::datasets {
 
 namespace {
 constexpr std::uint64_t kStreamScene = 0x7363656eULL;   // "scen"
+constexpr std::uint64_t kStreamNeighbours = 0x6e626f72ULL;   // "nbor"
 constexpr double kDeg = std::numbers::pi / 180.0;
 constexpr int kMaxCells = 300;                          // per side: at most 90 601 vertices
 
@@ -19,7 +20,14 @@ void require(bool ok, const std::string& key, const std::string& what) {
 }  // namespace
 
 const char* to_string(SceneKind kind) {
-  return kind == SceneKind::seabed ? "seabed" : kind == SceneKind::panel ? "panel" : kind == SceneKind::pipe ? "pipe" : "none";
+  switch (kind) {
+    case SceneKind::seabed: return "seabed";
+    case SceneKind::panel: return "panel";
+    case SceneKind::pipe: return "pipe";
+    case SceneKind::cluttered: return "cluttered";
+    case SceneKind::none: break;
+  }
+  return "none";
 }
 
 SceneKind parse_scene_kind(const std::string& word, const std::string& file, const std::string& field) {
@@ -27,7 +35,8 @@ SceneKind parse_scene_kind(const std::string& word, const std::string& file, con
   if (word == "seabed") return SceneKind::seabed;
   if (word == "panel") return SceneKind::panel;
   if (word == "pipe") return SceneKind::pipe;
-  throw Error("unknown scene '" + word + "' (none, seabed, panel, pipe)", file, field);
+  if (word == "cluttered") return SceneKind::cluttered;
+  throw Error("unknown scene '" + word + "' (none, seabed, panel, pipe, cluttered)", file, field);
 }
 
 void validate(const SceneSettings& s) {
@@ -53,6 +62,148 @@ void validate(const SceneSettings& s) {
   } else if (s.kind != SceneKind::none) {   // (scene none ignores every scene.* key)
     require(s.pipe_radius_m == 0, "scene.pipe_radius_m", "is only for scene = pipe");
   }
+  if (s.kind == SceneKind::cluttered) {
+    require(s.neighbours >= 1 && s.neighbours <= 8, "scene.neighbours", "must lie in [1, 8]");
+    require(in(s.neighbour_distance_m, 0.005, 1), "scene.neighbour_distance_m",
+            "must lie in [0.005, 1] m (a neighbour at a smaller distance would touch or cut the object)");
+    require(in(s.neighbour_share, 0, 1), "scene.neighbour_share", "must lie in [0, 1]");
+  }
+}
+
+std::vector<std::size_t> neighbour_choice(std::size_t size, std::size_t target, int count, std::uint64_t seed) {
+  require(count >= 0, "scene.neighbours", "must be >= 0");
+  const std::size_t others = size - (target < size ? 1 : 0);
+  if (static_cast<std::size_t>(count) > others)
+    throw Error("scene.neighbours: " + std::to_string(count) + " neighbours asked for, the database holds " +
+                    std::to_string(others) + " other objects",
+                {}, "scene.neighbours");
+  // A partial Fisher-Yates shuffle of the other objects' indices (the target's slot skipped).
+  std::vector<std::size_t> pool;
+  pool.reserve(others);
+  for (std::size_t i = 0; i < size; ++i)
+    if (i != target) pool.push_back(i);
+  Rng rng(seed, kStreamNeighbours);
+  for (std::size_t k = 0; k < static_cast<std::size_t>(count); ++k)
+    std::swap(pool[k], pool[k + rng.index(pool.size() - k)]);
+  pool.resize(static_cast<std::size_t>(count));
+  return pool;
+}
+
+std::vector<SceneObject> scene_neighbours(const SceneSettings& s, std::size_t size, std::size_t target,
+                                          std::uint64_t seed, const std::function<SceneObject(std::size_t)>& load) {
+  std::vector<SceneObject> out;
+  if (s.kind != SceneKind::cluttered) return out;
+  for (std::size_t i : neighbour_choice(size, target, s.neighbours, seed)) out.push_back(load(i));
+  return out;
+}
+
+double cluttered_extent(double object_radius, double neighbour_radius, const SceneSettings& s, double reach) {
+  return object_radius + s.neighbour_distance_m + 2.0 * neighbour_radius + reach + 0.05;
+}
+
+namespace {
+
+/// At most `limit` of a mesh's vertices, evenly strided.
+std::vector<Vec3> sampled_vertices(const Mesh& m, std::size_t limit) {
+  const std::size_t stride = std::max<std::size_t>(1, (m.vertices.size() + limit - 1) / limit);
+  std::vector<Vec3> out;
+  for (std::size_t i = 0; i < m.vertices.size(); i += stride) out.push_back(m.vertices[i]);
+  return out;
+}
+
+/// Whether every point lies at least `d` from `index`'s surface and, `outside`, outside it (a
+/// closed surface). Without the inside test the points must have come from outside in steps
+/// shorter than 2 d (a point that crossed the surface was then nearer than d to it).
+bool clear_of(const MeshIndex& index, const std::vector<Vec3>& points, const Vec3& shift, double d, bool outside) {
+  for (const Vec3& p : points) {
+    const Vec3 x = p + shift;
+    if (index.closest_within(x, d) || (outside && index.inside(x))) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::vector<PlacedObject> place_neighbours(const Mesh& object_world, const Support& seabed,
+                                           const std::vector<SceneObject>& objects, const SceneSettings& s,
+                                           std::uint64_t seed) {
+  validate(s);
+  if (s.kind != SceneKind::cluttered) throw Error("neighbours need scene = cluttered", {}, "scene");
+  if (objects.size() != static_cast<std::size_t>(s.neighbours))
+    throw Error("scene.neighbours: " + std::to_string(s.neighbours) + " neighbours asked for, " +
+                    std::to_string(objects.size()) + " meshes given",
+                {}, "scene.neighbours");
+  constexpr std::size_t kSamples = 2000;
+  const double d = s.neighbour_distance_m;
+  const Vec3 up = seabed.up(), e1 = seabed.axis(), e2 = up.cross(e1);
+  const auto box = mesh_bounds(object_world);
+  const Vec3 centre = box.center();
+  double r_object = 0.0;
+  for (const Vec3& v : object_world.vertices) r_object = std::max(r_object, (v - centre).norm());
+  const MeshIndex object_index(object_world);
+  const std::vector<Vec3> object_samples = sampled_vertices(object_world, kSamples);
+
+  Rng rng(seed, kStreamNeighbours, 1);
+  const double phase = rng.uniform(0.0, 2.0 * std::numbers::pi);
+  const double n = static_cast<double>(objects.size());
+  std::vector<PlacedObject> placed;
+  std::vector<MeshIndex> placed_index;
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    const SceneObject& o = objects[k];
+    if (o.mesh.vertices.empty() || o.mesh.faces.empty())
+      throw Error("neighbour '" + o.name + "' has an empty mesh", {}, "scene.neighbours");
+    // Turned at random about its own bounding-box centre.
+    const Eigen::Quaterniond q = rng.rotation();
+    const double azimuth = phase + 2.0 * std::numbers::pi * (static_cast<double>(k) + rng.uniform(-0.25, 0.25)) / n;
+    const Vec3 dir = std::cos(azimuth) * e1 + std::sin(azimuth) * e2;
+    const Vec3 c_local = mesh_bounds(o.mesh).center();
+    Mesh turned = o.mesh;
+    double r = 0.0;
+    for (Vec3& v : turned.vertices) {
+      v = q * (v - c_local);
+      r = std::max(r, v.norm());
+    }
+    // Where it rests at distance `along` from the object's centre in the seabed's plane: lowered
+    // along `up` until its lowest vertex lies on the seabed.
+    auto rest = [&](double along) {
+      const Vec3 c = centre + along * dir;
+      double lift = std::numeric_limits<double>::infinity();
+      for (const Vec3& v : turned.vertices) lift = std::min(lift, seabed.above(c + v));
+      return Vec3(c - lift * up);
+    };
+    const MeshIndex turned_index(turned);   // the neighbour about its centre
+    const std::vector<Vec3> samples = sampled_vertices(turned, kSamples);
+    auto apart = [&](const Vec3& c) {
+      // (The object: approached from beyond the bounding spheres in steps of d / 4 or outward.)
+      if (!clear_of(object_index, samples, c, d, false) || !clear_of(turned_index, object_samples, -c, d, false))
+        return false;
+      for (std::size_t j = 0; j < placed.size(); ++j)
+        if (!clear_of(placed_index[j], samples, c, d, true)) return false;
+      return true;
+    };
+    // Out from the bounding spheres' distance while another neighbour is in the way, then in.
+    double along = r_object + r + d;
+    int out = 0;
+    while (!apart(rest(along))) {
+      if (++out > 64)
+        throw Error("scene.neighbours: neighbour '" + o.name + "' could not be placed apart from the others", {},
+                    "scene.neighbours");
+      along += d;
+    }
+    while (along - d / 4 > 0 && apart(rest(along - d / 4))) along -= d / 4;
+    const Vec3 c = rest(along);
+    PlacedObject p;
+    p.name = o.name;
+    p.T_world_object.linear() = q.toRotationMatrix();
+    p.T_world_object.translation() = c - q * c_local;
+    p.world = o.mesh;
+    for (Vec3& v : p.world.vertices) v = p.T_world_object * v;
+    Mesh shifted = turned;
+    for (Vec3& v : shifted.vertices) v += c;
+    placed_index.emplace_back(std::move(shifted));
+    placed.push_back(std::move(p));
+  }
+  return placed;
 }
 
 Support::Support(const Mesh& object_mesh, const Pose& T_world_object, const SceneSettings& s, double reach,

@@ -31,23 +31,41 @@
 // pipe is triangulated with chords at most 0.2 mm inside the circle. above() treats the pipe as
 // unbounded along its axis (its mesh is `extent_m` each side of the object).
 //
-// The support is recorded in the log's ground truth (the mesh, world frame), so a study can tell
-// which contacts touched the target and which the seabed. The recognizer does not see it.
+// `cluttered`: a seabed (as `seabed`, every seabed key applies) with `neighbours` other objects
+// of the database lying on it around the object, as a dropped tool lies among others. Neighbour k
+// (its mesh given by the caller, datasets::neighbour_choice draws which) is turned to a seeded
+// random orientation and put in the seabed's plane at a seeded azimuth (evenly spread, jittered),
+// far enough that their bounding spheres are `neighbour_distance_m` apart; it is then lowered
+// onto the seabed (its lowest vertex on it) and slid towards the object, in steps of a quarter of
+// the distance, while its sampled vertices stay at least the distance from the object's surface
+// and outside it, the object's from its own, and it keeps that distance from the neighbours
+// placed before it. So the nearest vertices are between the distance and 1.25 times it from the
+// other surface, unless a neighbour placed before stopped it farther (sampled at up to 2 000
+// vertices of each: a face or an edge between samples may come a little closer).
+// The patch reaches past the neighbours by the hand's reach. A share `neighbour_share` of the
+// off-target grasps aim at a neighbour (one drawn uniformly, a point area-uniform on its surface,
+// approached along its outward normal; an aim blocked by the seabed is redrawn), the rest at the
+// seabed.
+//
+// The support (and a cluttered scene's neighbours, their names and poses) are recorded in the
+// log's ground truth (meshes in the world frame), so a study can tell which contacts touched the
+// target, the seabed or a neighbour. The recognizer does not see them.
 #pragma once
 
 #include "engine/core.hpp"
 #include "engine/geometry/mesh.hpp"
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <utility>
 #include <vector>
 
 namespace ts::datasets {
 
-enum class SceneKind { none, seabed, panel, pipe };
+enum class SceneKind { none, seabed, panel, pipe, cluttered };
 
-const char* to_string(SceneKind kind);   ///< "none" / "seabed" / "panel" / "pipe"
+const char* to_string(SceneKind kind);   ///< "none" / "seabed" / "panel" / "pipe" / "cluttered"
 /// Throws ts::Error naming `file` and `field` for another word.
 SceneKind parse_scene_kind(const std::string& word, const std::string& file = {}, const std::string& field = "scene");
 
@@ -68,7 +86,29 @@ struct SceneSettings {
                                       ///< half-length
   double pipe_radius_m = 0.0;         ///< m, a pipe's radius (0: the object's bounding radius,
                                       ///< at least 5 cm); only for a pipe
+  int neighbours = 2;                 ///< cluttered: other database objects beside the object,
+                                      ///< in [1, 8]
+  double neighbour_distance_m = 0.05; ///< m, cluttered: their surfaces' distance from the
+                                      ///< object's (and each other's), in [0.005, 1]
+  double neighbour_share = 0.5;       ///< cluttered: share of the off-target grasps aimed at a
+                                      ///< neighbour (the rest at the seabed), in [0, 1]
 };
+
+/// A scene's object as the caller gives it: its name and object-frame mesh (the database's).
+struct SceneObject {
+  std::string name;
+  Mesh mesh;
+};
+
+/// The `count` neighbours of a cluttered scene around database object `target`: distinct indices
+/// of a database of `size` objects, none the target, drawn from `seed` (the same draw for the same
+/// arguments). Throws ts::Error naming scene.neighbours when the database has too few others.
+std::vector<std::size_t> neighbour_choice(std::size_t size, std::size_t target, int count, std::uint64_t seed);
+
+/// The neighbours of the simulator's settings for a scene `s` (none unless s.kind is cluttered):
+/// neighbour_choice(size, target, s.neighbours, seed), each object as `load` gives it.
+std::vector<SceneObject> scene_neighbours(const SceneSettings& s, std::size_t size, std::size_t target,
+                                          std::uint64_t seed, const std::function<SceneObject(std::size_t)>& load);
 
 /// Throws ts::Error naming the key ("scene.slope_deg", ...) of a setting out of range.
 void validate(const SceneSettings& s);
@@ -124,5 +164,24 @@ class Support {
   std::vector<double> h_;                     ///< (cells + 1)^2 heights, row-major in (i: u, j: v)
   Mesh mesh_;
 };
+
+/// A neighbour as placed: its name, pose and world-frame mesh.
+struct PlacedObject {
+  std::string name;
+  Pose T_world_object = Pose::Identity();
+  Mesh world;
+};
+
+/// The half-size of a cluttered scene's seabed patch that reaches past neighbours of bounding
+/// radii up to `neighbour_radius` (see above): the object's radius, the distance, twice that
+/// radius, the hand's reach and 5 cm.
+double cluttered_extent(double object_radius, double neighbour_radius, const SceneSettings& s, double reach);
+
+/// The neighbours of a cluttered scene (see above) around `object_world` (world frame) on
+/// `seabed`, one per entry of `objects` (s.neighbours of them). Deterministic in `seed`. Throws
+/// ts::Error naming the key when a neighbour cannot be placed apart from the others.
+std::vector<PlacedObject> place_neighbours(const Mesh& object_world, const Support& seabed,
+                                           const std::vector<SceneObject>& objects, const SceneSettings& s,
+                                           std::uint64_t seed);
 
 }  // namespace ts::datasets

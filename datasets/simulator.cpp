@@ -147,6 +147,15 @@ struct Simulator::Impl {
   double radius = 0.0;
   std::optional<Support> support;        // the scene's support (world frame), if any
   std::optional<MeshIndex> world;        // object and support (object frame): what the hand meets
+  /// A cluttered scene's neighbours (world frame), their surface-area CDFs, centres, radii and
+  /// the sign that turns their faces' winding into outward normals.
+  struct Neighbour {
+    PlacedObject placed;
+    std::vector<double> area_cdf;
+    Vec3 centre = Vec3::Zero();
+    double radius = 0.0, normal_sign = 1.0;
+  };
+  std::vector<Neighbour> neighbours;
 
   const MeshIndex& collide() const { return world ? *world : mesh; }
 
@@ -316,6 +325,14 @@ Simulator::Simulator(Mesh object_mesh, std::string object_name, Gripper gripper,
       ft.normal_sigma_deg >= 90)
     throw Error("fingertips: need a finite quantization >= 0 and a normal noise below 90 degrees", {}, "fingertips");
   validate(settings.scene);
+  if (settings.scene.kind == SceneKind::cluttered &&
+      settings.neighbours.size() != static_cast<std::size_t>(settings.scene.neighbours))
+    throw Error("scene.neighbours: " + std::to_string(settings.scene.neighbours) + " neighbours asked for, " +
+                    std::to_string(settings.neighbours.size()) +
+                    " meshes given (the caller loads them from the database: datasets::neighbour_choice)",
+                {}, "scene.neighbours");
+  if (settings.scene.kind != SceneKind::cluttered && !settings.neighbours.empty())
+    throw Error("neighbours need scene = cluttered", {}, "scene.neighbours");
   if (settings.scene.kind != SceneKind::none && settings.sensing == Sensing::probe)
     throw Error("the probe does not touch scenes yet: scene needs sensing = pads or fingertips", {}, "scene");
   const auto& n = settings.noise;
@@ -346,15 +363,48 @@ Simulator::Simulator(Mesh object_mesh, std::string object_name, Gripper gripper,
   if (m.settings.scene.kind != SceneKind::none) {
     // The support, and the surface the hand meets in the object frame: the object's faces, then
     // the support's, wound as the object's (face_normal's sign makes them point up).
-    m.support.emplace(M, m.T_world_object, m.settings.scene, m.gripper.reach(), m.settings.seed);
-    Mesh both = M;
+    SceneSettings scene = m.settings.scene;
+    if (scene.kind == SceneKind::cluttered && scene.extent_m == 0) {   // the patch under the neighbours too
+      double r_neighbour = 0.0;
+      for (const SceneObject& o : m.settings.neighbours) {
+        const Vec3 c = mesh_bounds(o.mesh).center();
+        for (const Vec3& v : o.mesh.vertices) r_neighbour = std::max(r_neighbour, (v - c).norm());
+      }
+      scene.extent_m = cluttered_extent(m.radius, r_neighbour, scene, m.gripper.reach());
+    }
+    m.support.emplace(M, m.T_world_object, scene, m.gripper.reach(), m.settings.seed);
+    Mesh all = M;
     const Pose T_object_world = m.T_world_object.inverse();
-    const int base = static_cast<int>(both.vertices.size());
-    for (const Vec3& v : m.support->mesh().vertices) both.vertices.push_back(T_object_world * v);
-    for (const auto& f : m.support->mesh().faces)
-      both.faces.push_back(m.normal_sign > 0 ? Eigen::Vector3i(f + Eigen::Vector3i::Constant(base))
-                                             : Eigen::Vector3i(f[0] + base, f[2] + base, f[1] + base));
-    m.world.emplace(std::move(both));
+    // A surface's faces after the object's, wound as the object's are when `outward` says how the
+    // surface's own winding points (the support's faces point up).
+    auto append = [&](const Mesh& world, double outward) {
+      const int base = static_cast<int>(all.vertices.size());
+      for (const Vec3& v : world.vertices) all.vertices.push_back(T_object_world * v);
+      for (const auto& f : world.faces)
+        all.faces.push_back(m.normal_sign * outward > 0 ? Eigen::Vector3i(f + Eigen::Vector3i::Constant(base))
+                                                        : Eigen::Vector3i(f[0] + base, f[2] + base, f[1] + base));
+    };
+    append(m.support->mesh(), 1.0);
+    if (scene.kind == SceneKind::cluttered) {
+      Mesh object_world = M;
+      for (Vec3& v : object_world.vertices) v = m.T_world_object * v;
+      for (PlacedObject& p : place_neighbours(object_world, *m.support, m.settings.neighbours, scene, m.settings.seed)) {
+        Impl::Neighbour n;
+        double total = 0.0;
+        for (const auto& f : p.world.faces) {
+          total += 0.5 * (p.world.vertices[f[1]] - p.world.vertices[f[0]]).cross(p.world.vertices[f[2]] - p.world.vertices[f[0]]).norm();
+          n.area_cdf.push_back(total);
+        }
+        if (!(total > 0)) throw Error("neighbour '" + p.name + "' has zero area", {}, "scene.neighbours");
+        n.centre = mesh_bounds(p.world).center();
+        for (const Vec3& v : p.world.vertices) n.radius = std::max(n.radius, (v - n.centre).norm());
+        n.normal_sign = mesh_signed_volume(p.world) < 0 ? -1.0 : 1.0;
+        append(p.world, n.normal_sign);
+        n.placed = std::move(p);
+        m.neighbours.push_back(std::move(n));
+      }
+    }
+    m.world.emplace(std::move(all));
   }
   Rng gain_rng(m.settings.seed, kStreamGains);
   const int S = m.gripper.sensor().sensels();
@@ -519,9 +569,26 @@ Simulator::Grasp Simulator::grasp_or_aim(std::size_t g, GraspCommand* aim_only) 
       if (best_shortfall < 1e300) break;
       aim_support = true;
     }
-    // A random surface point (area-uniform) and its outward normal, object frame.
-    Vec3 p, n;
-    if (aim_support) {
+    // A random surface point (area-uniform) and its outward normal, object frame; the approach
+    // starts beyond the bounding sphere of what it aims at.
+    Vec3 p, n, aim_centre = m.centre;
+    double aim_radius = m.radius;
+    if (aim_support && !m.neighbours.empty() && off_rng.uniform() < m.settings.scene.neighbour_share) {
+      const Impl::Neighbour& nb = m.neighbours[off_rng.index(m.neighbours.size())];
+      const Mesh& W = nb.placed.world;
+      const double u = off_rng.uniform() * nb.area_cdf.back();
+      const std::size_t face = std::min<std::size_t>(
+          static_cast<std::size_t>(std::upper_bound(nb.area_cdf.begin(), nb.area_cdf.end(), u) - nb.area_cdf.begin()),
+          W.faces.size() - 1);
+      const double r1 = std::sqrt(off_rng.uniform()), r2 = off_rng.uniform();
+      const auto& tri = W.faces[face];
+      const Vec3 x = (1 - r1) * W.vertices[tri[0]] + r1 * (1 - r2) * W.vertices[tri[1]] + r1 * r2 * W.vertices[tri[2]];
+      const Vec3 normal = nb.normal_sign * (W.vertices[tri[1]] - W.vertices[tri[0]]).cross(W.vertices[tri[2]] - W.vertices[tri[0]]);
+      p = T_object_world * x;
+      n = T_object_world.linear() * (normal.norm() > 0 ? Vec3(normal.normalized()) : Vec3::UnitZ());
+      aim_centre = T_object_world * nb.centre;
+      aim_radius = nb.radius;
+    } else if (aim_support) {
       const auto [x, up] = m.support->aim(off_rng);
       p = T_object_world * x;
       n = T_object_world.linear() * up;
@@ -552,7 +619,7 @@ Simulator::Grasp Simulator::grasp_or_aim(std::size_t g, GraspCommand* aim_only) 
     // Come in along -n from outside the object's bounding sphere; stop where the open hand
     // would touch (ray casts of the palm, link and foam samples).
     const Vec3 d = -n;
-    const double L = (target.translation() - m.centre).norm() + m.radius + G.reach() + 0.01;
+    const double L = (target.translation() - aim_centre).norm() + aim_radius + G.reach() + 0.01;
     T_obj_eef = target;
     T_obj_eef.translation() -= d * L;
     travel = L;
@@ -731,6 +798,8 @@ SimulationResult Simulator::run() const {
   if (m.support) {
     log.truth->scene = to_string(m.settings.scene.kind);
     log.truth->support = m.support->mesh();
+    for (const Impl::Neighbour& n : m.neighbours)
+      log.truth->neighbours.push_back({n.placed.name, n.placed.T_world_object, n.placed.world});
   }
   for (auto& s : slots) {
     out.grasps_with_contact += s.diagnostics.contact_sensels > 0;

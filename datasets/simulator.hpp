@@ -103,6 +103,9 @@ struct SimulatorSettings {
   ProbeSettings probe;
   FingertipSettings fingertips;
   SceneSettings scene;               ///< what lies around the object (none: water alone)
+  /// A cluttered scene's neighbours (scene.neighbours of them, object-frame meshes from the
+  /// database; neighbour_choice draws which), placed by the simulator (place_neighbours).
+  std::vector<SceneObject> neighbours;
   int sensors = 1;                   ///< 1: the gripper's single_pad; 6 (or all): every pad
   NoiseSettings noise;
   GraspSettings grasp;

@@ -56,43 +56,89 @@ bool fingertip_log(const LogHeader& h) { return h.sensing == Sensing::fingertips
 
 constexpr std::uint64_t kMaxSupportVertices = 10'000'000;
 
-// /ground_truth/support: the scene's name and its support mesh, sizes checked before reading.
+constexpr std::int64_t kMaxNeighbours = 64;
+
+// A world-frame mesh of the ground truth (`path`: its group), sizes checked before reading.
+Mesh read_truth_mesh(const h5::Group& g, const std::string& name, const std::string& path) {
+  const h5::Shape vs = g.shape("vertices"), fs = g.shape("faces");
+  if (vs.size() != 2 || vs[1] != 3 || vs[0] < 3 || vs[0] > kMaxSupportVertices)
+    throw Error("must be [V, 3] with 3 <= V <= 10^7", name, path + "/vertices");
+  if (fs.size() != 2 || fs[1] != 3 || fs[0] < 1 || fs[0] > 2 * kMaxSupportVertices)
+    throw Error("must be [F, 3] with 1 <= F <= 2 x 10^7", name, path + "/faces");
+  const auto v = g.read<double>("vertices", {kAny, 3});
+  const auto f = g.read<std::int32_t>("faces", {kAny, 3});
+  Mesh m;
+  for (std::size_t i = 0; i < v.size(); i += 3) {
+    m.vertices.emplace_back(v[i], v[i + 1], v[i + 2]);
+    if (!m.vertices.back().allFinite()) throw Error("not finite", name, indexed(path + "/vertices", i / 3));
+  }
+  for (std::size_t i = 0; i < f.size(); i += 3) {
+    for (std::size_t k = 0; k < 3; ++k)
+      if (f[i + k] < 0 || static_cast<std::uint64_t>(f[i + k]) >= vs[0])
+        throw Error("vertex index out of range", name, indexed(path + "/faces", i / 3));
+    m.faces.emplace_back(f[i], f[i + 1], f[i + 2]);
+  }
+  return m;
+}
+
+void write_truth_mesh(h5::Group& g, const Mesh& m) {
+  std::vector<double> v;
+  for (const Vec3& x : m.vertices) v.insert(v.end(), {x[0], x[1], x[2]});
+  std::vector<std::int32_t> f;
+  for (const auto& t : m.faces) f.insert(f.end(), {t[0], t[1], t[2]});
+  g.write("vertices", v.data(), {m.vertices.size(), 3});
+  g.write("faces", f.data(), {m.faces.size(), 3});
+}
+
+// /ground_truth/support: the scene's name and its support mesh.
 void read_support(const h5::Group& g, const std::string& name, LogHeader& h) {
   if (!g.has_attribute("scene")) throw Error("missing attribute", name, "/ground_truth/support/scene");
   h.true_scene = g.string_attribute("scene");
   if (h.true_scene.empty() || h.true_scene == "none" || h.true_scene.size() > 64)
     throw Error("must name the scene (not empty or \"none\", at most 64 characters)", name,
                 "/ground_truth/support/scene");
-  const h5::Shape vs = g.shape("vertices"), fs = g.shape("faces");
-  if (vs.size() != 2 || vs[1] != 3 || vs[0] < 3 || vs[0] > kMaxSupportVertices)
-    throw Error("must be [V, 3] with 3 <= V <= 10^7", name, "/ground_truth/support/vertices");
-  if (fs.size() != 2 || fs[1] != 3 || fs[0] < 1 || fs[0] > 2 * kMaxSupportVertices)
-    throw Error("must be [F, 3] with 1 <= F <= 2 x 10^7", name, "/ground_truth/support/faces");
-  const auto v = g.read<double>("vertices", {kAny, 3});
-  const auto f = g.read<std::int32_t>("faces", {kAny, 3});
-  Mesh& m = h.true_support;
-  for (std::size_t i = 0; i < v.size(); i += 3) {
-    m.vertices.emplace_back(v[i], v[i + 1], v[i + 2]);
-    if (!m.vertices.back().allFinite())
-      throw Error("not finite", name, indexed("/ground_truth/support/vertices", i / 3));
-  }
-  for (std::size_t i = 0; i < f.size(); i += 3) {
-    for (std::size_t k = 0; k < 3; ++k)
-      if (f[i + k] < 0 || static_cast<std::uint64_t>(f[i + k]) >= vs[0])
-        throw Error("vertex index out of range", name, indexed("/ground_truth/support/faces", i / 3));
-    m.faces.emplace_back(f[i], f[i + 1], f[i + 2]);
-  }
+  h.true_support = read_truth_mesh(g, name, "/ground_truth/support");
 }
 
 void write_support(h5::Group& truth, const LogHeader& h) {
   h5::Group g = truth.create_group("support");
   g.set_attribute("scene", h.true_scene);
-  std::vector<double> v;
-  for (const Vec3& x : h.true_support.vertices) v.insert(v.end(), {x[0], x[1], x[2]});
-  std::vector<std::int32_t> f;
-  for (const auto& t : h.true_support.faces) f.insert(f.end(), {t[0], t[1], t[2]});
-  g.write("vertices", v.data(), {h.true_support.vertices.size(), 3});
-  g.write("faces", f.data(), {h.true_support.faces.size(), 3});
+  write_truth_mesh(g, h.true_support);
+}
+
+// /ground_truth/neighbours: attribute count, then groups 0 .. count - 1, each with its object's
+// name (attribute), pose [7] and world-frame mesh.
+void read_neighbours(const h5::Group& g, const std::string& name, LogHeader& h) {
+  if (!g.has_attribute("count")) throw Error("missing attribute", name, "/ground_truth/neighbours/count");
+  const std::int64_t count = g.int_attribute("count");
+  if (count < 1 || count > kMaxNeighbours)
+    throw Error("must lie in [1, 64]", name, "/ground_truth/neighbours/count");
+  for (std::int64_t k = 0; k < count; ++k) {
+    const std::string path = "/ground_truth/neighbours/" + std::to_string(k);
+    if (!g.has_group(std::to_string(k))) throw Error("missing group", name, path);
+    const h5::Group n = g.open_group(std::to_string(k));
+    if (!n.has_attribute("object")) throw Error("missing attribute", name, path + "/object");
+    LogGroundTruth::Neighbour x;
+    x.name = n.string_attribute("object");
+    if (x.name.empty() || x.name.size() > 256) throw Error("must name the object (1 to 256 characters)", name, path + "/object");
+    const auto row = n.read<double>("pose", {7});
+    x.pose = checked_pose_from_row(row.data(), name, path + "/pose");
+    x.mesh = read_truth_mesh(n, name, path);
+    h.true_neighbours.push_back(std::move(x));
+  }
+}
+
+void write_neighbours(h5::Group& truth, const LogHeader& h) {
+  h5::Group g = truth.create_group("neighbours");
+  g.set_attribute("count", static_cast<std::int64_t>(h.true_neighbours.size()));
+  for (std::size_t k = 0; k < h.true_neighbours.size(); ++k) {
+    const LogGroundTruth::Neighbour& x = h.true_neighbours[k];
+    h5::Group n = g.create_group(std::to_string(k));
+    n.set_attribute("object", x.name);
+    const auto row = pose_row(x.pose);
+    n.write("pose", row.data(), {7});
+    write_truth_mesh(n, x.mesh);
+  }
 }
 
 // Header: root attributes, /gripper, /sensors and (structure of) /ground_truth.
@@ -150,6 +196,13 @@ LogHeader read_header(const h5::File& file) {
       if (version < 4) throw Error("a log with a scene's support needs format_version 4", name, "/format_version");
       read_support(truth.open_group("support"), name, h);
     }
+    if (truth.has_group("neighbours")) {
+      if (version < 5) throw Error("a log with a scene's neighbours needs format_version 5", name, "/format_version");
+      if (!truth.has_group("support"))
+        throw Error("neighbours lie on a scene's support: /ground_truth/support is missing", name,
+                    "/ground_truth/neighbours");
+      read_neighbours(truth.open_group("neighbours"), name, h);
+    }
   }
   // The header must already be consistent (pads exist, gains positive).
   validate(log_of(h), name);
@@ -184,6 +237,7 @@ LogHeader header_of(const TactileLog& log) {
     h.true_object_pose = log.truth->object_pose;
     h.true_scene = log.truth->scene;
     h.true_support = log.truth->support;
+    h.true_neighbours = log.truth->neighbours;
   }
   return h;
 }
@@ -220,6 +274,11 @@ LogWriter LogWriter::create(const std::filesystem::path& path, const LogHeader& 
   if (!header.true_support.faces.empty() && !header.true_object_pose)
     throw Error("a scene's support is ground truth: the log needs the true object pose", m.display,
                 "/ground_truth/support");
+  if (!header.true_neighbours.empty() && !scene)
+    throw Error("a scene's neighbours lie on its support: the log needs the support and the true object pose",
+                m.display, "/ground_truth/neighbours");
+  if (header.true_neighbours.size() > static_cast<std::size_t>(kMaxNeighbours))
+    throw Error("at most 64 neighbours", m.display, "/ground_truth/neighbours");
   if (scene && (header.true_scene.empty() || header.true_scene == "none"))
     throw Error("a support needs its scene's name", m.display, "/ground_truth/support/scene");
   if (scene && probe_log(header))
@@ -235,7 +294,11 @@ LogWriter LogWriter::create(const std::filesystem::path& path, const LogHeader& 
   h5::Group root = m.file.root();
   root.set_attribute("format", kLogFormat);
   root.set_attribute("format_version",
-                     static_cast<std::int64_t>(scene ? 4 : fingertip_log(header) ? 3 : probe_log(header) ? 2 : 1));
+                     static_cast<std::int64_t>(scene && !header.true_neighbours.empty() ? 5
+                                               : scene                                  ? 4
+                                               : fingertip_log(header)                  ? 3
+                                               : probe_log(header)                      ? 2
+                                                                                        : 1));
   root.set_attribute("object", header.object);
   root.set_attribute("noise", header.noise);
   root.set_attribute("seed", seed_to_attr(header.seed));
@@ -293,6 +356,7 @@ LogWriter LogWriter::create(const std::filesystem::path& path, const LogHeader& 
     truth.create_extendible<double>("arm_pose", {7}, chunks(256));
     truth.create_extendible<double>("joints", {d.joints}, chunks(256));
     if (scene) write_support(truth, header);
+    if (scene && !header.true_neighbours.empty()) write_neighbours(truth, header);
   }
   return w;
 }
@@ -487,6 +551,7 @@ TactileLog read_log(const std::filesystem::path& path) {
     truth.object_pose = *h.true_object_pose;
     truth.scene = h.true_scene;
     truth.support = h.true_support;
+    truth.neighbours = h.true_neighbours;
     const auto tp = t.read<double>("arm_pose", {kAny, 7}, &s);
     if (s.at(0) != G)
       throw Error("ground truth has " + std::to_string(s.at(0)) + " arm poses for " + std::to_string(G) + " grasps",

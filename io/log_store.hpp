@@ -23,8 +23,9 @@
 namespace ts::io {
 
 constexpr const char* kLogFormat = "touchstone-tactile-log";
-constexpr int kLogFormatVersion = 4;   ///< read: 1 to 4; written: 1 (pads), 2 (probe), 3 (fingertips),
-                                       ///< 4 (a simulated scene's support in the ground truth)
+constexpr int kLogFormatVersion = 5;   ///< read: 1 to 5; written: 1 (pads), 2 (probe), 3 (fingertips),
+                                       ///< 4 (a simulated scene's support in the ground truth), 5 (and
+                                       ///< a cluttered scene's neighbours)
 
 /// Everything of a log except its grasps (what a writer needs before the first grasp).
 struct LogHeader {
@@ -42,6 +43,8 @@ struct LogHeader {
   bool fingertip_normals = false;        ///< fingertips: the grasps carry normals
   std::string true_scene = "none";       ///< ground truth: the simulated scene (with true_object_pose)
   Mesh true_support;                     ///< ground truth: its support, world frame (empty: none)
+  std::vector<LogGroundTruth::Neighbour> true_neighbours;   ///< ground truth: a cluttered scene's
+                                                            ///< other objects (with a support)
 };
 
 LogHeader header_of(const TactileLog& log);

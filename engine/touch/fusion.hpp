@@ -73,6 +73,13 @@ struct LogGroundTruth {
   std::vector<std::vector<double>> joints;  ///< true joint angles per grasp
   std::string scene = "none";           ///< the simulator's scene ("none": the object alone)
   Mesh support;                         ///< the scene's support surface, world frame (empty: none)
+  /// Another object of the scene (a cluttered scene's neighbour): its name, pose and world mesh.
+  struct Neighbour {
+    std::string name;
+    Pose pose = Pose::Identity();       ///< T_world_object
+    Mesh mesh;                          ///< world frame
+  };
+  std::vector<Neighbour> neighbours;
 };
 
 struct TactileLog {

@@ -88,13 +88,15 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
                     informative_col = column("answer_set.informative");
   const std::size_t expected_col = column("plan.expected_object_information"), drop_col = column("plan.entropy_drop");
   const std::size_t fit_col = column("fit.contact_distance_m");
-  const std::size_t right_col = column("attribution.right_share"), off_col = column("contacts.off_target_share");
+  const std::size_t right_col = column("attribution.right_share"), off_col = column("contacts.off_target_share"),
+                    neighbour_col = column("scene.answer_is_neighbour");
   const std::size_t found_col = column("support.found"), tilt_col = column("support.tilt_deg"),
                     height_col = column("support.height_error_m");
   J rows = J::array();
   for (int k = 0; k < steps; ++k) {
     std::map<int, ClusterCounts> covered_by_object;
-    std::vector<double> set_sizes, expected, drop_planned, drop_all, fit, attributed, off_target, found, tilt, height;
+    std::vector<double> set_sizes, expected, drop_planned, drop_all, fit, attributed, off_target, named_neighbour,
+        found, tilt, height;
     std::size_t covered = 0, informative = 0;
     std::map<int, ClusterCounts> strict_by_object, class_by_object;
     std::vector<StepSample> samples;
@@ -131,6 +133,7 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
       take(fit_col, fit);
       take(right_col, attributed);
       take(off_col, off_target);
+      take(neighbour_col, named_neighbour);
       take(found_col, found);
       take(tilt_col, tilt);
       take(height_col, height, true);
@@ -198,6 +201,8 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
     auto mean_or_null = [](const std::vector<double>& v) { return v.empty() ? J(nullptr) : J(mean_t_interval(v).mean); };
     row["off_target_share_mean"] = mean_or_null(off_target);
     row["attribution_accuracy_mean"] = mean_or_null(attributed);
+    // A cluttered scene: the share of runs whose answer named a neighbour (null without them).
+    row["neighbour_answer_share"] = mean_or_null(named_neighbour);
     // The support stage on a scene: the share of runs that found a support, and against the true
     // one under the object the found plane's tilt and |height| there (medians over those found).
     row["support_found_share"] = mean_or_null(found);

@@ -66,6 +66,9 @@ int run_simulate(const SimulateOptions& o) {
   s.seed = o.common.seed;
   if (!o.offset.empty()) s.world_offset = Vec3(o.offset[0], o.offset[1], o.offset[2]);
 
+  s.neighbours = datasets::scene_neighbours(s.scene, db.size(), index, s.seed, [&](std::size_t i) {
+    return datasets::SceneObject{db.info(i).name, db.load_mesh(i)};
+  });
   const datasets::Simulator sim(db.load_mesh(index), db.info(index).name, gripper, s);
   const datasets::SimulationResult result = sim.run();
   std::ostringstream source;
@@ -140,8 +143,15 @@ int run_log_info(const LogInfoOptions& o) {
     j["grasps"] = log.grasps.size();
     j["contacts_per_grasp"] = per_grasp;
     j["ground_truth"] = log.truth ? tactile_pose_json(log.truth->object_pose) : ojson(nullptr);
-    if (log.truth && !log.truth->support.faces.empty())
+    if (log.truth && !log.truth->support.faces.empty()) {
       j["scene"] = {{"kind", log.truth->scene}, {"support_faces", log.truth->support.faces.size()}};
+      if (!log.truth->neighbours.empty()) {
+        ojson n = ojson::array();
+        for (const LogGroundTruth::Neighbour& x : log.truth->neighbours)
+          n.push_back({{"object", x.name}, {"pose", tactile_pose_json(x.pose)}});
+        j["scene"]["neighbours"] = n;
+      }
+    }
     j["noise"] = log.noise;
     j["sensors"] = log.pads.size();
     j["pads"] = pads;
@@ -180,6 +190,8 @@ int run_log_info(const LogInfoOptions& o) {
     if (!log.truth->support.faces.empty())
       std::cout << "  scene         " << log.truth->scene << " (its support: " << log.truth->support.faces.size()
                 << " faces, in the ground truth)\n";
+    for (const LogGroundTruth::Neighbour& x : log.truth->neighbours)
+      std::cout << "  neighbour     " << x.name << " at t = " << tactile_pose_json(x.pose)["t"].dump() << "\n";
   } else {
     std::cout << "none\n";
   }

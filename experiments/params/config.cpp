@@ -127,6 +127,15 @@ void load_config_file(ExperimentConfig& config, const std::filesystem::path& fil
   validate(config, name);
 }
 
+void check_scene_keys(const ExperimentConfig& c, const std::string& file) {
+  const SceneOverrides& sc = c.scene_params;
+  if (c.scene == "cluttered" || c.scene == "none") return;   // (scene none ignores every scene.* key)
+  for (const auto& [key, given] : {std::pair{"scene.neighbours", sc.neighbours.has_value()},
+                                   std::pair{"scene.neighbour_distance_m", sc.neighbour_distance_m.has_value()},
+                                   std::pair{"scene.neighbour_share", sc.neighbour_share.has_value()}})
+    if (given) throw Error(std::string(key) + " is only for scene = cluttered (scene is " + c.scene + ")", file, key);
+}
+
 void validate(const ExperimentConfig& c, const std::string& file) {
   if (c.pool < c.steps)
     throw Error("pool (" + std::to_string(c.pool) + ") must hold at least steps (" +
@@ -146,6 +155,7 @@ void validate(const ExperimentConfig& c, const std::string& file) {
   if (c.scene != "none" && c.sensing == "probe")
     throw Error("scene " + c.scene + " needs sensing = pads or fingertips (the probe does not touch scenes yet)", file,
                 "scene");
+  check_scene_keys(c, file);
   std::size_t variants = 1;
   for (const auto& a : c.sweep) {
     variants *= a.values.size();

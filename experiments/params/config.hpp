@@ -49,7 +49,7 @@ struct FingertipOverrides {
   std::optional<double> normals_deg;             ///< deg, normal noise; unset: no normals
 };
 
-/// Overrides of the simulated scene (scene = "seabed", "panel" or "pipe"; unset:
+/// Overrides of the simulated scene (scene = "seabed", "panel", "pipe" or "cluttered"; unset:
 /// datasets::SceneSettings' default).
 struct SceneOverrides {
   std::optional<double> slope_deg;               ///< deg, the support's tilt
@@ -60,6 +60,9 @@ struct SceneOverrides {
   std::optional<double> off_target_radius_m;     ///< m, how far from the object those aim
   std::optional<double> extent_m;                ///< m, half-size of the support patch
   std::optional<double> pipe_radius_m;           ///< m, a pipe's radius (scene = pipe)
+  std::optional<int> neighbours;                 ///< cluttered: database objects beside the object
+  std::optional<double> neighbour_distance_m;    ///< m, cluttered: their distance from it
+  std::optional<double> neighbour_share;         ///< cluttered: share of off-target aims at them
 };
 
 struct SweepAxis {
@@ -87,7 +90,7 @@ struct ExperimentConfig {
   NoiseOverrides noise_params;
   ProbeOverrides probe_params;
   FingertipOverrides fingertip_params;
-  std::string scene = "none";           ///< none | seabed | panel | pipe (datasets::SceneSettings)
+  std::string scene = "none";           ///< none | seabed | panel | pipe | cluttered (datasets::SceneSettings)
   SceneOverrides scene_params;
   int sensors = 1;
   std::string sensing = "pads";         ///< pads | probe (datasets::ProbeSettings) | fingertips
@@ -117,6 +120,10 @@ void load_config_file(ExperimentConfig& config, const std::filesystem::path& fil
 /// Checks that need all keys together (pool >= steps, sweep values valid, check_memory with the
 /// explored objects listed, or one for all). Throws ts::Error naming the key.
 void validate(const ExperimentConfig& config, const std::string& file = {});
+/// The scene keys' part of validate: a cluttered scene's keys given for another scene (scene
+/// none ignores every scene.* key) are refused (also checked by simulation_settings, for the
+/// simulator's other callers).
+void check_scene_keys(const ExperimentConfig& config, const std::string& file = {});
 
 /// Checks, from the configuration alone and before anything runs or is written, that what an
 /// experiment holds in memory at once can fit in `memory_bytes` (0: this machine's physical

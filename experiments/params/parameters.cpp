@@ -610,8 +610,10 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
                             "What lies around the object: none (water alone), seabed (the object rests on a "
                             "support surface that the hand touches too, shaped by scene.*), panel (it is mounted "
                             "against a flat vertical plate, the fixture; scene.* but slope and relief) or pipe (it "
-                            "rests on a horizontal pipe; scene.* but slope and relief); sensing = pads or fingertips"),
-                    {"none", "seabed", "panel", "pipe"}, TS_CONFIG(scene)));
+                            "rests on a horizontal pipe; scene.* but slope and relief) or cluttered (a seabed "
+                            "with scene.neighbours other database objects lying beside it); sensing = pads or "
+                            "fingertips"),
+                    {"none", "seabed", "panel", "pipe", "cluttered"}, TS_CONFIG(scene)));
   d.back().sweepable = false;
   d.back().simulate = true;
   probe_setting("scene.slope_deg", "deg", 0, 60, "The seabed's tilt from horizontal (unset: 0; scene = seabed)",
@@ -642,6 +644,23 @@ std::pair<std::vector<Parameter>, std::vector<Parameter>> config_declaration() {
                 "The pipe's radius (unset, 0: the object's bounding radius, at least 5 cm; scene = pipe, refused "
                 "for a seabed or a panel)",
                 "--scene-pipe-radius", TS_CONFIG(scene_params.pipe_radius_m));
+  {
+    Parameter p = number(setting("scene.neighbours", S, Type::integer, "", 1, 8, "",
+                                 "Other database objects lying beside the object, drawn by the seed (unset: 2; "
+                                 "scene = cluttered)",
+                                 {"--scene-neighbours"}),
+                         TS_CONFIG(scene_params.neighbours));
+    p.simulate = true;
+    d.push_back(std::move(p));
+  }
+  probe_setting("scene.neighbour_distance_m", "m", 0.005, 1,
+                "The neighbours' surfaces lie this far from the object's, to 1.25 times it (unset: 0.05; scene = "
+                "cluttered)",
+                "--scene-neighbour-distance", TS_CONFIG(scene_params.neighbour_distance_m));
+  probe_setting("scene.neighbour_share", "", 0, 1,
+                "Share of the off-target grasps aimed at a neighbour, the rest at the seabed (unset: 0.5; scene = "
+                "cluttered)",
+                "--scene-neighbour-share", TS_CONFIG(scene_params.neighbour_share));
   {
     Parameter p = setting("seed", E, Type::integer, "", 0, kInf, "", "Seed of every random draw (unsigned integer)");
     p.set_config = [](ExperimentConfig& c, const Inputs& in, const std::string& file, const std::string& name) {

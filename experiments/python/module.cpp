@@ -271,6 +271,9 @@ PyLog simulate(const PyDatabase& d, const py::object& object, std::size_t grasps
   PyLog l;
   {
     py::gil_scoped_release release;
+    s.neighbours = datasets::scene_neighbours(s.scene, d.db->size(), i, s.seed, [&](std::size_t k) {
+      return datasets::SceneObject{d.db->info(k).name, d.reader->load_mesh(k)};
+    });
     const datasets::Simulator sim(d.reader->load_mesh(i), d.db->info(i).name, Gripper(), s);
     l.log = std::make_shared<TactileLog>(sim.run().log);
   }

@@ -20,7 +20,7 @@ datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
   datasets::SimulatorSettings s;
   s.sensors = c.sensors;
   s.noise = datasets::noise_profile(c.noise);
-  auto take = [](const std::optional<double>& value, double& field) {   // unset: the default stays
+  auto take = [](const auto& value, auto& field) {   // unset: the default stays
     if (value) field = *value;
   };
   const NoiseOverrides& n = c.noise_params;
@@ -47,6 +47,7 @@ datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
   const FingertipOverrides& t = c.fingertip_params;
   take(t.quantization_m, s.fingertips.quantization);
   take(t.normals_deg, s.fingertips.normal_sigma_deg);
+  check_scene_keys(c);
   s.scene.kind = datasets::parse_scene_kind(c.scene, {}, "scene");
   const SceneOverrides& sc = c.scene_params;
   take(sc.slope_deg, s.scene.slope_deg);
@@ -57,6 +58,9 @@ datasets::SimulatorSettings simulation_settings(const ExperimentConfig& c) {
   take(sc.off_target_radius_m, s.scene.off_target_radius_m);
   take(sc.extent_m, s.scene.extent_m);
   take(sc.pipe_radius_m, s.scene.pipe_radius_m);
+  take(sc.neighbours, s.scene.neighbours);
+  take(sc.neighbour_distance_m, s.scene.neighbour_distance_m);
+  take(sc.neighbour_share, s.scene.neighbour_share);
   s.grasps = static_cast<std::size_t>(c.pool);
   return s;
 }
@@ -77,6 +81,8 @@ std::string pool_key(const datasets::SimulatorSettings& s) {
       << sc.relief_wavelength_m << '|' << sc.gap_m << '|' << sc.off_target << '|' << sc.off_target_radius_m << '|'
       << sc.extent_m;
     if (sc.kind == datasets::SceneKind::pipe) k << '|' << sc.pipe_radius_m;   // (other scenes' keys as before)
+    if (sc.kind == datasets::SceneKind::cluttered)
+      k << '|' << sc.neighbours << '|' << sc.neighbour_distance_m << '|' << sc.neighbour_share;
   }
   return k.str();
 }
@@ -92,6 +98,7 @@ TactileLog log_from_pool(const TactileLog& pool, const std::vector<std::int32_t>
   truth.object_pose = pool.truth->object_pose;
   truth.scene = pool.truth->scene;
   truth.support = pool.truth->support;
+  truth.neighbours = pool.truth->neighbours;
   for (std::int32_t g : grasps) {
     const auto gi = static_cast<std::size_t>(g);
     log.grasps.push_back(pool.grasps.at(gi));

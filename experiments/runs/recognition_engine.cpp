@@ -342,9 +342,24 @@ class RecognitionEngine final : public RunEngine {
     es.free.res_free = rs.evaluate.res_free;
     es.free.s_obj_max = largest_object_extent(*group.database);
     Exploration exploration(log, es);
-    // A scene's support, to tell which contacts truly touched the target (attribution).
-    std::optional<MeshIndex> support;
-    if (log.truth && !log.truth->support.faces.empty()) support.emplace(log.truth->support);
+    // A scene's support, and everything in it but the target (the support and a cluttered
+    // scene's neighbours), to tell which contacts truly touched the target (attribution).
+    std::optional<MeshIndex> support, others;
+    std::vector<std::string> neighbour_names;
+    if (log.truth && !log.truth->support.faces.empty()) {
+      support.emplace(log.truth->support);
+      if (!log.truth->neighbours.empty()) {
+        Mesh all = log.truth->support;
+        for (const LogGroundTruth::Neighbour& n : log.truth->neighbours) {
+          const int base = static_cast<int>(all.vertices.size());
+          all.vertices.insert(all.vertices.end(), n.mesh.vertices.begin(), n.mesh.vertices.end());
+          for (const auto& f : n.mesh.faces) all.faces.push_back(f + Eigen::Vector3i::Constant(base));
+          neighbour_names.push_back(n.name);
+        }
+        others.emplace(std::move(all));
+      }
+    }
+    const MeshIndex* off_target_surfaces = others ? &*others : support ? &*support : nullptr;
     const auto run_start = Clock::now();
     std::vector<Vec3> contacts_so_far;   // active: the contact cloud of the previous step
     const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -469,14 +484,14 @@ class RecognitionEngine final : public RunEngine {
       // at its true pose), and the share the step's attribution labelled right, target or not.
       {
         double right_share = nan, off_share = nan;
-        if (support && !hidden && !contacts.empty()) {
+        if (off_target_surfaces && !hidden && !contacts.empty()) {
           const GeometryRef truth_geo = group.database->geometry(local_true);
           std::vector<double> d(contacts.size());
           truth_geo->field.distances(contacts.points.data(), contacts.size(), rec.truth.inverse(), d.data());
           std::size_t off = 0, right = 0;
           const bool labelled = sr.attribution.size() == contacts.size();
           for (std::size_t i = 0; i < contacts.size(); ++i) {
-            const bool on_target = std::abs(d[i]) <= support->closest(contacts.points[i]).distance;
+            const bool on_target = std::abs(d[i]) <= off_target_surfaces->closest(contacts.points[i]).distance;
             off += on_target ? 0 : 1;
             right += labelled && (sr.attribution[i] == ContactLabel::object) == on_target ? 1 : 0;
           }
@@ -485,6 +500,12 @@ class RecognitionEngine final : public RunEngine {
           if (labelled) right_share = static_cast<double>(right) / n;
         }
         s.values.insert(s.values.end(), {right_share, off_share});
+        // A cluttered scene: whether the step named one of the neighbours (NaN without them).
+        s.values.push_back(neighbour_names.empty() || !sr.valid ? nan
+                           : std::find(neighbour_names.begin(), neighbour_names.end(),
+                                       group.database->info(sr.best.object).name) != neighbour_names.end()
+                               ? 1.0
+                               : 0.0);
         // The support the step found against the true one under the object: found (NaN: not
         // looked for), its tilt (degrees) and its height there (m, signed, up positive).
         const bool looked = std::any_of(sr.stages.begin(), sr.stages.end(), [](const StageRun& x) {
@@ -560,7 +581,9 @@ class RecognitionEngine final : public RunEngine {
     datasets::SimulatorSettings s = v->simulation;
     const std::string& name = explored_[static_cast<std::size_t>(key.second)];
     s.seed = pool_seed(config_.seed, name, std::nullopt);
-    datasets::Simulator sim(db_.load_mesh(explored_file_[static_cast<std::size_t>(key.second)]), name, Gripper(), s);
+    const std::size_t file = explored_file_[static_cast<std::size_t>(key.second)];
+    s.neighbours = neighbours_of(s.scene, file, s.seed);
+    datasets::Simulator sim(db_.load_mesh(file), name, Gripper(), s);
     TactileLog log = sim.run().log;
     if (!log.truth) throw Error("the simulator gave no ground truth", {}, name);
     return log;
@@ -594,8 +617,19 @@ class RecognitionEngine final : public RunEngine {
                               const std::vector<std::int32_t>& grasps) const {
     const auto object = static_cast<std::size_t>(task.object);
     const std::string& name = explored_.at(object);
-    return simulate_run_pool(db_.load_mesh(explored_file_.at(object)), name, v.simulation,
-                             pool_seed(config_.seed, name, task.run), grasps);
+    const std::uint64_t seed = pool_seed(config_.seed, name, task.run);
+    datasets::SimulatorSettings s = v.simulation;
+    s.neighbours = neighbours_of(s.scene, explored_file_.at(object), seed);
+    return simulate_run_pool(db_.load_mesh(explored_file_.at(object)), name, s, seed, grasps);
+  }
+
+  /// A cluttered scene's neighbours around database object `file` (none for another scene),
+  /// drawn from the whole database file by the pool's seed.
+  std::vector<datasets::SceneObject> neighbours_of(const datasets::SceneSettings& scene, std::size_t file,
+                                                   std::uint64_t seed) const {
+    return datasets::scene_neighbours(scene, db_.source->size(), file, seed, [&](std::size_t i) {
+      return datasets::SceneObject{db_.source->info(i).name, db_.load_mesh(i)};
+    });
   }
 };
 
@@ -609,7 +643,7 @@ const std::vector<std::string>& recognition_step_values() {
     n.insert(n.end(), {"set.truth_gap_to_answer", "answer_set.size", "answer_set.covers", "answer_set.informative",
                        "plan.expected_information", "plan.expected_object_information", "plan.entropy_drop",
                        "fit.contact_distance_m", "attribution.right_share", "contacts.off_target_share",
-                       "support.found", "support.tilt_deg", "support.height_error_m"});
+                       "scene.answer_is_neighbour", "support.found", "support.tilt_deg", "support.height_error_m"});
     return n;
   }();
   return names;

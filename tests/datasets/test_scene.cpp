@@ -389,3 +389,162 @@ TEST_CASE("pipe: a horizontal cylinder the object rests on; grasps touch it and 
   CHECK(on_object > contacts / 4);
   for (const Pose& A : res.log.truth->arm_poses) CHECK(same.above(A.translation()) > 0);
 }
+
+TEST_CASE("cluttered: neighbours from the database lie on the seabed at the distance, apart, and are touched") {
+  // The draw: distinct objects, never the target, the same for the same seed; too many refused.
+  const auto a = datasets::neighbour_choice(10, 4, 3, 11);
+  CHECK(a == datasets::neighbour_choice(10, 4, 3, 11));
+  REQUIRE(a.size() == 3);
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    CHECK(a[i] < 10);
+    CHECK(a[i] != 4);
+    for (std::size_t j = 0; j < i; ++j) CHECK(a[i] != a[j]);
+  }
+  CHECK(datasets::neighbour_choice(10, 4, 9, 11).size() == 9);
+  try {
+    datasets::neighbour_choice(10, 4, 10, 11);
+    FAIL("drew more neighbours than the database's other objects");
+  } catch (const Error& e) {
+    CHECK(e.field() == "scene.neighbours");
+  }
+
+  // The placement on a flat seabed around a tilted box: each neighbour rests on the seabed (its
+  // lowest vertex on it), its vertices between the distance and 1.25 times it from the object's
+  // surface (the object's from its own likewise at least the distance), and the neighbours at
+  // least the distance apart; the same placement for the same seed.
+  const Mesh box = test::box_mesh(Vec3(0.1, 0.07, 0.06));
+  const Pose T = tilted_pose();
+  Mesh world = box;
+  for (Vec3& v : world.vertices) v = T * v;
+  datasets::SceneSettings cs;
+  cs.kind = datasets::SceneKind::cluttered;
+  cs.neighbours = 3;
+  cs.neighbour_distance_m = 0.04;
+  cs.extent_m = 0.6;
+  const datasets::Support seabed(box, T, cs, 0.15, 3);
+  const std::vector<datasets::SceneObject> objects{{"ball", test::sphere_mesh(0.05)},
+                                                   {"bar", test::box_mesh(Vec3(0.3, 0.04, 0.04))},
+                                                   {"cube", test::box_mesh(Vec3(0.07, 0.07, 0.07))}};
+  const auto placed = datasets::place_neighbours(world, seabed, objects, cs, 5);
+  REQUIRE(placed.size() == 3);
+  const MeshIndex object_index(world);
+  auto nearest = [](const MeshIndex& index, const Mesh& m) {
+    double d = 1e9;
+    for (const Vec3& v : m.vertices) d = std::min(d, index.closest(v).distance);
+    return d;
+  };
+  for (std::size_t k = 0; k < placed.size(); ++k) {
+    const datasets::PlacedObject& p = placed[k];
+    CHECK(p.name == objects[k].name);
+    REQUIRE(p.world.vertices.size() == objects[k].mesh.vertices.size());
+    for (std::size_t i = 0; i < p.world.vertices.size(); ++i)
+      CHECK((p.world.vertices[i] - p.T_world_object * objects[k].mesh.vertices[i]).norm() < 1e-12);
+    double lowest = 1e9;
+    for (const Vec3& v : p.world.vertices) lowest = std::min(lowest, seabed.above(v));
+    CHECK(std::abs(lowest) < 1e-9);
+    const MeshIndex own(p.world);
+    const double d = std::min(nearest(object_index, p.world), nearest(own, world));
+    CHECK(d >= 0.04 - 1e-9);
+    CHECK(d <= 1.25 * 0.04 + 1e-9);
+    for (std::size_t j = 0; j < k; ++j) CHECK(nearest(MeshIndex(placed[j].world), p.world) >= 0.04 - 1e-9);
+  }
+  const auto again = datasets::place_neighbours(world, seabed, objects, cs, 5);
+  for (std::size_t k = 0; k < placed.size(); ++k) CHECK(again[k].T_world_object.isApprox(placed[k].T_world_object, 0));
+
+  // Bad settings named: a count out of [1, 8], a distance that would touch, a share outside
+  // [0, 1], meshes that do not match the count.
+  refused(box, T, cs.kind, [](auto& b) { b.neighbours = 0; }, "scene.neighbours");
+  refused(box, T, cs.kind, [](auto& b) { b.neighbours = 9; }, "scene.neighbours");
+  refused(box, T, cs.kind, [](auto& b) { b.neighbour_distance_m = 0.001; }, "scene.neighbour_distance_m");
+  refused(box, T, cs.kind, [](auto& b) { b.neighbour_share = 1.5; }, "scene.neighbour_share");
+  try {
+    datasets::place_neighbours(world, seabed, {objects[0]}, cs, 5);
+    FAIL("placed one mesh as three neighbours");
+  } catch (const Error& e) {
+    CHECK(e.field() == "scene.neighbours");
+  }
+  CHECK(datasets::parse_scene_kind("cluttered") == datasets::SceneKind::cluttered);
+  CHECK(std::string(datasets::to_string(datasets::SceneKind::cluttered)) == "cluttered");
+
+  // The simulator: 40 % of the grasps off the target, half of those at the two neighbours. The
+  // contacts lie on the object, the seabed or a neighbour (within 1.5 mm), each kind touched;
+  // the log's truth holds the neighbours as placed, and it round-trips (format_version 5).
+  const Vec3 h(0.05, 0.035, 0.03);
+  datasets::SimulatorSettings s;
+  s.grasps = 60;
+  s.noise = datasets::noise_profile("ideal");
+  s.seed = 7;
+  s.scene.kind = datasets::SceneKind::cluttered;
+  s.scene.off_target = 0.4;
+  s.scene.neighbours = 2;
+  s.scene.neighbour_distance_m = 0.03;
+  s.neighbours = {objects[0], objects[2]};
+  const datasets::Simulator sim(test::box_mesh(2.0 * h), "box", Gripper(), s);
+  auto run_with = [&](int threads) {
+    tbb::task_arena arena(threads);
+    return arena.execute([&] { return sim.run(); });
+  };
+  const auto res = run_with(2);
+  const auto one = run_with(1);
+  REQUIRE(res.log.truth);
+  CHECK(res.log.truth->scene == "cluttered");
+  REQUIRE(res.log.truth->neighbours.size() == 2);
+  CHECK(res.log.truth->neighbours[0].name == "ball");
+  CHECK(res.log.truth->neighbours[1].name == "cube");
+  std::vector<MeshIndex> neighbour_index;
+  for (const auto& n : res.log.truth->neighbours) neighbour_index.emplace_back(n.mesh);
+  const MeshIndex seabed_index(res.log.truth->support);
+  const Pose T_object_world = sim.object_pose().inverse();
+  std::size_t on_object = 0, on_seabed = 0, on_neighbour = 0;
+  for (std::size_t g = 0; g < res.log.grasps.size(); ++g) {
+    CHECK(res.log.grasps[g].tactile == one.log.grasps[g].tactile);
+    for (const Vec3& p : grasp_contacts(res.log, g).points) {
+      const Vec3 q = (T_object_world * p).cwiseAbs() - h;
+      const double d_object = q.maxCoeff() > 0 ? q.cwiseMax(0.0).norm() : -q.maxCoeff();
+      const double d_seabed = seabed_index.closest(p).distance;
+      double d_neighbour = 1e9;
+      for (const MeshIndex& n : neighbour_index) d_neighbour = std::min(d_neighbour, n.closest(p).distance);
+      CHECK(std::min({d_object, d_seabed, d_neighbour}) < 0.0015);
+      if (d_object <= std::min(d_seabed, d_neighbour)) ++on_object;
+      else if (d_neighbour < d_seabed) ++on_neighbour;
+      else ++on_seabed;
+    }
+  }
+  const std::size_t contacts = on_object + on_seabed + on_neighbour;
+  CHECK(contacts > 150);
+  CHECK(on_object > contacts / 4);
+  CHECK(on_neighbour > contacts / 20);
+  CHECK(on_seabed > contacts / 50);
+
+  test::TempDir dir;
+  const auto path = dir.path() / "cluttered.h5";
+  io::LogWriter w = io::LogWriter::create(path, io::header_of(res.log));
+  for (std::size_t g = 0; g < res.log.grasps.size(); ++g)
+    w.append(res.log.grasps[g], &res.log.truth->arm_poses[g], &res.log.truth->joints[g]);
+  w.close();
+  const TactileLog back = io::read_log(path);
+  REQUIRE(back.truth);
+  REQUIRE(back.truth->neighbours.size() == 2);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const auto& x = res.log.truth->neighbours[k];
+    const auto& y = back.truth->neighbours[k];
+    CHECK(y.name == x.name);
+    CHECK(y.pose.isApprox(x.pose, 1e-12));
+    CHECK(y.mesh.vertices == x.mesh.vertices);
+    CHECK(y.mesh.faces == x.mesh.faces);
+  }
+
+  // The simulator wants the count's meshes, and meshes only in a cluttered scene.
+  datasets::SimulatorSettings missing = s;
+  missing.neighbours.pop_back();
+  datasets::SimulatorSettings seabed_only = s;
+  seabed_only.scene.kind = datasets::SceneKind::seabed;
+  for (const auto* bad : {&missing, &seabed_only}) {
+    try {
+      datasets::Simulator(test::box_mesh(2.0 * h), "box", Gripper(), *bad);
+      FAIL("accepted neighbours that do not match the scene");
+    } catch (const Error& e) {
+      CHECK(e.field() == "scene.neighbours");
+    }
+  }
+}

@@ -843,6 +843,48 @@ TEST_CASE("cli seabed: simulate a scene, log info names it, recognize --support 
   CHECK_FALSE(fs::exists(dir / "probe.h5"));
 }
 
+TEST_CASE("cli cluttered: neighbours from the database beside the box, in the log and scored by the experiment") {
+  test::TempDir dir("cli_cluttered");
+  make_db(dir);
+  const Run sim = touchstone(dir, "simulate --db db.h5 --object box --grasps 20 --noise ideal --scene cluttered "
+                                  "--scene-neighbours 2 --scene-off-target 0.5 --seed 5 --out cluttered.h5");
+  REQUIRE_MESSAGE(sim.code == 0, sim.err);
+  const Run info = touchstone(dir, "log info cluttered.h5 --json");
+  REQUIRE(info.code == 0);
+  const auto scene = nlohmann::json::parse(info.out)["scene"];
+  CHECK(scene["kind"] == "cluttered");
+  REQUIRE(scene["neighbours"].size() == 2);
+  const TactileLog log = io::read_log(dir / "cluttered.h5");
+  const io::DbReader db(dir / "db.h5");
+  for (std::size_t k = 0; k < 2; ++k) {   // database objects, not the box, placed as the log says
+    const auto& n = log.truth->neighbours[k];
+    CHECK(scene["neighbours"][k]["object"] == n.name);
+    CHECK(n.name != "box");
+    const std::size_t i = db.find(n.name);
+    REQUIRE(i < db.size());
+    const Mesh m = db.load_mesh(i);
+    REQUIRE(m.vertices.size() == n.mesh.vertices.size());
+    CHECK((n.pose * m.vertices.front() - n.mesh.vertices.front()).norm() < 1e-9);
+  }
+  // The experiment: every off-target grasp at a neighbour; the contacts off the target are
+  // counted against the neighbours too, and the answer named a neighbour or not in every run.
+  const std::string exp = "experiment --db db.h5 --objects box --runs 2 --steps 16 --pool 20 --set noise=ideal "
+                          "--set scene=cluttered --set scene.off_target=0.5 --set scene.neighbour_share=1 --json ";
+  const Run on = touchstone(dir, exp + "--set support.mode=plane --out on.h5");
+  REQUIRE_MESSAGE(on.code == 0, on.err);
+  const auto last = nlohmann::json::parse(on.out)["per_step"][15];
+  CHECK(last["off_target_share_mean"].get<double>() > 0.1);
+  const double named = last["neighbour_answer_share"].get<double>();
+  CHECK((named == 0.0 || named == 0.5 || named == 1.0));
+  CHECK(named + last["recognition_rate"].get<double>() <= 1.0);
+  // Bad input: a cluttered scene's key for another scene, named; nothing written.
+  const Run bad = touchstone(dir, "simulate --db db.h5 --object box --grasps 2 --scene seabed --scene-neighbours 2 "
+                                  "--out bad.h5");
+  CHECK(bad.code != 0);
+  CHECK(bad.err.find("scene.neighbours") != std::string::npos);
+  CHECK_FALSE(fs::exists(dir / "bad.h5"));
+}
+
 TEST_CASE("cli pipe: recognize --support cylinder finds the pipe under the box and sets it aside") {
   test::TempDir dir("cli_pipe");
   make_db(dir);
@@ -1042,6 +1084,9 @@ TEST_CASE("cli params --json: every method parameter is a recognize flag (and ea
       {"scene.off_target_radius_m", {"0.2", {{"scene.off_target_radius_m", 0.2}}}},
       {"scene.extent_m", {"0.5", {{"scene.extent_m", 0.5}}}},
       {"scene.pipe_radius_m", {"0.1", {{"scene.pipe_radius_m", 0.1}}}},
+      {"scene.neighbours", {"3", {{"scene.neighbours", 3}}}},
+      {"scene.neighbour_distance_m", {"0.02", {{"scene.neighbour_distance_m", 0.02}}}},
+      {"scene.neighbour_share", {"0.7", {{"scene.neighbour_share", 0.7}}}},
       {"seed", {"7", {{"seed", 7}}}},
       {"ransac.samples", {"3x20", {{"ransac.triplets", 3}, {"ransac.registrations", 20}}}},
       {"memory_budget_mb", {"64", {{"memory_budget_mb", 64.0}}}},

@@ -222,7 +222,7 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
   const std::size_t F = confidence_feature_names().size();
   const std::size_t G = 2 + F + pipeline_stage_names().size();   // set.truth_gap_to_answer, then answer_set.*
   for (const auto& s : runs[0].steps) {
-    REQUIRE(s.values.size() == G + 13);
+    REQUIRE(s.values.size() == G + 14);
     CHECK(std::isnan(s.values[0]));  // no calibration: no confidence
     CHECK(std::isnan(s.values[1]));
     for (std::size_t i = 2; i < 2 + F; ++i) CHECK(std::isfinite(s.values[i]));
@@ -244,7 +244,8 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
     // attribution.right_share, contacts.off_target_share: no scene, nothing to score.
     CHECK(std::isnan(s.values[G + 8]));
     CHECK(std::isnan(s.values[G + 9]));
-    for (std::size_t i = G + 10; i < G + 13; ++i) CHECK(std::isnan(s.values[i]));   // support.*: not looked for
+    CHECK(std::isnan(s.values[G + 10]));   // scene.answer_is_neighbour: no neighbours
+    for (std::size_t i = G + 11; i < G + 14; ++i) CHECK(std::isnan(s.values[i]));   // support.*: not looked for
   }
   // The entropy drop: the previous step's posterior entropy minus this one's (none at step 1).
   const auto& st = runs[0].steps;
