@@ -24,7 +24,8 @@
 // step, the answer's object, ln wt and pose, the posterior, and every hypothesis's object and
 // ln wt, so that two builds (or thread counts, --accuracy-threads) are compared with `cmp`.
 //
-// Prints the machine, thread counts, parameters and every figure.
+// Prints the machine, thread counts, parameters and every figure (with the speed part, the peak
+// resident memory).
 #include "datasets/simulator.hpp"
 #include "engine/database/symmetry_cache.hpp"
 #include "engine/geometry/pose_error.hpp"
@@ -38,6 +39,7 @@
 #include "io/db_store.hpp"
 
 #include <CLI/CLI.hpp>
+#include <sys/resource.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -262,6 +264,10 @@ int main(int argc, char** argv) {
       }
       std::printf("speed-up 1 -> 2 threads: %.2fx at step %zu, %.2fx over all steps; identical results: %s\n",
                   median(last[1]) / median(last[2]), grasps, median(all[1]) / median(all[2]), same ? "yes" : "NO");
+      rusage usage{};
+      getrusage(RUSAGE_SELF, &usage);   // ru_maxrss: KiB on Linux
+      std::printf("peak memory so far: %.2f GB resident (the database's geometry loaded as the steps needed it)\n",
+                  static_cast<double>(usage.ru_maxrss) * 1024.0 / 1e9);
     }
 
     if (accuracy) {
