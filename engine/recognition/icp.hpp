@@ -28,7 +28,9 @@ struct IcpSettings {
   double min_rotation_deg = 0.01;     ///< ... and turns less than this (degrees), or when
   double min_improvement = 0.001;     ///< ... the RMS improved by less than this fraction in
                                       ///< two successive iterations
-  double max_correspondence = 0.0;    ///< m; pairs farther apart are ignored (0: keep all)
+  double max_correspondence = 0.0;    ///< m; pairs farther apart are ignored (0: keep all; the
+                                      ///< Recognizer makes it 2 x evaluate.outlier_m when the
+                                      ///< background term is on)
   double trim_fraction = 1.0;         ///< trimmed ICP: fit the closest share of pairs (1: all)
   std::size_t max_points = 128;       ///< contacts used, a fixed prefix of the scene's
                                       ///< evaluation order (0: all)

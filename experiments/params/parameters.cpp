@@ -222,7 +222,7 @@ std::vector<Parameter> declaration() {
                       {"--icp-iterations", "icp_iterations"}, TS_FIELD(recognizer.icp.max_iterations)));
   d.push_back(real("icp.trim", "", 0.1, 1, "", "Trimmed ICP: share of the closest pairs fitted",
                    {"--icp-trim", "icp_trim"}, TS_FIELD(recognizer.icp.trim_fraction)));
-  d.push_back(real("icp.max_correspondence_m", "m", 0, 100, "", "ICP pair distance gate (0: none)",
+  d.push_back(real("icp.max_correspondence_m", "m", 0, 100, "", "ICP pair distance gate (0: none, or with the background term on twice evaluate.outlier_m)",
                    {"--icp-max-correspondence", "icp_max_correspondence"}, TS_FIELD(recognizer.icp.max_correspondence)));
   d.push_back(integer("icp.points", 0, kLarge, "", "Contacts used by ICP (0: all)",
                       {"--icp-points", "icp_points", "icp_max_points"}, TS_FIELD(recognizer.icp.max_points)));

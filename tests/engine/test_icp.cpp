@@ -81,6 +81,30 @@ TEST_CASE("Trimmed ICP resists outlying contacts") {
   CHECK(et.position_m < ep.position_m);
 }
 
+TEST_CASE("ICP's pair gate leaves contacts beyond it out of the fit (the background term's ICP)") {
+  IcpCase c;
+  Scene sc = c.scene(12);
+  // Every 5th contact (in evaluation order) moved 2.5 cm off the surface along its normal side
+  // (within the field's band, where it pulls an ungated fit): a neighbour's or the seabed's.
+  Rng rng(9);
+  for (std::size_t i = 0; i < sc.ordered.size(); i += 5) sc.ordered[i] += 0.025 * rng.unit_vector();
+  const GeometryRef pinned = c.db.geometry(c.obj);
+  const ObjectGeometry& geo = *pinned;
+  const Pose start = perturbed(sc.to_scene(c.truth), 0.003, 3.0, 7);
+  IcpSettings plain;
+  plain.max_iterations = 100;
+  IcpSettings gated = plain;
+  gated.max_correspondence = 0.01;
+  const IcpResult rg = icp(sc, geo, start, gated);
+  const PoseError ep = pose_error(sc.to_world(icp(sc, geo, start, plain).T_scene_object), c.truth);
+  const PoseError eg = pose_error(sc.to_world(rg.T_scene_object), c.truth);
+  CHECK(eg.position_m < 1e-3);
+  CHECK(eg.orientation_deg < 2.0);
+  CHECK(eg.position_m < ep.position_m);
+  CHECK(eg.orientation_deg < ep.orientation_deg);
+  CHECK(rg.pairs < sc.ordered.size());   // the moved contacts were not paired
+}
+
 TEST_CASE("ICP on degenerate input keeps the initial pose and says so") {
   IcpCase c;
   const GeometryRef pinned = c.db.geometry(c.obj);

@@ -288,6 +288,22 @@ TEST_CASE("Pipeline: attribution labels the answer's contacts, one 5 mm off it t
   CHECK(t.attribution[n] == ContactLabel::unexplained);
 }
 
+TEST_CASE("Recognizer: with the background term on, ICP's pair gate is twice its distance unless set") {
+  // (What the gate does to a fit: test_icp.cpp; what it does to recognition among neighbours:
+  // study15_cluttered, paired against the commit before.)
+  auto src = test::make_source();
+  Database db(src);
+  RecognizerSettings s = test::fast_settings(Method::bricpsf);
+  CHECK(Recognizer(db, s).settings().icp.max_correspondence == 0.0);   // no term, no gate
+  s.evaluate.outlier_m = 0.015;
+  CHECK(Recognizer(db, s).settings().icp.max_correspondence == 0.03);
+  s.icp.max_correspondence = 0.1;   // an explicit gate is kept
+  CHECK(Recognizer(db, s).settings().icp.max_correspondence == 0.1);
+  // Scaled settings (objects of another size): the gate follows the scaled distance.
+  s.icp.max_correspondence = 0.0;
+  CHECK(Recognizer(db, s.scaled(2.0)).settings().icp.max_correspondence == doctest::Approx(0.06).scale(0).epsilon(1e-12));
+}
+
 TEST_CASE("Scaled settings scale the support's and the background term's lengths (objects of another size)") {
   RecognizerSettings s;
   s.evaluate.outlier_m = 0.015;
