@@ -7,6 +7,8 @@
 #include <cmath>
 #include <numbers>
 #include <optional>
+#include <tuple>
+#include <utility>
 
 namespace ts::datasets {
 
@@ -112,6 +114,35 @@ struct Hit {
   int link = 0;          // finger-local link index of the hitting sample
   double radius = 0.0;   // distance of the hit sample from the joint origin
 };
+
+/// Cumulative face areas of a mesh (area-uniform sampling); back() is its area.
+std::vector<double> area_cdf_of(const Mesh& M) {
+  std::vector<double> cdf;
+  double total = 0.0;
+  for (const auto& f : M.faces) {
+    total += 0.5 * (M.vertices[f[1]] - M.vertices[f[0]]).cross(M.vertices[f[2]] - M.vertices[f[0]]).norm();
+    cdf.push_back(total);
+  }
+  return cdf;
+}
+
+/// An area-uniform point of M's surface and its face (draws the face, then two barycentrics).
+std::pair<Vec3, int> area_sample(const Mesh& M, const std::vector<double>& cdf, Rng& rng) {
+  const double u = rng.uniform() * cdf.back();
+  const int face = static_cast<int>(
+      std::min<std::size_t>(std::upper_bound(cdf.begin(), cdf.end(), u) - cdf.begin(), M.faces.size() - 1));
+  const double r1 = std::sqrt(rng.uniform()), r2 = rng.uniform();
+  const auto& tri = M.faces[face];
+  return {(1 - r1) * M.vertices[tri[0]] + r1 * (1 - r2) * M.vertices[tri[1]] + r1 * r2 * M.vertices[tri[2]], face};
+}
+
+/// Face f's unit normal, its winding's times `sign` (+z for a degenerate face).
+Vec3 face_normal_of(const Mesh& M, int f, double sign) {
+  const auto& t = M.faces[f];
+  const Vec3 n = (M.vertices[t[1]] - M.vertices[t[0]]).cross(M.vertices[t[2]] - M.vertices[t[0]]);
+  const double len = n.norm();
+  return len > 0 ? Vec3(sign * n / len) : Vec3::UnitZ();
+}
 }  // namespace
 
 NoiseSettings noise_profile(const std::string& name) {
@@ -163,13 +194,7 @@ struct Simulator::Impl {
       : mesh(std::move(m)), name(std::move(n)), gripper(std::move(g)), settings(std::move(s)) {}
 
   // ---- geometry helpers -------------------------------------------------------------------
-  Vec3 face_normal(int f) const {
-    const auto& M = mesh.mesh();
-    const auto& t = M.faces[f];
-    const Vec3 n = (M.vertices[t[1]] - M.vertices[t[0]]).cross(M.vertices[t[2]] - M.vertices[t[0]]);
-    const double len = n.norm();
-    return len > 0 ? Vec3(normal_sign * n / len) : Vec3::UnitZ();
-  }
+  Vec3 face_normal(int f) const { return face_normal_of(mesh.mesh(), f, normal_sign); }
 
   void finger_poses(const Pose& T_obj_eef, int f, const std::vector<double>& q, std::vector<Pose>& out) const {
     const int first = gripper.joint_index(f, 0);
@@ -344,12 +369,8 @@ Simulator::Simulator(Mesh object_mesh, std::string object_name, Gripper gripper,
   Impl& m = *impl_;
   const Mesh& M = m.mesh.mesh();
   m.normal_sign = mesh_signed_volume(M) < 0 ? -1.0 : 1.0;
-  double total = 0.0;
-  for (const auto& f : M.faces) {
-    total += 0.5 * (M.vertices[f[1]] - M.vertices[f[0]]).cross(M.vertices[f[2]] - M.vertices[f[0]]).norm();
-    m.area_cdf.push_back(total);
-  }
-  if (!(total > 0)) throw Error("object mesh has zero area", {}, m.name);
+  m.area_cdf = area_cdf_of(M);
+  if (!(m.area_cdf.back() > 0)) throw Error("object mesh has zero area", {}, m.name);
   const auto box = mesh_bounds(M);
   m.centre = box.center();
   for (const auto& v : M.vertices) m.radius = std::max(m.radius, (v - m.centre).norm());
@@ -390,12 +411,8 @@ Simulator::Simulator(Mesh object_mesh, std::string object_name, Gripper gripper,
       for (Vec3& v : object_world.vertices) v = m.T_world_object * v;
       for (PlacedObject& p : place_neighbours(object_world, *m.support, m.settings.neighbours, scene, m.settings.seed)) {
         Impl::Neighbour n;
-        double total = 0.0;
-        for (const auto& f : p.world.faces) {
-          total += 0.5 * (p.world.vertices[f[1]] - p.world.vertices[f[0]]).cross(p.world.vertices[f[2]] - p.world.vertices[f[0]]).norm();
-          n.area_cdf.push_back(total);
-        }
-        if (!(total > 0)) throw Error("neighbour '" + p.name + "' has zero area", {}, "scene.neighbours");
+        n.area_cdf = area_cdf_of(p.world);
+        if (!(n.area_cdf.back() > 0)) throw Error("neighbour '" + p.name + "' has zero area", {}, "scene.neighbours");
         n.centre = mesh_bounds(p.world).center();
         for (const Vec3& v : p.world.vertices) n.radius = std::max(n.radius, (v - n.centre).norm());
         n.normal_sign = mesh_signed_volume(p.world) < 0 ? -1.0 : 1.0;
@@ -456,14 +473,8 @@ Simulator::Grasp probe_touch(const MeshIndex& mesh, const std::vector<double>& a
   double L = 0.0;
   int attempts = 0;
   for (bool ok = false; !ok && attempts < ps.max_attempts; ++attempts) {
-    const double u = rng.uniform() * area_cdf.back();
-    const int face = static_cast<int>(std::min<std::size_t>(
-        std::upper_bound(area_cdf.begin(), area_cdf.end(), u) - area_cdf.begin(), M.faces.size() - 1));
-    const double r1 = std::sqrt(rng.uniform()), r2 = rng.uniform();
-    const auto& tri = M.faces[face];
-    const Vec3 p = (1 - r1) * M.vertices[tri[0]] + r1 * (1 - r2) * M.vertices[tri[1]] + r1 * r2 * M.vertices[tri[2]];
-    Vec3 n = (M.vertices[tri[1]] - M.vertices[tri[0]]).cross(M.vertices[tri[2]] - M.vertices[tri[0]]);
-    n = n.norm() > 0 ? Vec3(normal_sign * n.normalized()) : Vec3::UnitZ();
+    const auto [p, face] = area_sample(M, area_cdf, rng);
+    const Vec3 n = face_normal_of(M, face, normal_sign);
     const double cos_a = 1.0 - rng.uniform() * (1.0 - cos_max);
     const double sin_a = std::sqrt(std::max(0.0, 1.0 - cos_a * cos_a));
     const double beta = rng.uniform(0.0, 2.0 * std::numbers::pi);
@@ -575,17 +586,9 @@ Simulator::Grasp Simulator::grasp_or_aim(std::size_t g, GraspCommand* aim_only) 
     double aim_radius = m.radius;
     if (aim_support && !m.neighbours.empty() && off_rng.uniform() < m.settings.scene.neighbour_share) {
       const Impl::Neighbour& nb = m.neighbours[off_rng.index(m.neighbours.size())];
-      const Mesh& W = nb.placed.world;
-      const double u = off_rng.uniform() * nb.area_cdf.back();
-      const std::size_t face = std::min<std::size_t>(
-          static_cast<std::size_t>(std::upper_bound(nb.area_cdf.begin(), nb.area_cdf.end(), u) - nb.area_cdf.begin()),
-          W.faces.size() - 1);
-      const double r1 = std::sqrt(off_rng.uniform()), r2 = off_rng.uniform();
-      const auto& tri = W.faces[face];
-      const Vec3 x = (1 - r1) * W.vertices[tri[0]] + r1 * (1 - r2) * W.vertices[tri[1]] + r1 * r2 * W.vertices[tri[2]];
-      const Vec3 normal = nb.normal_sign * (W.vertices[tri[1]] - W.vertices[tri[0]]).cross(W.vertices[tri[2]] - W.vertices[tri[0]]);
+      const auto [x, face] = area_sample(nb.placed.world, nb.area_cdf, off_rng);
       p = T_object_world * x;
-      n = T_object_world.linear() * (normal.norm() > 0 ? Vec3(normal.normalized()) : Vec3::UnitZ());
+      n = T_object_world.linear() * face_normal_of(nb.placed.world, face, nb.normal_sign);
       aim_centre = T_object_world * nb.centre;
       aim_radius = nb.radius;
     } else if (aim_support) {
@@ -593,12 +596,8 @@ Simulator::Grasp Simulator::grasp_or_aim(std::size_t g, GraspCommand* aim_only) 
       p = T_object_world * x;
       n = T_object_world.linear() * up;
     } else {
-      const double u = rng.uniform() * m.area_cdf.back();
-      const int face = static_cast<int>(std::min<std::size_t>(
-          std::upper_bound(m.area_cdf.begin(), m.area_cdf.end(), u) - m.area_cdf.begin(), M.faces.size() - 1));
-      const double r1 = std::sqrt(rng.uniform()), r2 = rng.uniform();
-      const auto& tri = M.faces[face];
-      p = (1 - r1) * M.vertices[tri[0]] + r1 * (1 - r2) * M.vertices[tri[1]] + r1 * r2 * M.vertices[tri[2]];
+      int face = 0;
+      std::tie(p, face) = area_sample(M, m.area_cdf, rng);
       n = m.face_normal(face);
     }
     // Pad frame: z within the cone about -n, random roll, p on the foam at a random sensel spot.

@@ -148,8 +148,7 @@ Recognizer::Recognizer(const Database& db, std::shared_ptr<const FeatureIndex> i
   if (s_.n_p == 0) throw Error("n_p must be positive", {}, "n_p");
   // With the background term on, ICP pairs no contact farther than twice its distance from the
   // object (unless icp.max_correspondence says otherwise): what the evaluation takes for the
-  // seabed or a neighbour must not pull the fit either (study15_cluttered: 14.4 -> 42.2 % at
-  // step 20 with neighbours, the position error 18 -> 5 mm).
+  // seabed or a neighbour must not pull the fit either (measured by study15_cluttered; CHANGELOG).
   if (s_.evaluate.outlier_m > 0.0 && s_.icp.max_correspondence == 0.0)
     s_.icp.max_correspondence = 2.0 * s_.evaluate.outlier_m;
   prior_ = shape_prior(db_, s_);
