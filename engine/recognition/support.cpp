@@ -91,7 +91,9 @@ int free_side(const Vec3& n, const Vec3& centre, const std::vector<const Vec3*>&
 /// The contacts beyond the tolerance above a candidate support (`height`: signed, up or outside
 /// positive), or none when too few lie off it (min_contacts) or too few of those lie above it
 /// (above_share): the object rests on its support, while a face of the object has the rest of
-/// the object behind it.
+/// the object behind it. (Below counts from the tolerance, not from SupportSurface::kBelow
+/// tolerances as the contacts it explains do: an object's face would then hide the object's
+/// contacts just behind it, and more of them pass for a support.)
 template <class Height>
 std::optional<std::size_t> rest_above(const PointCloud& contacts, const SupportSettings& s, Height height) {
   std::size_t above = 0, below = 0;
@@ -114,16 +116,22 @@ struct Judge {
   /// The candidate `plane` refitted and judged; found = false when it is not a support.
   SupportSurface operator()(Plane plane) const {
     SupportSurface out;
+    out.verdict = SupportVerdict::few_contacts;
     const double tol = s.tolerance;
-    auto within = [&](const Plane& q) {
+    auto within = [&](const Plane& q, double band) {
       std::vector<Vec3> near;
       for (const Vec3& p : contacts.points)
-        if (std::abs(q.normal.dot(p - q.point)) < tol) near.push_back(p);
+        if (std::abs(q.normal.dot(p - q.point)) < band) near.push_back(p);
       return near;
     };
-    std::vector<Vec3> on = within(plane);
+    // Gathered within twice the tolerance first: a patch of a few contacts in a strip (a pad
+    // that met the seabed with its edge) gives a normal a few degrees off, which a contact 10 cm
+    // away sees as more than the tolerance. Then refitted twice, to those within the tolerance.
+    std::vector<Vec3> on = within(plane, 2.0 * tol);
     if (on.size() < s.min_contacts || !fit_plane(on, plane)) return out;
-    on = within(plane);   // those of the refitted plane
+    on = within(plane, tol);
+    if (on.size() >= 3 && fit_plane(on, plane)) on = within(plane, tol);   // those of the refitted plane
+    out.contacts_on = on.size();
     if (on.size() < s.min_contacts) return out;
     // The disc its contacts span (about their centroid, in the plane).
     Vec3 c = Vec3::Zero();
@@ -146,7 +154,9 @@ struct Judge {
       ++grasps_on;
       add_hand_free_points(grasps, g, witnesses);
     }
+    out.verdict = SupportVerdict::few_grasps;
     if (!grasps.empty() && grasps_on < s.min_grasps) return out;
+    out.verdict = SupportVerdict::side_unclear;
     const double reach = radius + 0.05;
     if (witnesses.empty())
       for (const Vec3& q : free)
@@ -155,8 +165,10 @@ struct Judge {
     if (side == 0) return out;
     const Vec3 n = side * plane.normal;
     // The rest above it, and no free space below it where it was touched.
+    out.verdict = SupportVerdict::rest_not_above;
     const std::optional<std::size_t> above = rest_above(contacts, s, [&](const Vec3& p) { return n.dot(p - c); });
     if (!above) return out;
+    out.verdict = SupportVerdict::free_behind;
     const double margin = s.free_margin >= 0.0 ? s.free_margin : s.tolerance;
     std::size_t free_near = 0, free_below = 0;
     for (const Vec3& q : free) {
@@ -168,6 +180,7 @@ struct Judge {
     }
     if (free_near > 0 && 50 * free_below > free_near) return out;   // more than 2 % below
     out.found = true;
+    out.verdict = SupportVerdict::found;
     out.normal = n;
     out.offset = n.dot(c);
     out.contacts_on = on.size();
@@ -177,6 +190,26 @@ struct Judge {
   }
 };
 
+
+/// Why nothing was found: the verdict of the candidate with the most contacts on it (the first of
+/// those), the one most likely the support.
+struct Largest {
+  SupportVerdict verdict;
+  std::size_t contacts = 0;
+  explicit Largest(bool none) : verdict(none ? SupportVerdict::no_candidate : SupportVerdict::few_contacts) {}
+  void add(const SupportSurface& j) {
+    if (j.contacts_on > contacts) contacts = j.contacts_on, verdict = j.verdict;
+  }
+  /// Into `best` when it was not found: the verdict and the contacts on that candidate.
+  void report(SupportSurface& best) const {
+    if (best.found) {
+      best.verdict = SupportVerdict::found;
+    } else {
+      best.verdict = verdict;
+      best.contacts_on = contacts;
+    }
+  }
+};
 
 // A cylinder: unit axis `a` through `p`, radius `r`.
 struct Cylinder {
@@ -320,9 +353,11 @@ struct CylinderJudge {
 
   SupportSurface operator()(Cylinder c) const {
     SupportSurface out;
+    out.verdict = SupportVerdict::few_contacts;
     const double tol = s.tolerance;
     if (!refit(c)) return out;
     const std::vector<std::size_t> idx = on(c);
+    out.contacts_on = idx.size();
     if (idx.size() < s.min_contacts) return out;
     // Its contacts' centroid, axial stretch and the axis point nearest them.
     Vec3 centroid = Vec3::Zero();
@@ -336,7 +371,9 @@ struct CylinderJudge {
       hi = std::max(hi, t);
     }
     const std::vector<std::size_t> on_grasps = grasps_on(c);
+    out.verdict = SupportVerdict::few_grasps;
     if (!grasps.empty() && on_grasps.size() < s.min_grasps) return out;
+    out.verdict = SupportVerdict::side_unclear;
     // The free side is outside: the hands that touched it, or the free space near it, with
     // one in 20 inside at most (a cylinder through the object's faces has hands inside it).
     std::vector<const Vec3*> witnesses;
@@ -353,8 +390,10 @@ struct CylinderJudge {
     }
     if (outside + inside == 0 || outside < 20 * inside) return out;
     // The rest outside it, and no free space inside it along its contacts' stretch.
+    out.verdict = SupportVerdict::rest_not_above;
     const std::optional<std::size_t> above = rest_above(contacts, s, [&](const Vec3& p) { return c.distance(p); });
     if (!above) return out;
+    out.verdict = SupportVerdict::free_behind;
     const double margin = s.free_margin >= 0.0 ? s.free_margin : s.tolerance;
     std::size_t free_near = 0, free_inside = 0;
     for (const Vec3& q : free) {
@@ -367,6 +406,7 @@ struct CylinderJudge {
     }
     if (free_near > 0 && 50 * free_inside > free_near) return out;
     out.found = true;
+    out.verdict = SupportVerdict::found;
     out.shape = SupportSurface::Shape::cylinder;
     out.axis = c.a;
     out.point = c.p;
@@ -411,18 +451,35 @@ SupportSurface estimate_cylinder(const PointCloud& contacts, const GraspGroups& 
     if (judge.radius_ok(candidates[k].r)) order.emplace_back(judge.on(candidates[k]).size(), k);
   std::stable_sort(order.begin(), order.end(), [](const auto& x, const auto& y) { return x.first > y.first; });
   SupportSurface best;
+  Largest largest(candidates.empty());
   for (std::size_t k = 0; k < std::min<std::size_t>(16, order.size()); ++k) {
     if (order[k].first < s.min_contacts) break;
     const SupportSurface j = judge(candidates[order[k].second]);
+    largest.add(j);
     if (j.found && (!best.found || j.grasps_on > best.grasps_on ||
                     (j.grasps_on == best.grasps_on && j.contacts_on > best.contacts_on)))
       best = j;
   }
   best.shape = SupportSurface::Shape::cylinder;
   best.candidates = candidates.size();
+  largest.report(best);
   return best;
 }
 }  // namespace
+
+const char* to_string(SupportVerdict v) {
+  switch (v) {
+    case SupportVerdict::not_looked: return "not_looked";
+    case SupportVerdict::no_candidate: return "no_candidate";
+    case SupportVerdict::few_contacts: return "few_contacts";
+    case SupportVerdict::few_grasps: return "few_grasps";
+    case SupportVerdict::side_unclear: return "side_unclear";
+    case SupportVerdict::rest_not_above: return "rest_not_above";
+    case SupportVerdict::free_behind: return "free_behind";
+    case SupportVerdict::found: return "found";
+  }
+  return "unknown";
+}
 
 SupportSurface estimate_support(const PointCloud& contacts, const GraspGroups& grasps, const std::vector<Vec3>& free,
                                 const SupportSettings& s, std::uint64_t seed, std::uint64_t step) {
@@ -446,11 +503,14 @@ SupportSurface estimate_support(const PointCloud& contacts, const GraspGroups& g
   }
   const Judge judge{contacts, grasps, free, s};
   SupportSurface best;
+  Largest largest(candidates.empty());
   for (const Plane& p : candidates) {
     const SupportSurface j = judge(p);
+    largest.add(j);
     if (j.found && (!best.found || j.contacts_on > best.contacts_on)) best = j;
   }
   best.candidates = candidates.size();
+  largest.report(best);
   return best;
 }
 
@@ -458,7 +518,7 @@ PointCloud without_support(const PointCloud& contacts, const SupportSurface& sup
   if (!support.found) return contacts;
   PointCloud out;
   for (std::size_t i = 0; i < contacts.points.size(); ++i) {
-    if (std::abs(support.signed_distance(contacts.points[i])) < tolerance) continue;
+    if (support.explains(contacts.points[i], tolerance)) continue;
     out.points.push_back(contacts.points[i]);
     if (contacts.has_normals()) out.normals.push_back(contacts.normals[i]);
   }
@@ -474,7 +534,7 @@ GraspGroups without_support(const GraspGroups& grasps, const SupportSurface& sup
   out.first = {0};
   for (std::size_t g = 0; g < grasps.grasps(); ++g) {
     for (std::uint32_t i = grasps.first[g]; i < grasps.first[g + 1]; ++i)
-      if (std::abs(support.signed_distance(grasps.points[i])) >= tolerance) out.points.push_back(grasps.points[i]);
+      if (!support.explains(grasps.points[i], tolerance)) out.points.push_back(grasps.points[i]);
     out.first.push_back(static_cast<std::uint32_t>(out.points.size()));
   }
   return out;

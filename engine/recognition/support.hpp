@@ -6,8 +6,12 @@
 // Plane:
 // Candidates: the plane of each grasp's patch (its contacts' PCA, when flat within the tolerance),
 // or, without grasp groups (a points-only cloud), planes through seeded triplets of contacts;
-// each refitted to the contacts within `tolerance` of it. Up is the free side: where the hands
-// that touched it were (their free points), or the free space near it.
+// each refitted to the contacts within twice `tolerance` of it (a pad that met the seabed with
+// its edge leaves a strip whose plane is a few degrees off), then twice to those within
+// `tolerance`. Up is the free side: where the hands that touched it were (their free points), or
+// the free space near it. The contacts it explains lie within `tolerance` above it or up to
+// SupportSurface::kBelow tolerances below it (the arm's error moves a grasp's contacts on it
+// together, mostly into it).
 //
 // A plane is the support when, beside enough contacts on it (`min_contacts`, and with grasp
 // groups `min_grasps` grasps whose patches lie on it):
@@ -67,6 +71,22 @@ struct SupportSettings {
                                      ///< object's (stage "attribution")
 };
 
+/// Why no support was found: the test at which the candidate with the most contacts on it failed
+/// (the one most likely the support), in the order the tests run (a later one: it passed every
+/// test before it).
+enum class SupportVerdict : int {
+  not_looked = 0,      ///< support.mode off
+  no_candidate,        ///< no flat patch (no triplet, no pair of patches for a cylinder)
+  few_contacts,        ///< fewer than support.min_contacts contacts on any candidate (or no fit)
+  few_grasps,          ///< fewer than min_grasps grasps' patches on it
+  side_unclear,        ///< the hands' free points do not tell its free side (4 to 1)
+  rest_not_above,      ///< too few contacts off it, or too few of those on its free side
+  free_behind,         ///< free space below it (inside a cylinder) where it was touched
+  found,               ///< a support was found
+};
+/// "found", "few_grasps", ...: the name the answer's JSON and the run store's report use.
+const char* to_string(SupportVerdict v);
+
 /// The support a step found: a plane or a cylinder, world frame.
 struct SupportSurface {
   enum class Shape { plane, cylinder };
@@ -77,16 +97,28 @@ struct SupportSurface {
   Vec3 axis = Vec3::UnitX();         ///< cylinder: unit, along its axis
   Vec3 point = Vec3::Zero();         ///< cylinder: the point of its axis nearest its contacts' centroid
   double radius = 0.0;               ///< cylinder: m
-  std::size_t contacts_on = 0;       ///< input contacts within the tolerance
+  std::size_t contacts_on = 0;       ///< input contacts within the tolerance (found = false: of the
+                                     ///< largest candidate, when it got that far)
   std::size_t contacts_above = 0;    ///< input contacts above it (outside a cylinder) beyond the tolerance
   std::size_t grasps_on = 0;         ///< grasps whose patch lies on it
   std::size_t candidates = 0;        ///< candidates examined
+  SupportVerdict verdict = SupportVerdict::not_looked;   ///< found, or why not
 
   /// Positive on the free side: above the plane, outside the cylinder.
   double signed_distance(const Vec3& x) const {
     if (shape == Shape::plane) return normal.dot(x) - offset;
     const Vec3 d = x - point;
     return (d - axis.dot(d) * axis).norm() - radius;
+  }
+  /// Whether it explains a contact at x: within `tolerance` of it, or below it (inside a
+  /// cylinder) by up to kBelow tolerances. Nothing of the object lies below its support, while
+  /// the arm's error moves a grasp's contacts on the support together, by more than the
+  /// tolerance (underwater: 3 mm per axis and 1 degree per grasp), and mostly into it as the hand
+  /// pressed there.
+  static constexpr double kBelow = 3.0;
+  bool explains(const Vec3& x, double tolerance) const {
+    const double d = signed_distance(x);
+    return d < tolerance && d > -kBelow * tolerance;
   }
   /// The unit normal towards the free side at the surface point nearest x (on a cylinder's axis:
   /// any direction across it).
@@ -105,7 +137,7 @@ struct SupportSurface {
 SupportSurface estimate_support(const PointCloud& contacts, const GraspGroups& grasps, const std::vector<Vec3>& free,
                               const SupportSettings& settings, std::uint64_t seed, std::uint64_t step);
 
-/// `contacts` without the points the support explains (within its tolerance); `grasps` likewise
+/// `contacts` without the points the support explains (SupportSurface::explains); `grasps` likewise
 /// (their free points and pivots kept, grasps left empty kept empty).
 PointCloud without_support(const PointCloud& contacts, const SupportSurface& support, double tolerance);
 GraspGroups without_support(const GraspGroups& grasps, const SupportSurface& support, double tolerance);

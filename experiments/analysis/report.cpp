@@ -1,6 +1,7 @@
 #include "experiments/analysis/report.hpp"
 
 #include "engine/core.hpp"
+#include "engine/recognition/support.hpp"
 #include "experiments/analysis/calibration.hpp"
 #include "io/atomic_file.hpp"
 
@@ -91,12 +92,12 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
   const std::size_t right_col = column("attribution.right_share"), off_col = column("contacts.off_target_share"),
                     neighbour_col = column("scene.answer_is_neighbour");
   const std::size_t found_col = column("support.found"), tilt_col = column("support.tilt_deg"),
-                    height_col = column("support.height_error_m");
+                    height_col = column("support.height_error_m"), verdict_col = column("support.verdict");
   J rows = J::array();
   for (int k = 0; k < steps; ++k) {
     std::map<int, ClusterCounts> covered_by_object;
     std::vector<double> set_sizes, expected, drop_planned, drop_all, fit, attributed, off_target, named_neighbour,
-        found, tilt, height;
+        found, tilt, height, verdicts;
     std::size_t covered = 0, informative = 0;
     std::map<int, ClusterCounts> strict_by_object, class_by_object;
     std::vector<StepSample> samples;
@@ -137,6 +138,7 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
       take(found_col, found);
       take(tilt_col, tilt);
       take(height_col, height, true);
+      take(verdict_col, verdicts);
       // Active touch: the planner's expectation of the chosen grasp and the step's entropy drop.
       if (drop_col < s.values.size() && !std::isnan(s.values[drop_col])) {
         drop_all.push_back(s.values[drop_col]);
@@ -208,6 +210,16 @@ J per_step_json(const io::RunStoreHeader& h, const std::vector<const io::RunReco
     row["support_found_share"] = mean_or_null(found);
     row["support_tilt_deg_median"] = opt(median(tilt));
     row["support_height_error_m_median"] = opt(median(height));
+    // Where it was looked for, the share of runs at each verdict (found, or the test the
+    // candidate with the most contacts on it failed: engine/recognition/support.hpp); null when
+    // not looked.
+    J shares = nullptr;
+    for (const double v : verdicts) {
+      const std::string name = to_string(static_cast<SupportVerdict>(static_cast<int>(v)));
+      if (shares.is_null()) shares = J::object();
+      shares[name] = shares.value(name, 0.0) + 1.0 / static_cast<double>(verdicts.size());
+    }
+    row["support_verdict_shares"] = shares;
     // The interface's keys first, then the rest.
     row["position_error_m_median"] = opt(m.position_m.median);
     row["orientation_error_deg_median"] = opt(m.orientation_rad.median, kDeg);

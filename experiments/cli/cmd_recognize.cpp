@@ -604,6 +604,10 @@ nlohmann::ordered_json steps_json(const Context& c, const InputRun& run) {
     // The support under the object (support.mode plane or cylinder): its surface and the
     // contacts set aside.
     st["support"] = support_json(r.support);
+    // Found, or why not (the test the candidate with the most contacts on it failed); null: not
+    // looked for.
+    st["support_verdict"] = r.support.verdict == SupportVerdict::not_looked ? nlohmann::ordered_json(nullptr)
+                                                                             : nlohmann::ordered_json(to_string(r.support.verdict));
     // What explains each contact (stage "attribution"): the answer, the support, or nothing.
     st["attribution"] = attribution_json(r.attribution);
     st["unobservable_dof"] = r.unobservable_dof;

@@ -329,6 +329,8 @@ py::dict step_dict(const Database& db, const StepResult& r, const std::optional<
   } else {
     o["support"] = py::none();
   }
+  o["support_verdict"] = r.support.verdict == SupportVerdict::not_looked ? py::object(py::none())
+                                                                        : py::object(py::str(to_string(r.support.verdict)));
   if (!r.attribution.empty()) {   // per contact: 0 the object's, 1 the support's, 2 unexplained
     py::array_t<std::uint8_t> a(static_cast<py::ssize_t>(r.attribution.size()));
     auto w = a.mutable_unchecked<1>();

@@ -518,7 +518,8 @@ class RecognitionEngine final : public RunEngine {
           tilt = std::acos(std::min(1.0, std::abs(under.normal.dot(found_normal)))) * 180.0 / std::numbers::pi;
           height = sr.support.signed_distance(under.point);
         }
-        s.values.insert(s.values.end(), {found, tilt, height});
+        // Why it was not found (SupportVerdict's code; NaN: not looked for).
+        s.values.insert(s.values.end(), {found, tilt, height, looked ? static_cast<double>(sr.support.verdict) : nan});
       }
       if (truth_pose_) {
         const std::optional<Funnel>& f = sr.watched;
@@ -643,7 +644,8 @@ const std::vector<std::string>& recognition_step_values() {
     n.insert(n.end(), {"set.truth_gap_to_answer", "answer_set.size", "answer_set.covers", "answer_set.informative",
                        "plan.expected_information", "plan.expected_object_information", "plan.entropy_drop",
                        "fit.contact_distance_m", "attribution.right_share", "contacts.off_target_share",
-                       "scene.answer_is_neighbour", "support.found", "support.tilt_deg", "support.height_error_m"});
+                       "scene.answer_is_neighbour", "support.found", "support.tilt_deg", "support.height_error_m",
+                       "support.verdict"});
     return n;
   }();
   return names;

@@ -1,11 +1,14 @@
 // The support under the object (engine/recognition/support.hpp): a box resting on a seabed is
 // found with its plane (normal and height); a box alone is not (its faces have the box behind
 // them); a block on a plate the hand went round is not (free space under the plate); a
-// points-only cloud finds it through triplets; its contacts are set aside; bad settings named.
+// points-only cloud finds it through triplets; its contacts are set aside, with those a little
+// below it; where none is found, the verdict names the test its largest candidate failed; bad
+// settings named.
 #include "engine/recognition/support.hpp"
 
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 #include <vector>
@@ -68,8 +71,15 @@ TEST_CASE("support: a box on a seabed; its plane, the contacts set aside") {
   s.mode = SupportMode::plane;
   const SupportSurface p = estimate_support(cloud, g, free, s, 1, 1);
   REQUIRE(p.found);
+  CHECK(p.verdict == SupportVerdict::found);
   CHECK(p.normal.dot(Vec3::UnitZ()) > std::cos(0.5 * 3.14159265 / 180));
   CHECK(std::abs(p.offset) < 1e-9);
+  // It explains contacts within the tolerance above it and up to kBelow tolerances below it (a
+  // grasp on it moved by the arm's error), not beyond.
+  CHECK(p.explains(Vec3(0.3, 0.3, 0.9 * s.tolerance), s.tolerance));
+  CHECK_FALSE(p.explains(Vec3(0.3, 0.3, 1.1 * s.tolerance), s.tolerance));
+  CHECK(p.explains(Vec3(0.3, 0.3, -0.9 * SupportSurface::kBelow * s.tolerance), s.tolerance));
+  CHECK_FALSE(p.explains(Vec3(0.3, 0.3, -1.1 * SupportSurface::kBelow * s.tolerance), s.tolerance));
   CHECK(p.grasps_on == 3);
   CHECK(p.contacts_on == 75);   // the seabed's three patches; the box's lowest contacts are 6 mm up
   CHECK(p.contacts_above == object_contacts);
@@ -117,7 +127,11 @@ TEST_CASE("support: a box alone, and a block on a plate the hand went round, hav
   SupportSettings s;
   s.mode = SupportMode::plane;
   std::vector<Vec3> free = free_above(h, -0.2);
-  CHECK_FALSE(estimate_support(cloud, g, free, s, 1, 1).found);
+  const SupportSurface alone = estimate_support(cloud, g, free, s, 1, 1);
+  CHECK_FALSE(alone.found);
+  // Its largest candidate, the bottom (75 contacts), has its free side down and the box above it.
+  CHECK(alone.verdict == SupportVerdict::rest_not_above);
+  CHECK(alone.contacts_on == 75);
 
   // A plate (z = 0) with the block on it, the plate's top touched beside the block, and free
   // space under the plate (the hand went round its rim): the plate's top is no support.
@@ -128,12 +142,16 @@ TEST_CASE("support: a box alone, and a block on a plate the hand went round, hav
   std::vector<Vec3> round = free_above(h);
   for (double x = -0.2; x <= 0.2; x += 0.02)
     for (double y = -0.2; y <= 0.2; y += 0.02) round.emplace_back(x, y, -0.05);
-  CHECK_FALSE(estimate_support(plate, pg, round, s, 1, 1).found);
+  const SupportSurface plate_top = estimate_support(plate, pg, round, s, 1, 1);
+  CHECK_FALSE(plate_top.found);
+  CHECK(plate_top.verdict == SupportVerdict::free_behind);
   // The same contacts with free space above only: a support.
   CHECK(estimate_support(plate, pg, free_above(h), s, 1, 1).found);
   // Touched on its underside too (contacts below the plane): no support.
   for (const Vec3& c : {Vec3(0.08, 0.0, -0.02), Vec3(-0.05, 0.05, -0.02)}) patch(pg, plate, c, -Vec3::UnitZ());
-  CHECK_FALSE(estimate_support(plate, pg, free_above(h), s, 1, 1).found);
+  const SupportSurface under = estimate_support(plate, pg, free_above(h), s, 1, 1);
+  CHECK_FALSE(under.found);
+  CHECK(under.verdict == SupportVerdict::rest_not_above);
 }
 
 namespace {

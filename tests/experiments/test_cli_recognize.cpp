@@ -83,6 +83,7 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
     REQUIRE(s["stages_skipped"].is_array());
     CHECK(s["stages_ran"].size() + s["stages_skipped"].size() == 15);
     CHECK(s["support"].is_null());   // support.mode off: none looked for
+    CHECK(s["support_verdict"].is_null());
     for (const auto& name : s["stages_ran"]) CHECK(s["pipeline_s"][name.get<std::string>()].get<double>() >= 0.0);
     CHECK(s["pipeline_s"].size() == s["stages_ran"].size());
     std::set<std::string> skipped;
@@ -786,6 +787,7 @@ TEST_CASE("cli seabed: simulate a scene, log info names it, recognize --support 
   const auto last = nlohmann::json::parse(r.out)["steps"].back();
   CHECK(last["object"] == "box");
   REQUIRE(last["support"].is_object());
+  CHECK(last["support_verdict"] == "found");
   CHECK(last["support"]["normal"][2].get<double>() > std::cos(2.0 * 3.14159265 / 180));   // up, within 2 degrees
   CHECK(std::abs(last["support"]["offset_m"].get<double>() - floor_z) < 0.002);          // at the seabed's height
   CHECK(last["support"]["contacts"].get<int>() >= 12);
@@ -826,9 +828,11 @@ TEST_CASE("cli seabed: simulate a scene, log info names it, recognize --support 
   CHECK(s_off["attribution_accuracy_mean"].is_null());
   // The support found against the true one under the box: level and at its height (ideal noise).
   CHECK(s_on["support_found_share"] == 1.0);
+  CHECK(s_on["support_verdict_shares"]["found"] == 1.0);
   CHECK(s_on["support_tilt_deg_median"].get<double>() < 1.0);
   CHECK(s_on["support_height_error_m_median"].get<double>() < 0.001);
   CHECK(s_off["support_found_share"].is_null());
+  CHECK(s_off["support_verdict_shares"].is_null());
   CHECK(s_off["support_tilt_deg_median"].is_null());
   // Bad scenes: one error naming the key, nothing written.
   const Run gap = touchstone(dir, "simulate --db db.h5 --object box --grasps 2 --scene seabed --scene-gap -0.01 "

@@ -222,7 +222,7 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
   const std::size_t F = confidence_feature_names().size();
   const std::size_t G = 2 + F + pipeline_stage_names().size();   // set.truth_gap_to_answer, then answer_set.*
   for (const auto& s : runs[0].steps) {
-    REQUIRE(s.values.size() == G + 14);
+    REQUIRE(s.values.size() == G + 15);
     CHECK(std::isnan(s.values[0]));  // no calibration: no confidence
     CHECK(std::isnan(s.values[1]));
     for (std::size_t i = 2; i < 2 + F; ++i) CHECK(std::isfinite(s.values[i]));
@@ -245,7 +245,7 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
     CHECK(std::isnan(s.values[G + 8]));
     CHECK(std::isnan(s.values[G + 9]));
     CHECK(std::isnan(s.values[G + 10]));   // scene.answer_is_neighbour: no neighbours
-    for (std::size_t i = G + 11; i < G + 14; ++i) CHECK(std::isnan(s.values[i]));   // support.*: not looked for
+    for (std::size_t i = G + 11; i < G + 15; ++i) CHECK(std::isnan(s.values[i]));   // support.*: not looked for
   }
   // The entropy drop: the previous step's posterior entropy minus this one's (none at step 1).
   const auto& st = runs[0].steps;

@@ -359,6 +359,7 @@ def test_support_is_the_commands(built, db, tmp_path):
     found = 0
     for py, c in zip(steps, cli["steps"]):
         assert (py.support is None) == (c["support"] is None)
+        assert py.support_verdict == c["support_verdict"]
         if py.support is None:
             continue
         found += 1

@@ -1,5 +1,5 @@
 // Stage "attribution": what explains each of the step's contacts (issue 58). A contact is the
-// support's when the stage "support" set it aside (within its tolerance of the support), the
+// support's when the stage "support" set it aside (SupportSurface::explains), the
 // object's when it lies within support.attribution_m of the answer's surface at the answer's
 // pose, and unexplained otherwise (something else was touched: a neighbour, a fixture; or the
 // answer is wrong). StepResult::attribution, one label per input contact in its order. Left out
@@ -35,7 +35,7 @@ class AttributionStage final : public Stage {
     std::vector<Vec3> points;
     std::vector<std::size_t> index;
     for (std::size_t i = 0; i < in.size(); ++i) {
-      if (sp.found && std::abs(sp.signed_distance(in.points[i])) < c.s.support.tolerance)
+      if (sp.found && sp.explains(in.points[i], c.s.support.tolerance))
         out[i] = ContactLabel::support;
       else if (std::isfinite(in.points[i].squaredNorm()))
         points.push_back(in.points[i]), index.push_back(i);

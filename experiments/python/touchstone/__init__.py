@@ -91,6 +91,10 @@ class StepResult:
     # {"shape": "cylinder", "axis" (unit), "point" (on the axis), "radius_m"}, with the "contacts"
     # and "grasps" it explains, set aside; None: none found or not looked for
     support: Optional[Dict[str, Any]] = None
+    # Whether the support was found ("found") or the test at which the candidate with the most
+    # contacts on it failed ("no_candidate", "few_contacts", "few_grasps", "side_unclear",
+    # "rest_not_above", "free_behind"); None: not looked for
+    support_verdict: Optional[str] = None
     # What explains each contact of the step's cloud (support.mode on or evaluate.outlier_m > 0),
     # one uint8 a contact: 0 the answer's, 1 the support's, 2 unexplained; None: not labelled
     attribution: Optional[Any] = None
