@@ -183,7 +183,6 @@ struct Judge {
     out.verdict = SupportVerdict::found;
     out.normal = n;
     out.offset = n.dot(c);
-    out.contacts_on = on.size();
     out.contacts_above = *above;
     out.grasps_on = grasps_on;
     return out;
@@ -202,12 +201,9 @@ struct Largest {
   }
   /// Into `best` when it was not found: the verdict and the contacts on that candidate.
   void report(SupportSurface& best) const {
-    if (best.found) {
-      best.verdict = SupportVerdict::found;
-    } else {
-      best.verdict = verdict;
-      best.contacts_on = contacts;
-    }
+    if (best.found) return;   // its judge said found
+    best.verdict = verdict;
+    best.contacts_on = contacts;
   }
 };
 
