@@ -14,7 +14,11 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 }
 
 std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, double answer_log_weight,
-                                          std::span<const std::uint32_t> class_of, std::size_t classes) {
+                                          std::span<const std::uint32_t> class_of, std::size_t classes,
+                                          std::span<const double> object_prior) {
+  if (!object_prior.empty() && object_prior.size() != class_of.size())
+    throw Error("the shape prior has " + std::to_string(object_prior.size()) + " scores for a database of " +
+                std::to_string(class_of.size()), {}, "answer_set");
   std::vector<double> best(classes, -kInf);
   double top = -kInf;
   for (const Hypothesis& h : state) {
@@ -34,15 +38,27 @@ std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, dou
     if (best[c] == -kInf) continue;
     if (ref == kInf)
       gaps[c] = best[c] == kInf ? 0.0 : kInf;
-    else
-      gaps[c] = std::max(0.0, ref - best[c]);   // a class weighted at or above the answer: 0
+    else   // a class weighted at or above the answer: 0
+      gaps[c] = std::min(std::max(0.0, ref - best[c]), 0.5 * kOutsideState);
   }
+  if (object_prior.empty()) return gaps;
+  // Outside the state: after every class in it, by the shape prior.
+  std::vector<double> prior(classes, -kInf);
+  for (std::size_t i = 0; i < class_of.size(); ++i) {
+    const std::uint32_t c = class_of[i];
+    if (c >= classes) throw Error("class index " + std::to_string(c) + " out of " + std::to_string(classes), {}, "answer_set");
+    if (!std::isnan(object_prior[i])) prior[c] = std::max(prior[c], object_prior[i]);
+  }
+  const double top_prior = *std::max_element(prior.begin(), prior.end());
+  if (!std::isfinite(top_prior)) return gaps;
+  for (std::size_t c = 0; c < classes; ++c)
+    if (best[c] == -kInf && std::isfinite(prior[c])) gaps[c] = kOutsideState + (top_prior - prior[c]);
   return gaps;
 }
 
 std::vector<double> class_log_weight_gaps(const StepResult& r, std::span<const std::uint32_t> class_of, std::size_t classes) {
   if (!r.valid) return class_log_weight_gaps({}, 0.0, class_of, classes);
-  return class_log_weight_gaps(r.hypotheses, r.best.log_weight, class_of, classes);
+  return class_log_weight_gaps(r.hypotheses, r.best.log_weight, class_of, classes, r.prior_scores);
 }
 
 std::vector<std::uint32_t> class_indices(std::size_t objects, const std::vector<std::vector<std::size_t>>& members,

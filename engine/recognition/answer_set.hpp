@@ -3,8 +3,15 @@
 //
 // The nonconformity score of a class at a step is its log-weight gap to the answer: ln w of the
 // hypothesis the answer rule chose minus the best ln w among the class's own hypotheses, floored at
-// 0 (Eq. 5-6; 0 for the answer's class and for any class weighted above it, +inf for a class
-// without hypotheses in the state). The answer's class is therefore in every set. Scoring
+// 0 (Eq. 5-6; 0 for the answer's class and for any class weighted above it). The answer's class is
+// therefore in every set. A class without hypotheses in the state scores after every class with
+// some: kOutsideState plus its shape-prior gap (the best class's shape-prior score minus its own,
+// engine/recognition/shape_prior.hpp: the step's pose-free ranking of every object, which runs on
+// large databases), or +inf when the step has no shape prior or the class none (objects not
+// allowed). On a database of thousands, the truth is outside the state in more than alpha of the
+// runs until late steps, and with +inf for all of those no class could be excluded: the set said
+// "any object" (4 500 catalogue objects: through step 20). Ranked by the prior instead, the set is
+// the state's classes and the prior's best. Any fixed score keeps the guarantee below. Scoring
 // against the ln w leader instead left the truth out whenever the near-twin verification chose it
 // over a heavier twin (9 of 96 right answers at step 40 of study7_cat450_sets). Calibration runs
 // (simulated runs of the database, experiments/analysis/calibration.hpp) give the gaps of the
@@ -28,14 +35,25 @@
 namespace ts {
 inline namespace recognition {
 
+/// The score of a class outside the state: kOutsideState plus its shape-prior gap (>= 0). Gaps
+/// in the state are capped below it (at kOutsideState / 2; ln w's gaps are a few nats at most).
+inline constexpr double kOutsideState = 1e6;
+/// Whether a score is a class outside the state's (kOutsideState + its prior gap, or +inf).
+inline bool outside_state(double score) { return score >= kOutsideState; }
+
 /// Per class (class_of[object] < classes): `answer_log_weight` (the ln w of the answer rule's
-/// choice, one of the state's) minus the best ln w of the class's hypotheses, floored at 0 (+inf:
-/// the class has none). An empty state gives +inf for every class; a NaN answer_log_weight is
-/// replaced by the state's largest ln w. Throws ts::Error when a hypothesis names an object
-/// outside class_of or a class_of entry is not below `classes`.
+/// choice, one of the state's) minus the best ln w of the class's hypotheses, floored at 0. A class
+/// with none scores kOutsideState plus (the best class's prior minus its own), its prior the best
+/// of its objects' `object_prior` (the shape prior's scores, one per object), or +inf when
+/// `object_prior` is empty or the class's prior is -inf. An empty state gives +inf for every
+/// class; a NaN answer_log_weight is replaced by the state's largest ln w. Throws ts::Error when a
+/// hypothesis names an object outside class_of, a class_of entry is not below `classes`, or
+/// `object_prior` is neither empty nor one per object.
 std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, double answer_log_weight,
-                                          std::span<const std::uint32_t> class_of, std::size_t classes);
-/// The same for a step: its state and its answer (r.best; every gap +inf when the step is not valid).
+                                          std::span<const std::uint32_t> class_of, std::size_t classes,
+                                          std::span<const double> object_prior = {});
+/// The same for a step: its state, its answer (r.best) and its shape prior (r.prior_scores); every
+/// gap +inf when the step is not valid.
 std::vector<double> class_log_weight_gaps(const StepResult& r, std::span<const std::uint32_t> class_of, std::size_t classes);
 
 /// Classes of a database's objects as class_of indices: `members` (each class's objects, e.g. a
@@ -80,15 +98,16 @@ class ConformalScores {
 
 struct AnswerSetMember {
   std::uint32_t cls = 0;   ///< class index (class_indices)
-  double gap = 0.0;        ///< its log-weight gap (0: the leading class)
+  double gap = 0.0;        ///< its log-weight gap (0: the leading class), or outside the state
+                           ///< kOutsideState + its shape-prior gap (outside_state(gap))
   double p_value = 1.0;    ///< its conformal p-value: the set at level a holds it for a < p_value
 };
 
 struct AnswerSet {
   double alpha = 0.05;
   /// false: no class can be excluded at this alpha (the calibration's gaps at this step reach
-  /// +inf within the 1 - alpha quantile, or the state is empty): the answer is "any object",
-  /// `members` is empty and `size` the number of classes.
+  /// +inf within the 1 - alpha quantile, or the state is empty, or every class is in the set):
+  /// the answer is "any object", `members` is empty and `size` the number of classes.
   bool informative = true;
   std::size_t size = 0;
   std::vector<AnswerSetMember> members;   ///< by gap ascending, then class (the leading class first)

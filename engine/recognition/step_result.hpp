@@ -144,6 +144,9 @@ struct StepResult {
   double posterior = 0.0;           ///< posterior of best.object
   std::vector<Hypothesis> hypotheses;  ///< the state S_t, best first
   std::vector<double> posteriors;   ///< per database object: weights summed, normalized
+  std::vector<double> prior_scores;  ///< per database object, the shape prior's score this step
+                                     ///< (higher is better; stage "shape_prior", large databases;
+                                     ///< empty when it did not run)
   std::size_t contacts = 0, free_points = 0;
   SupportSurface support;           ///< the support the step found (found = false: none, or
                                     ///< not looked for); its contacts are not in `contacts`

@@ -512,7 +512,8 @@ nlohmann::ordered_json to_json(const Calibration& c) {
   for (const AnswerSetCalibration& a : c.answer_sets) {
     nlohmann::ordered_json s;
     s["alpha"] = a.alpha;
-    s["score"] = "log-weight gap of the true class of congruent objects to the answer (engine/recognition/answer_set.hpp)";
+    s["score"] = "log-weight gap of the true class of congruent objects to the answer; outside the state 1e6 plus its "
+                 "shape-prior gap (engine/recognition/answer_set.hpp)";
     s["tie_nats"] = a.tie_nats;
     s["simulation"] = a.simulation;
     s["steps"] = nlohmann::ordered_json::array();

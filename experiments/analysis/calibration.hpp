@@ -101,13 +101,15 @@ struct AnswerSetCalibration {
 /// out.
 nlohmann::ordered_json simulation_of(const nlohmann::ordered_json& config);
 
-/// The calibration file (JSON, "format": "touchstone-calibration", version 6; versions 2 (all
+/// The calibration file (JSON, "format": "touchstone-calibration", version 7; versions 2 (all
 /// models linear), 3 (no answer sets), 4 (answer sets scored against the ln w leader: refused,
-/// refit) and 5 (the answer sets of one simulation, an object) are read as well): one set of
+/// refit), 5 (the answer sets of one simulation, an object) and 6 (a class without hypotheses
+/// scored +inf, not by the shape prior: the same sets) are read as well; version 7 is new so that
+/// earlier builds, which would score such classes +inf against gaps that rank them, refuse it): one set of
 /// models per range of steps (how far an exploration is changes what the features mean), and the
 /// answer sets' scores, one entry per simulation the calibration runs were drawn with.
 struct Calibration {
-  static constexpr int kVersion = 6;
+  static constexpr int kVersion = 7;
   static constexpr int kOldestVersion = 2;
   std::string database_fingerprint;   ///< of the database the runs explored
   std::vector<std::string> features;  ///< confidence_feature_names() when fitted

@@ -229,7 +229,8 @@ StepSet step_set(const Context& c, const StepResult& r) {
 /// The step's set answer (the calibration's answer sets, at --alpha or the calibration's level):
 /// the classes of congruent objects that hold the truth with probability at least 1 - alpha, each
 /// with its conformal p-value (it stays in the set for every alpha below it) and its log-weight gap
-/// to the answer, or "informative": false when no class can be excluded.
+/// to the answer (null for a class without hypotheses, in the set by its shape-prior gap
+/// "prior_gap"), or "informative": false when no class can be excluded.
 nlohmann::ordered_json answer_set_json(const Context& c, const StepSet& s) {
   const AnswerSet& set = s.set;
   std::vector<std::vector<std::size_t>> members(c.classes);
@@ -243,7 +244,14 @@ nlohmann::ordered_json answer_set_json(const Context& c, const StepSet& s) {
   for (const AnswerSetMember& m : set.members) {
     nlohmann::ordered_json names = nlohmann::ordered_json::array();
     for (std::size_t i : members[m.cls]) names.push_back(c.db.info(i).name);
-    j["members"].push_back({{"objects", names}, {"p_value", m.p_value}, {"log_weight_gap", m.gap}});
+    nlohmann::ordered_json member = {{"objects", names}, {"p_value", m.p_value}};
+    if (outside_state(m.gap)) {   // no hypothesis in the state: there by the shape prior
+      member["log_weight_gap"] = nullptr;
+      member["prior_gap"] = m.gap - kOutsideState;
+    } else {
+      member["log_weight_gap"] = m.gap;
+    }
+    j["members"].push_back(std::move(member));
   }
   return j;
 }

@@ -475,7 +475,12 @@ class PyRecognizer {
       py::dict x;
       x["objects"] = names;
       x["p_value"] = m.p_value;
-      x["log_weight_gap"] = m.gap;
+      if (outside_state(m.gap)) {   // no hypothesis in the state: there by the shape prior
+        x["log_weight_gap"] = py::none();
+        x["prior_gap"] = m.gap - kOutsideState;
+      } else {
+        x["log_weight_gap"] = m.gap;
+      }
       members.append(x);
     }
     o["members"] = members;

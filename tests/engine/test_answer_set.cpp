@@ -209,3 +209,66 @@ TEST_CASE("Conformal sets with a tie: gaps below it score as the answer's class,
   CHECK(s.p_value(0.15) == doctest::Approx(19.0 / 21.0));   // 1 + the 18 gaps 0.2 ... 1.9
   for (double bad : {-0.1, kInf, std::nan("")}) CHECK_THROWS_AS(s.set_tie(bad), Error);
 }
+
+TEST_CASE("Classes without hypotheses ranked by the shape prior: after every class of the state, a finite score") {
+  std::size_t classes = 0;
+  // Objects 1 and 3 congruent: classes {1, 3} -> 0, then 0 -> 1, 2 -> 2, 4 -> 3, 5 -> 4.
+  const std::vector<std::uint32_t> of = class_indices(6, {{1, 3}}, classes);
+  REQUIRE(classes == 5);
+  const std::vector<Hypothesis> state{hyp(0, -0.1), hyp(2, -0.6)};
+  // Prior scores per object: class {1, 3} takes its best (-2.0), object 4's is the best of all
+  // (-1.5), object 5 was not allowed (-inf).
+  const std::vector<double> prior{-3.0, -2.5, -4.0, -2.0, -1.5, -kInf};
+  const std::vector<double> gaps = class_log_weight_gaps(state, -0.1, of, classes, prior);
+  REQUIRE(gaps.size() == 5);
+  CHECK(gaps[1] == 0.0);                                     // object 0: the answer
+  CHECK(gaps[2] == doctest::Approx(0.5).epsilon(1e-12));     // object 2: in the state, by ln w
+  CHECK(gaps[0] == doctest::Approx(kOutsideState + 0.5).scale(0).epsilon(1e-12));   // class {1, 3}: -1.5 - (-2.0)
+  CHECK(gaps[3] == kOutsideState);                           // object 4: the prior's best
+  CHECK(gaps[4] == kInf);                                    // object 5: no prior score
+  CHECK_FALSE(outside_state(gaps[2]));
+  CHECK(outside_state(gaps[0]));
+  CHECK(outside_state(gaps[4]));
+  // The prior of a class in the state does not matter: object 0's -3.0 is the worst, its gap 0.
+  // Without a prior the classes outside are +inf, as before.
+  const std::vector<double> plain = class_log_weight_gaps(state, -0.1, of, classes);
+  CHECK(plain[0] == kInf);
+  CHECK(plain[3] == kInf);
+  CHECK(plain[2] == gaps[2]);
+  // Through a step: r.prior_scores; an empty state stays "no evidence" whatever the prior.
+  StepResult r;
+  r.valid = true;
+  r.hypotheses = state;
+  r.best = state[0];
+  r.prior_scores = prior;
+  CHECK(class_log_weight_gaps(r, of, classes) == gaps);
+  for (double g : class_log_weight_gaps({}, 0.0, of, classes, prior)) CHECK(g == kInf);
+  // A prior of the wrong length.
+  CHECK_THROWS_AS(class_log_weight_gaps(state, -0.1, of, classes, std::vector<double>(5, 0.0)), Error);
+
+  // Calibration: 20 runs, 16 with the truth in the state (gaps 0) and 4 outside it with prior
+  // gaps 0.2, 0.4, 0.6, 0.8. At alpha 0.1 the threshold is the 19th smallest score, 1e6 + 0.6:
+  // the set is the state's classes and the outside classes within 0.6 of the prior's best.
+  std::vector<double> cal(16, 0.0);
+  for (double p : {0.2, 0.4, 0.6, 0.8}) cal.push_back(kOutsideState + p);
+  const ConformalScores s(cal);
+  CHECK(s.threshold(0.1) == doctest::Approx(kOutsideState + 0.6).scale(0).epsilon(1e-9));
+  const AnswerSet set = conformal_set(gaps, s, 0.1);
+  REQUIRE(set.informative);
+  REQUIRE(set.size == 4);                                    // all but object 5's class
+  CHECK(set.members[0].cls == 1);                            // the answer first
+  CHECK(set.members[1].cls == 2);                            // then the state, by ln w
+  CHECK(set.members[2].cls == 3);                            // then the prior's best
+  CHECK(set.members[3].cls == 0);
+  CHECK(set.members[3].p_value == doctest::Approx(3.0 / 21.0));   // 1 + the scores >= 1e6 + 0.5 (0.6, 0.8)
+  // At alpha 0.2 the threshold falls in the state (the 17th smallest, 1e6 + 0.2): the prior's
+  // best (prior gap 0) only.
+  const AnswerSet tighter = conformal_set(gaps, s, 0.2);
+  REQUIRE(tighter.informative);
+  CHECK(tighter.size == 3);
+  // The same calibration scored +inf outside (a version 6 file) gives the sets it gave: "any object".
+  std::vector<double> old(16, 0.0);
+  old.insert(old.end(), 4, kInf);
+  CHECK_FALSE(conformal_set(gaps, ConformalScores(old), 0.1).informative);
+  CHECK_FALSE(conformal_set(plain, ConformalScores(old), 0.1).informative);
+}

@@ -192,7 +192,7 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   CHECK(qback.object_confidence(1, x) == back.object_confidence(1, x));
   CHECK_THROWS_AS(q.predict(std::vector<double>(2 * f, 0.0)), Error);   // terms given as features
   auto qj = to_json(qc);
-  CHECK(qj["version"] == 6);
+  CHECK(qj["version"] == 7);
   CHECK(qj["steps"][1]["object"]["terms"] == "quadratic");
   auto short_q = qj;   // quadratic, but the coefficients of a linear model
   short_q["steps"][1]["object"]["coef"] = j["steps"][1]["object"]["coef"];
@@ -217,7 +217,7 @@ TEST_CASE("Calibration files: round trip, and another database, version or featu
   std::ofstream(dir / "v3.json") << v3.dump();
   CHECK(read_calibration(dir / "v3.json", "abc123").answer_sets.empty());
   auto newer = qj;
-  newer["version"] = 7;
+  newer["version"] = Calibration::kVersion + 1;
   CHECK(error_of(newer.dump(), "abc123") == "version");
   // The clamp of standardized terms: written, read back, applied (the pose model, mean 0 and
   // scale 1: z = -0.5 - 0.5 * sum(clamp(t)), t = 10 clamped to 4 in every term).
@@ -565,6 +565,26 @@ TEST_CASE("Calibration files: answer sets round trip, and every bad count or num
   CHECK(back.answer_sets[0].calibrated_step(9) == 2);
   CHECK(back.answer_sets[0].at(9).finite() == back.answer_sets[0].steps[1].finite());
   CHECK(back.answer_sets[0].at(1).p_value(0.5) == doctest::Approx(4.0 / 5.0));   // 0.5 and two infinite
+  // A class outside the state ranked by the shape prior (1e6 + its prior gap): finite, kept as
+  // written, above every gap of the state.
+  AnswerSetCalibration ranked = a;
+  ranked.steps[1] = ConformalScores(std::vector<double>{0.25, 0.0, kOutsideState + 0.75, 0.125});
+  c.answer_sets = {ranked};
+  write_calibration(dir / "ranked.json", c);
+  const Calibration ranked_back = read_calibration(dir / "ranked.json", "f");
+  const ConformalScores& r1 = ranked_back.answer_sets.at(0).steps.at(1);
+  CHECK(r1.infinite() == 0);
+  CHECK(r1.finite() == std::vector<double>{0.0, 0.125, 0.25, kOutsideState + 0.75});
+  CHECK(r1.p_value(kOutsideState + 0.5) == doctest::Approx(2.0 / 5.0));
+  // Version 6 (a class without hypotheses scored +inf) is read as it was written.
+  auto v6 = to_json(back);
+  v6["version"] = 6;
+  std::ofstream(dir / "v6.json") << v6.dump();
+  const Calibration back6 = read_calibration(dir / "v6.json", "f");
+  REQUIRE(back6.answer_sets.size() == 1);
+  CHECK(back6.answer_sets[0].steps[0].infinite() == 2);
+  CHECK(back6.answer_sets[0].steps[1].finite() == back.answer_sets[0].steps[1].finite());
+  c.answer_sets = {a};
 
   auto error_of = [&](const nlohmann::ordered_json& j) {
     const auto p = dir / "bad.json";

@@ -23,7 +23,8 @@ class ShapePriorStage final : public Stage {
 
   void run(StepContext& c) const override {
     const auto t0 = detail::Clock::now();
-    c.preferred = rank_by_prior(c.prior->score(c.scene, c.allowed, c.s.seed, c.step_u()));
+    c.res.prior_scores = c.prior->score(c.scene, c.allowed, c.s.seed, c.step_u());   // also for set answers
+    c.preferred = rank_by_prior(c.res.prior_scores);
     c.prior_s = detail::seconds_since(t0);
   }
 };

@@ -99,7 +99,8 @@ class StepResult:
     # one uint8 a contact: 0 the answer's, 1 the support's, 2 unexplained; None: not labelled
     attribution: Optional[Any] = None
     # The set answer with a calibration (Recognizer(calibration=...)): {"alpha", "informative",
-    # "size", "calibrated_step", "members": [{"objects", "p_value", "log_weight_gap"}]}
+    # "size", "calibrated_step", "members": [{"objects", "p_value", "log_weight_gap"}]}; a member
+    # without hypotheses (in the set by the shape prior) has "log_weight_gap" None and "prior_gap"
     answer_set: Optional[Dict[str, Any]] = None
     # Recognizer(explain=True): why the answer won over its best rival, as `recognize --explain`
     # gives it: {"decided_by", "hypotheses": [{"role", "object", "rank", "pose", "log_weight",
