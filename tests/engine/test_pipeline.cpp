@@ -56,6 +56,7 @@ TEST_CASE("Pipeline: each method's stages in Algorithm 1's order, and a small da
     REQUIRE(r->valid);
     CHECK_FALSE(stage_of(*r, "shape_prior").ran);
     CHECK(stage_of(*r, "shape_prior").reason.starts_with(small));
+    CHECK(r->prior_scores.empty());   // set answers then score classes without hypotheses +inf
     CHECK_FALSE(stage_of(*r, "shortlist").ran);
     CHECK(stage_of(*r, "shortlist").reason == small + " (the shortlist acts above 48)");
     CHECK_FALSE(stage_of(*r, "attribution").ran);   // no support looked for, no background term

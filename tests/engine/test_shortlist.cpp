@@ -527,6 +527,9 @@ TEST_CASE("Pose transfer's pool: with the shape prior, only the prior's best obj
       REQUIRE(r.watched.has_value());
       const Funnel& f = *r.watched;
       if (f.prior_rank == 0) continue;   // no prior this step (too few contacts)
+      // The step keeps the scores it ranked by (set answers rank classes without hypotheses by them).
+      REQUIRE(r.prior_scores.size() == src->size());
+      CHECK(rank_by_prior(r.prior_scores).at(f.prior_rank - 1) == o);
       if (f.prior_rank > pool) {
         ++outside;
         CHECK(f.transfer_rank == 0);
