@@ -42,7 +42,7 @@ struct ResultAnswerSet {
   int calibrated_step = 0;                ///< the calibration step whose scores were used
   std::vector<double> p_value;            ///< per object, in (0, 1]
   std::vector<double> log_weight_gap;     ///< per object, >= 0 (>= 1e6: its class has no hypothesis,
-                                          ///< ranked by the shape prior; +inf: nor a prior)
+                                          ///< 1e6 + its shape-prior gap; +inf: the prior could not score it)
   std::vector<std::uint8_t> in_set;       ///< per object, 1 when its class is in the set
 };
 

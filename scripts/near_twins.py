@@ -56,7 +56,12 @@ def main():
     def column(name):
         return columns.index(name) if name in columns else None
 
-    gap_col, covers_col = column("set.truth_gap_to_answer"), column("answer_set.covers")
+    # set.truth_score (set.truth_gap_to_answer before classes without hypotheses were ranked by
+    # the shape prior): the log-weight gap, or 1e6 plus the prior's gap outside the state
+    gap_col = column("set.truth_score")
+    if gap_col is None:
+        gap_col = column("set.truth_gap_to_answer")
+    covers_col = column("answer_set.covers")
     listed = []
     print(f"{a.store}: {len(obj)} runs")
     print(f"{'step':>5} {'runs':>5} {'misses':>7} {'near-twin':>10} {'share':>7}")
@@ -88,7 +93,8 @@ def main():
     if a.misses:
         print(f"\n{'step':>5}  {'variant':<24} {'explored':<24} {'named':<24} {'gap (nats)':>11} {'rank':>5} {'set':>4}")
         for s, v, e, n, gap, rk, cov in listed:
-            print(f"{s:>5}  {v:<24} {e:<24} {n:<24} {gap:>11.2e} {rk:>5} {cov:>4}")
+            shown = f"{gap:>11.2e}" if not gap >= 1e6 else ("no hyp." if gap == float("inf") else f"prior+{gap - 1e6:.2f}")
+            print(f"{s:>5}  {v:<24} {e:<24} {n:<24} {shown:>11} {rk:>5} {cov:>4}")
 
 
 if __name__ == "__main__":

@@ -37,22 +37,26 @@ std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, dou
   for (std::size_t c = 0; c < classes; ++c) {
     if (best[c] == -kInf) continue;
     if (ref == kInf)
-      gaps[c] = best[c] == kInf ? 0.0 : kInf;
+      gaps[c] = best[c] == kInf ? 0.0 : 0.5 * kOutsideState;
     else   // a class weighted at or above the answer: 0
       gaps[c] = std::min(std::max(0.0, ref - best[c]), 0.5 * kOutsideState);
   }
-  if (object_prior.empty()) return gaps;
-  // Outside the state: after every class in it, by the shape prior.
+  // Outside the state: after every class in it, by the shape prior; all tied when there is none
+  // or it scored no class (no contact pair far enough apart).
   std::vector<double> prior(classes, -kInf);
-  for (std::size_t i = 0; i < class_of.size(); ++i) {
+  for (std::size_t i = 0; i < object_prior.size(); ++i) {
     const std::uint32_t c = class_of[i];
     if (c >= classes) throw Error("class index " + std::to_string(c) + " out of " + std::to_string(classes), {}, "answer_set");
     if (!std::isnan(object_prior[i])) prior[c] = std::max(prior[c], object_prior[i]);
   }
   const double top_prior = *std::max_element(prior.begin(), prior.end());
-  if (!std::isfinite(top_prior)) return gaps;
-  for (std::size_t c = 0; c < classes; ++c)
-    if (best[c] == -kInf && std::isfinite(prior[c])) gaps[c] = kOutsideState + (top_prior - prior[c]);
+  for (std::size_t c = 0; c < classes; ++c) {
+    if (best[c] != -kInf) continue;
+    if (!std::isfinite(top_prior))
+      gaps[c] = kOutsideState;
+    else if (std::isfinite(prior[c]))
+      gaps[c] = kOutsideState + (top_prior - prior[c]);   // else +inf: it cannot span the contacts
+  }
   return gaps;
 }
 

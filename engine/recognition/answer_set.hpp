@@ -7,8 +7,10 @@
 // therefore in every set. A class without hypotheses in the state scores after every class with
 // some: kOutsideState plus its shape-prior gap (the best class's shape-prior score minus its own,
 // engine/recognition/shape_prior.hpp: the step's pose-free ranking of every object, which runs on
-// large databases), or +inf when the step has no shape prior or the class none (objects not
-// allowed). On a database of thousands, the truth is outside the state in more than alpha of the
+// large databases; all tied at kOutsideState when the step has none or it scored no class), or
+// +inf when the class alone has none (objects too small to span the contacts). Without a prior
+// the sets are the same as with +inf for every such class, as before it: the tied classes come
+// into a set together, and then with every class (the set says "any object"). On a database of thousands, the truth is outside the state in more than alpha of the
 // runs until late steps, and with +inf for all of those no class could be excluded: the set said
 // "any object" (4 500 catalogue objects: through step 20). Ranked by the prior instead, the set is
 // the state's classes and the prior's best. Any fixed score keeps the guarantee below. Scoring
@@ -44,8 +46,10 @@ inline bool outside_state(double score) { return score >= kOutsideState; }
 /// Per class (class_of[object] < classes): `answer_log_weight` (the ln w of the answer rule's
 /// choice, one of the state's) minus the best ln w of the class's hypotheses, floored at 0. A class
 /// with none scores kOutsideState plus (the best class's prior minus its own), its prior the best
-/// of its objects' `object_prior` (the shape prior's scores, one per object), or +inf when
-/// `object_prior` is empty or the class's prior is -inf. An empty state gives +inf for every
+/// of its objects' `object_prior` (the shape prior's scores, one per object); kOutsideState when
+/// no class has a finite prior (`object_prior` empty: no shape prior, or it scored nothing): all
+/// tied, so that a calibration fitted with priors leaves none of them out on a step without; +inf
+/// when its prior is -inf while another's is finite (it cannot span the contacts). An empty state gives +inf for every
 /// class; a NaN answer_log_weight is replaced by the state's largest ln w. Throws ts::Error when a
 /// hypothesis names an object outside class_of, a class_of entry is not below `classes`, or
 /// `object_prior` is neither empty nor one per object.

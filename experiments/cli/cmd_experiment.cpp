@@ -35,6 +35,20 @@ namespace {
 
 using experiments::ExperimentConfig;
 
+/// A set answer's score as a reader takes it: a log-weight gap, or outside the state the shape
+/// prior's gap (engine/recognition/answer_set.hpp).
+std::string set_score_text(double score) {
+  std::ostringstream o;
+  o << std::setprecision(3);
+  if (std::isinf(score))
+    o << "every class";
+  else if (outside_state(score))
+    o << "classes without hypotheses within " << score - kOutsideState << " nats of the shape prior's best";
+  else
+    o << "a log-weight gap of " << score;
+  return o.str();
+}
+
 struct ExperimentOptions {
   CommonOptions common;
   std::string db, config_file, out, plots;
@@ -507,10 +521,21 @@ int run_calibrate(const CalibrateOptions& o) {
     }
     const std::set<int> hidden = experiments::hidden_explored_objects(c.header);
     const experiments::ClassMap classes = experiments::class_map(c.header);
-    const auto gap_column = std::find(c.header.step_values.begin(), c.header.step_values.end(), "set.truth_gap_to_answer");
+    const auto& sv = c.header.step_values;
+    auto gap_column = std::find(sv.begin(), sv.end(), "set.truth_score");
+    if (gap_column == sv.end()) {   // written before classes without hypotheses were ranked by the prior
+      gap_column = std::find(sv.begin(), sv.end(), "set.truth_gap_to_answer");
+      if (gap_column != sv.end())
+        std::cerr << "touchstone calibrate: note: " << path
+                  << " records set.truth_gap_to_answer, written before classes without hypotheses were ranked by the "
+                     "shape prior: its sets are those of then, which exclude no class while the truth lacks hypotheses "
+                     "in more than alpha of the runs; rerun it for sets that do\n";
+    }
     const auto config_json = nlohmann::ordered_json::parse(c.header.config_json, nullptr, false);
-    if (gap_column == c.header.step_values.end()) {
-      if (no_set_reason.empty()) no_set_reason = path + " has no per-step 'set.truth_gap_to_answer' (written before set answers scored against the answer: rerun it)";
+    if (config_json.is_object() && config_json.contains("database") && config_json["database"] == "each") {
+      if (no_set_reason.empty()) no_set_reason = path + " localized each explored object alone (database = \"each\"): no rival to rank";
+    } else if (gap_column == sv.end()) {
+      if (no_set_reason.empty()) no_set_reason = path + " has no per-step 'set.truth_score' (written before set answers scored against the answer: rerun it)";
     } else {
       // Each variant's simulation (a sweep of noise settings: one per level). Variants that
       // simulate alike but differ otherwise (a sweep of the method) would pool unlike runs.
@@ -701,8 +726,8 @@ int run_calibrate(const CalibrateOptions& o) {
         std::cout << "; answer sets at alpha " << std::setprecision(2) << a.alpha << " over " << a.steps.size()
                   << " steps of " << a.steps.front().size() << " runs"
                   << (cal.answer_sets.size() > 1 ? " simulated with " + a.simulation.dump() : std::string())
-                  << " (the gap admitted at step " << a.steps.size() << ": " << std::setprecision(3)
-                  << a.steps.back().threshold(a.alpha) << ")";
+                  << " (admitted at step " << a.steps.size() << ": " << std::setprecision(3)
+                  << set_score_text(a.steps.back().threshold(a.alpha)) << ")";
     } else {
       std::cout << "; no answer sets (" << no_set_reason << ")";
     }

@@ -641,7 +641,7 @@ const std::vector<std::string>& recognition_step_values() {
     std::vector<std::string> n{"confidence_object", "confidence_pose"};
     for (const std::string& f : confidence_feature_names()) n.push_back("feature." + f);
     for (const std::string& stage : pipeline_stage_names()) n.push_back("ran." + stage);
-    n.insert(n.end(), {"set.truth_gap_to_answer", "answer_set.size", "answer_set.covers", "answer_set.informative",
+    n.insert(n.end(), {"set.truth_score", "answer_set.size", "answer_set.covers", "answer_set.informative",
                        "plan.expected_information", "plan.expected_object_information", "plan.entropy_drop",
                        "fit.contact_distance_m", "attribution.right_share", "contacts.off_target_share",
                        "scene.answer_is_neighbour", "support.found", "support.tilt_deg", "support.height_error_m",

@@ -23,7 +23,7 @@ Hypothesis hyp(std::uint32_t object, double log_weight) {
 }
 }  // namespace
 
-TEST_CASE("Classes' log-weight gaps: the answer's ln w minus each class's best, floored at 0, +inf without hypotheses") {
+TEST_CASE("Classes' log-weight gaps: the answer's ln w minus each class's best, floored at 0, tied after them without hypotheses") {
   std::size_t classes = 0;
   // Objects 1 and 3 congruent: classes {1, 3} -> 0, then 0 -> 1, 2 -> 2, 4 -> 3.
   const std::vector<std::uint32_t> of = class_indices(5, {{1, 3}}, classes);
@@ -36,7 +36,7 @@ TEST_CASE("Classes' log-weight gaps: the answer's ln w minus each class's best, 
   CHECK(gaps[0] == 0.0);                              // object 3 leads; its class holds object 1 too
   CHECK(gaps[1] == doctest::Approx(0.24).epsilon(1e-12));
   CHECK(gaps[2] == doctest::Approx(0.49).epsilon(1e-12));   // object 2's best, not its worse one
-  CHECK(gaps[3] == kInf);                             // no hypothesis of object 4
+  CHECK(gaps[3] == kOutsideState);                    // no hypothesis of object 4 (no prior: tied)
   // NaN: the leader stands in for the answer.
   CHECK(class_log_weight_gaps(state, std::nan(""), of, classes) == gaps);
   // The answer rule chose object 0 (ln w -0.25) over the heavier class {1, 3}: object 0's class
@@ -45,7 +45,7 @@ TEST_CASE("Classes' log-weight gaps: the answer's ln w minus each class's best, 
   CHECK(gaps[0] == 0.0);
   CHECK(gaps[1] == 0.0);
   CHECK(gaps[2] == doctest::Approx(0.25).epsilon(1e-12));
-  CHECK(gaps[3] == kInf);
+  CHECK(gaps[3] == kOutsideState);
   // The same through a step: its answer is r.best; a step without hypotheses has no evidence.
   StepResult r;
   r.valid = true;
@@ -230,11 +230,13 @@ TEST_CASE("Classes without hypotheses ranked by the shape prior: after every cla
   CHECK(outside_state(gaps[0]));
   CHECK(outside_state(gaps[4]));
   // The prior of a class in the state does not matter: object 0's -3.0 is the worst, its gap 0.
-  // Without a prior the classes outside are +inf, as before.
+  // Without a prior, or a prior that scored no class, the classes outside are tied.
   const std::vector<double> plain = class_log_weight_gaps(state, -0.1, of, classes);
-  CHECK(plain[0] == kInf);
-  CHECK(plain[3] == kInf);
+  CHECK(plain[0] == kOutsideState);
+  CHECK(plain[3] == kOutsideState);
+  CHECK(plain[4] == kOutsideState);
   CHECK(plain[2] == gaps[2]);
+  CHECK(class_log_weight_gaps(state, -0.1, of, classes, std::vector<double>(6, -kInf)) == plain);
   // Through a step: r.prior_scores; an empty state stays "no evidence" whatever the prior.
   StepResult r;
   r.valid = true;
@@ -261,8 +263,8 @@ TEST_CASE("Classes without hypotheses ranked by the shape prior: after every cla
   CHECK(set.members[2].cls == 3);                            // then the prior's best
   CHECK(set.members[3].cls == 0);
   CHECK(set.members[3].p_value == doctest::Approx(3.0 / 21.0));   // 1 + the scores >= 1e6 + 0.5 (0.6, 0.8)
-  // At alpha 0.2 the threshold falls in the state (the 17th smallest, 1e6 + 0.2): the prior's
-  // best (prior gap 0) only.
+  // At alpha 0.2 the threshold is the 17th smallest score, 1e6 + 0.2: of the classes outside,
+  // the prior's best (prior gap 0) only.
   const AnswerSet tighter = conformal_set(gaps, s, 0.2);
   REQUIRE(tighter.informative);
   CHECK(tighter.size == 3);
@@ -271,4 +273,25 @@ TEST_CASE("Classes without hypotheses ranked by the shape prior: after every cla
   old.insert(old.end(), 4, kInf);
   CHECK_FALSE(conformal_set(gaps, ConformalScores(old), 0.1).informative);
   CHECK_FALSE(conformal_set(plain, ConformalScores(old), 0.1).informative);
+  // A step without a prior under a calibration with priors: the classes outside tie at 1e6, whose
+  // p-value counts every calibration run outside the state (5 / 21 > 0.1): all of them come in,
+  // so every class: "any object", never a set that leaves them out unseen.
+  CHECK(s.p_value(plain[0]) == doctest::Approx(5.0 / 21.0));
+  CHECK_FALSE(conformal_set(plain, s, 0.1).informative);
+  // Without priors on either side (a small database) the ties act as +inf did: left out while
+  // few calibration runs lie outside the state (1 of 20: p 2 / 21), then every class (3 of 20).
+  std::vector<double> plain_inf = plain;
+  for (double& g : plain_inf)
+    if (outside_state(g)) g = kInf;
+  for (const int outside : {1, 3}) {
+    std::vector<double> tied(20 - outside, 0.0), tied_inf = tied;
+    tied.insert(tied.end(), outside, kOutsideState);
+    tied_inf.insert(tied_inf.end(), outside, kInf);
+    const AnswerSet now = conformal_set(plain, ConformalScores(tied), 0.1);
+    const AnswerSet before = conformal_set(plain_inf, ConformalScores(tied_inf), 0.1);
+    CHECK(now.informative == (outside == 1));
+    CHECK(now.informative == before.informative);
+    CHECK(now.size == before.size);
+    CHECK(now.size == (outside == 1 ? 1 : 5));   // the answer alone (the rival at 0.5: p 2 / 21)
+  }
 }

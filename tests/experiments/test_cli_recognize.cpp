@@ -1491,7 +1491,7 @@ std::set<int> variants_whose_sets_hold_their_p_values(const fs::path& path, cons
   const io::RunStoreContents store = io::RunStore::read(path);
   const auto& v = store.header.step_values;
   auto col = [&](const char* name) { return static_cast<std::size_t>(std::find(v.begin(), v.end(), name) - v.begin()); };
-  const std::size_t gap = col("set.truth_gap_to_answer"), covers = col("answer_set.covers"), informative = col("answer_set.informative");
+  const std::size_t gap = col("set.truth_score"), covers = col("answer_set.covers"), informative = col("answer_set.informative");
   REQUIRE(informative < v.size());
   std::set<int> checked;
   for (const auto& r : store.runs) {
@@ -1588,8 +1588,15 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
         has_answer = has_answer || name == (st["object"].is_null() ? st["best_guess"] : st["object"]);
     CHECK(has_answer);
     double last = 0.0;
+    bool outside = false;   // members without hypotheses (log_weight_gap null) come after the others
     for (const auto& m : a["members"]) {
       CHECK(m["p_value"].get<double>() > 0.5);
+      if (m["log_weight_gap"].is_null()) {
+        CHECK(m["prior_gap"].get<double>() >= 0.0);
+        outside = true;
+        continue;
+      }
+      CHECK_FALSE(outside);
       CHECK(m["log_weight_gap"].get<double>() >= last);
       last = m["log_weight_gap"].get<double>();
     }
@@ -1617,7 +1624,10 @@ TEST_CASE("cli calibrate: fits on run stores, and the fit does not depend on the
             std::find(rd.header.objects.begin(), rd.header.objects.end(), name.get<std::string>()) - rd.header.objects.begin());
         REQUIRE(i < rd.header.objects.size());
         CHECK(b.p_value[i] == m["p_value"].get<double>());
-        CHECK(b.log_weight_gap[i] == m["log_weight_gap"].get<double>());
+        if (m["log_weight_gap"].is_null())   // outside the state: the stored score is 1e6 + the prior's gap
+          CHECK(b.log_weight_gap[i] == kOutsideState + m["prior_gap"].get<double>());
+        else
+          CHECK(b.log_weight_gap[i] == m["log_weight_gap"].get<double>());
       }
     for (std::size_t i = 0; i < b.in_set.size(); ++i) {
       if (b.in_set[i]) in_file.insert(rd.header.objects[i]);

@@ -220,7 +220,7 @@ TEST_CASE("Recognition engine: per-step confidence features; confidences from th
   const auto runs = run_all(*plain, c, dir / "plain.h5", 1, true);
   REQUIRE(runs.size() == 1);
   const std::size_t F = confidence_feature_names().size();
-  const std::size_t G = 2 + F + pipeline_stage_names().size();   // set.truth_gap_to_answer, then answer_set.*
+  const std::size_t G = 2 + F + pipeline_stage_names().size();   // set.truth_score, then answer_set.*
   for (const auto& s : runs[0].steps) {
     REQUIRE(s.values.size() == G + 15);
     CHECK(std::isnan(s.values[0]));  // no calibration: no confidence
