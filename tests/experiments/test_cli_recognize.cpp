@@ -765,6 +765,10 @@ TEST_CASE("cli fingertips: simulate --sensing fingertips, recognize the log and 
   for (const auto& run : io::RunStore::read(dir / "each.h5").runs)
     for (const auto& st : run.steps)
       if (st.best_object >= 0) CHECK(st.correct);   // it may name nothing else
+  // Each object alone has no rival to rank: no answer sets from such runs, and why.
+  const Run cal = touchstone(dir, "calibrate each.h5 --step-ranges 1 --out each_cal.json");
+  CHECK_MESSAGE(cal.out.find("no answer sets (") != std::string::npos, cal.out << cal.err);
+  CHECK_MESSAGE(cal.out.find("database = \"each\"") != std::string::npos, cal.out << cal.err);
   CHECK(touchstone(dir, "experiment --db db.h5 --objects wedge --runs 1 --steps 2 --pool 2 --set database=each "
                         "--set hidden=nut --out bad.h5").code == 1);
   CHECK_FALSE(fs::exists(dir / "bad.h5"));
