@@ -19,6 +19,8 @@ std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, dou
   if (!object_prior.empty() && object_prior.size() != class_of.size())
     throw Error("the shape prior has " + std::to_string(object_prior.size()) + " scores for a database of " +
                 std::to_string(class_of.size()), {}, "answer_set");
+  for (const std::uint32_t c : class_of)
+    if (c >= classes) throw Error("class index " + std::to_string(c) + " out of " + std::to_string(classes), {}, "answer_set");
   std::vector<double> best(classes, -kInf);
   double top = -kInf;
   for (const Hypothesis& h : state) {
@@ -26,7 +28,6 @@ std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, dou
       throw Error("a hypothesis names object " + std::to_string(h.object) + " of a database of " +
                   std::to_string(class_of.size()), {}, "answer_set");
     const std::uint32_t c = class_of[h.object];
-    if (c >= classes) throw Error("class index " + std::to_string(c) + " out of " + std::to_string(classes), {}, "answer_set");
     if (std::isnan(h.log_weight)) continue;
     best[c] = std::max(best[c], h.log_weight);
     top = std::max(top, h.log_weight);
@@ -44,11 +45,8 @@ std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, dou
   // Outside the state: after every class in it, by the shape prior; all tied when there is none
   // or it scored no class (no contact pair far enough apart).
   std::vector<double> prior(classes, -kInf);
-  for (std::size_t i = 0; i < object_prior.size(); ++i) {
-    const std::uint32_t c = class_of[i];
-    if (c >= classes) throw Error("class index " + std::to_string(c) + " out of " + std::to_string(classes), {}, "answer_set");
-    if (!std::isnan(object_prior[i])) prior[c] = std::max(prior[c], object_prior[i]);
-  }
+  for (std::size_t i = 0; i < object_prior.size(); ++i)
+    if (!std::isnan(object_prior[i])) prior[class_of[i]] = std::max(prior[class_of[i]], object_prior[i]);
   const double top_prior = *std::max_element(prior.begin(), prior.end());
   for (std::size_t c = 0; c < classes; ++c) {
     if (best[c] != -kInf) continue;

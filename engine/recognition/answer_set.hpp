@@ -10,9 +10,10 @@
 // large databases; all tied at kOutsideState when the step has none or it scored no class), or
 // +inf when the class alone has none (objects too small to span the contacts). Without a prior
 // the sets are the same as with +inf for every such class, as before it: the tied classes come
-// into a set together, and then with every class (the set says "any object"). On a database of thousands, the truth is outside the state in more than alpha of the
-// runs until late steps, and with +inf for all of those no class could be excluded: the set said
-// "any object" (4 500 catalogue objects: through step 20). Ranked by the prior instead, the set is
+// into a set together, and then with every class (the set says "any object"). On a database of
+// thousands, the truth is outside the state in more than alpha of the runs until late steps, and
+// with +inf for all of those no class could be excluded: the set said "any object" (4 500
+// catalogue objects: through step 20). Ranked by the prior instead, the set is
 // the state's classes and the prior's best. Any fixed score keeps the guarantee below. Scoring
 // against the ln w leader instead left the truth out whenever the near-twin verification chose it
 // over a heavier twin (9 of 96 right answers at step 40 of study7_cat450_sets). Calibration runs
@@ -49,8 +50,8 @@ inline bool outside_state(double score) { return score >= kOutsideState; }
 /// of its objects' `object_prior` (the shape prior's scores, one per object); kOutsideState when
 /// no class has a finite prior (`object_prior` empty: no shape prior, or it scored nothing): all
 /// tied, so that a calibration fitted with priors leaves none of them out on a step without; +inf
-/// when its prior is -inf while another's is finite (it cannot span the contacts). An empty state gives +inf for every
-/// class; a NaN answer_log_weight is replaced by the state's largest ln w. Throws ts::Error when a
+/// when its prior is -inf while another's is finite (it cannot span the contacts). An empty state
+/// gives +inf for every class; a NaN answer_log_weight is replaced by the state's largest ln w. Throws ts::Error when a
 /// hypothesis names an object outside class_of, a class_of entry is not below `classes`, or
 /// `object_prior` is neither empty nor one per object.
 std::vector<double> class_log_weight_gaps(std::span<const Hypothesis> state, double answer_log_weight,

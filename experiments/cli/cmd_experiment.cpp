@@ -532,9 +532,8 @@ int run_calibrate(const CalibrateOptions& o) {
                      "in more than alpha of the runs; rerun it for sets that do\n";
     }
     const auto config_json = nlohmann::ordered_json::parse(c.header.config_json, nullptr, false);
-    const bool each_alone = config_json.is_object() && config_json.contains("database") &&
-                            (config_json["database"] == "each" || config_json["database"] == nlohmann::ordered_json::array({"each"}));
-    if (each_alone) {
+    // database = "each" (the configuration's list of names holds only "each")
+    if (config_json.is_object() && config_json.value("database", nlohmann::ordered_json()) == nlohmann::ordered_json::array({"each"})) {
       if (no_set_reason.empty()) no_set_reason = path + " localized each explored object alone (database = \"each\"): no rival to rank";
     } else if (gap_column == sv.end()) {
       if (no_set_reason.empty()) no_set_reason = path + " has no per-step 'set.truth_score' (written before set answers scored against the answer: rerun it)";
