@@ -3,6 +3,7 @@
 
 #include "engine/geometry/cloud.hpp"
 #include "engine/geometry/kabsch.hpp"
+#include "engine/target_clones.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -111,47 +112,121 @@ Row first_at_least(Row row, Row end, int v) {
   return std::lower_bound(row, end, v, [](const ObjectPairs::Near& x, int w) { return x.distance < w; });
 }
 
-/// The oriented model pairs (i on contact 0, j on contact 1) that agree with each query's
-/// longest side (distance, and the point-pair angles where the contacts have normals), in row
-/// order. One sweep over the rows serves all the queries: each row is read from memory once a
-/// step and searched once a query while it is in cache (the searches, one row fetched from
-/// memory each, were most of the source's time).
-std::vector<std::vector<std::pair<std::uint16_t, std::uint16_t>>> matched_pairs(
-    const ObjectPairs& T, const std::vector<TripletQuery>& queries, int utol) {
-  std::vector<std::vector<std::pair<std::uint16_t, std::uint16_t>>> matched(queries.size());
+/// Whether a table entry's point-pair angles agree with a query's (sa, sb, sab) within utol
+/// (>= 0): |a - s| <= utol exactly when 0 <= a - s + utol <= 2 utol.
+[[gnu::always_inline]] inline bool angles_agree(const ObjectPairs::Near& e, int sa, int sb, int sab, int utol) {
+  const auto width = static_cast<unsigned>(2 * utol);
+  return (static_cast<unsigned>(e.a_ij - sab + utol) <= width) & (static_cast<unsigned>(e.a_i - sa + utol) <= width) &
+         (static_cast<unsigned>(e.a_j - sb + utol) <= width);
+}
+
+/// How many of a row's n entries agree with the angles (branch-free: about half of them do, at
+/// random).
+TS_TARGET_CLONES
+std::uint32_t count_agreeing(const ObjectPairs::Near* __restrict row, std::size_t n, int sa, int sb, int sab,
+                             int utol) {
+  std::uint32_t count = 0;
+  for (std::size_t k = 0; k < n; ++k) count += angles_agree(row[k], sa, sb, sab, utol) ? 1u : 0u;
+  return count;
+}
+
+/// One query's matched model pairs (i on contact 0, j on contact 1: the entries of row i whose
+/// distance lies in the query's longest side's band and, where the contacts have normals, whose
+/// angles agree), in row order, without listing them: per row, its band [begin, end) and how many
+/// pairs the rows before it matched. A (triplet, object) matches thousands of pairs and keeps 48
+/// at random; writing them all out was half the source's time.
+struct MatchedPairs {
+  std::vector<std::uint16_t> begin, end;   ///< per row, the band's entries
+  std::vector<std::uint32_t> before;       ///< per row (and one past the last), pairs in rows before
+  std::uint32_t size() const { return before.empty() ? 0 : before.back(); }
+};
+
+/// Each query's matched pairs. One sweep over the rows serves all the queries: each row is read
+/// from memory once a step and searched once a query while it is in cache (the searches, one row
+/// fetched from memory each, were most of the source's time).
+std::vector<MatchedPairs> matched_pairs(const ObjectPairs& T, const std::vector<TripletQuery>& queries, int utol) {
   const std::size_t m = T.points.size();
+  std::vector<MatchedPairs> matched(queries.size());
+  for (MatchedPairs& mp : matched) {
+    mp.begin.assign(m, 0);
+    mp.end.assign(m, 0);
+    mp.before.assign(m + 1, 0);
+  }
   for (std::size_t i = 0; i < m; ++i) {
     const Row row = T.near.begin() + static_cast<std::ptrdiff_t>(i * (m - 1));
     const Row end = row + static_cast<std::ptrdiff_t>(m - 1);
     for (std::size_t k = 0; k < queries.size(); ++k) {
       const TripletQuery& q = queries[k];
-      for (Row it = first_at_least(row, end, q.lo01); it != end && it->distance <= q.hi01; ++it) {
-        if (q.normals && (std::abs(q.sab - it->a_ij) > utol || std::abs(q.sa - it->a_i) > utol ||
-                          std::abs(q.sb - it->a_j) > utol))
-          continue;
-        matched[k].emplace_back(static_cast<std::uint16_t>(i), it->index);
-      }
+      MatchedPairs& mp = matched[k];
+      const Row first = first_at_least(row, end, q.lo01);
+      Row last = first;
+      while (last != end && last->distance <= q.hi01) ++last;
+      const auto n = static_cast<std::size_t>(last - first);
+      mp.begin[i] = static_cast<std::uint16_t>(first - row);
+      mp.end[i] = static_cast<std::uint16_t>(last - row);
+      const std::uint32_t count = q.normals ? count_agreeing(&*first, n, q.sa, q.sb, q.sab, utol)
+                                            : static_cast<std::uint32_t>(n);
+      mp.before[i + 1] = mp.before[i] + count;
     }
   }
   return matched;
 }
 
+/// The matched pair at `position` (< mp.size()) of the row-order list.
+std::pair<std::uint16_t, std::uint16_t> matched_pair(const ObjectPairs& T, const TripletQuery& q,
+                                                     const MatchedPairs& mp, std::uint32_t position, int utol) {
+  const std::size_t m = T.points.size();
+  // The row: the last whose pairs before it are at most `position` (rows without pairs skipped).
+  const auto i = static_cast<std::size_t>(std::upper_bound(mp.before.begin(), mp.before.end(), position) -
+                                          mp.before.begin() - 1);
+  const ObjectPairs::Near* row = T.near.data() + i * (m - 1);
+  std::uint32_t left = position - mp.before[i];
+  for (std::size_t x = mp.begin[i]; x < mp.end[i]; ++x) {
+    if (q.normals && !angles_agree(row[x], q.sa, q.sb, q.sab, utol)) continue;
+    if (left-- == 0) return {static_cast<std::uint16_t>(i), row[x].index};
+  }
+  throw Error("sparse candidates: a matched pair's position beyond its row (internal)");
+}
+
 /// Candidates of one (triplet, object): a deterministic random subset of its matched pairs, then
 /// the model points closing the triangle (from the first point's sorted row), registered by
 /// Kabsch and checked on the normals.
-void close_triangles(const ObjectPairs& T, const TripletQuery& q,
-                     std::vector<std::pair<std::uint16_t, std::uint16_t>>& matched, int utol,
+void close_triangles(const ObjectPairs& T, const TripletQuery& q, const MatchedPairs& mp, int utol,
                      const SparseSettings& s, Rng& rng, std::vector<Pose>& out) {
   const std::size_t m = T.points.size();
   const double tol = s.distance_tolerance;
   const double cos_ntol = std::cos(s.normal_tolerance_deg * std::numbers::pi / 180.0);
-  // A deterministic random subset of them (partial Fisher-Yates).
-  const std::size_t take = std::min(matched.size(), s.pairs_per_triplet);
-  for (std::size_t k = 0; k < take; ++k) std::swap(matched[k], matched[k + rng.index(matched.size() - k)]);
+  // A deterministic random subset of them: a partial Fisher-Yates shuffle of the positions of the
+  // row-order list (the positions it moves kept aside), the pairs then read at the positions
+  // drawn.
+  const std::uint32_t size = mp.size();
+  const std::size_t take = std::min<std::size_t>(size, s.pairs_per_triplet);
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> moved;   // (position, what it now holds)
+  auto held = [&](std::uint32_t p) {
+    for (const auto& [at, v] : moved)
+      if (at == p) return v;
+    return p;
+  };
+  auto hold = [&](std::uint32_t p, std::uint32_t v) {
+    for (auto& [at, w] : moved)
+      if (at == p) {
+        w = v;
+        return;
+      }
+    moved.emplace_back(p, v);
+  };
+  std::vector<std::uint32_t> drawn(take);
+  for (std::size_t k = 0; k < take; ++k) {
+    const auto r = static_cast<std::uint32_t>(k + rng.index(size - k));
+    const std::uint32_t vk = held(static_cast<std::uint32_t>(k)), vr = held(r);
+    hold(static_cast<std::uint32_t>(k), vr);
+    hold(r, vk);
+    drawn[k] = vr;
+  }
   KabschSettings ks;
   ks.min_sv_ratio = s.min_sv_ratio;
   for (std::size_t k = 0; k < take && out.size() < s.per_object; ++k) {
-    const auto [i, j] = matched[k];
+    const auto [i, j] = matched_pair(T, q, mp, drawn[k], utol);
     const Row row = T.near.begin() + static_cast<std::ptrdiff_t>(std::size_t{i} * (m - 1));
     const Row end = row + static_cast<std::ptrdiff_t>(m - 1);
     for (Row it = first_at_least(row, end, q.lo02); it != end && it->distance <= q.hi02 && out.size() < s.per_object; ++it) {
