@@ -3,6 +3,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -64,24 +65,36 @@ Mat3 rotation_from_covariance(const Mat3& H, bool* reflected) {
   return V * D * U.transpose();
 }
 
-RigidFit kabsch(std::span<const Vec3> source, std::span<const Vec3> target,
-                std::span<const double> weights, const KabschSettings& settings) {
+namespace {
+
+/// A point set's centroid and spreads as kabsch() uses them.
+struct Side {
+  Vec3 centroid, spreads;
+};
+Side side_of(std::span<const Vec3> p, std::span<const double> w, double wsum) {
+  const Vec3 c = centroid_of(p, w, wsum);
+  return {c, spreads_of(p, w, c, wsum)};
+}
+
+/// kabsch() with the target's side given (`prepared`, unweighted) or computed (null).
+RigidFit fit_pairs(std::span<const Vec3> source, std::span<const Vec3> target, std::span<const double> weights,
+                   const KabschSettings& settings, const Side* prepared, bool target_finite) {
   RigidFit fit;
   const std::size_t n = source.size();
   if (n < 3 || target.size() != n || (!weights.empty() && weights.size() != n)) return fit;
+  if (prepared && !target_finite) return fit;
   double wsum = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
-    if (!finite(source[i]) || !finite(target[i])) return fit;
+    if (!finite(source[i]) || (!prepared && !finite(target[i]))) return fit;
     const double w = weights.empty() ? 1.0 : weights[i];
     if (!(w >= 0.0) || !std::isfinite(w)) return fit;
     wsum += w;
   }
   if (!(wsum > 0.0)) return fit;
 
-  const Vec3 cs = centroid_of(source, weights, wsum);
-  const Vec3 ct = centroid_of(target, weights, wsum);
-  const Vec3 ss = spreads_of(source, weights, cs, wsum);
-  const Vec3 st = spreads_of(target, weights, ct, wsum);
+  const Side src = side_of(source, weights, wsum);
+  const Side tgt = prepared ? *prepared : side_of(target, weights, wsum);
+  const Vec3 &cs = src.centroid, &ct = tgt.centroid, &ss = src.spreads, &st = tgt.spreads;
   if (ss[0] < settings.min_spread || st[0] < settings.min_spread) return fit;
   fit.sv_ratio = std::min(ss[1] / ss[0], st[1] / st[0]);
   if (!(fit.sv_ratio >= settings.min_sv_ratio)) return fit;
@@ -106,6 +119,29 @@ RigidFit kabsch(std::span<const Vec3> source, std::span<const Vec3> target,
   fit.valid = fit.T_target_source.matrix().allFinite() && std::isfinite(fit.rms);
   if (!fit.valid) fit.T_target_source = Pose::Identity();
   return fit;
+}
+
+}  // namespace
+
+RigidFit kabsch(std::span<const Vec3> source, std::span<const Vec3> target,
+                std::span<const double> weights, const KabschSettings& settings) {
+  return fit_pairs(source, target, weights, settings, nullptr, false);
+}
+
+KabschTarget::KabschTarget(std::span<const Vec3> target) : points_(target.begin(), target.end()) {
+  finite_ = std::all_of(points_.begin(), points_.end(), [](const Vec3& p) { return finite(p); });
+  double wsum = 0.0;   // as kabsch() sums the unit weights
+  for (std::size_t i = 0; i < points_.size(); ++i) wsum += 1.0;
+  if (finite_ && wsum > 0.0) {
+    const Side side = side_of(points_, {}, wsum);
+    centroid_ = side.centroid;
+    spreads_ = side.spreads;
+  }
+}
+
+RigidFit kabsch(std::span<const Vec3> source, const KabschTarget& target, const KabschSettings& settings) {
+  const Side side{target.centroid_, target.spreads_};
+  return fit_pairs(source, target.points_, {}, settings, &side, target.finite_);
 }
 
 double rotation_angle(const Mat3& R) {

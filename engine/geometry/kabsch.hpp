@@ -8,6 +8,7 @@
 #include "engine/core.hpp"
 
 #include <span>
+#include <vector>
 
 namespace ts {
 inline namespace geometry {
@@ -30,6 +31,25 @@ struct RigidFit {
 /// Never returns NaN: invalid inputs give valid = false and the identity.
 RigidFit kabsch(std::span<const Vec3> source, std::span<const Vec3> target,
                 std::span<const double> weights = {}, const KabschSettings& settings = {});
+
+/// A target point set met by many sources (a scene triplet registered against many model
+/// triplets): its centroid and principal spreads computed once, not once a fit. kabsch(source,
+/// target) gives the same fit as the unweighted kabsch(source, target.points()), bit for bit.
+class KabschTarget {
+ public:
+  KabschTarget() = default;   ///< no points: every fit invalid
+  explicit KabschTarget(std::span<const Vec3> target);
+  std::span<const Vec3> points() const { return points_; }
+
+ private:
+  friend RigidFit kabsch(std::span<const Vec3> source, const KabschTarget& target, const KabschSettings& settings);
+  std::vector<Vec3> points_;
+  bool finite_ = false;       ///< every point finite (kabsch() checks nothing else of them)
+  Vec3 centroid_ = Vec3::Zero(), spreads_ = Vec3::Zero();
+};
+
+/// Unweighted Kabsch/Arun against a prepared target (see KabschTarget).
+RigidFit kabsch(std::span<const Vec3> source, const KabschTarget& target, const KabschSettings& settings = {});
 
 /// The rotation R maximizing trace(R H) for a cross-covariance H = sum w s t^T of centred pairs,
 /// i.e. minimizing sum w |R s - t|^2 (Arun et al. 1987 by SVD, with Umeyama's reflection fix:

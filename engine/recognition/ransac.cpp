@@ -101,6 +101,7 @@ struct Triplet {
   bool valid = false;
   std::array<std::uint32_t, 3> point{};   ///< contact indices
   std::array<Vec3, 3> p;                  ///< scene frame
+  KabschTarget target;                    ///< p, prepared for the registrations against it
   std::array<Vec3, 3> n;                  ///< scene normals
   PairSignature s12, s13, s23;
   double d12 = 0, d13 = 0, d23 = 0;
@@ -210,7 +211,7 @@ std::optional<Candidate> register_once(const Triplet& t, const Database& db,
     const Vec3& q3 = pts[buf3[rng.index(buf3.size())]];
     if (!triangle_well_conditioned(q1, q2, q3, s.min_sv_ratio)) continue;
     const std::array<Vec3, 3> src{q1, q2, q3};
-    const RigidFit fit = kabsch(src, t.p);
+    const RigidFit fit = kabsch(src, t.target);
     if (!fit.valid) continue;
     Candidate c;
     c.object = a.object;
@@ -308,6 +309,7 @@ std::vector<Triplet> sample_triplets(const Scene& scene, const RansacSettings& s
         t.valid = true;
         t.point = k;
         t.p = {p1, p2, p3};
+        t.target = KabschTarget(t.p);
         t.n = {scene.contacts.normals[k[0]], scene.contacts.normals[k[1]], scene.contacts.normals[k[2]]};
         t.s12 = signature(p1, t.n[0], p2, t.n[1]);
         t.s13 = signature(p1, t.n[0], p3, t.n[2]);

@@ -73,6 +73,7 @@ bool draw_triplet(const std::vector<Vec3>& pts, double min_side, const SparseSet
 /// and its point-pair angles in the table's angle units.
 struct TripletQuery {
   Vec3 p[3], n[3];
+  KabschTarget target;   ///< p, prepared for the registrations against it
   bool normals = false;
   int lo01 = 0, hi01 = -1, lo02 = 0, hi02 = -1;
   double d12 = 0.0;
@@ -84,6 +85,7 @@ TripletQuery make_query(const ObjectPairs& T, const Vec3 (&p)[3], const Vec3 (&n
   TripletQuery q;
   std::copy(p, p + 3, q.p);
   std::copy(n, n + 3, q.n);
+  q.target = KabschTarget(std::span<const Vec3>(p, 3));
   q.normals = normals;
   const double tol = s.distance_tolerance;
   const double d01 = (p[1] - p[0]).norm(), d02 = (p[2] - p[0]).norm();
@@ -236,7 +238,7 @@ void close_triangles(const ObjectPairs& T, const TripletQuery& q, const MatchedP
         continue;
       if (std::abs((T.points[r] - T.points[j]).norm() - q.d12) > tol) continue;
       const Vec3 src[3] = {T.points[i], T.points[j], T.points[r]};
-      const RigidFit fit = kabsch(std::span<const Vec3>(src, 3), std::span<const Vec3>(q.p, 3), {}, ks);
+      const RigidFit fit = kabsch(std::span<const Vec3>(src, 3), q.target, ks);
       if (!fit.valid) continue;
       if (q.normals) {
         const Mat3 R = fit.T_target_source.linear();

@@ -6,6 +6,7 @@
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 using namespace ts;
@@ -217,4 +218,47 @@ TEST_CASE("rotation_angle agrees with Eq. 10 and stays accurate near 0 and pi") 
     CHECK(rotation_angle(R) == doctest::Approx(a).epsilon(1e-6));
   }
   CHECK(rotation_angle(Mat3::Identity()) == 0.0);
+}
+
+TEST_CASE("A prepared target gives kabsch()'s fit bit for bit, its rejections included") {
+  Rng rng(41);
+  const auto same = [](const RigidFit& a, const RigidFit& b) {
+    return a.valid == b.valid && a.reflection_fixed == b.reflection_fixed && a.rms == b.rms &&
+           a.sv_ratio == b.sv_ratio && a.T_target_source.matrix() == b.T_target_source.matrix();
+  };
+  KabschSettings strict;
+  strict.min_sv_ratio = 0.15;
+  for (int trial = 0; trial < 200; ++trial) {
+    const std::size_t n = trial % 3 == 0 ? 3 : 3 + static_cast<std::size_t>(trial % 7);
+    const std::vector<Vec3> target = random_points(rng, n, 0.2);
+    const KabschTarget prepared(target);
+    for (int k = 0; k < 5; ++k) {
+      std::vector<Vec3> src = moved(random_pose(rng, 0.5), target, rng, 0.01 * k);
+      if (k == 4) src = random_points(rng, n, 0.2);   // unrelated: reflections, poor fits
+      CAPTURE(trial);
+      CAPTURE(k);
+      CHECK(same(kabsch(src, prepared), kabsch(src, target)));
+      CHECK(same(kabsch(src, prepared, strict), kabsch(src, target, {}, strict)));
+    }
+  }
+  // What kabsch() rejects of the target or the pairing, the prepared target rejects alike.
+  const std::vector<Vec3> src{Vec3(0, 0, 0), Vec3(0.1, 0, 0), Vec3(0, 0.1, 0)};
+  const std::vector<Vec3> collinear{Vec3(0, 0, 0), Vec3(0.1, 0, 0), Vec3(0.2, 0, 0)};
+  const std::vector<Vec3> coincident(3, Vec3(1, 2, 3));
+  std::vector<Vec3> not_finite = src;
+  not_finite[1].y() = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<Vec3> four{Vec3(0, 0, 0), Vec3(0.1, 0, 0), Vec3(0, 0.1, 0), Vec3(0, 0, 0.1)};
+  const std::vector<Vec3>* targets[] = {&collinear, &coincident, &not_finite, &four};
+  for (const std::vector<Vec3>* t : targets) {
+    const RigidFit fit = kabsch(src, KabschTarget(*t));
+    CHECK_FALSE(fit.valid);
+    CHECK(fit.T_target_source.matrix() == Pose::Identity().matrix());
+    CHECK(same(fit, kabsch(src, *t)));
+  }
+  CHECK_FALSE(kabsch(src, KabschTarget()).valid);
+  // A valid fit through the prepared path: the exact transform back.
+  const Pose T = random_pose(rng, 1.0);
+  const RigidFit fit = kabsch(src, KabschTarget(moved(T, src, rng)));
+  REQUIRE(fit.valid);
+  CHECK((fit.T_target_source.matrix() - T.matrix()).cwiseAbs().maxCoeff() < 1e-12);
 }
