@@ -119,6 +119,9 @@ class NanoNearestSet {
  public:
   using DistanceType = double;
   using IndexType = std::uint32_t;
+  NanoNearestSet() = default;
+  /// Only points with sq_distance < tie_bound(max_sq) are admitted (every one within reach).
+  explicit NanoNearestSet(double max_sq) : bound_(tie_bound(max_sq)) {}
   bool full() const { return found_; }
   std::size_t size() const { return found_ ? 1 : 0; }
   double worstDist() const { return bound_; }
@@ -204,6 +207,16 @@ std::span<const Vec3> KdTree3::points() const {
 Neighbour KdTree3::nearest(const Vec3& q) const {
   if (!impl_ || !impl_->tree) return {0, std::numeric_limits<double>::infinity()};
   NanoNearestSet set;
+  const double qv[3] = {q.x(), q.y(), q.z()};
+  impl_->tree->findNeighbors(set, qv, nanoflann::SearchParams());
+  return set.full() ? set.best() : Neighbour{0, std::numeric_limits<double>::infinity()};
+}
+
+Neighbour KdTree3::nearest_within(const Vec3& q, double max_distance) const {
+  if (!impl_ || !impl_->tree || !(max_distance >= 0.0)) return {0, std::numeric_limits<double>::infinity()};
+  // The nearest is the minimum by (distance, index) over the points admitted; every point
+  // nearer than a point admitted is admitted too, so what is found is nearest()'s answer.
+  NanoNearestSet set(max_distance * max_distance);
   const double qv[3] = {q.x(), q.y(), q.z()};
   impl_->tree->findNeighbors(set, qv, nanoflann::SearchParams());
   return set.full() ? set.best() : Neighbour{0, std::numeric_limits<double>::infinity()};

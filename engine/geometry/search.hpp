@@ -36,6 +36,10 @@ class KdTree3 {
   std::size_t memory_bytes() const;   ///< own points and tree nodes (estimate from their counts)
   /// Nearest point; sq_distance = +inf when the tree is empty.
   Neighbour nearest(const Vec3& q) const;
+  /// nearest(q), bit for bit, when some point lies within `max_distance` of q; otherwise none
+  /// (sq_distance = +inf), or, when the nearest lies a few ulps beyond, that one. Searches only
+  /// the part of the tree within reach, so a query far from every point costs a few nodes.
+  Neighbour nearest_within(const Vec3& q, double max_distance) const;
   /// k nearest, sorted by distance then index.
   std::vector<Neighbour> knn(const Vec3& q, std::size_t k) const;
   /// All points within `radius`, sorted by distance then index.

@@ -21,9 +21,16 @@ struct Screen {
   const PointCloud& coarse;
   const KdTree3& tree;
   double voxel, inv2;
+  /// Beyond this distance the nearest point gives e = 1 exactly: d >= |p - x| - voxel is then
+  /// more than the outlier distance by a margin that rounding cannot cross.
+  double reach;
+  Screen(const Scene& sc, const PointCloud& c, const KdTree3& t, double voxel_m, double outlier_m)
+      : scene(sc), coarse(c), tree(t), voxel(voxel_m), inv2(1.0 / (outlier_m * outlier_m)),
+        reach(voxel_m + outlier_m * (1.0 + 1e-6)) {}
   double error(const Pose& T_object_scene, std::size_t k) const {
     const Vec3 p = T_object_scene * scene.ordered[k];
-    const Neighbour nb = tree.nearest(p);
+    const Neighbour nb = tree.nearest_within(p, reach);
+    if (!(nb.sq_distance < std::numeric_limits<double>::infinity())) return 1.0;
     const Vec3 v = p - coarse.points[nb.index];
     double d = std::sqrt(nb.sq_distance) - voxel;
     if (coarse.has_normals()) d = std::max(d, std::abs(coarse.normals[nb.index].dot(v)));
@@ -40,14 +47,13 @@ std::vector<double> screen_candidates(const Scene& scene, const Database& db,
   if (m == 0 || !(s.outlier_distance > 0.0)) return score;
   for (const Candidate& c : cands) (void)db.keypoints(c.object);  // load on this thread first
   const double voxel = db.settings().scan.coarse_voxel;
-  const double inv2 = 1.0 / (s.outlier_distance * s.outlier_distance);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cands.size(), 16),
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t i = r.begin(); i != r.end(); ++i) {
                         const Candidate& c = cands[i];
                         const ObjectKeypoints& kp = db.keypoints(c.object);
                         if (kp.tree.size() == 0) continue;
-                        const Screen sc{scene, kp.coarse, kp.tree, voxel, inv2};
+                        const Screen sc(scene, kp.coarse, kp.tree, voxel, s.outlier_distance);
                         const Pose T = c.T_scene_object.inverse();
                         double sum = 0.0;
                         for (std::size_t k = 0; k < m; ++k) sum += sc.error(T, k);
@@ -74,7 +80,6 @@ std::vector<double> screen_objects(const Scene& scene, const Database& db, const
   std::stable_sort(objects.begin(), objects.end(),
                    [&](std::uint32_t x, std::uint32_t y) { return of[x].size() > of[y].size(); });
   const double voxel = db.settings().scan.coarse_voxel;
-  const double inv2 = 1.0 / (s.outlier_distance * s.outlier_distance);
   // The bar of `keep`: the keep-th smallest of the objects' best scores so far (each an upper
   // bound of that object's final best), so never below the final keep-th best.
   std::mutex bar_mutex;
@@ -90,7 +95,7 @@ std::vector<double> screen_objects(const Scene& scene, const Database& db, const
     const std::uint32_t o = objects[j];
     const ObjectKeypoints& kp = db.keypoints(o);
     if (kp.tree.size() == 0) return;
-    const Screen sc{scene, kp.coarse, kp.tree, voxel, inv2};
+    const Screen sc(scene, kp.coarse, kp.tree, voxel, s.outlier_distance);
     double low = 1.0, published = 2.0;   // 2: not published yet
     for (std::uint32_t i : of[o]) {
       // Stop once the partial sum (each e >= 0) shows the candidate cannot beat the object's

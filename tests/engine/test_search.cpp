@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <random>
 
@@ -157,6 +158,44 @@ TEST_CASE("KdTree3 breaks ties by the smaller index and includes the radius boun
   CHECK(ball.size() == 2 * 7);
   // Nearest of a duplicated point is its first copy.
   CHECK(tree.nearest(pts[300]).index == 300 - 216);
+}
+
+TEST_CASE("KdTree3::nearest_within is nearest() when the nearest is within reach, none when nothing is") {
+  Rng rng(17);
+  std::vector<Vec3> pts(2000);
+  for (auto& p : pts) p = Vec3(rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-0.1, 0.1));
+  const KdTree3 tree(pts);
+  const auto grid = grid_with_duplicates(6);   // exact ties: the smaller index must win alike
+  const KdTree3 tied(grid);
+  std::size_t within = 0, beyond = 0;
+  for (int q = 0; q < 3000; ++q) {
+    const Vec3 query(rng.uniform(-1.5, 1.5), rng.uniform(-1.5, 1.5), rng.uniform(-0.6, 0.6));
+    const Neighbour exact = brute_knn(pts, query, 1).front();
+    REQUIRE(tree.nearest(query).index == exact.index);
+    for (double r : {0.0, 0.01, 0.05, 0.2, 1.0}) {
+      const Neighbour got = tree.nearest_within(query, r);
+      if (exact.sq_distance <= r * r) {
+        ++within;
+        CHECK(got.index == exact.index);
+        CHECK(got.sq_distance == exact.sq_distance);
+      } else {
+        ++beyond;
+        // none, or (a few ulps beyond the reach) the nearest itself
+        CHECK((got.sq_distance == std::numeric_limits<double>::infinity() ||
+               (got.index == exact.index && got.sq_distance <= r * r * (1.0 + 1e-9))));
+      }
+    }
+    const Vec3 g(double(rng.index(6)) + 0.5 * double(q % 2), double(rng.index(6)), double(rng.index(6)));
+    const Neighbour t = brute_knn(grid, g, 1).front();
+    const Neighbour got = tied.nearest_within(g, 1.0);
+    CHECK(got.index == t.index);
+    CHECK(got.sq_distance == t.sq_distance);
+  }
+  CHECK(within > 1000);   // both branches exercised
+  CHECK(beyond > 1000);
+  CHECK(KdTree3().nearest_within(Vec3::Zero(), 1.0).sq_distance == std::numeric_limits<double>::infinity());
+  CHECK(tree.nearest_within(Vec3::Zero(), -1.0).sq_distance == std::numeric_limits<double>::infinity());
+  CHECK(tree.nearest_within(pts[5], 0.0).index == 5);   // a point is within reach 0 of itself
 }
 
 TEST_CASE("KdTree3 handles empty trees, k = 0 and all-identical points") {
