@@ -37,7 +37,7 @@ class KdTree3 {
   /// Nearest point; sq_distance = +inf when the tree is empty.
   Neighbour nearest(const Vec3& q) const;
   /// nearest(q), bit for bit, when some point lies within `max_distance` of q; otherwise none
-  /// (sq_distance = +inf), or, when the nearest lies a few ulps beyond, that one. Searches only
+  /// (sq_distance = +inf) or some point a few ulps beyond `max_distance`. Searches only
   /// the part of the tree within reach, so a query far from every point costs a few nodes.
   Neighbour nearest_within(const Vec3& q, double max_distance) const;
   /// k nearest, sorted by distance then index.

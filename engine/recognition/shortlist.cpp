@@ -22,7 +22,9 @@ struct Screen {
   const KdTree3& tree;
   double voxel, inv2;
   /// Beyond this distance the nearest point gives e = 1 exactly: d >= |p - x| - voxel is then
-  /// more than the outlier distance by a margin that rounding cannot cross.
+  /// more than the outlier distance by a margin (1e-6 of it) that the rounding of the reach, its
+  /// square and the square root cannot cross while the voxel is below about 1e9 outlier
+  /// distances (the defaults: 5 mm and 1 cm).
   double reach;
   Screen(const Scene& sc, const PointCloud& c, const KdTree3& t, double voxel_m, double outlier_m)
       : scene(sc), coarse(c), tree(t), voxel(voxel_m), inv2(1.0 / (outlier_m * outlier_m)),

@@ -166,7 +166,7 @@ std::vector<MatchedPairs> matched_pairs(const ObjectPairs& T, const std::vector<
       const auto n = static_cast<std::size_t>(last - first);
       mp.begin[i] = static_cast<std::uint16_t>(first - row);
       mp.end[i] = static_cast<std::uint16_t>(last - row);
-      const std::uint32_t count = q.normals ? count_agreeing(&*first, n, q.sa, q.sb, q.sab, utol)
+      const std::uint32_t count = q.normals ? count_agreeing(T.near.data() + (first - T.near.begin()), n, q.sa, q.sb, q.sab, utol)
                                             : static_cast<std::uint32_t>(n);
       mp.before[i + 1] = mp.before[i] + count;
     }

@@ -256,6 +256,10 @@ TEST_CASE("A prepared target gives kabsch()'s fit bit for bit, its rejections in
     CHECK(same(fit, kabsch(src, *t)));
   }
   CHECK_FALSE(kabsch(src, KabschTarget()).valid);
+  // A source that is not finite, against a prepared target that is.
+  const KabschTarget good(std::vector<Vec3>{Vec3(0, 0, 0), Vec3(0.1, 0, 0), Vec3(0, 0.1, 0)});
+  CHECK_FALSE(kabsch(not_finite, good).valid);
+  CHECK(same(kabsch(not_finite, good), kabsch(not_finite, good.points())));
   // A valid fit through the prepared path: the exact transform back.
   const Pose T = random_pose(rng, 1.0);
   const RigidFit fit = kabsch(src, KabschTarget(moved(T, src, rng)));

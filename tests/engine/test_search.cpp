@@ -180,9 +180,9 @@ TEST_CASE("KdTree3::nearest_within is nearest() when the nearest is within reach
         CHECK(got.sq_distance == exact.sq_distance);
       } else {
         ++beyond;
-        // none, or (a few ulps beyond the reach) the nearest itself
+        // none, or some point a few ulps beyond the reach
         CHECK((got.sq_distance == std::numeric_limits<double>::infinity() ||
-               (got.index == exact.index && got.sq_distance <= r * r * (1.0 + 1e-9))));
+               (got.sq_distance >= exact.sq_distance && got.sq_distance <= r * r * (1.0 + 1e-9))));
       }
     }
     const Vec3 g(double(rng.index(6)) + 0.5 * double(q % 2), double(rng.index(6)), double(rng.index(6)));
@@ -196,6 +196,15 @@ TEST_CASE("KdTree3::nearest_within is nearest() when the nearest is within reach
   CHECK(KdTree3().nearest_within(Vec3::Zero(), 1.0).sq_distance == std::numeric_limits<double>::infinity());
   CHECK(tree.nearest_within(Vec3::Zero(), -1.0).sq_distance == std::numeric_limits<double>::infinity());
   CHECK(tree.nearest_within(pts[5], 0.0).index == 5);   // a point is within reach 0 of itself
+  // The reach is inclusive: on the grid, a point exactly 1 from its nearest (every distance is
+  // exact) is found with reach 1 and not with a reach just short of it.
+  const Vec3 off(2.0, 2.0, 6.0);   // nearest: the grid point (2, 2, 5), at distance 1
+  const Neighbour exact = brute_knn(grid, off, 1).front();
+  REQUIRE(exact.sq_distance == 1.0);
+  const Neighbour at = tied.nearest_within(off, 1.0);
+  CHECK(at.index == exact.index);
+  CHECK(at.sq_distance == 1.0);
+  CHECK(tied.nearest_within(off, 0.999).sq_distance == std::numeric_limits<double>::infinity());
 }
 
 TEST_CASE("KdTree3 handles empty trees, k = 0 and all-identical points") {
