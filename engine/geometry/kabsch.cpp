@@ -130,8 +130,8 @@ RigidFit kabsch(std::span<const Vec3> source, std::span<const Vec3> target,
 
 KabschTarget::KabschTarget(std::span<const Vec3> target) : points_(target.begin(), target.end()) {
   finite_ = std::all_of(points_.begin(), points_.end(), [](const Vec3& p) { return finite(p); });
-  double wsum = 0.0;   // as kabsch() sums the unit weights
-  for (std::size_t i = 0; i < points_.size(); ++i) wsum += 1.0;
+  // kabsch()'s sum of n unit weights, which is n exactly
+  const auto wsum = static_cast<double>(points_.size());
   if (finite_ && wsum > 0.0) {
     const Side side = side_of(points_, {}, wsum);
     centroid_ = side.centroid;
