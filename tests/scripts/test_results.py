@@ -191,7 +191,7 @@ def run_case():
     d = tree()
     try:
         git = ["git", "-C", str(d), "-c", "user.email=t@t", "-c", "user.name=t"]
-        for folder in ("engine", "io"):   # the database's key reads these folders' trees
+        for folder in ("engine", "io"):   # sources the database's key reads
             (d / folder).mkdir()
             (d / folder / "source.cpp").write_text("// a source\n")
         subprocess.run(git + ["init", "-q"], check=True)
@@ -221,7 +221,77 @@ def run_case():
         shutil.rmtree(d)
 
 
+def load_script():
+    import importlib.machinery
+    import importlib.util
+    loader = importlib.machinery.SourceFileLoader("results_script", str(script))
+    module = importlib.util.module_from_spec(importlib.util.spec_from_loader("results_script", loader))
+    loader.exec_module(module)
+    return module
+
+
+def db_sources_case():
+    """The database key's sources: every project file `touchstone db build` and `touchstone catalogue`
+    compile from (their include closure, each header's .cpp followed) is among DB_SOURCES and not
+    excluded; and the key moves with a builder source, not with a recognizer source."""
+    global cases
+    import os
+    m = load_script()
+    listed = m.db_sources(src, False)   # what git lists of DB_SOURCES (a path or a folder each)
+    covered = lambda f: f"\t{f}\n" in listed + "\n"
+    cases += 1
+    cxx = os.environ.get("CXX", "c++")
+    todo, seen, missing = ["experiments/cli/cmd_db.cpp", "experiments/cli/cmd_catalogue.cpp"], set(), set()
+    while todo:
+        f = todo.pop()
+        if f in seen:
+            continue
+        seen.add(f)
+        p = subprocess.run([cxx, "-std=c++20", "-I.", "-isystem", "/usr/include/eigen3", "-MM", f], cwd=src,
+                           capture_output=True, text=True)
+        if p.returncode != 0:
+            failures.append(f"{cxx} -MM {f} failed:\n{p.stderr[-2000:]}")
+            continue
+        for dep in p.stdout.replace("\\\n", " ").split()[1:]:
+            if not dep.startswith(("engine/", "io/", "datasets/", "experiments/")):
+                continue
+            if not covered(dep):
+                missing.add(dep)
+            cpp = dep.rsplit(".", 1)[0] + ".cpp"
+            if dep.endswith(".hpp") and (src / cpp).is_file():
+                todo.append(cpp)
+    if missing or len(seen) < 20:
+        failures.append(f"database sources: {len(seen)} files followed; not in the key: {sorted(missing)}")
+    cases += 1
+    d = Path(tempfile.mkdtemp(prefix="ts-dbkey-"))
+    try:
+        git = ["git", "-C", str(d), "-c", "user.email=t@t", "-c", "user.name=t"]
+        files = {"engine/geometry/a.cpp": "1", "engine/recognition/b.cpp": "1", "datasets/scene.cpp": "1"}
+        for f, text in files.items():
+            (d / f).parent.mkdir(parents=True, exist_ok=True)
+            (d / f).write_text(text)
+        subprocess.run(git + ["init", "-q"], check=True)
+        keys = []
+        for f in [None, "engine/recognition/b.cpp", "datasets/scene.cpp", "engine/geometry/a.cpp"]:
+            if f:
+                (d / f).write_text("2")
+                dirty = m.db_sources(d, True)
+                subprocess.run(git + ["commit", "-qam", "t"], check=True)
+                keys.append((dirty, m.db_sources(d, False)))
+            else:
+                subprocess.run(git + ["add", "-A"], check=True)
+                subprocess.run(git + ["commit", "-q", "-m", "t"], check=True)
+                keys.append((None, m.db_sources(d, False)))
+        base = keys[0][1]
+        if not (keys[1] == (base, base) and keys[2] == (base, base) and keys[3][0] != base and keys[3][1] != base
+                and "engine/geometry/a.cpp" in base):
+            failures.append(f"the database key: {keys}")
+    finally:
+        shutil.rmtree(d)
+
+
 run_case()
+db_sources_case()
 
 for f in failures:
     print(f"FAIL {f}", file=sys.stderr)
