@@ -62,6 +62,19 @@ double cpu_seconds() {
   return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
+/// Resident memory now and at its peak so far (GB).
+std::pair<double, double> resident_gb() {
+  long pages = 0, resident = 0;
+  if (FILE* f = std::fopen("/proc/self/statm", "r")) {
+    if (std::fscanf(f, "%ld %ld", &pages, &resident) != 2) resident = 0;
+    std::fclose(f);
+  }
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);   // ru_maxrss: KiB on Linux
+  return {static_cast<double>(resident) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1e9,
+          static_cast<double>(usage.ru_maxrss) * 1024.0 / 1e9};
+}
+
 double median(std::vector<double> v) {
   if (v.empty()) return 0.0;
   std::sort(v.begin(), v.end());
@@ -204,6 +217,9 @@ int main(int argc, char** argv) {
     std::printf("feature search: %s, %zu features, built in %.2f s\n",
                 table ? "exact batched table" : "FeatureIndex", table ? table->features() : index->size(),
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    const auto [table_now, table_peak] = resident_gb();
+    std::printf("memory with the feature search built: %.2f GB resident (peak %.2f GB), the table %.2f GB\n", table_now,
+                table_peak, table ? static_cast<double>(table->memory_bytes()) / 1e9 : 0.0);
 
     if (speed) {
       // A few logs spread over the database; every step run with 1 and with 2 threads.
@@ -264,10 +280,20 @@ int main(int argc, char** argv) {
       }
       std::printf("speed-up 1 -> 2 threads: %.2fx at step %zu, %.2fx over all steps; identical results: %s\n",
                   median(last[1]) / median(last[2]), grasps, median(all[1]) / median(all[2]), same ? "yes" : "NO");
-      rusage usage{};
-      getrusage(RUSAGE_SELF, &usage);   // ru_maxrss: KiB on Linux
-      std::printf("peak memory so far: %.2f GB resident (the database's geometry loaded as the steps needed it)\n",
-                  static_cast<double>(usage.ru_maxrss) * 1024.0 / 1e9);
+      // What stays: the object geometry (no budget here: every object the steps reached) and
+      // the keypoints (every allowed object's on a database large enough for the shape prior,
+      // whose histograms read them; summed after the reading, loading any not yet in use).
+      const auto [now, peak] = resident_gb();
+      double keypoints = 0.0;
+      for (std::size_t o = 0; o < n_obj; ++o) {
+        const ObjectKeypoints& k = db.keypoints(o);
+        keypoints += static_cast<double>(k.coarse.points.capacity() * sizeof(Vec3) +
+                                         k.coarse.normals.capacity() * sizeof(Vec3) + k.tree.memory_bytes());
+      }
+      std::printf("peak memory so far: %.2f GB resident (the database's geometry loaded as the steps needed it); now %.2f GB, "
+                  "of which object geometry %.2f GB (its peak %.2f GB, %zu loads); the %zu objects' keypoints %.2f GB\n",
+                  peak, now, static_cast<double>(db.geometry_bytes()) / 1e9,
+                  static_cast<double>(db.geometry_peak_bytes()) / 1e9, db.geometry_loads(), n_obj, keypoints / 1e9);
     }
 
     if (accuracy) {
