@@ -10,7 +10,7 @@
 //             one also counts, its pose carried over, when the database records classes.
 //
 //   build/bench/bench_recognize --db DB.h5 [--grasps 20] [--speed-logs 6] [--seeds 3]
-//       [--noise underwater] [--method bricpsf] [--objects N] [--skip-speed] [--skip-accuracy]
+//       [--noise underwater] [--method bricpsf] [--objects N] [--database-size N] [--skip-speed] [--skip-accuracy]
 //       [--preset improved|paper] [--KEY VALUE ...] [--set KEY=VALUE ...]
 //       [--accuracy-threads N] [--answers FILE]
 //   Method parameters (experiments/params/parameters.cpp, `touchstone params`) as `touchstone recognize`
@@ -18,7 +18,9 @@
 //   15, or an older flag, -N 15) or --set KEY=VALUE (a key or an older name: --set N=15).
 //   --method, --preset, --noise, its overrides (--arm-position-sigma, ...) and --sensors are the
 //   declared experiment and simulator parameters (the noise defaults to underwater here);
-//   --objects N (the first N objects of the database) is the benchmark's own selection.
+//   --objects N (the first N objects of the database) is the benchmark's own selection of the
+//   objects it explores; --database-size N cuts the recognizer's database to the first N objects
+//   (and the explored ones to those).
 //
 // --answers FILE writes every step of every accuracy log, exactly (hexadecimal floats): the log, the
 // step, the answer's object, ln wt and pose, the posterior, and every hypothesis's object and
@@ -130,7 +132,7 @@ Log simulate(const io::DbReader& db, std::size_t object, std::size_t grasps,
 
 int main(int argc, char** argv) {
   std::string db_path, noise, method, preset;
-  std::size_t grasps = 20, speed_logs = 6, seeds = 3, objects = 0;
+  std::size_t grasps = 20, speed_logs = 6, seeds = 3, objects = 0, database_size = 0;
   int accuracy_threads = 0;
   std::string answers_path;
   bool skip_speed = false, skip_accuracy = false;
@@ -144,6 +146,8 @@ int main(int argc, char** argv) {
   app.add_option("--speed-logs", speed_logs, "Logs of the speed part")->check(CLI::Range(1, 100000));
   app.add_option("--seeds", seeds, "Logs per object of the accuracy part")->check(CLI::Range(1, 100000));
   app.add_option("--objects", objects, "First N objects of the database (0: all)");
+  app.add_option("--database-size", database_size,
+                 "The recognizer's database cut to its first N objects, the logs' objects among them (0: all)");
   app.add_flag("--skip-speed", skip_speed, "Skip the speed part");
   app.add_flag("--skip-accuracy", skip_accuracy, "Skip the accuracy part");
   app.add_option("--accuracy-threads", accuracy_threads, "Worker threads of the accuracy part (0: all cores)")
@@ -191,11 +195,16 @@ int main(int argc, char** argv) {
     auto reader = std::make_shared<io::DbReader>(db_path);
     Database db(reader);
     db.set_surface(needs_surface(rs, db.settings()));   // as `touchstone recognize` does
-    const std::size_t n_obj = objects > 0 ? std::min(objects, db.size()) : db.size();
-    std::printf("bench_recognize: %s\nmachine: %s; first touch of fresh memory %.2f ms/MB\ndatabase: %s (%zu objects), method %s, %zu grasps, noise %s\n",
+    if (database_size > 0 && database_size < db.size()) {   // as `experiment --database-size`
+      rs.objects.assign(db.size(), 0);
+      std::fill_n(rs.objects.begin(), database_size, std::uint8_t{1});
+    }
+    const std::size_t allowed = rs.objects.empty() ? db.size() : database_size;
+    const std::size_t n_obj = std::min(objects > 0 ? std::min(objects, db.size()) : db.size(), allowed);
+    std::printf("bench_recognize: %s\nmachine: %s; first touch of fresh memory %.2f ms/MB\ndatabase: %s (%zu objects, the recognizer's %zu), method %s, %zu grasps, noise %s\n",
                 "recognizer speed and accuracy", experiments::machine_description().c_str(),
                 experiments::first_touch_ms_per_mb(), db_path.c_str(),
-                db.size(), method.c_str(), grasps, noise.c_str());
+                db.size(), allowed, method.c_str(), grasps, noise.c_str());
     std::printf("parameters (preset %s):", preset.c_str());
     {
       experiments::MethodSettings shown = settings;
