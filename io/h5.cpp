@@ -1014,10 +1014,29 @@ File::File(File&&) noexcept = default;
 File& File::operator=(File&&) noexcept = default;
 
 namespace {
-Id file_access_plist() {
+/// A file read only keeps at most this much metadata cached (HDF5's default: 32 MB). Each object
+/// a reader loads leaves its datasets' headers and chunk indexes in the metadata cache, whose
+/// resident memory is several times its nominal size: on a database of thousands of objects the
+/// default held a few hundred MB more once every object's features were loaded (bench_recognize's
+/// memory line after the feature search), for no faster loads (the objects are read one after
+/// another; their metadata is not wanted again soon).
+constexpr std::size_t kReadMetadataCacheBytes = std::size_t{4} << 20;
+
+Id file_access_plist(bool read_only) {
   Id fapl(H5Pcreate(H5P_FILE_ACCESS));
   // Closing the file closes every object still open in it, so close() really releases it.
   H5Pset_fclose_degree(fapl.get(), H5F_CLOSE_STRONG);
+  if (read_only) {
+    H5AC_cache_config_t c{};
+    c.version = H5AC__CURR_CACHE_CONFIG_VERSION;
+    if (H5Pget_mdc_config(fapl.get(), &c) >= 0 && c.max_size > kReadMetadataCacheBytes) {
+      c.max_size = kReadMetadataCacheBytes;
+      c.min_size = std::min(c.min_size, c.max_size);
+      c.set_initial_size = true;
+      c.initial_size = std::min(c.initial_size, c.max_size);
+      H5Pset_mdc_config(fapl.get(), &c);
+    }
+  }
   return fapl;
 }
 
@@ -1036,7 +1055,7 @@ File File::create(const std::filesystem::path& path, const std::string& display)
   const std::string name = display.empty() ? path.string() : display;
   Id fcpl(H5Pcreate(H5P_FILE_CREATE));
   H5Pset_obj_track_times(fcpl.get(), false);   // the root group has no timestamps either
-  Id fapl = file_access_plist();
+  Id fapl = file_access_plist(false);
   hid_t id = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, fcpl.get(), fapl.get());
   if (id < 0) {
     const std::string d = hdf5_detail();
@@ -1063,7 +1082,7 @@ File File::open(const std::filesystem::path& path, Access access, const std::str
     throw Error("cannot read the file" + (d.empty() ? "" : ": " + d), name);
   }
   if (is_hdf5 == 0) throw Error("not an HDF5 file", name);
-  Id fapl = file_access_plist();
+  Id fapl = file_access_plist(access == Access::read);
   hid_t id = H5Fopen(path.c_str(), access == Access::read ? H5F_ACC_RDONLY : H5F_ACC_RDWR, fapl.get());
   if (id < 0) {
     const std::string d = hdf5_detail();

@@ -90,11 +90,19 @@ const ObjectKeypoints& Database::keypoints(std::size_t i) const {
     tbb::this_task_arena::isolate([&] {
       auto k = std::make_unique<ObjectKeypoints>();
       k->coarse = source_->load_coarse(i);
-      k->tree = KdTree3::over(k->coarse.points);
       s.keypoints = std::move(k);
     });
   });
   return *s.keypoints;
+}
+
+const KdTree3& ObjectKeypoints::tree() const {
+  std::call_once(tree_once_, [&] {
+    // Isolated: a thread waiting on the once flag must not pick up a task that waits on it too.
+    tbb::this_task_arena::isolate([&] { tree_ = KdTree3::over(coarse.points); });
+    tree_built_.store(true, std::memory_order_release);
+  });
+  return tree_;
 }
 
 ObjectFeatures Database::load_features(std::size_t i) const { return source_->load_features(i); }

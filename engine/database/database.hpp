@@ -57,7 +57,17 @@ struct ObjectFeatures {
 /// themselves live only in the search structure built from Database::load_features.
 struct ObjectKeypoints {
   PointCloud coarse;               ///< object frame, with normals
-  KdTree3 tree;                    ///< over coarse.points, not a copy (KdTree3::over)
+  /// A k-d tree over coarse.points, not a copy (KdTree3::over), built on the first call
+  /// (thread-safe): only the shortlist's screening searches it, and on a database of thousands
+  /// of objects, whose every keypoints the shape prior reads, most objects are never screened.
+  /// coarse must not change once it is built.
+  const KdTree3& tree() const;
+  bool tree_built() const { return tree_built_.load(std::memory_order_acquire); }
+
+ private:
+  mutable std::once_flag tree_once_;
+  mutable KdTree3 tree_;
+  mutable std::atomic<bool> tree_built_{false};
 };
 
 struct ObjectGeometry {

@@ -54,8 +54,8 @@ std::vector<double> screen_candidates(const Scene& scene, const Database& db,
                       for (std::size_t i = r.begin(); i != r.end(); ++i) {
                         const Candidate& c = cands[i];
                         const ObjectKeypoints& kp = db.keypoints(c.object);
-                        if (kp.tree.size() == 0) continue;
-                        const Screen sc(scene, kp.coarse, kp.tree, voxel, s.outlier_distance);
+                        if (kp.tree().size() == 0) continue;
+                        const Screen sc(scene, kp.coarse, kp.tree(), voxel, s.outlier_distance);
                         const Pose T = c.T_scene_object.inverse();
                         double sum = 0.0;
                         for (std::size_t k = 0; k < m; ++k) sum += sc.error(T, k);
@@ -96,8 +96,8 @@ std::vector<double> screen_objects(const Scene& scene, const Database& db, const
   tbb::parallel_for(std::size_t{0}, objects.size(), [&](std::size_t j) {
     const std::uint32_t o = objects[j];
     const ObjectKeypoints& kp = db.keypoints(o);
-    if (kp.tree.size() == 0) return;
-    const Screen sc(scene, kp.coarse, kp.tree, voxel, s.outlier_distance);
+    if (kp.tree().size() == 0) return;
+    const Screen sc(scene, kp.coarse, kp.tree(), voxel, s.outlier_distance);
     double low = 1.0, published = 2.0;   // 2: not published yet
     for (std::uint32_t i : of[o]) {
       // Stop once the partial sum (each e >= 0) shows the candidate cannot beat the object's

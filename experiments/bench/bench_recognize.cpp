@@ -291,13 +291,15 @@ int main(int argc, char** argv) {
                   median(last[1]) / median(last[2]), grasps, median(all[1]) / median(all[2]), same ? "yes" : "NO");
       // What stays: the object geometry (no budget here: every object the steps reached) and
       // the keypoints (every allowed object's on a database large enough for the shape prior,
-      // whose histograms read them; summed after the reading, loading any not yet in use).
+      // whose histograms read them; summed after the reading, loading any not yet in use; a
+      // k-d tree only where the screening built it).
       const auto [now, peak] = resident_gb();
       double keypoints = 0.0;
       for (std::size_t o = 0; o < n_obj; ++o) {
         const ObjectKeypoints& k = db.keypoints(o);
         keypoints += static_cast<double>(k.coarse.points.capacity() * sizeof(Vec3) +
-                                         k.coarse.normals.capacity() * sizeof(Vec3) + k.tree.memory_bytes());
+                                         k.coarse.normals.capacity() * sizeof(Vec3) +
+                                         (k.tree_built() ? k.tree().memory_bytes() : 0));
       }
       std::printf("peak memory so far: %.2f GB resident (the database's geometry loaded as the steps needed it); now %.2f GB, "
                   "of which object geometry %.2f GB (its peak %.2f GB, %zu loads); the %zu objects' keypoints %.2f GB\n",
