@@ -3,13 +3,15 @@
 //   speed     BRICPSF (or --method) through `grasps` steps of a few logs, with 1 and with 2
 //             threads: the median time of the last step (cumulative cloud after `grasps`
 //             grasps) and of every step, a per-stage breakdown, and the 1 -> 2 thread speed-up.
-//             Results with 1 and 2 threads must be identical (checked).
+//             An untimed pass first loads what the steps read; then `rounds` timed rounds, each
+//             with 1 and 2 threads, the order alternating. Results of every round and thread
+//             count must be identical (checked).
 //   accuracy  every object x `seeds` logs (noise profile `noise`): the share of logs whose last
 //             step names the right object with a position error below 1 cm (also symmetric
 //             orientation error statistics); and class-aware: an object congruent with the right
 //             one also counts, its pose carried over, when the database records classes.
 //
-//   build/bench/bench_recognize --db DB.h5 [--grasps 20] [--speed-logs 6] [--seeds 3]
+//   build/bench/bench_recognize --db DB.h5 [--grasps 20] [--speed-logs 6] [--rounds 3] [--seeds 3]
 //       [--noise underwater] [--method bricpsf] [--objects N] [--database-size N] [--skip-speed] [--skip-accuracy]
 //       [--preset improved|paper] [--KEY VALUE ...] [--set KEY=VALUE ...]
 //       [--accuracy-threads N] [--answers FILE]
@@ -45,6 +47,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <ctime>
@@ -132,7 +135,7 @@ Log simulate(const io::DbReader& db, std::size_t object, std::size_t grasps,
 
 int main(int argc, char** argv) {
   std::string db_path, noise, method, preset;
-  std::size_t grasps = 20, speed_logs = 6, seeds = 3, objects = 0, database_size = 0;
+  std::size_t grasps = 20, speed_logs = 6, seeds = 3, objects = 0, database_size = 0, rounds = 3;
   int accuracy_threads = 0;
   std::string answers_path;
   bool skip_speed = false, skip_accuracy = false;
@@ -144,6 +147,10 @@ int main(int argc, char** argv) {
   app.add_option("--db", db_path, "Object database (HDF5)")->required();
   app.add_option("--grasps", grasps, "Steps (grasps) of each log")->check(CLI::Range(1, 100000));
   app.add_option("--speed-logs", speed_logs, "Logs of the speed part")->check(CLI::Range(1, 100000));
+  app.add_option("--rounds", rounds,
+                 "Timed rounds of the speed part, after an untimed one; each runs every log with 1 and 2 threads, "
+                 "the order alternating")
+      ->check(CLI::Range(1, 1000));
   app.add_option("--seeds", seeds, "Logs per object of the accuracy part")->check(CLI::Range(1, 100000));
   app.add_option("--objects", objects, "First N objects of the database (0: all)");
   app.add_option("--database-size", database_size,
@@ -245,7 +252,8 @@ int main(int argc, char** argv) {
       std::map<int, std::vector<double>> last, all, cpu_last;
       std::map<int, std::vector<StageTimes>> stages;
       std::map<int, std::vector<StepResult>> finals;
-      for (int threads : {1, 2}) {
+      // One pass over every log, each step timed, or none (the warm-up).
+      const auto pass = [&](int threads, bool timed) {
         tbb::task_arena arena(threads);
         arena.execute([&] {
           for (std::size_t i = 0; i < logs.size(); ++i) {
@@ -254,22 +262,36 @@ int main(int argc, char** argv) {
             for (std::size_t k = 0; k < grasps; ++k) {
               const double c0 = cpu_seconds();
               r = rec.step(steps[i].contacts[k], steps[i].free[k], steps[i].grasps[k]);
+              if (!timed) continue;
               if (k + 1 == grasps) cpu_last[threads].push_back(cpu_seconds() - c0);
               all[threads].push_back(r.times.total_s);
             }
+            if (!timed) continue;
             last[threads].push_back(r.times.total_s);
             stages[threads].push_back(r.times);
             finals[threads].push_back(r);
           }
         });
-      }
-      bool same = true;
-      for (std::size_t i = 0; i < logs.size(); ++i) {
-        const auto &a = finals[1][i], &b = finals[2][i];
-        same = same && a.hypotheses.size() == b.hypotheses.size();
-        for (std::size_t j = 0; same && j < a.hypotheses.size(); ++j)
-          same = a.hypotheses[j].pose.matrix() == b.hypotheses[j].pose.matrix() &&
-                 a.hypotheses[j].log_weight == b.hypotheses[j].log_weight;
+      };
+      // An untimed pass first loads what the steps read (object geometry, keypoints, pair
+      // tables), so that neither thread count pays the first loads; then the rounds alternate
+      // which thread count goes first (1 2, 2 1, 1 2, ...), so that a drift of the machine falls
+      // on both.
+      pass(2, false);
+      for (std::size_t round = 0; round < rounds; ++round)
+        for (int threads : round % 2 == 0 ? std::array<int, 2>{1, 2} : std::array<int, 2>{2, 1}) pass(threads, true);
+      const auto same_result = [](const StepResult& a, const StepResult& b) {
+        if (a.hypotheses.size() != b.hypotheses.size()) return false;
+        for (std::size_t j = 0; j < a.hypotheses.size(); ++j)
+          if (!(a.hypotheses[j].pose.matrix() == b.hypotheses[j].pose.matrix() &&
+                a.hypotheses[j].log_weight == b.hypotheses[j].log_weight))
+            return false;
+        return true;
+      };
+      bool same = true;   // every round and thread count against the first round's 1 thread
+      for (std::size_t i = 0; i < finals[2].size(); ++i) {
+        const StepResult& first = finals[1][i % logs.size()];
+        same = same && same_result(first, finals[1][i]) && same_result(first, finals[2][i]);
       }
       for (int threads : {1, 2}) {
         std::vector<double> pre, pr, re, ic, ev;
@@ -286,6 +308,24 @@ int main(int argc, char** argv) {
                     1e3 * median(cpu_last[threads]),
                     1e3 * median(all[threads]), grasps, 1e3 * median(pre), 1e3 * median(pr), 1e3 * median(re),
                     1e3 * median(ic), 1e3 * median(ev));
+        // The pipeline's own stages (StepResult::stages, in their order; 0 where a stage was
+        // left out), their sum and what the step spent outside them.
+        std::vector<std::string> names;
+        std::map<std::string, std::vector<double>> by_stage;
+        std::vector<double> outside;
+        for (const StepResult& r : finals[threads]) {
+          double inside = 0.0;
+          for (const StageRun& sr : r.stages) {
+            if (!by_stage.count(sr.name)) names.push_back(sr.name);
+            by_stage[sr.name].push_back(sr.seconds);
+            inside += sr.seconds;
+          }
+          outside.push_back(r.times.total_s - inside);
+        }
+        std::printf("threads %d: pipeline stages at step %zu (median ms):", threads, grasps);
+        for (std::size_t n = 0; n < names.size(); ++n)
+          std::printf("%s %s %.2f", n ? "," : "", names[n].c_str(), 1e3 * median(by_stage[names[n]]));
+        std::printf("; outside the stages %.2f\n", 1e3 * median(outside));
       }
       std::printf("speed-up 1 -> 2 threads: %.2fx at step %zu, %.2fx over all steps; identical results: %s\n",
                   median(last[1]) / median(last[2]), grasps, median(all[1]) / median(all[2]), same ? "yes" : "NO");

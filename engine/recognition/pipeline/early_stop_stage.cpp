@@ -10,6 +10,9 @@
 // Eq. 8's error per free point at most early_stop_free_conflict.
 #include "engine/recognition/pipeline/stages.hpp"
 
+#include "engine/detail.hpp"
+
+#include <atomic>
 #include <cmath>
 #include <set>
 #include <string>
@@ -50,8 +53,14 @@ class EarlyStop final : public Stage {
       if (seen.insert(h.cand.object).second) leaders.push_back(h);
     const GeometryPins geometry = pin(c.db, leaders);
     if (!explains(c, geometry[leaders.front().cand.object], leaders.front())) return;
-    for (std::size_t k = 1; k < leaders.size(); ++k)
-      if (explains(c, geometry[leaders[k].cand.object], leaders[k])) return;   // not one object alone
+    // Not one object alone when any other leader explains the step too: the rivals checked in
+    // parallel, each skipped once one is found (the answer, any, is the same in every order).
+    std::atomic<bool> rival{false};
+    detail::parallel_each(leaders.size() - 1, 1, [&](std::size_t k) {
+      if (rival.load(std::memory_order_relaxed)) return;
+      if (explains(c, geometry[leaders[k + 1].cand.object], leaders[k + 1])) rival.store(true, std::memory_order_relaxed);
+    });
+    if (rival.load()) return;
     c.stop_early = "early stop: the leading survivor explains every contact within noise, no other object's does";
   }
 };
