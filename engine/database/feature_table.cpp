@@ -12,6 +12,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <vector>
 
 namespace ts {
 inline namespace database {
@@ -76,16 +77,20 @@ namespace {
 /// bounds it tightly. Deterministic (ties by row).
 void kd_order(const FeatureRows& f, std::vector<std::uint32_t>& idx, std::size_t lo, std::size_t hi) {
   if (hi - lo <= kBlock) return;
+  // Each dimension's range, row by row (one pass over the rows, each read whole).
+  const int dims = f.dim();
+  std::vector<float> mn(f.row(idx[lo]), f.row(idx[lo]) + dims), mx = mn;
+  for (std::size_t i = lo + 1; i < hi; ++i) {
+    const float* r = f.row(idx[i]);
+    for (int d = 0; d < dims; ++d) {
+      mn[d] = std::min(mn[d], r[d]);
+      mx[d] = std::max(mx[d], r[d]);
+    }
+  }
   int dim = 0;
   float widest = -1.0f;
-  for (int d = 0; d < f.dim(); ++d) {
-    float mn = f.row(idx[lo])[d], mx = mn;
-    for (std::size_t i = lo; i < hi; ++i) {
-      mn = std::min(mn, f.row(idx[i])[d]);
-      mx = std::max(mx, f.row(idx[i])[d]);
-    }
-    if (mx - mn > widest) widest = mx - mn, dim = d;
-  }
+  for (int d = 0; d < dims; ++d)
+    if (mx[d] - mn[d] > widest) widest = mx[d] - mn[d], dim = d;
   // Split on a multiple of the block size so that leaves fill whole blocks.
   const std::size_t half = lo + ((hi - lo) / 2 + kBlock - 1) / kBlock * kBlock;
   const std::size_t mid = std::min(half, hi);
