@@ -50,7 +50,10 @@ struct EvaluateSettings {
   bool free_inside_penalty = false;   ///< extension: a free point inside a closed object
                                       ///< (signed field < 0) costs e = 1 however deep
   bool use_distance_field = true;     ///< false: nearest fine-cloud point (paper's k-d tree)
-  std::size_t prefix = 32;            ///< contacts in the first rejection test (and per chunk)
+  /// Contacts in the first rejection test (and per chunk). Speed only: select_top's ranking is
+  /// exact for any value. 8 rather than 32: the first phase bounds every candidate (thousands a
+  /// step) and a looser bound costs less than reading 32 contacts of each (CHANGELOG).
+  std::size_t prefix = 8;
   std::size_t free_prefix = 128;      ///< free-space points in the first rejection test
   double grasp_offset_sigma = 0.0;    ///< m, extension: prior sigma (per axis) of a per-grasp
                                       ///< translation fitted before Eq. 4 (0: off; needs the
