@@ -140,27 +140,38 @@ void thin_table_points(const ObjectKeypoints& keypoints, const SparseSettings& s
   out.normals = thin.has_normals() ? thin.normals : std::vector<Vec3>(thin.size(), Vec3::Zero());
 }
 
-/// The rows into out.near: row i holds every j != i sorted by (distance, index), j taken in
-/// increasing order, then a stable radix sort on the distance's low byte and on its high byte.
+/// The rows into out.near: row i holds every j != i sorted by (distance, index): keys
+/// (distance << 16 | j) taken in increasing j, then a stable radix sort on the distance's low
+/// byte and on its high byte (both counts from one pass).
 void append_sorted_rows(std::size_t n, const std::vector<std::uint16_t>& distance,
                         const std::vector<std::array<std::uint8_t, 3>>& angles, ObjectPairs& out) {
-  out.near.reserve(n * (n - 1));
-  std::vector<std::uint16_t> order(n - 1), by_low(n - 1);
+  out.near.resize(n * (n - 1));
+  std::vector<std::uint32_t> keys(n - 1), sorted(n - 1);
+  ObjectPairs::Near* to = out.near.data();
   for (std::size_t i = 0; i < n; ++i) {
     const std::uint16_t* row = distance.data() + i * n;
+    std::array<std::uint32_t, 256> low{}, high{};
     std::size_t k = 0;
-    for (std::size_t j = 0; j < n; ++j)
-      if (j != i) order[k++] = static_cast<std::uint16_t>(j);
-    for (const int shift : {0, 8}) {
-      std::array<std::uint32_t, 257> start{};
-      for (const std::uint16_t j : order) ++start[((row[j] >> shift) & 0xffu) + 1];
-      for (std::size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
-      for (const std::uint16_t j : order) by_low[start[(row[j] >> shift) & 0xffu]++] = j;
-      order.swap(by_low);
+    for (std::size_t j = 0; j < n; ++j) {
+      if (j == i) continue;
+      const std::uint32_t d = row[j];
+      keys[k++] = d << 16 | static_cast<std::uint32_t>(j);
+      ++low[d & 0xffu];
+      ++high[d >> 8];
     }
-    for (const std::uint16_t j : order) {
-      const auto& a = angles[i * n + j];
-      out.near.push_back({row[j], j, a[0], a[1], a[2], 0});
+    std::uint32_t at_low = 0, at_high = 0;
+    for (std::size_t b = 0; b < 256; ++b) {
+      const std::uint32_t l = low[b], h = high[b];
+      low[b] = at_low, high[b] = at_high;
+      at_low += l, at_high += h;
+    }
+    for (const std::uint32_t key : keys) sorted[low[(key >> 16) & 0xffu]++] = key;
+    for (const std::uint32_t key : sorted) keys[high[key >> 24]++] = key;
+    const std::array<std::uint8_t, 3>* row_angles = angles.data() + i * n;
+    for (const std::uint32_t key : keys) {
+      const std::uint32_t j = key & 0xffffu;
+      const auto& a = row_angles[j];
+      *to++ = {static_cast<std::uint16_t>(key >> 16), static_cast<std::uint16_t>(j), a[0], a[1], a[2], 0};
     }
   }
 }
@@ -201,6 +212,18 @@ ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSet
     table_angle_units_both(nj.cross(d).norm(), nj.dot(d), e[1], ignored);
     table_angle_units_both(ni.cross(nj).norm(), ni.dot(nj), e[2], ignored);
   };
+  // One angle of row `from`'s entry `to` the scalar way, without the fast path (never odd here):
+  // angle(n_k, d) of d = p_to - p_from, as measure(from, to) computes it.
+  auto exact_units = [&](std::size_t from, std::size_t to, std::size_t k) {
+    const Vec3 d = out.points[to] - out.points[from];
+    const Vec3& nk = out.normals[k];
+    return static_cast<std::uint8_t>(pair_angle_units(std::atan2(nk.cross(d).norm(), nk.dot(d))));
+  };
+  auto exact_units_normals = [&](std::size_t i, std::size_t j) {
+    const Vec3& ni = out.normals[i];
+    const Vec3& nj = out.normals[j];
+    return static_cast<std::uint8_t>(pair_angle_units(std::atan2(ni.cross(nj).norm(), ni.dot(nj))));
+  };
   for (std::size_t i = 0; i < n; ++i) {
     pair_row(i, n, R);
     for (std::size_t j = i + 1; j < n; ++j) {
@@ -208,15 +231,20 @@ ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSet
           static_cast<std::uint16_t>(std::lround(std::min(R.dist[j] / out.unit, 65535.0)));
       auto& row_i = angles[i * n + j];
       auto& row_j = angles[j * n + i];
-      bool clear = !R.odd[j];
-      clear = clear && clear_units(R.ai[j], row_i[0]) && clear_units(R.aj[j], row_i[1]) &&
-              clear_units(R.aij[j], row_i[2]) && clear_units(R.ji[j], row_j[0]) && clear_units(R.jj[j], row_j[1]);
-      if (clear) {
-        row_j[2] = row_i[2];
-      } else {
+      if (R.odd[j]) {
         measure(i, j);
         measure(j, i);
+        continue;
       }
+      // Each angle the fast path leaves undecided (on a rounding boundary within the
+      // polynomial's error: often pi / 2 between near-axis normals of CAD faces) from std::atan2
+      // of the numbers `measure` computes, alone.
+      if (!clear_units(R.ai[j], row_i[0])) row_i[0] = exact_units(i, j, i);
+      if (!clear_units(R.aj[j], row_i[1])) row_i[1] = exact_units(i, j, j);
+      if (!clear_units(R.aij[j], row_i[2])) row_i[2] = exact_units_normals(i, j);
+      if (!clear_units(R.ji[j], row_j[0])) row_j[0] = exact_units(j, i, j);
+      if (!clear_units(R.jj[j], row_j[1])) row_j[1] = exact_units(j, i, i);
+      row_j[2] = row_i[2];
     }
   }
   append_sorted_rows(n, distance, angles, out);
