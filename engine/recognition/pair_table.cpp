@@ -212,17 +212,10 @@ ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSet
     table_angle_units_both(nj.cross(d).norm(), nj.dot(d), e[1], ignored);
     table_angle_units_both(ni.cross(nj).norm(), ni.dot(nj), e[2], ignored);
   };
-  // One angle of row `from`'s entry `to` the scalar way, without the fast path (never odd here):
-  // angle(n_k, d) of d = p_to - p_from, as measure(from, to) computes it.
-  auto exact_units = [&](std::size_t from, std::size_t to, std::size_t k) {
-    const Vec3 d = out.points[to] - out.points[from];
-    const Vec3& nk = out.normals[k];
-    return static_cast<std::uint8_t>(pair_angle_units(std::atan2(nk.cross(d).norm(), nk.dot(d))));
-  };
-  auto exact_units_normals = [&](std::size_t i, std::size_t j) {
-    const Vec3& ni = out.normals[i];
-    const Vec3& nj = out.normals[j];
-    return static_cast<std::uint8_t>(pair_angle_units(std::atan2(ni.cross(nj).norm(), ni.dot(nj))));
+  // One angle the scalar way without the fast path (never odd here): angle(a, b) in units, as
+  // measure computes it.
+  auto exact_units = [](const Vec3& a, const Vec3& b) {
+    return static_cast<std::uint8_t>(pair_angle_units(std::atan2(a.cross(b).norm(), a.dot(b))));
   };
   for (std::size_t i = 0; i < n; ++i) {
     pair_row(i, n, R);
@@ -239,11 +232,11 @@ ObjectPairs build_object_pairs(const ObjectKeypoints& keypoints, const SparseSet
       // Each angle the fast path leaves undecided (on a rounding boundary within the
       // polynomial's error: often pi / 2 between near-axis normals of CAD faces) from std::atan2
       // of the numbers `measure` computes, alone.
-      if (!clear_units(R.ai[j], row_i[0])) row_i[0] = exact_units(i, j, i);
-      if (!clear_units(R.aj[j], row_i[1])) row_i[1] = exact_units(i, j, j);
-      if (!clear_units(R.aij[j], row_i[2])) row_i[2] = exact_units_normals(i, j);
-      if (!clear_units(R.ji[j], row_j[0])) row_j[0] = exact_units(j, i, j);
-      if (!clear_units(R.jj[j], row_j[1])) row_j[1] = exact_units(j, i, i);
+      if (!clear_units(R.ai[j], row_i[0])) row_i[0] = exact_units(out.normals[i], out.points[j] - out.points[i]);
+      if (!clear_units(R.aj[j], row_i[1])) row_i[1] = exact_units(out.normals[j], out.points[j] - out.points[i]);
+      if (!clear_units(R.aij[j], row_i[2])) row_i[2] = exact_units(out.normals[i], out.normals[j]);
+      if (!clear_units(R.ji[j], row_j[0])) row_j[0] = exact_units(out.normals[j], out.points[i] - out.points[j]);
+      if (!clear_units(R.jj[j], row_j[1])) row_j[1] = exact_units(out.normals[i], out.points[i] - out.points[j]);
       row_j[2] = row_i[2];
     }
   }
