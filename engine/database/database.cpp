@@ -1,5 +1,7 @@
 #include "engine/database/database.hpp"
 
+#include "engine/geometry/cloud.hpp"
+
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -105,6 +107,17 @@ const KdTree3& ObjectKeypoints::tree() const {
   return tree_;
 }
 
+const std::vector<Vec3>& ObjectGeometry::extremes() const {
+  std::call_once(extremes_->once, [&] {
+    tbb::this_task_arena::isolate([&] {   // (as the keypoints' load)
+      const std::vector<Vec3>* from = &fine.points;
+      if (from->empty() && extremes_->db) from = &extremes_->db->keypoints(extremes_->object).coarse.points;
+      extremes_->points = extreme_points(*from, kExtremeDirections);
+    });
+  });
+  return extremes_->points;
+}
+
 ObjectFeatures Database::load_features(std::size_t i) const { return source_->load_features(i); }
 
 GeometryRef Database::geometry(std::size_t i) const {
@@ -123,6 +136,8 @@ GeometryRef Database::geometry(std::size_t i) const {
           g->tree = KdTree3::over(g->fine.points);
         }
         g->field = source_->load_field(i);
+        g->extremes_->db = this;
+        g->extremes_->object = i;
         return g;
       });
       s.bytes = memory_bytes(*fresh);

@@ -74,6 +74,25 @@ struct ObjectGeometry {
   PointCloud fine;                 ///< object frame, with normals
   KdTree3 tree;                    ///< over fine.points, not a copy (KdTree3::over)
   DistanceField field;
+  /// The surface points lowest along some of kExtremeDirections directions (extreme_points): how
+  /// deep a pose puts the object below a plane, read from a hundred points instead of the cloud.
+  /// From the fine cloud when it is loaded, else (a database that reads only the fields) the
+  /// database's keypoints, the coarse cloud (within half its voxel of the surface); none
+  /// without either. Built on the first call (thread-safe; copies share it), as only a step with
+  /// a support plane asks; fine must not change once it is built, and a geometry from a
+  /// Database must not outlive it.
+  const std::vector<Vec3>& extremes() const;
+  static constexpr int kExtremeDirections = 256;
+
+ private:
+  friend class Database;
+  struct Extremes {
+    std::once_flag once;
+    std::vector<Vec3> points;
+    const class Database* db = nullptr;   ///< the keypoints' database (fine not loaded)
+    std::size_t object = 0;
+  };
+  std::shared_ptr<Extremes> extremes_ = std::make_shared<Extremes>();
 };
 
 /// Wall-clock seconds per stage of build_object (diagnostics printed by `db build`).

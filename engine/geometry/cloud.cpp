@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 
 namespace ts {
 inline namespace geometry {
@@ -236,6 +237,39 @@ PointCloud transformed(const PointCloud& cloud, const Pose& T) {
     const Mat3 R = T.linear();
     for (std::size_t i = 0; i < cloud.normals.size(); ++i) out.normals[i] = R * cloud.normals[i];
   }
+  return out;
+}
+
+std::vector<Vec3> fibonacci_directions(int n) {
+  std::vector<Vec3> dirs;
+  dirs.reserve(static_cast<std::size_t>(std::max(n, 0)));
+  const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
+  for (int i = 0; i < n; ++i) {
+    const double z = 1.0 - (2.0 * i + 1.0) / n;
+    const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+    dirs.emplace_back(r * std::cos(golden * i), r * std::sin(golden * i), z);
+  }
+  return dirs;
+}
+
+std::vector<Vec3> extreme_points(const std::vector<Vec3>& points, int directions) {
+  if (points.empty()) return {};
+  const std::vector<Vec3> dirs = fibonacci_directions(directions);
+  std::vector<std::size_t> lowest(dirs.size(), 0);
+  std::vector<double> low(dirs.size(), std::numeric_limits<double>::infinity());
+  for (std::size_t i = 0; i < points.size(); ++i)
+    for (std::size_t k = 0; k < dirs.size(); ++k) {
+      const double h = dirs[k].dot(points[i]);
+      if (h < low[k]) {
+        low[k] = h;
+        lowest[k] = i;
+      }
+    }
+  std::sort(lowest.begin(), lowest.end());
+  lowest.erase(std::unique(lowest.begin(), lowest.end()), lowest.end());
+  std::vector<Vec3> out;
+  out.reserve(lowest.size());
+  for (std::size_t i : lowest) out.push_back(points[i]);
   return out;
 }
 

@@ -35,5 +35,15 @@ Vec3 centroid(const std::vector<Vec3>& points);
 /// Apply a rigid transform to points (and normals).
 PointCloud transformed(const PointCloud& cloud, const Pose& T);
 
+/// Nearly uniform unit directions on the sphere (Fibonacci lattice), n of them (none for n <= 0).
+std::vector<Vec3> fibonacci_directions(int n);
+
+/// The points that are lowest along at least one of `directions` Fibonacci directions (each
+/// point once, in input order). The lowest of them along any direction u approximates the lowest
+/// of all points along u from above: never lower than the true lowest point, and off by the
+/// curvature of the points' hull between sampled directions (a sphere of radius r: at most
+/// r (1 - cos a), a the angle from u to its nearest sampled direction). Empty input: empty.
+std::vector<Vec3> extreme_points(const std::vector<Vec3>& points, int directions);
+
 }  // namespace geometry
 }  // namespace ts

@@ -59,19 +59,6 @@ SurfaceSamples sample_surface(const Mesh& mesh, int count, Rng& rng) {
   return s;
 }
 
-/// Nearly uniform directions on the unit sphere (Fibonacci lattice).
-std::vector<Vec3> fibonacci_directions(int n) {
-  std::vector<Vec3> dirs;
-  dirs.reserve(std::max(n, 0));
-  const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
-  for (int i = 0; i < n; ++i) {
-    const double z = 1.0 - (2.0 * i + 1.0) / n;
-    const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
-    dirs.emplace_back(r * std::cos(golden * i), r * std::sin(golden * i), z);
-  }
-  return dirs;
-}
-
 /// One view: an orthographic raster of parallel rays along `d`, pixel (i, j) starting at
 /// origin + i h u + j h v, with its first hit (t = +inf for a miss).
 struct View {

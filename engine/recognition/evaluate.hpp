@@ -72,8 +72,19 @@ struct Evaluation {
   std::uint32_t contacts = 0;         ///< contacts evaluated
   std::uint32_t free_points = 0;      ///< free points near enough to need a distance
   double grasp_offset_rms = 0.0;      ///< m, RMS length of the per-grasp offsets (when fitted)
+  double sink_penalty = 0.0;          ///< ln wt lost to the floor term (sink_penalty), included
+                                      ///< in log_weight
   bool complete = false;              ///< false: stopped early (log_weight is an upper bound)
 };
+
+/// The floor term (scene.floor on): how deep `T_scene_object` puts the object's lowest point
+/// (ObjectGeometry::extremes) below the floor, d; 0 up to the floor's margin m, then
+/// cost * min(1, (d - m) / m): the object never lies below its support, while the plane found
+/// from a few grasps under the arm's error is tilted by a few degrees and off by millimetres.
+/// 0 when the floor is off, and when more than half of the floor's `on_plane` contacts lie
+/// within its tolerance of the object at that pose (the plane is then the object's own face,
+/// which the support stage can take for a support when the object was touched from one side).
+double sink_penalty(const Scene& scene, const ObjectGeometry& geometry, const Pose& T_scene_object);
 
 /// A pose hypothesis for one object, in the scene frame.
 struct Candidate {

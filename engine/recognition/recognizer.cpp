@@ -120,6 +120,7 @@ RecognizerSettings RecognizerSettings::scaled(double f) const {
   s.support.tolerance *= f;
   if (s.support.free_margin > 0.0) s.support.free_margin *= f;
   s.support.attribution *= f;
+  s.support.sink *= f;
   s.support.min_radius *= f;
   return s;
 }

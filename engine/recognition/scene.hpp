@@ -46,6 +46,20 @@ struct Scene {
   std::size_t dropped_free = 0;        ///< free points dropped as too close to a contact
   double feature_radius = 0.0;         ///< m, radius the features were computed with
   GraspGroups grasps;                  ///< local frame; the contacts grouped by grasp, or empty
+  /// The step's support plane, when found and support.sink_m > 0 (the stage "scene" sets it):
+  /// nothing of the object lies below its support, so a hypothesis that puts the object deeper
+  /// than `margin` below it loses up to `cost` of ln wt (evaluate: sink_penalty), unless it
+  /// explains the plane's contacts as its own face (most of `on_plane` within `tolerance` of its
+  /// surface): the plane found may be a face of the object.
+  struct Floor {
+    bool on = false;
+    Vec3 normal = Vec3::UnitZ();       ///< unit, up (the free side)
+    double offset = 0.0;               ///< local frame: normal . x = offset
+    double margin = 0.0;               ///< m, depth below it that costs nothing
+    double cost = 0.0;                 ///< ln wt lost at twice `margin` and deeper
+    double tolerance = 0.0;            ///< m, a contact this near the object is its own
+    std::vector<Vec3> on_plane;        ///< local frame, some of the contacts the plane explains
+  } floor;
 
   bool has_free_space() const { return !free_space.empty(); }
   /// T_world_object from T_scene_object and back.

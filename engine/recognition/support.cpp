@@ -70,6 +70,9 @@ void check(const SupportSettings& s) {
           "must lie in (0, 10] m");
   require(std::isfinite(s.attribution) && s.attribution > 0 && s.attribution <= 1, "support.attribution",
           "must lie in (0, 1] m");
+  require(std::isfinite(s.sink) && s.sink >= 0 && s.sink <= 1, "support.sink", "must lie in [0, 1] m");
+  require(std::isfinite(s.sink_cost) && s.sink_cost >= 0 && s.sink_cost <= 100, "support.sink_cost",
+          "must lie in [0, 100]");
 }
 
 /// Up for a plane through `centre` with normal `n`: the side of the witnesses (free points of

@@ -69,6 +69,11 @@ struct SupportSettings {
   double min_radius = 0.04;          ///< m, the thinnest cylinder taken for a pipe
   double attribution = 0.01;         ///< m, a contact this near the answer's surface is the
                                      ///< object's (stage "attribution")
+  double sink = 0.02;                ///< m, a plane found: a hypothesis that puts the object
+                                     ///< deeper than this below it loses ln wt (Scene::Floor;
+                                     ///< 0: off)
+  double sink_cost = 1.0;            ///< ln wt it loses at twice `sink` deep and deeper (1: as
+                                     ///< much as every contact beyond d_outlier)
 };
 
 /// Why no support was found: the test at which the candidate with the most contacts on it failed

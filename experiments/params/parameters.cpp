@@ -311,6 +311,14 @@ std::vector<Parameter> declaration() {
                    "A contact this near the answer's surface is the object's; the others are the support's "
                    "or unexplained (the step's attribution; with support.mode on or evaluate.outlier_m > 0)",
                    {"--attribution"}, TS_FIELD(recognizer.support.attribution)));
+  d.push_back(real("support.sink_m", "m", 0, 1, "",
+                   "Support: with a plane found, a pose that puts the object deeper than this below it loses "
+                   "ln wt (up to support.sink_cost, reached at twice this depth); nothing of the object lies "
+                   "below its support (0: off)",
+                   {"--support-sink"}, TS_FIELD(recognizer.support.sink)));
+  d.push_back(real("support.sink_cost", "", 0, 100, "",
+                   "Support: the ln wt a pose loses at twice support.sink_m below the plane and deeper",
+                   {"--support-sink-cost"}, TS_FIELD(recognizer.support.sink_cost)));
   d.push_back(integer("prior.angle_bins", 1, 64, "", "Shape prior: bins of each angle term",
                       {"--prior-angle-bins"}, TS_FIELD(recognizer.prior.angle_bins)));
   d.push_back(real("prior.distance_bin_m", "m", 1e-4, 1, "", "Shape prior: pair-distance bin",

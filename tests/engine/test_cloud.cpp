@@ -5,6 +5,7 @@
 
 #include <Eigen/Eigenvalues>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 
@@ -216,4 +217,38 @@ TEST_CASE("estimate_normals: identical for 1 and 2 threads, and far from the ori
   double worst = 1.0;
   for (std::size_t i = 0; i < pts.size(); ++i) worst = std::min(worst, f[i].dot(a[i]));
   CHECK(worst > 1.0 - 1e-6);  // same normals 100 km away (a local frame per neighbourhood)
+}
+
+TEST_CASE("extreme_points: the lowest along any direction, from above and within the sampling's curvature") {
+  // Points on and inside a sphere of radius r: along a direction u the lowest of all is -r (up
+  // to the sampling); the extremes' lowest may only lie above it, by at most about
+  // r (1 - cos a) for the angle a to the nearest of 256 directions (under 9 degrees: 0.012 r).
+  constexpr double r = 0.1;
+  Rng rng(3);
+  std::vector<Vec3> pts;
+  for (int i = 0; i < 6000; ++i) pts.push_back(r * rng.unit_vector());
+  for (int i = 0; i < 2000; ++i) pts.push_back(0.9 * r * rng.uniform() * rng.unit_vector());
+  const std::vector<Vec3> ext = extreme_points(pts, 256);
+  CHECK(ext.size() <= 256);
+  CHECK(ext.size() >= 100);
+  for (const Vec3& e : ext) CHECK(std::find(pts.begin(), pts.end(), e) != pts.end());
+  double worst = 0.0;
+  for (int k = 0; k < 500; ++k) {
+    const Vec3 u = rng.unit_vector();
+    double all = 1e9, some = 1e9;
+    for (const Vec3& p : pts) all = std::min(all, u.dot(p));
+    for (const Vec3& e : ext) some = std::min(some, u.dot(e));
+    CHECK(some >= all);
+    worst = std::max(worst, some - all);
+  }
+  CHECK(worst <= 0.015 * r);
+  CHECK(extreme_points({}, 256).empty());
+  // A box: every direction's lowest point is a corner, and the corners are among the extremes.
+  std::vector<Vec3> box;
+  for (int i = 0; i <= 10; ++i)
+    for (int j = 0; j <= 10; ++j)
+      for (int k = 0; k <= 10; ++k) box.emplace_back(0.04 * (i / 5.0 - 1), 0.03 * (j / 5.0 - 1), 0.02 * (k / 5.0 - 1));
+  const std::vector<Vec3> corners = extreme_points(box, 256);
+  CHECK(corners.size() == 8);
+  for (const Vec3& c : corners) CHECK(c.cwiseAbs().isApprox(Vec3(0.04, 0.03, 0.02)));
 }

@@ -662,3 +662,77 @@ TEST_CASE("Near-twin verification with rotations in the offsets: a 1.5 degree ar
   mixed.add({Vec3(0, 0, 1)});
   CHECK(mixed.pivots.empty());
 }
+
+TEST_CASE("The floor term: nothing of the object below its support, a pose sunk into it loses ln wt") {
+  // A box 8 x 6 x 4 cm whose fine points are its mesh's vertices (its corners among them): along
+  // the floor's normal +z its lowest point is at -2 cm, turned a quarter about x at -3 cm.
+  const Vec3 half(0.04, 0.03, 0.02);
+  const Mesh m = test::make_box(half, 4);
+  ObjectGeometry box = field_geometry(m);
+  box.fine.points = m.vertices;
+  ObjectInfo info;
+  info.extent = 2.0 * half;
+  std::vector<Vec3> top;   // contacts on the top face
+  for (int i = -3; i <= 3; ++i)
+    for (int j = -3; j <= 3; ++j) top.emplace_back(0.01 * i, 0.008 * j, 0.02);
+  Scene sc = make_scene(top);
+  const Pose I = Pose::Identity();
+  CHECK(sink_penalty(sc, box, I) == 0.0);   // off
+  sc.floor.on = true;
+  sc.floor.margin = 0.01;
+  sc.floor.cost = 0.5;
+  auto at = [&](double floor_height, const Pose& T) {
+    sc.floor.offset = floor_height;
+    return sink_penalty(sc, box, T);
+  };
+  CHECK(at(-0.02, I) == 0.0);                                   // resting on it
+  CHECK(at(-0.025, I) == 0.0);                                  // above it
+  CHECK(at(-0.01, I) == 0.0);                                   // 1 cm deep: the margin
+  CHECK(at(-0.005, I) == doctest::Approx(0.25).epsilon(1e-9));  // 1.5 cm: half the cost
+  CHECK(at(0.01, I) == doctest::Approx(0.5).epsilon(1e-9));     // 3 cm: all of it
+  CHECK(at(0.5, I) == doctest::Approx(0.5).epsilon(1e-9));      // and no more
+  Pose turned = I;
+  turned.linear() = Eigen::AngleAxisd(std::numbers::pi / 2, Vec3::UnitX()).toRotationMatrix();
+  turned.translation() = Vec3(0.3, -0.2, 0.1);                  // lowest point at 0.1 - 0.03
+  CHECK(at(0.07, turned) == 0.0);
+  CHECK(at(0.08, turned) == 0.0);
+  CHECK(at(0.085, turned) == doctest::Approx(0.25).epsilon(1e-9));
+  CHECK(at(0.06, turned) == 0.0);
+  sc.floor.normal = -Vec3::UnitZ();   // upside down: along -z the lowest is the top, at -(0.1 + 0.03)
+  CHECK(at(-0.10, turned) == doctest::Approx(0.5).epsilon(1e-9));   // 3 cm deep
+  CHECK(at(-0.115, turned) == doctest::Approx(0.25).epsilon(1e-9));
+  CHECK(at(-0.14, turned) == 0.0);
+  sc.floor.normal = Vec3::UnitZ();
+
+  // In evaluate: ln wt less exactly the penalty, reported; the same without the floor.
+  EvaluateSettings es;
+  es.free_space = false;
+  sc.floor.offset = -0.005;
+  const Evaluation sunk = evaluate(sc, box, info, I, es);
+  sc.floor.on = false;
+  const Evaluation free = evaluate(sc, box, info, I, es);
+  REQUIRE(sunk.complete);
+  REQUIRE(free.complete);
+  CHECK(free.sink_penalty == 0.0);
+  CHECK(sunk.sink_penalty == doctest::Approx(0.25).epsilon(1e-9));
+  CHECK(free.log_weight - sunk.log_weight == doctest::Approx(0.25).epsilon(1e-9));
+  CHECK(free.log_weight > -0.01);   // the contacts lie on the box
+  // Early rejection counts the penalty: a threshold the contacts alone pass but not with it.
+  sc.floor.on = true;
+  const Evaluation cut = evaluate(sc, box, info, I, es, free.log_weight - 0.1);
+  CHECK_FALSE(cut.complete);
+  CHECK(cut.log_weight < free.log_weight - 0.1);
+
+  // A plane through the box's top face (taken for a support, as a face touched from one side can
+  // be): the box at its pose lies 4 cm below it but explains its contacts, so it is its own face.
+  sc.floor.offset = 0.02;
+  sc.floor.tolerance = 0.006;
+  sc.floor.on_plane = top;
+  CHECK(sink_penalty(sc, box, I) == 0.0);
+  Pose aside = I;   // the same depth 10 cm aside: the plane's contacts lie off it
+  aside.translation().x() = 0.1;
+  CHECK(sink_penalty(sc, box, aside) == doctest::Approx(0.5).epsilon(1e-9));
+  sc.floor.on_plane.resize(top.size() / 2 - 1);   // a minority on the box, the rest off it
+  for (int i = 0; i < 25; ++i) sc.floor.on_plane.push_back(Vec3(0.3 + 0.01 * i, 0.0, 0.02));
+  CHECK(sink_penalty(sc, box, I) == doctest::Approx(0.5).epsilon(1e-9));
+}

@@ -275,6 +275,23 @@ TEST_CASE("support: settings out of range are named") {
   } catch (const Error& e) {
     CHECK(e.field() == "support.min_radius");
   }
+  for (auto [key, bad] : {std::pair<const char*, SupportSettings>{"support.sink", [] {
+                                                                    SupportSettings b;
+                                                                    b.sink = -0.01;
+                                                                    return b;
+                                                                  }()},
+                          {"support.sink_cost", [] {
+                             SupportSettings b;
+                             b.sink_cost = std::nan("");
+                             return b;
+                           }()}}) {
+    try {
+      estimate_support({}, {}, {}, bad, 1, 1);
+      FAIL("accepted a bad " << key);
+    } catch (const Error& e) {
+      CHECK(e.field() == key);
+    }
+  }
   s = {};
   CHECK_FALSE(estimate_support({}, {}, {}, s, 1, 1).found);   // nothing to decide on
 }

@@ -22,6 +22,9 @@ std::size_t distinct_points(const std::vector<Vec3>& p) {
   return seen.size();
 }
 
+/// Contacts on a found support plane that a hypothesis sunk below it is checked against.
+constexpr std::size_t kFloorWitnesses = 32;
+
 class SceneStage final : public Stage {
  public:
   std::string_view name() const override { return "scene"; }
@@ -35,6 +38,21 @@ class SceneStage final : public Stage {
       scs.free_clearance = s.evaluate.d_thresh > 0.0 ? s.evaluate.d_thresh : 0.5 * s.evaluate.res_free;
     c.scene = prepare_scene(c.contacts(), c.free_world, c.db.settings().fpfh, scs, s.seed, c.step_u());
     if (s.evaluate.grasp_offset_sigma > 0.0 || s.twins.rivals > 0) set_grasps(c.scene, c.grasp_groups());
+    if (const SupportSurface& sup = c.res.support;
+        s.support.sink > 0.0 && sup.found && sup.shape == SupportSurface::Shape::plane) {
+      c.scene.floor.on = true;
+      c.scene.floor.normal = sup.normal;
+      c.scene.floor.offset = sup.offset - sup.normal.dot(c.scene.origin);
+      c.scene.floor.margin = s.support.sink;
+      c.scene.floor.cost = s.support.sink_cost;
+      c.scene.floor.tolerance = s.support.tolerance;
+      // Up to kFloorWitnesses of the contacts it explains, evenly through the cloud's order.
+      std::vector<Vec3> on;
+      for (const Vec3& x : c.contacts_world.points)
+        if (sup.explains(x, s.support.tolerance)) on.push_back(x - c.scene.origin);
+      const std::size_t keep = std::min(on.size(), kFloorWitnesses);
+      for (std::size_t k = 0; k < keep; ++k) c.scene.floor.on_plane.push_back(on[k * on.size() / keep]);
+    }
     StepResult& res = c.res;
     res.times.prepare_s = detail::seconds_since(t0);
     res.contacts = c.scene.contacts.size();
