@@ -110,9 +110,9 @@ const KdTree3& ObjectKeypoints::tree() const {
 const std::vector<Vec3>& ObjectGeometry::extremes() const {
   std::call_once(extremes_->once, [&] {
     tbb::this_task_arena::isolate([&] {   // (as the keypoints' load)
-      const std::vector<Vec3>* from = &fine.points;
-      if (from->empty() && extremes_->db) from = &extremes_->db->keypoints(extremes_->object).coarse.points;
-      extremes_->points = extreme_points(*from, kExtremeDirections);
+      const std::vector<Vec3>& from =
+          extremes_->db ? extremes_->db->keypoints(extremes_->object).coarse.points : fine.points;
+      extremes_->points = extreme_points(from, kExtremeDirections);
     });
   });
   return extremes_->points;

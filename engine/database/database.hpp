@@ -75,12 +75,12 @@ struct ObjectGeometry {
   KdTree3 tree;                    ///< over fine.points, not a copy (KdTree3::over)
   DistanceField field;
   /// The surface points lowest along some of kExtremeDirections directions (extreme_points): how
-  /// deep a pose puts the object below a plane, read from a hundred points instead of the cloud.
-  /// From the fine cloud when it is loaded, else (a database that reads only the fields) the
-  /// database's keypoints, the coarse cloud (within half its voxel of the surface); none
-  /// without either. Built on the first call (thread-safe; copies share it), as only a step with
-  /// a support plane asks; fine must not change once it is built, and a geometry from a
-  /// Database must not outlive it.
+  /// deep a pose puts the object below a plane, read from at most that many points instead of the
+  /// cloud. For a geometry from a Database, of its keypoints (the coarse cloud, fine points one
+  /// per coarse voxel, always loaded), so that the answer does not depend on whether the fine
+  /// cloud is; otherwise of `fine` (none when it is empty). Built on the first call (thread-safe;
+  /// copies share it), as only a step with a support plane asks; fine must not change once it is
+  /// built, and a geometry from a Database must not outlive it.
   const std::vector<Vec3>& extremes() const;
   static constexpr int kExtremeDirections = 256;
 

@@ -40,9 +40,10 @@ std::vector<Vec3> fibonacci_directions(int n);
 
 /// The points that are lowest along at least one of `directions` Fibonacci directions (each
 /// point once, in input order). The lowest of them along any direction u approximates the lowest
-/// of all points along u from above: never lower than the true lowest point, and off by the
-/// curvature of the points' hull between sampled directions (a sphere of radius r: at most
-/// r (1 - cos a), a the angle from u to its nearest sampled direction). Empty input: empty.
+/// of all points along u from above: never lower than the true lowest point. How far above
+/// depends on the points' hull between sampled directions: on a sphere of radius r at most about
+/// r (1 - cos a), a the angle from u to its nearest sampled direction; more near sharp edges
+/// and corners that no sampled direction finds lowest. Empty input: empty.
 std::vector<Vec3> extreme_points(const std::vector<Vec3>& points, int directions);
 
 }  // namespace geometry

@@ -185,16 +185,17 @@ double sink_penalty(const Scene& scene, const ObjectGeometry& geo, const Pose& T
 
 namespace {
 
-/// Eq. 4-9 without the floor term.
+/// Eq. 4-9 less the floor term `sink` (sink_penalty).
 Evaluation evaluate_terms(const Scene& scene, const ObjectGeometry& geo, const ObjectInfo& info,
-                          const Pose& T_scene_object, const EvaluateSettings& s, double reject_below) {
+                          const Pose& T_scene_object, const EvaluateSettings& s, double reject_below,
+                          double sink) {
   const Vec3 half = half_extent_of(info);
   auto by_tree = [&](const Vec3* p, std::size_t n, const Pose& T, double* out) {
     for (std::size_t i = 0; i < n; ++i)
       out[i] = std::sqrt(geo.tree.nearest(T * p[i]).sq_distance);
   };
   if (!s.use_distance_field || geo.field.empty())
-    return evaluate_batched(scene, by_tree, half, T_scene_object, s, reject_below);
+    return evaluate_batched(scene, by_tree, half, T_scene_object, s, reject_below, nullptr, sink);
   const double margin = geo.field.coarse_margin();
   // Beyond the coarse grid the field returns only a lower bound; Eq. 4 saturates at d_outlier,
   // so the bound is exact enough unless d_outlier exceeds the margin: then ask the k-d tree.
@@ -208,23 +209,19 @@ Evaluation evaluate_terms(const Scene& scene, const ObjectGeometry& geo, const O
   if (s.grasp_offset_sigma > 0.0 && scene.grasps.grasps() > 0) {  // needs the field's gradient
     const GraspFit fit = fit_grasp_offsets(scene, geo.field, T_scene_object, s);
     const ContactTerm term{fit.error_sum, fit.contacts};
-    Evaluation ev = evaluate_batched(scene, by_field, half, T_scene_object, s, reject_below, &term);
+    Evaluation ev = evaluate_batched(scene, by_field, half, T_scene_object, s, reject_below, &term, sink);
     ev.grasp_offset_rms = fit.offset_rms;
     return ev;
   }
-  return evaluate_batched(scene, by_field, half, T_scene_object, s, reject_below);
+  return evaluate_batched(scene, by_field, half, T_scene_object, s, reject_below, nullptr, sink);
 }
 
 }  // namespace
 
 Evaluation evaluate(const Scene& scene, const ObjectGeometry& geo, const ObjectInfo& info,
                     const Pose& T_scene_object, const EvaluateSettings& s, double reject_below) {
-  // The floor term only lowers ln wt: taken first, it tightens the early rejection as it is.
-  const double sink = sink_penalty(scene, geo, T_scene_object);
-  Evaluation ev = evaluate_terms(scene, geo, info, T_scene_object, s, reject_below + sink);
-  ev.sink_penalty = sink;
-  ev.log_weight -= sink;
-  return ev;
+  // The floor term only lowers ln wt: taken first, it tightens the early rejection.
+  return evaluate_terms(scene, geo, info, T_scene_object, s, reject_below, sink_penalty(scene, geo, T_scene_object));
 }
 
 namespace {

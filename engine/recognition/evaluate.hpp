@@ -146,11 +146,13 @@ struct ContactTerm {
 
 /// The same over any batch distance function `fn(const Vec3* pts, std::size_t n,
 /// const Pose& T_object_pts, double* out)` giving signed (or unsigned) distances of T * pts[i].
+/// `floor_penalty` (the floor term, sink_penalty) is part of ln wt from the start, so every
+/// rejection test and the bound count it.
 template <class BatchFn>
 Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const Vec3& half_extent,
                             const Pose& T_scene_object, const EvaluateSettings& settings,
                             double reject_below = -std::numeric_limits<double>::infinity(),
-                            const ContactTerm* contact_term = nullptr);
+                            const ContactTerm* contact_term = nullptr, double floor_penalty = 0.0);
 
 /// The same, with any signed distance function of object-frame points (tests, oracles):
 /// `distance(p_object)` returns the signed distance to the surface (negative inside, or
@@ -206,7 +208,7 @@ inline double free_error(double d, double d_thresh, bool inside_penalty, double 
 template <class BatchFn>
 Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const Vec3& half_extent,
                             const Pose& T_scene_object, const EvaluateSettings& s,
-                            double reject_below, const ContactTerm* given) {
+                            double reject_below, const ContactTerm* given, double floor_penalty) {
   Evaluation ev;
   const std::size_t C = given ? given->n : scene.contacts.size();
   if (C == 0 || (!given && scene.ordered.size() != C) || !T_scene_object.matrix().allFinite())
@@ -220,25 +222,25 @@ Evaluation evaluate_batched(const Scene& scene, const BatchFn& distances, const 
   double buf[kMax];
   const double background = eq::background(s);
 
-  // Contact term (Eq. 4, 5/7), in the scene's fixed pseudo-random order.
+  // Contact term (Eq. 4, 5/7), in the scene's fixed pseudo-random order; with the floor term.
   double sum = given ? given->sum : 0.0;
   std::size_t nc = given ? C : 0;
+  auto contact_part = [&](Evaluation& e) {
+    e.contacts = static_cast<std::uint32_t>(nc);
+    e.contact_error = sum / static_cast<double>(nc);
+    e.log_weight = -sum * invC - floor_penalty;
+    e.sink_penalty = floor_penalty;
+    return e;
+  };
   const std::size_t c_limit = bound_only ? std::min(C, chunk) : C;
   while (nc < c_limit) {
     const std::size_t m = std::min(chunk, c_limit - nc);
     distances(scene.ordered.data() + nc, m, T_object_scene, buf);
     for (std::size_t j = 0; j < m; ++j) sum += eq::contact_error(buf[j], s.d_outlier, background);
     nc += m;
-    if (!bound_only && nc < C && -sum * invC < reject_below) {
-      ev.contacts = static_cast<std::uint32_t>(nc);
-      ev.contact_error = sum / static_cast<double>(nc);
-      ev.log_weight = -sum * invC;
-      return ev;
-    }
+    if (!bound_only && nc < C && -sum * invC - floor_penalty < reject_below) return contact_part(ev);
   }
-  ev.contacts = static_cast<std::uint32_t>(nc);
-  ev.contact_error = sum / static_cast<double>(nc);
-  ev.log_weight = -sum * invC;
+  contact_part(ev);
   bool partial = nc < C;
 
   // Free-space term (Eq. 8, 9): points farther than d_thresh from the object's box cost 0 and

@@ -112,6 +112,9 @@ struct Evidence {
   double contact_log_weight = 0.0;  ///< ln wt_cont (Eq. 5, 7): minus the mean Eq. 4 error
   double free_log_weight = 0.0;     ///< ln wt_free (Eq. 9): -lambda x the summed Eq. 8 error (0:
                                     ///< no free-space term)
+  double floor_log_weight = 0.0;    ///< the floor term: minus what its pose lost for sinking the
+                                    ///< object below the support plane (0: none; evaluate.hpp,
+                                    ///< sink_penalty); ln wt is the sum of the three
   std::size_t free_points_checked = 0;  ///< free points near enough to its object to be checked
                                         ///< (Eq. 8 charges those within d_thresh of its surface)
   double offset_rms_m = 0.0;        ///< m, RMS of the per-grasp offsets fitted (0: none)
@@ -174,8 +177,8 @@ struct StepResult {
   std::vector<StageRun> stages;     ///< the step's pipeline, in order: ran or left out, and why
   /// Recognizer::explain: the answer's evidence, then its best rival's (the best hypothesis of
   /// another object; absent when the state holds one object), and what decided between them:
-  /// "near_twin" (the verification's V), "contacts" or "free_space" (the term of ln wt that
-  /// differs most), or "" (no rival).
+  /// "near_twin" (the verification's V), "contacts", "free_space" or "floor" (the term of ln wt
+  /// that differs most), or "" (no rival).
   std::vector<Evidence> explanation;
   std::string decided_by;
   std::string stopped;              ///< why the step stopped before any matching ("no contacts",

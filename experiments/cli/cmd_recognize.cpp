@@ -494,6 +494,7 @@ nlohmann::ordered_json explanation_json(const Context& c, const StepResult& r) {
     h["log_weight"] = e.log_weight;
     h["contact_log_weight"] = e.contact_log_weight;
     h["free_log_weight"] = e.free_log_weight;
+    h["floor_log_weight"] = e.floor_log_weight;
     h["free_points_checked"] = e.free_points_checked;
     h["offset_rms_m"] = e.offset_rms_m;
     h["contact_rms_sigma"] = e.fit.valid ? nlohmann::ordered_json(e.fit.rms_sigma) : nullptr;
@@ -525,6 +526,8 @@ void print_explanation(const Context& c, const StepResult& r) {
   row("ln wt (Eq. 6)", a.log_weight, b.log_weight);
   row("  contacts: - mean Eq. 4 error", a.contact_log_weight, b.contact_log_weight);
   row("  free space: - lambda x Eq. 8 sum", a.free_log_weight, b.free_log_weight);
+  if (a.floor_log_weight != 0.0 || b.floor_log_weight != 0.0)
+    row("  floor: sunk below the support", a.floor_log_weight, b.floor_log_weight);
   std::printf("  %-34s %12zu %12zu\n", "free points checked near it", a.free_points_checked, b.free_points_checked);
   auto opt = [](bool have, double x, const char* fmt) {
     char buf[32];

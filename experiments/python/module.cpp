@@ -382,6 +382,7 @@ py::dict step_dict(const Database& db, const StepResult& r, const std::optional<
       h["log_weight"] = e.log_weight;
       h["contact_log_weight"] = e.contact_log_weight;
       h["free_log_weight"] = e.free_log_weight;
+      h["floor_log_weight"] = e.floor_log_weight;
       h["free_points_checked"] = e.free_points_checked;
       h["offset_rms_m"] = e.offset_rms_m;
       h["contact_rms_sigma"] = e.fit.valid ? py::object(py::float_(e.fit.rms_sigma)) : py::none();

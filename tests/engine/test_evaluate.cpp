@@ -687,7 +687,8 @@ TEST_CASE("The floor term: nothing of the object below its support, a pose sunk 
   };
   CHECK(at(-0.02, I) == 0.0);                                   // resting on it
   CHECK(at(-0.025, I) == 0.0);                                  // above it
-  CHECK(at(-0.01, I) == 0.0);                                   // 1 cm deep: the margin
+  CHECK(at(-0.011, I) == 0.0);                                  // 9 mm deep: within the margin
+  CHECK(at(-0.009, I) > 0.0);                                   // 11 mm: beyond it
   CHECK(at(-0.005, I) == doctest::Approx(0.25).epsilon(1e-9));  // 1.5 cm: half the cost
   CHECK(at(0.01, I) == doctest::Approx(0.5).epsilon(1e-9));     // 3 cm: all of it
   CHECK(at(0.5, I) == doctest::Approx(0.5).epsilon(1e-9));      // and no more
@@ -695,8 +696,16 @@ TEST_CASE("The floor term: nothing of the object below its support, a pose sunk 
   turned.linear() = Eigen::AngleAxisd(std::numbers::pi / 2, Vec3::UnitX()).toRotationMatrix();
   turned.translation() = Vec3(0.3, -0.2, 0.1);                  // lowest point at 0.1 - 0.03
   CHECK(at(0.07, turned) == 0.0);
-  CHECK(at(0.08, turned) == 0.0);
+  CHECK(at(0.079, turned) == 0.0);
   CHECK(at(0.085, turned) == doctest::Approx(0.25).epsilon(1e-9));
+  // Any turn: the lowest corner of the box at that pose (all eight are among its extremes).
+  Pose any = I;
+  any.linear() = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  any.translation() = Vec3(-0.1, 0.05, 0.2);
+  double lowest = 1e9;
+  for (const Vec3& v : m.vertices) lowest = std::min(lowest, (any * v).z());
+  CHECK(at(lowest + 0.015, any) == doctest::Approx(0.25).epsilon(1e-9));
+  CHECK(at(lowest + 0.009, any) == 0.0);
   CHECK(at(0.06, turned) == 0.0);
   sc.floor.normal = -Vec3::UnitZ();   // upside down: along -z the lowest is the top, at -(0.1 + 0.03)
   CHECK(at(-0.10, turned) == doctest::Approx(0.5).epsilon(1e-9));   // 3 cm deep
@@ -722,6 +731,9 @@ TEST_CASE("The floor term: nothing of the object below its support, a pose sunk 
   const Evaluation cut = evaluate(sc, box, info, I, es, free.log_weight - 0.1);
   CHECK_FALSE(cut.complete);
   CHECK(cut.log_weight < free.log_weight - 0.1);
+  const Evaluation kept = evaluate(sc, box, info, I, es, free.log_weight - 0.25 - 1e-6);   // just below it
+  CHECK(kept.complete);
+  CHECK(kept.log_weight == doctest::Approx(free.log_weight - 0.25).epsilon(1e-12));
 
   // A plane through the box's top face (taken for a support, as a face touched from one side can
   // be): the box at its pose lies 4 cm below it but explains its contacts, so it is its own face.
@@ -732,7 +744,9 @@ TEST_CASE("The floor term: nothing of the object below its support, a pose sunk 
   Pose aside = I;   // the same depth 10 cm aside: the plane's contacts lie off it
   aside.translation().x() = 0.1;
   CHECK(sink_penalty(sc, box, aside) == doctest::Approx(0.5).epsilon(1e-9));
-  sc.floor.on_plane.resize(top.size() / 2 - 1);   // a minority on the box, the rest off it
-  for (int i = 0; i < 25; ++i) sc.floor.on_plane.push_back(Vec3(0.3 + 0.01 * i, 0.0, 0.02));
+  sc.floor.on_plane.resize(24);   // exactly half on the box is not most of them
+  for (int i = 0; i < 24; ++i) sc.floor.on_plane.push_back(Vec3(0.3 + 0.01 * i, 0.0, 0.02));
   CHECK(sink_penalty(sc, box, I) == doctest::Approx(0.5).epsilon(1e-9));
+  sc.floor.on_plane.pop_back();   // 24 of 47: most
+  CHECK(sink_penalty(sc, box, I) == 0.0);
 }

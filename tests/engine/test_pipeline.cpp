@@ -314,6 +314,8 @@ TEST_CASE("Scaled settings scale the support's and the background term's lengths
   CHECK(t.support.tolerance == doctest::Approx(10.0 * s.support.tolerance).scale(0).epsilon(1e-12));
   CHECK(t.support.free_margin == doctest::Approx(0.1).scale(0).epsilon(1e-12));
   CHECK(t.support.attribution == doctest::Approx(10.0 * s.support.attribution).scale(0).epsilon(1e-12));
+  CHECK(t.support.sink == doctest::Approx(10.0 * s.support.sink).scale(0).epsilon(1e-12));
+  CHECK(t.support.sink_cost == s.support.sink_cost);   // nats, not a length
   RecognizerSettings automatic;   // free_margin < 0: automatic, stays so
   CHECK(automatic.scaled(10.0).support.free_margin == automatic.support.free_margin);
 }

@@ -535,7 +535,8 @@ TEST_CASE("Explaining a step: the answer's and its best rival's own numbers, Eq.
     for (const Evidence& e : b.explanation) {
       // Eq. 6 split: ln wt_cont = -mean Eq. 4 in [-1, 0]; ln wt_free = -lambda sum Eq. 8, each
       // free point's error in [0, 1] and only near ones count.
-      const double terms = e.contact_log_weight + e.free_log_weight;
+      const double terms = e.contact_log_weight + e.free_log_weight + e.floor_log_weight;
+      CHECK(e.floor_log_weight == 0.0);   // no support looked for
       CHECK(terms == doctest::Approx(e.log_weight).epsilon(1e-12));
       CHECK(e.contact_log_weight <= 0.0);
       CHECK(e.contact_log_weight >= -1.0);

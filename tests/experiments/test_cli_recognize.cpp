@@ -179,7 +179,8 @@ TEST_CASE("cli recognize: JSON per the interface, result file, identical for any
       CHECK(ans["role"] == "answer");
       CHECK(ans["object"] == s["object"]);
       CHECK(ans["log_weight"].get<double>() == s["log_weight"].get<double>());
-      const double terms = ans["contact_log_weight"].get<double>() + ans["free_log_weight"].get<double>();
+      const double terms = ans["contact_log_weight"].get<double>() + ans["free_log_weight"].get<double>() +
+                           ans["floor_log_weight"].get<double>();
       CHECK(terms == doctest::Approx(ans["log_weight"].get<double>()).epsilon(1e-12));
       if (ex["hypotheses"].size() == 2) {
         CHECK(ex["hypotheses"][1]["role"] == "rival");

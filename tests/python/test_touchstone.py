@@ -390,7 +390,7 @@ def test_explain_is_the_commands_and_changes_no_answer(built, db, tmp_path):
         assert x["decided_by"] == cx["decided_by"]
         assert [h["object"] for h in x["hypotheses"]] == [h["object"] for h in cx["hypotheses"]]
         for h, ch in zip(x["hypotheses"], cx["hypotheses"]):
-            for key in ("log_weight", "contact_log_weight", "free_log_weight", "rank", "posterior"):
+            for key in ("log_weight", "contact_log_weight", "free_log_weight", "floor_log_weight", "rank", "posterior"):
                 assert h[key] == ch[key], key
         assert x["hypotheses"][0]["role"] == "answer" and x["hypotheses"][0]["object"] == e.object
         assert x["hypotheses"][0]["log_weight"] == e.log_weight

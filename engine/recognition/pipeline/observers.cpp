@@ -113,7 +113,8 @@ void ExplainObserver::after(std::string_view stage, bool ran, StepContext& c) {
     e.rank = i + 1;
     e.log_weight = h.eval.log_weight;
     e.free_log_weight = free_term ? 0.0 - c.ev.lambda * h.eval.free_error : 0.0;   // (no -0)
-    e.contact_log_weight = e.log_weight - e.free_log_weight;
+    e.floor_log_weight = 0.0 - h.eval.sink_penalty;   // (no -0)
+    e.contact_log_weight = e.log_weight - e.free_log_weight - e.floor_log_weight;
     e.free_points_checked = free_term ? h.eval.free_points : 0;
     e.offset_rms_m = h.eval.grasp_offset_rms;
     e.fit = i == chosen ? c.res.fit : absolute_fit(c.scene, c.db, h, c.s.evaluate);
@@ -130,10 +131,12 @@ void ExplainObserver::after(std::string_view stage, bool ran, StepContext& c) {
     const Evidence& b = c.res.explanation[1];
     if (!std::isnan(a.twin_score) && !std::isnan(b.twin_score))
       c.res.decided_by = "near_twin";
-    else
-      c.res.decided_by = std::abs(a.free_log_weight - b.free_log_weight) > std::abs(a.contact_log_weight - b.contact_log_weight)
-                             ? "free_space"
-                             : "contacts";
+    else {
+      const double contacts = std::abs(a.contact_log_weight - b.contact_log_weight);
+      const double free = std::abs(a.free_log_weight - b.free_log_weight);
+      const double floor = std::abs(a.floor_log_weight - b.floor_log_weight);
+      c.res.decided_by = floor > std::max(contacts, free) ? "floor" : free > contacts ? "free_space" : "contacts";
+    }
   }
   seconds += detail::seconds_since(t0);
 }

@@ -104,7 +104,7 @@ class StepResult:
     answer_set: Optional[Dict[str, Any]] = None
     # Recognizer(explain=True): why the answer won over its best rival, as `recognize --explain`
     # gives it: {"decided_by", "hypotheses": [{"role", "object", "rank", "pose", "log_weight",
-    # "contact_log_weight", "free_log_weight", "free_points_checked", "offset_rms_m",
+    # "contact_log_weight", "free_log_weight", "floor_log_weight", "free_points_checked", "offset_rms_m",
     # "contact_rms_sigma", "contacts_beyond_3_sigma", "twin_score", "posterior"}, ...]}
     explanation: Optional[Dict[str, Any]] = None
     _raw: Dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
