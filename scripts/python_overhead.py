@@ -50,8 +50,9 @@ def main():
         for k in range(1, a.grasps + 1):
             ex.advance_to(k)
             contacts, free, grasps = ex.contacts(), ex.free(), ex.grasps()
+            hand_free, pivots = ex.hand_free(), ex.pivots()
             t0 = time.perf_counter()
-            r = rec.step(contacts, free, grasps)
+            r = rec.step(contacts, free, grasps, hand_free, pivots)
             wall.append(time.perf_counter() - t0)
             inner.append(r.times_s["total"])
     over = [w - i for w, i in zip(wall, inner)]

@@ -75,6 +75,35 @@ py::array_t<double> array_of(const std::vector<Vec3>& p) {
   return a;
 }
 
+/// Contacts by grasp from Python: `grasps` a sequence of N_g x 3 arrays, `hand_free` (None, or
+/// one M_g x 3 array per grasp: the points its hand held free) and `pivots` (None, or a G x 3
+/// array: the point each grasp's arm error turns about), as Exploration's grasps(), hand_free()
+/// and pivots() give them.
+GraspGroups grasp_groups(const py::object& grasps, const py::object& hand_free, const py::object& pivots) {
+  GraspGroups g;
+  if (grasps.is_none()) {
+    if (!hand_free.is_none() || !pivots.is_none())
+      throw py::value_error("hand_free and pivots describe grasps: give grasps too");
+    return g;
+  }
+  std::vector<py::object> items, frees;
+  for (const auto& item : grasps) items.push_back(py::reinterpret_borrow<py::object>(item));
+  if (!hand_free.is_none()) {
+    for (const auto& item : hand_free) frees.push_back(py::reinterpret_borrow<py::object>(item));
+    if (frees.size() != items.size())
+      throw py::value_error("hand_free: " + std::to_string(frees.size()) + " entries for " +
+                            std::to_string(items.size()) + " grasps (one array per grasp)");
+  }
+  const std::vector<Vec3> pv = points_of(pivots, "pivots");
+  if (!pivots.is_none() && pv.size() != items.size())
+    throw py::value_error("pivots: " + std::to_string(pv.size()) + " rows for " + std::to_string(items.size()) +
+                          " grasps (one per grasp)");
+  for (std::size_t k = 0; k < items.size(); ++k)
+    g.add(points_of(items[k], "grasps[]"), frees.empty() ? std::vector<Vec3>{} : points_of(frees[k], "hand_free[]"),
+          pv.empty() ? std::nullopt : std::optional<Vec3>(pv[k]));
+  return g;
+}
+
 py::array_t<double> matrix_of(const Pose& T) {
   py::array_t<double> a({py::ssize_t{4}, py::ssize_t{4}});
   auto w = a.mutable_unchecked<2>();
@@ -440,13 +469,12 @@ class PyRecognizer {
     rec_->explain(explain_);
   }
 
-  py::dict step(const py::object& contacts, const py::object& free, const py::object& grasps) {
+  py::dict step(const py::object& contacts, const py::object& free, const py::object& grasps,
+               const py::object& hand_free, const py::object& pivots) {
     PointCloud c;
     c.points = points_of(contacts, "contacts");
     const std::vector<Vec3> f = points_of(free, "free");
-    GraspGroups g;
-    if (!grasps.is_none())
-      for (const auto& item : grasps) g.add(points_of(py::reinterpret_borrow<py::object>(item), "grasps[]"));
+    const GraspGroups g = grasp_groups(grasps, hand_free, pivots);
     StepResult r;
     {
       py::gil_scoped_release release;
@@ -580,6 +608,19 @@ class PyExploration {
     py::list out;
     for (std::size_t k = 0; k < g.grasps(); ++k)
       out.append(array_of(std::vector<Vec3>(g.points.begin() + g.first[k], g.points.begin() + g.first[k + 1])));
+    return out;
+  }
+  /// Per grasp, the point its arm pose error turns about (GraspGroups::pivots; 0 x 3 when unknown).
+  py::array_t<double> pivots() const { return array_of(ex_->grasp_groups().pivots); }
+  /// Per grasp, the points its hand held free at the end of the grasp (GraspGroups::free).
+  py::list hand_free() const {
+    const GraspGroups& g = ex_->grasp_groups();
+    py::list out;
+    for (std::size_t k = 0; k < g.grasps(); ++k) {
+      const bool known = k + 1 < g.free_first.size();
+      out.append(array_of(known ? std::vector<Vec3>(g.free.begin() + g.free_first[k], g.free.begin() + g.free_first[k + 1])
+                                : std::vector<Vec3>{}));
+    }
     return out;
   }
 
@@ -982,14 +1023,16 @@ PYBIND11_MODULE(_touchstone, m) {
 
   py::class_<PyExploration>(m, "Exploration",
       "The fused clouds of a log step by step (the recognizer's inputs, as `touchstone recognize` "
-      "fuses them): contacts() N x 3, free() M x 3, grasps() the contacts by grasp; world frame, metres.")
+      "fuses them): contacts() N x 3, free() M x 3, grasps() the contacts by grasp, hand_free() the points each grasp's hand held free, pivots() G x 3; world frame, metres.")
       .def(py::init<PyLog, const PyDatabase&, double, std::optional<double>>(), py::arg("log"), py::arg("db"),
            py::arg("contact_voxel_m") = 0.002, py::arg("res_free_m") = py::none())
       .def("advance_to", &PyExploration::advance_to, py::arg("steps"))
       .def_property_readonly("steps", &PyExploration::steps)
       .def("contacts", &PyExploration::contacts)
       .def("free", &PyExploration::free)
-      .def("grasps", &PyExploration::grasps);
+      .def("grasps", &PyExploration::grasps)
+      .def("hand_free", &PyExploration::hand_free)
+      .def("pivots", &PyExploration::pivots);
 
   py::class_<PyRecognizer>(m, "Recognizer", "The C++ recognizer (touchstone.Recognizer wraps it).")
       .def(py::init<std::shared_ptr<PyDatabase>, const std::string&, const std::string&, std::uint64_t,
@@ -999,7 +1042,7 @@ PYBIND11_MODULE(_touchstone, m) {
            py::arg("params") = py::dict(), py::arg("only") = py::none(), py::arg("calibration") = py::none(),
            py::arg("alpha") = py::none(), py::arg("explain") = false)
       .def("step", &PyRecognizer::step, py::arg("contacts"), py::arg("free") = py::none(),
-           py::arg("grasps") = py::none())
+           py::arg("grasps") = py::none(), py::arg("hand_free") = py::none(), py::arg("pivots") = py::none())
       .def("recognize_log", &PyRecognizer::recognize_log, py::arg("log"), py::arg("steps") = 0)
       .def("reset", &PyRecognizer::reset)
       .def_property_readonly("settings", &PyRecognizer::settings)

@@ -415,6 +415,29 @@ def test_stepping_with_arrays_equals_recognize_log(db, built):
     assert rec.hypotheses == []
 
 
+def test_stepping_with_the_hands_free_points_equals_recognize_log_on_the_seabed(db, built):
+    # The support stage and the near-twin verification read the points each grasp's hand held
+    # free and the arm error's pivots: with hand_free() and pivots() passed, step() is
+    # recognize_log() on a seabed log with support.mode = plane, support verdicts included.
+    _, names = built
+    log = ts.simulate(db, names[0], grasps=12, seed=5,   # without hand_free, 7 of its 12 steps differ
+                      params={"scene": "seabed", "scene.off_target": 0.4})
+    params = {"support.mode": "plane"}
+    expected = ts.Recognizer(db, seed=2, params=params).recognize_log(log)
+    assert any(s.support is not None for s in expected)   # the seabed found at some step
+    rec = ts.Recognizer(db, seed=2, params=params)
+    ex = ts.Exploration(log, db)
+    for k, want in enumerate(expected, start=1):
+        ex.advance_to(k)
+        grasps, hand_free, pivots = ex.grasps(), ex.hand_free(), ex.pivots()
+        assert len(hand_free) == len(grasps) == pivots.shape[0] == k
+        assert all(h.shape[1] == 3 and len(h) > 0 for h in hand_free)
+        got = rec.step(ex.contacts(), ex.free(), grasps, hand_free=hand_free, pivots=pivots)
+        assert got.support_verdict == want.support_verdict
+        assert got.object == want.object and got.log_weight == want.log_weight
+        assert np.array_equal(got.pose, want.pose)
+
+
 def test_thread_count_changes_no_answer(db, built):
     _, names = built
     log = ts.simulate(db, names[3], grasps=5, seed=9)
@@ -482,6 +505,13 @@ def test_step_rejects_bad_arrays(db):
         rec.step(np.array([[0.0, 0.0, np.nan]]))
     with pytest.raises(ValueError):
         rec.step(np.zeros((4, 3)), free=np.zeros(3))
+    two = [np.zeros((2, 3)), np.ones((2, 3))]
+    with pytest.raises(ValueError, match="hand_free: 1 entries for 2 grasps"):
+        rec.step(np.zeros((4, 3)), grasps=two, hand_free=[np.zeros((3, 3))])
+    with pytest.raises(ValueError, match="pivots: 3 rows for 2 grasps"):
+        rec.step(np.zeros((4, 3)), grasps=two, pivots=np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="give grasps too"):
+        rec.step(np.zeros((4, 3)), hand_free=[np.zeros((3, 3))])
 
 
 def test_only_limits_the_answer(db, built):

@@ -136,12 +136,17 @@ class Recognizer:
                                     None if only is None else list(only),
                                     None if calibration is None else str(calibration), alpha, bool(explain))
 
-    def step(self, contacts: Any, free: Any = None, grasps: Optional[Sequence[Any]] = None) -> StepResult:
+    def step(self, contacts: Any, free: Any = None, grasps: Optional[Sequence[Any]] = None,
+             hand_free: Optional[Sequence[Any]] = None, pivots: Any = None) -> StepResult:
         """One exploration step with the cumulative contacts (N x 3, world frame, metres), the
         free-space points (M x 3, or None) and optionally the same contacts grouped by grasp (a
         list of K_g x 3 arrays: the per-grasp offsets of the evaluation take out each grasp's
-        arm error)."""
-        return StepResult._of(self._impl.step(contacts, free, grasps))
+        arm error). With grasps, ``hand_free`` (one M_g x 3 array per grasp: the points its hand
+        held free, which the support stage and the near-twin verification read) and ``pivots``
+        (G x 3: the point each grasp's arm error turns about) complete what ``recognize_log``
+        gives the recognizer: ``Exploration``'s ``grasps()``, ``hand_free()`` and ``pivots()``
+        passed together give its answers."""
+        return StepResult._of(self._impl.step(contacts, free, grasps, hand_free, pivots))
 
     def recognize_log(self, log: TactileLog, steps: int = 0) -> List[StepResult]:
         """Every step of a tactile log (the first ``steps`` grasps; 0: all), fused and recognized
