@@ -580,6 +580,16 @@ class PyRecognizer {
   std::size_t classes_ = 0;
 };
 
+/// `grasps` arrays, the k-th of points[first[k]] .. points[first[k + 1] - 1] (0 x 3 for a grasp
+/// `first` has no offsets for).
+py::list per_grasp(const std::vector<Vec3>& points, const std::vector<std::uint32_t>& first, std::size_t grasps) {
+  py::list out;
+  for (std::size_t k = 0; k < grasps; ++k)
+    out.append(array_of(k + 1 < first.size() ? std::vector<Vec3>(points.begin() + first[k], points.begin() + first[k + 1])
+                                              : std::vector<Vec3>{}));
+  return out;
+}
+
 /// The fused clouds of a log, step by step (the recognizer's inputs), on a database's box.
 class PyExploration {
  public:
@@ -603,26 +613,18 @@ class PyExploration {
     }
     return array_of(f);
   }
+  /// Per grasp, its contacts.
   py::list grasps() const {
     const GraspGroups& g = ex_->grasp_groups();
-    py::list out;
-    for (std::size_t k = 0; k < g.grasps(); ++k)
-      out.append(array_of(std::vector<Vec3>(g.points.begin() + g.first[k], g.points.begin() + g.first[k + 1])));
-    return out;
+    return per_grasp(g.points, g.first, g.grasps());
   }
-  /// Per grasp, the point its arm pose error turns about (GraspGroups::pivots; 0 x 3 when unknown).
-  py::array_t<double> pivots() const { return array_of(ex_->grasp_groups().pivots); }
   /// Per grasp, the points its hand held free at the end of the grasp (GraspGroups::free).
   py::list hand_free() const {
     const GraspGroups& g = ex_->grasp_groups();
-    py::list out;
-    for (std::size_t k = 0; k < g.grasps(); ++k) {
-      const bool known = k + 1 < g.free_first.size();
-      out.append(array_of(known ? std::vector<Vec3>(g.free.begin() + g.free_first[k], g.free.begin() + g.free_first[k + 1])
-                                : std::vector<Vec3>{}));
-    }
-    return out;
+    return per_grasp(g.free, g.free_first, g.grasps());
   }
+  /// Per grasp, the point its arm pose error turns about (GraspGroups::pivots; 0 x 3 when unknown).
+  py::array_t<double> pivots() const { return array_of(ex_->grasp_groups().pivots); }
 
  private:
   std::shared_ptr<TactileLog> log_;
